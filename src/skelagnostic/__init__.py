@@ -1,0 +1,82 @@
+"""skelagnostic: skeleton-agnostic character motion learning.
+
+The top-level namespace re-exports the core lazily, so ``import skelagnostic``
+stays fast and pulls in torch only when a core name is first used::
+
+    import skelagnostic as sa
+    motion = sa.read_bvh("walk.bvh")
+    positions = motion.global_positions()
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0.dev0"
+
+_LAZY: dict[str, tuple[str, str | None]] = {
+    "Skeleton": ("skelagnostic.core.skeleton", "Skeleton"),
+    "Motion": ("skelagnostic.core.motion", "Motion"),
+    "read_bvh": ("skelagnostic.io.bvh", "read_bvh"),
+    "write_bvh": ("skelagnostic.io.bvh", "write_bvh"),
+    "parse_bvh": ("skelagnostic.io.bvh", "parse_bvh"),
+    "forward_kinematics": ("skelagnostic.core.kinematics", "forward_kinematics"),
+    "SkelagnosticError": ("skelagnostic.errors", "SkelagnosticError"),
+    "BVHError": ("skelagnostic.errors", "BVHError"),
+    "SkeletonError": ("skelagnostic.errors", "SkeletonError"),
+    "MotionError": ("skelagnostic.errors", "MotionError"),
+    "NotInvertibleError": ("skelagnostic.errors", "NotInvertibleError"),
+    "procedural": ("skelagnostic.procedural", None),
+}
+
+__all__ = [
+    "BVHError",
+    "Motion",
+    "MotionError",
+    "NotInvertibleError",
+    "SkelagnosticError",
+    "Skeleton",
+    "SkeletonError",
+    "__version__",
+    "forward_kinematics",
+    "parse_bvh",
+    "procedural",
+    "read_bvh",
+    "write_bvh",
+]
+
+if TYPE_CHECKING:  # pragma: no cover
+    from skelagnostic import procedural
+    from skelagnostic.core.kinematics import forward_kinematics
+    from skelagnostic.core.motion import Motion
+    from skelagnostic.core.skeleton import Skeleton
+    from skelagnostic.errors import (
+        BVHError,
+        MotionError,
+        NotInvertibleError,
+        SkelagnosticError,
+        SkeletonError,
+    )
+    from skelagnostic.io.bvh import parse_bvh, read_bvh, write_bvh
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module_name, attr = _LAZY[name]
+    except KeyError:
+        # submodules such as skelagnostic.metrics are imported on first access
+        try:
+            return importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"{__name__}.{name}":
+                raise AttributeError(f"module 'skelagnostic' has no attribute {name!r}") from None
+            raise
+    module = importlib.import_module(module_name)
+    value = module if attr is None else getattr(module, attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

@@ -1,0 +1,629 @@
+"""The :class:`Skeleton`: a joint hierarchy with rest offsets and body groups."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+
+from skelagnostic.errors import SkeletonError
+
+__all__ = ["BODY_GROUPS", "Skeleton", "infer_body_groups"]
+
+#: The body groups a joint can belong to.
+BODY_GROUPS: tuple[str, ...] = (
+    "spine",
+    "left_arm",
+    "right_arm",
+    "left_leg",
+    "right_leg",
+    "tail",
+    "other",
+)
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+# Name tokens. Names are split into lowercase words at case changes, digits and
+# separators ("LeftUpLeg" -> ["left", "up", "leg"], "l_hand" -> ["l", "hand"]).
+_ARM = {
+    "shoulder",
+    "arm",
+    "forearm",
+    "elbow",
+    "wrist",
+    "hand",
+    "finger",
+    "fingers",
+    "thumb",
+    "index",
+    "middle",
+    "ring",
+    "pinky",
+    "collar",
+    "clavicle",
+    "scapula",
+    "palm",
+    "carpal",
+}
+_LEG = {
+    "hip",
+    "thigh",
+    "upleg",
+    "leg",
+    "knee",
+    "calf",
+    "shin",
+    "ankle",
+    "foot",
+    "toe",
+    "toes",
+    "heel",
+    "ball",
+    "tibia",
+    "femur",
+}
+_SPINE = {
+    "hips",
+    "pelvis",
+    "root",
+    "spine",
+    "chest",
+    "neck",
+    "head",
+    "back",
+    "torso",
+    "abdomen",
+    "jaw",
+    "skull",
+    "lowerback",
+    "upperback",
+    "waist",
+    "body",
+    "lowerneck",
+    "upperneck",
+}
+_TAIL = {"tail"}
+_EFFECTOR_WORDS = ("hand", "wrist", "foot", "ankle", "toe", "head")
+
+
+def _words(name: str) -> list[str]:
+    # Split "LHipJoint" -> L Hip Joint, "lhand" stays "lhand" (handled by prefix rules).
+    parts = re.findall(r"[A-Z]+(?=[A-Z][a-z])|[A-Z]?[a-z]+|[A-Z]+|\d+", name)
+    return [p.lower() for p in parts]
+
+
+def _side(name: str) -> int:
+    """+1 for left, -1 for right, 0 when the name gives no side."""
+    words = _words(name)
+    if not words:
+        return 0
+    if "left" in words:
+        return 1
+    if "right" in words:
+        return -1
+    low = name.lower()
+    if re.search(r"(^|[_.\-:\s])l($|[_.\-:\s])", low) or re.match(r"^l(?=[A-Z_])", name):
+        return 1
+    if re.search(r"(^|[_.\-:\s])r($|[_.\-:\s])", low) or re.match(r"^r(?=[A-Z_])", name):
+        return -1
+    # lowercase glued prefixes such as "lhand", "rfingers", "lshoulder"
+    for prefix, side in (("l", 1), ("r", -1)):
+        if low.startswith(prefix) and low[1:] and any(low[1:].startswith(w) for w in _ARM | _LEG):
+            return side
+    return 0
+
+
+def _limb(name: str) -> str | None:
+    words = set(_words(name))
+    low = name.lower()
+    stripped = low[1:] if low[:1] in {"l", "r"} else low
+    if words & _TAIL or "tail" in low:
+        return "tail"
+    if words & _SPINE and not (words & _ARM) and not (words & _LEG):
+        return "spine"
+    if words & _ARM or any(stripped.startswith(w) for w in _ARM):
+        return "arm"
+    if words & _LEG or any(stripped.startswith(w) for w in _LEG):
+        return "leg"
+    if words & _SPINE:
+        return "spine"
+    return None
+
+
+def infer_body_groups(
+    joint_names: Sequence[str],
+    parents: Sequence[int],
+    offsets: np.ndarray | torch.Tensor | None = None,
+    lateral_axis: int = 0,
+) -> list[str]:
+    """Assign each joint a body group from its name, its parent and the rest geometry.
+
+    Rules, in order: the root is ``spine``; a name with limb words (arm, hand,
+    shoulder, leg, knee, foot, ...) and a side (``Left``, ``L_``, ``lhand``, ...)
+    gives ``left_arm`` / ``right_arm`` / ``left_leg`` / ``right_leg``; ``tail``
+    words give ``tail``; spine words (spine, chest, neck, head, ...) give
+    ``spine``; a limb name without a side takes its parent's side, or, failing
+    that, the sign of the rest offset along ``lateral_axis`` (+ is left);
+    anything else inherits its parent's group.
+
+    Args:
+        joint_names: Joint names.
+        parents: Parent indices (root -1, parents before children).
+        offsets: ``[J, 3]`` rest offsets, used for the side of unnamed limbs.
+        lateral_axis: Axis index whose positive direction is the character's left.
+
+    Returns:
+        One group name per joint, each in :data:`BODY_GROUPS`.
+    """
+    num = len(joint_names)
+    groups: list[str] = ["other"] * num
+    pos = None
+    if offsets is not None:
+        off = np.asarray(offsets, dtype=np.float64)
+        pos = np.zeros((num, 3))
+        for j, p in enumerate(parents):
+            pos[j] = off[j] if p < 0 else pos[p] + off[j]
+        pos = pos - pos[0]
+    for j, (name, p) in enumerate(zip(joint_names, parents, strict=True)):
+        if p < 0:
+            groups[j] = "spine"
+            continue
+        limb = _limb(name)
+        parent_group = groups[p]
+        if limb in {"arm", "leg"}:
+            side = _side(name)
+            if side == 0 and parent_group.startswith(("left_", "right_")):
+                side = 1 if parent_group.startswith("left_") else -1
+            if side == 0 and pos is not None:
+                lat = pos[j, lateral_axis]
+                side = 1 if lat > 1e-9 else (-1 if lat < -1e-9 else 0)
+            groups[j] = ("left_" if side > 0 else "right_") + limb if side else "other"
+        elif limb == "tail":
+            groups[j] = "tail"
+        elif limb == "spine" and parent_group in {"spine", "other"}:
+            groups[j] = "spine"
+        else:
+            groups[j] = parent_group
+    return groups
+
+
+class Skeleton:
+    """A joint hierarchy with rest offsets.
+
+    Joints are ordered so that every parent comes before its children; the root
+    has parent ``-1``. Offsets are the rest-pose translation of each joint from
+    its parent, in the parent's frame (the root's offset is its rest position).
+
+    Args:
+        joint_names: Unique joint names.
+        parents: Parent index per joint.
+        offsets: ``[J, 3]`` rest offsets (torch or numpy).
+        end_sites: Optional mapping from joint index to the offsets of its BVH
+            ``End Site`` children (a list of 3-vectors per joint).
+        body_groups: Optional explicit group per joint (a sequence, or a mapping from
+            joint name to group for a partial override); inferred otherwise.
+        up_axis: ``"x"``, ``"y"`` or ``"z"``; the up direction of the data.
+        name: Optional human-readable name (e.g. ``"lafan1"``).
+        morphology: ``"biped"`` or ``"quadruped"``; decides the canonical :meth:`template`.
+            Inferred when ``None``: a skeleton with a tail and both arms and legs is a
+            quadruped.
+        channels: Optional per-joint BVH channel names, kept so that
+            :func:`~skelagnostic.write_bvh` can reproduce the file's layout. Not part of
+            the topology (ignored by ``==`` and ``hash``).
+
+    Raises:
+        SkeletonError: On duplicate names, bad parents, wrong offset shape or
+            non-finite offsets.
+    """
+
+    def __init__(
+        self,
+        joint_names: Sequence[str],
+        parents: Sequence[int],
+        offsets: torch.Tensor | np.ndarray | Sequence[Sequence[float]],
+        end_sites: Mapping[int, Sequence[Sequence[float]]] | None = None,
+        body_groups: Sequence[str] | Mapping[str, str] | None = None,
+        up_axis: str = "y",
+        name: str | None = None,
+        morphology: str | None = None,
+        channels: Sequence[Sequence[str]] | None = None,
+    ) -> None:
+        names = [str(n) for n in joint_names]
+        parents_l = [int(p) for p in parents]
+        if not names:
+            raise SkeletonError("skeleton has no joints")
+        if len(parents_l) != len(names):
+            raise SkeletonError(
+                f"parents has {len(parents_l)} entries for {len(names)} joint names"
+            )
+        seen: dict[str, int] = {}
+        for j, n in enumerate(names):
+            if n in seen:
+                raise SkeletonError(f"duplicate joint name {n!r} (joints {seen[n]} and {j})")
+            seen[n] = j
+        roots = [j for j, p in enumerate(parents_l) if p < 0]
+        if roots != [0]:
+            raise SkeletonError(f"the root must be joint 0 and unique; roots found at {roots}")
+        for j, p in enumerate(parents_l):
+            if p >= j:
+                raise SkeletonError(
+                    f"joint {names[j]!r} has parent index {p}: parents must come before children"
+                )
+        off = torch.as_tensor(
+            np.asarray(offsets, dtype=np.float64)
+            if not isinstance(offsets, torch.Tensor)
+            else offsets
+        )
+        if not off.is_floating_point():
+            off = off.to(torch.float64)
+        if off.shape != (len(names), 3):
+            raise SkeletonError(f"offsets must have shape [{len(names)}, 3], got {list(off.shape)}")
+        if not torch.isfinite(off).all():
+            bad = int((~torch.isfinite(off)).any(-1).nonzero()[0, 0])
+            raise SkeletonError(f"offset of joint {names[bad]!r} is not finite")
+        if up_axis not in _AXES:
+            raise SkeletonError(f"up_axis must be 'x', 'y' or 'z', got {up_axis!r}")
+        self._names = names
+        self._parents = parents_l
+        self._offsets = off
+        self._index = seen
+        self.up_axis = up_axis
+        self.name = name
+        self.end_sites: dict[int, list[list[float]]] = {
+            int(k): [list(map(float, e)) for e in v] for k, v in (end_sites or {}).items()
+        }
+        self.channels = None if channels is None else [list(c) for c in channels]
+        if self.channels is not None and len(self.channels) != len(names):
+            raise SkeletonError(
+                f"channels has {len(self.channels)} entries for {len(names)} joints"
+            )
+        inferred = infer_body_groups(names, parents_l, off, lateral_axis=self._lateral_axis())
+        if body_groups is None:
+            groups = inferred
+        elif isinstance(body_groups, Mapping):
+            groups = list(inferred)
+            for jn, g in body_groups.items():
+                groups[self.index(jn)] = g
+        else:
+            groups = list(body_groups)
+            if len(groups) != len(names):
+                raise SkeletonError(
+                    f"body_groups has {len(groups)} entries for {len(names)} joints"
+                )
+        for jn, g in zip(names, groups, strict=True):
+            if g not in BODY_GROUPS:
+                raise SkeletonError(
+                    f"body group {g!r} of joint {jn!r} is not one of {', '.join(BODY_GROUPS)}"
+                )
+        self._groups = groups
+        if morphology is None:
+            has_all = {"left_arm", "right_arm", "left_leg", "right_leg"} <= set(groups)
+            morphology = "quadruped" if has_all and "tail" in groups else "biped"
+        if morphology not in {"biped", "quadruped"}:
+            raise SkeletonError(f"morphology must be 'biped' or 'quadruped', got {morphology!r}")
+        self.morphology = morphology
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def joint_names(self) -> list[str]:
+        """Joint names, in joint order."""
+        return list(self._names)
+
+    @property
+    def parents(self) -> list[int]:
+        """Parent index of each joint (``-1`` for the root)."""
+        return list(self._parents)
+
+    @property
+    def offsets(self) -> torch.Tensor:
+        """``[J, 3]`` rest offsets (float64 unless constructed otherwise)."""
+        return self._offsets
+
+    @property
+    def num_joints(self) -> int:
+        """Number of joints (End Sites not counted)."""
+        return len(self._names)
+
+    @property
+    def body_groups(self) -> list[str]:
+        """Body group of every joint (see :data:`BODY_GROUPS`)."""
+        return list(self._groups)
+
+    @property
+    def up_index(self) -> int:
+        """Index (0, 1, 2) of the up axis."""
+        return _AXES[self.up_axis]
+
+    def _lateral_axis(self) -> int:
+        # Canonical BVH convention: Y up, facing +Z, left +X; for Z up, facing +Y... +X left.
+        return 0 if self.up_axis in {"y", "z"} else 2
+
+    def index(self, joint: str | int) -> int:
+        """Index of a joint given by name (or index, checked).
+
+        Raises:
+            SkeletonError: If the joint is unknown; the message lists close names.
+        """
+        if isinstance(joint, int):
+            if not 0 <= joint < self.num_joints:
+                raise SkeletonError(f"joint index {joint} out of range [0, {self.num_joints})")
+            return joint
+        try:
+            return self._index[joint]
+        except KeyError:
+            import difflib
+
+            close = difflib.get_close_matches(joint, self._names, n=3)
+            hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+            raise SkeletonError(
+                f"unknown joint {joint!r} in skeleton {self.name or ''}{hint}".replace(" ;", ";")
+            ) from None
+
+    def children(self, joint: str | int) -> list[int]:
+        """Indices of the direct children of a joint."""
+        j = self.index(joint)
+        return [c for c, p in enumerate(self._parents) if p == j]
+
+    def bones(self) -> list[tuple[int, int]]:
+        """``(parent, child)`` index pairs, one per non-root joint."""
+        return [(p, c) for c, p in enumerate(self._parents) if p >= 0]
+
+    def bone_lengths(self) -> torch.Tensor:
+        """``[J]`` length of the bone ending at each joint (0 for the root)."""
+        lengths = self._offsets.norm(dim=-1).clone()
+        lengths[0] = 0.0
+        return lengths
+
+    def end_effectors(self) -> list[int]:
+        """Joints that end limbs or the spine: hands, feet (toes), head, tail tip.
+
+        A leaf joint (no joint children) of each group, preferring names with
+        hand/foot/toe/head words.
+        """
+        leaves = [j for j in range(self.num_joints) if not self.children(j) and j != 0]
+        result = []
+        for group in ("spine", "left_arm", "right_arm", "left_leg", "right_leg", "tail"):
+            cands = [j for j in leaves if self._groups[j] == group]
+            if not cands:
+                continue
+            named = [j for j in cands if any(w in self._names[j].lower() for w in _EFFECTOR_WORDS)]
+            pick = named or cands
+            # the deepest candidate ends the main chain
+            result.append(max(pick, key=self.depth))
+        return sorted(result)
+
+    def depth(self, joint: str | int) -> int:
+        """Number of bones between a joint and the root."""
+        j, d = self.index(joint), 0
+        while self._parents[j] >= 0:
+            j, d = self._parents[j], d + 1
+        return d
+
+    def mirror_map(self) -> list[int]:
+        """For every joint, the index of its left/right counterpart (itself if none).
+
+        Counterparts are found by swapping side markers in names (``Left``/``Right``,
+        ``L``/``R`` prefixes, ``_l``/``_r`` suffixes).
+        """
+        swaps = [
+            (r"Left", "Right"),
+            (r"left", "right"),
+            (r"LEFT", "RIGHT"),
+        ]
+
+        def swap(n: str) -> set[str]:
+            out = set()
+            for a, b in swaps:
+                if a in n:
+                    out.add(n.replace(a, b))
+                if b in n:
+                    out.add(n.replace(b, a))
+            for a, b in (("L", "R"), ("l", "r")):
+                if n.startswith(a):
+                    out.add(b + n[1:])
+                if n.startswith(b):
+                    out.add(a + n[1:])
+                for sep in ("_", ".", "-"):
+                    if n.endswith(sep + a):
+                        out.add(n[:-1] + b)
+                    if n.endswith(sep + b):
+                        out.add(n[:-1] + a)
+                    if n.startswith(a + sep):
+                        out.add(b + n[1:])
+                    if n.startswith(b + sep):
+                        out.add(a + n[1:])
+            return out
+
+        mapping = list(range(self.num_joints))
+        for j, n in enumerate(self._names):
+            if not self._groups[j].startswith(("left_", "right_")):
+                continue
+            for cand in swap(n):
+                k = self._index.get(cand)
+                if k is not None and k != j:
+                    mapping[j] = k
+                    break
+        return mapping
+
+    # ----------------------------------------------------------- derived forms
+    def rest_positions(self) -> torch.Tensor:
+        """``[J, 3]`` global joint positions of the file's rest pose (zero rotations)."""
+        pos = torch.zeros_like(self._offsets)
+        for j, p in enumerate(self._parents):
+            pos[j] = self._offsets[j] if p < 0 else pos[p] + self._offsets[j]
+        return pos
+
+    def template(self) -> torch.Tensor:
+        """``[J, 3]`` canonical neutral pose from bone lengths and body groups.
+
+        The file's rest pose varies between datasets (T-pose, A-pose, or the MANN
+        dog's all-along-+X rest), so the template is rebuilt from bone lengths
+        alone in a canonical frame: Y up, facing +Z, left +X, root at the origin.
+        Bipeds stand with the spine straight up; quadrupeds hold the spine
+        forward. Each limb's first non-zero bone points sideways (hip, clavicle),
+        the rest straight down (arms down), bones ending in a toe/ball point
+        forward; the tail points backward.
+        """
+        lengths = self.bone_lengths()
+        pos = torch.zeros_like(self._offsets)
+        up = torch.tensor([0.0, 1.0, 0.0], dtype=pos.dtype)
+        fwd = torch.tensor([0.0, 0.0, 1.0], dtype=pos.dtype)
+        lat = torch.tensor([1.0, 0.0, 0.0], dtype=pos.dtype)
+        # started[j]: a non-zero bone of j's limb already lies between the limb's start and j
+        started = [False] * self.num_joints
+        for j, p in enumerate(self._parents):
+            if p < 0:
+                continue
+            g = self._groups[j]
+            name = self._names[j].lower()
+            if g in {"spine", "other"}:
+                d = fwd if self.morphology == "quadruped" else up
+                if self.morphology == "quadruped" and ("head" in name or "neck" in name):
+                    d = (fwd + up) / 2**0.5
+            elif g == "tail":
+                d = -fwd
+            else:
+                before = started[p] if self._groups[p] == g else False
+                if not before and lengths[j] > 0:
+                    d = (1.0 if g.startswith("left_") else -1.0) * lat
+                else:
+                    d = fwd if any(w in name for w in ("toe", "ball")) else -up
+                started[j] = before or bool(lengths[j] > 0)
+            pos[j] = pos[p] + lengths[j] * d
+        return pos - pos[0]
+
+    def height(self) -> float:
+        """Extent of :meth:`template` along the up axis (the character's standing height).
+
+        For quadrupeds this is the shoulder/hip height plus the raised head.
+        """
+        t = self.template()
+        return float(t[:, 1].max() - t[:, 1].min())
+
+    def subset(self, joint_names: Iterable[str]) -> Skeleton:
+        """A skeleton with only the given joints (the root must be kept).
+
+        Removed joints are bridged: a kept joint is re-parented to its nearest kept
+        ancestor and its offset becomes the sum of the offsets along the removed
+        chain (exact when the removed joints have zero rest rotation, which is the
+        BVH rest pose).
+
+        Raises:
+            SkeletonError: On unknown names or when the root is dropped.
+        """
+        keep = {self.index(n) for n in joint_names}
+        if 0 not in keep:
+            raise SkeletonError(f"subset must keep the root joint {self._names[0]!r}")
+        order = sorted(keep)
+        new_index = {j: i for i, j in enumerate(order)}
+        parents, offsets = [], []
+        for j in order:
+            off = self._offsets[j].clone()
+            p = self._parents[j]
+            while p >= 0 and p not in keep:
+                off = off + self._offsets[p]
+                p = self._parents[p]
+            parents.append(-1 if p < 0 else new_index[p])
+            offsets.append(off)
+        return Skeleton(
+            [self._names[j] for j in order],
+            parents,
+            torch.stack(offsets),
+            end_sites={new_index[j]: v for j, v in self.end_sites.items() if j in keep},
+            body_groups=[self._groups[j] for j in order],
+            up_axis=self.up_axis,
+            name=self.name,
+            morphology=self.morphology,
+            channels=None if self.channels is None else [self.channels[j] for j in order],
+        )
+
+    def scaled(self, factor: float) -> Skeleton:
+        """The same skeleton with every offset (and end site) multiplied by ``factor``."""
+        return Skeleton(
+            self._names,
+            self._parents,
+            self._offsets * factor,
+            end_sites={j: [[c * factor for c in e] for e in v] for j, v in self.end_sites.items()},
+            body_groups=self._groups,
+            up_axis=self.up_axis,
+            name=self.name,
+            morphology=self.morphology,
+            channels=self.channels,
+        )
+
+    # --------------------------------------------------------- identity, I/O
+    def topology_key(self) -> tuple[tuple[str, ...], tuple[int, ...]]:
+        """Names and parents: what ``==`` and ``hash`` compare (offsets excluded)."""
+        return tuple(self._names), tuple(self._parents)
+
+    def same_topology(self, other: Skeleton) -> bool:
+        """Whether both skeletons have the same joint names and hierarchy."""
+        return self.topology_key() == other.topology_key()
+
+    def __eq__(self, other: object) -> bool:
+        """Topology equality plus equal offsets (within 1e-6 relative)."""
+        if not isinstance(other, Skeleton):
+            return NotImplemented
+        return self.same_topology(other) and torch.allclose(
+            self._offsets.double(), other._offsets.double(), rtol=1e-6, atol=1e-9
+        )
+
+    def __hash__(self) -> int:
+        return hash(self.topology_key())
+
+    def __repr__(self) -> str:
+        label = f" {self.name!r}" if self.name else ""
+        return (
+            f"Skeleton{label}({self.num_joints} joints, root {self._names[0]!r}, {self.morphology})"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable description (see :meth:`from_dict`)."""
+        return {
+            "joint_names": self._names,
+            "parents": self._parents,
+            "offsets": self._offsets.tolist(),
+            "end_sites": {str(k): v for k, v in self.end_sites.items()},
+            "body_groups": self._groups,
+            "up_axis": self.up_axis,
+            "name": self.name,
+            "morphology": self.morphology,
+            "channels": self.channels,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Skeleton:
+        """Rebuild a skeleton from :meth:`to_dict` output."""
+        try:
+            return cls(
+                data["joint_names"],
+                data["parents"],
+                data["offsets"],
+                end_sites={int(k): v for k, v in (data.get("end_sites") or {}).items()},
+                body_groups=data.get("body_groups"),
+                up_axis=data.get("up_axis", "y"),
+                name=data.get("name"),
+                morphology=data.get("morphology"),
+                channels=data.get("channels"),
+            )
+        except KeyError as exc:
+            raise SkeletonError(f"skeleton description lacks the field {exc.args[0]!r}") from None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return self.to_dict()
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(  # type: ignore[misc]
+            state["joint_names"],
+            state["parents"],
+            state["offsets"],
+            end_sites={int(k): v for k, v in (state.get("end_sites") or {}).items()},
+            body_groups=state.get("body_groups"),
+            up_axis=state.get("up_axis", "y"),
+            name=state.get("name"),
+            morphology=state.get("morphology"),
+            channels=state.get("channels"),
+        )

@@ -1,0 +1,480 @@
+"""Procedural motion: synthetic, parametric gaits on several skeletons.
+
+This is the embedded default data of skelagnostic: demos, the default training
+data of every method and the fast tests use it, so nothing needs downloading.
+It is **synthetic**: joint angles are smooth periodic functions of a gait phase,
+not motion capture. Its value is that the truth is known (gait frequency,
+phase, speed) and that the same gait can be played on different topologies.
+
+Skeletons (all in centimetres, Y up, facing +Z, left +X):
+
+* ``biped22``: LaFAN1-like, 22 joints (``Hips``, ``LeftUpLeg``, ... ``RightHand``).
+* ``biped31``: CMU-like, 31 joints with zero-length hip/back joints, fingers and
+  thumbs (Xia/MotionBuilder names).
+* ``biped17``: Human3.6M-like, 17 joints with short names (``RHip``, ``LKnee``, ...).
+* ``quadruped``: a dog, 21 joints with a tail and human-style names
+  (``LeftArm`` is a front leg), like the MANN dog data.
+
+Gaits: ``walk``, ``run``, ``idle`` for bipeds; ``walk`` (lateral sequence),
+``trot`` (diagonal pairs), ``gallop`` (rotary) and ``idle`` for the quadruped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from skelagnostic.core import quaternion as Q
+from skelagnostic.core.motion import Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = ["GAITS", "KINDS", "dataset", "generate", "skeleton"]
+
+# (name, parent, offset in cm, role). Roles drive the animation; joints without
+# a role (fingers, zero-length helpers) keep their rest rotation.
+_Spec = list[tuple[str, str | None, tuple[float, float, float], str | None]]
+
+
+def _mirror(spec: _Spec, left: str, right: str, rleft: str = "l_", rright: str = "r_") -> _Spec:
+    out = []
+    for name, parent, off, role in spec:
+        out.append(
+            (
+                name.replace(left, right, 1) if name.startswith(left) or left in name else name,
+                None if parent is None else parent.replace(left, right, 1),
+                (-off[0], off[1], off[2]),
+                None if role is None else role.replace(rleft, rright, 1),
+            )
+        )
+    return out
+
+
+_B22_LEFT_LEG: _Spec = [
+    ("LeftUpLeg", "Hips", (9.0, -5.0, 0.0), "l_hip"),
+    ("LeftLeg", "LeftUpLeg", (0.0, -42.0, 0.0), "l_knee"),
+    ("LeftFoot", "LeftLeg", (0.0, -42.0, 0.0), "l_ankle"),
+    ("LeftToe", "LeftFoot", (0.0, -6.0, 13.0), "l_toe"),
+]
+_B22_LEFT_ARM: _Spec = [
+    ("LeftShoulder", "Spine2", (3.0, 11.0, 0.0), "l_clavicle"),
+    ("LeftArm", "LeftShoulder", (15.0, 0.0, 0.0), "l_shoulder"),
+    ("LeftForeArm", "LeftArm", (28.0, 0.0, 0.0), "l_elbow"),
+    ("LeftHand", "LeftForeArm", (26.0, 0.0, 0.0), "l_wrist"),
+]
+_BIPED22: _Spec = [
+    ("Hips", None, (0.0, 95.0, 0.0), "root"),
+    *_B22_LEFT_LEG,
+    *_mirror(_B22_LEFT_LEG, "Left", "Right"),
+    ("Spine", "Hips", (0.0, 10.0, 0.0), "spine0"),
+    ("Spine1", "Spine", (0.0, 12.0, 0.0), "spine1"),
+    ("Spine2", "Spine1", (0.0, 12.0, 0.0), "spine2"),
+    ("Neck", "Spine2", (0.0, 16.0, 0.0), "neck"),
+    ("Head", "Neck", (0.0, 10.0, 0.0), "head"),
+    *_B22_LEFT_ARM,
+    *_mirror(_B22_LEFT_ARM, "Left", "Right"),
+]
+
+_B31_LEFT_LEG: _Spec = [
+    ("LHipJoint", "Hips", (0.0, 0.0, 0.0), None),
+    ("LeftUpLeg", "LHipJoint", (9.5, -6.0, 1.0), "l_hip"),
+    ("LeftLeg", "LeftUpLeg", (0.0, -43.0, 0.0), "l_knee"),
+    ("LeftFoot", "LeftLeg", (0.0, -41.0, 0.0), "l_ankle"),
+    ("LeftToeBase", "LeftFoot", (0.0, -5.0, 13.5), "l_toe"),
+]
+_B31_LEFT_ARM: _Spec = [
+    ("LeftShoulder", "Spine1", (3.5, 10.0, 0.0), "l_clavicle"),
+    ("LeftArm", "LeftShoulder", (16.0, 0.0, 0.0), "l_shoulder"),
+    ("LeftForeArm", "LeftArm", (27.0, 0.0, 0.0), "l_elbow"),
+    ("LeftHand", "LeftForeArm", (24.0, 0.0, 0.0), "l_wrist"),
+    ("LeftFingerBase", "LeftHand", (4.0, 0.0, 0.0), None),
+    ("LeftHandIndex1", "LeftFingerBase", (4.0, 0.0, 0.0), None),
+    ("LThumb", "LeftHand", (2.0, 0.0, 3.0), None),
+]
+_BIPED31: _Spec = [
+    ("Hips", None, (0.0, 96.0, 0.0), "root"),
+    *_B31_LEFT_LEG,
+    *[
+        (n.replace("LHip", "RHip"), p.replace("LHip", "RHip") if p else p, o, r)
+        for n, p, o, r in _mirror(_B31_LEFT_LEG, "Left", "Right")
+    ],
+    ("LowerBack", "Hips", (0.0, 0.0, 0.0), None),
+    ("Spine", "LowerBack", (0.0, 12.0, 0.0), "spine0"),
+    ("Spine1", "Spine", (0.0, 12.0, 0.0), "spine1"),
+    ("Neck", "Spine1", (0.0, 11.0, 0.0), "neck"),
+    ("Neck1", "Neck", (0.0, 7.0, 0.0), None),
+    ("Head", "Neck1", (0.0, 7.0, 0.0), "head"),
+    *_B31_LEFT_ARM,
+    *[
+        (n.replace("LThumb", "RThumb"), p, o, r)
+        for n, p, o, r in _mirror(_B31_LEFT_ARM, "Left", "Right")
+    ],
+]
+
+_B17_LEFT_LEG: _Spec = [
+    ("LHip", "Hip", (12.0, 0.0, 0.0), "l_hip"),
+    ("LKnee", "LHip", (0.0, -44.0, 0.0), "l_knee"),
+    ("LFoot", "LKnee", (0.0, -44.0, 0.0), "l_ankle"),
+]
+_B17_LEFT_ARM: _Spec = [
+    ("LShoulder", "Thorax", (16.0, 0.0, 0.0), "l_shoulder"),
+    ("LElbow", "LShoulder", (27.0, 0.0, 0.0), "l_elbow"),
+    ("LWrist", "LElbow", (25.0, 0.0, 0.0), "l_wrist"),
+]
+_BIPED17: _Spec = [
+    ("Hip", None, (0.0, 87.0, 0.0), "root"),
+    *[
+        (
+            n.replace("L", "R", 1),
+            p.replace("L", "R", 1) if p != "Hip" else p,
+            (-o[0], o[1], o[2]),
+            r.replace("l_", "r_") if r else r,
+        )
+        for n, p, o, r in _B17_LEFT_LEG
+    ],
+    *_B17_LEFT_LEG,
+    ("Spine", "Hip", (0.0, 23.0, 0.0), "spine0"),
+    ("Thorax", "Spine", (0.0, 25.0, 0.0), "spine2"),
+    ("Neck", "Thorax", (0.0, 9.0, 0.0), "neck"),
+    ("Head", "Neck", (0.0, 11.0, 0.0), "head"),
+    *_B17_LEFT_ARM,
+    *[
+        (
+            n.replace("L", "R", 1),
+            p.replace("L", "R", 1) if p.startswith("L") else p,
+            (-o[0], o[1], o[2]),
+            r.replace("l_", "r_") if r else r,
+        )
+        for n, p, o, r in _B17_LEFT_ARM
+    ],
+]
+
+_Q_LEFT_FRONT: _Spec = [
+    ("LeftShoulder", "Spine1", (6.0, -4.0, 4.0), "lf_0"),
+    ("LeftArm", "LeftShoulder", (0.0, -14.0, 0.0), "lf_1"),
+    ("LeftForeArm", "LeftArm", (0.0, -15.0, 0.0), "lf_2"),
+    ("LeftHand", "LeftForeArm", (0.0, -11.0, 3.0), "lf_3"),
+]
+_Q_LEFT_HIND: _Spec = [
+    ("LeftUpLeg", "Hips", (6.0, -4.0, -4.0), "lh_0"),
+    ("LeftLeg", "LeftUpLeg", (0.0, -17.0, 3.0), "lh_1"),
+    ("LeftFoot", "LeftLeg", (0.0, -18.0, -5.0), "lh_2"),
+]
+_QUADRUPED: _Spec = [
+    ("Hips", None, (0.0, 43.0, 0.0), "root"),
+    ("Spine", "Hips", (0.0, 2.0, 18.0), "spine0"),
+    ("Spine1", "Spine", (0.0, 0.0, 18.0), "spine1"),
+    ("Neck", "Spine1", (0.0, 8.0, 8.0), "neck"),
+    ("Head", "Neck", (0.0, 8.0, 8.0), "head"),
+    *_Q_LEFT_FRONT,
+    *_mirror(_Q_LEFT_FRONT, "Left", "Right", "lf_", "rf_"),
+    *_Q_LEFT_HIND,
+    *_mirror(_Q_LEFT_HIND, "Left", "Right", "lh_", "rh_"),
+    ("Tail", "Hips", (0.0, 3.0, -10.0), "tail0"),
+    ("Tail1", "Tail", (0.0, -3.0, -12.0), "tail1"),
+]
+
+_END_SITES = {
+    "Head": (0.0, 12.0, 0.0),
+    "LeftToe": (0.0, 0.0, 5.0),
+    "RightToe": (0.0, 0.0, 5.0),
+    "LeftHand": (8.0, 0.0, 0.0),
+    "RightHand": (-8.0, 0.0, 0.0),
+}
+
+_SPECS: dict[str, _Spec] = {
+    "biped22": _BIPED22,
+    "biped31": _BIPED31,
+    "biped17": _BIPED17,
+    "quadruped": _QUADRUPED,
+}
+
+#: Skeleton kinds the generator knows.
+KINDS: tuple[str, ...] = tuple(_SPECS)
+
+#: Gaits per morphology.
+GAITS: dict[str, tuple[str, ...]] = {
+    "biped": ("walk", "run", "idle"),
+    "quadruped": ("walk", "trot", "gallop", "idle"),
+}
+
+
+@dataclass(frozen=True)
+class _Gait:
+    frequency: float  # strides per second
+    hip: float  # degrees of limb swing
+    knee: float  # degrees of knee flexion
+    bob: float  # vertical bob as a fraction of leg length
+    arm: float  # degrees of arm swing (bipeds)
+    elbow: float  # degrees of elbow bend (bipeds)
+    spine: float  # degrees of spine flexion/twist
+    offsets: tuple[float, float, float, float] = (0.0, 0.5, 0.0, 0.5)  # LF RF LH RH phases
+
+
+_BIPED_GAITS = {
+    "walk": _Gait(0.9, 25.0, 35.0, 0.02, 18.0, 15.0, 4.0),
+    "run": _Gait(1.4, 38.0, 75.0, 0.05, 35.0, 85.0, 7.0),
+    "idle": _Gait(0.25, 1.5, 2.0, 0.004, 2.0, 8.0, 1.5),
+}
+_QUAD_GAITS = {
+    # phase offsets of (left front, right front, left hind, right hind)
+    "walk": _Gait(1.0, 20.0, 30.0, 0.02, 0.0, 0.0, 3.0, (0.25, 0.75, 0.0, 0.5)),
+    "trot": _Gait(2.0, 25.0, 40.0, 0.04, 0.0, 0.0, 3.0, (0.0, 0.5, 0.5, 0.0)),
+    "gallop": _Gait(2.8, 40.0, 60.0, 0.08, 0.0, 0.0, 12.0, (0.0, 0.1, 0.5, 0.6)),
+    "idle": _Gait(0.3, 1.0, 1.5, 0.003, 0.0, 0.0, 1.0, (0.0, 0.5, 0.5, 0.0)),
+}
+
+
+def _axis_angle(axis: str, degrees: torch.Tensor) -> torch.Tensor:
+    half = torch.deg2rad(degrees) / 2
+    q = torch.zeros(*degrees.shape, 4, dtype=degrees.dtype)
+    q[..., 0] = torch.cos(half)
+    q[..., 1 + "xyz".index(axis)] = torch.sin(half)
+    return q
+
+
+def skeleton(kind: str, scale: float = 1.0) -> Skeleton:
+    """The rest skeleton of a procedural kind (see :data:`KINDS`).
+
+    Args:
+        kind: ``"biped22"``, ``"biped31"``, ``"biped17"`` or ``"quadruped"``.
+        scale: Multiplies every offset (body size variation).
+
+    Raises:
+        SkelagnosticError: For an unknown kind.
+    """
+    if kind not in _SPECS:
+        raise SkelagnosticError(f"unknown procedural skeleton {kind!r}; known: {', '.join(KINDS)}")
+    spec = _SPECS[kind]
+    names = [s[0] for s in spec]
+    index = {n: i for i, n in enumerate(names)}
+    parents = [-1 if s[1] is None else index[s[1]] for s in spec]
+    offsets = torch.tensor([s[2] for s in spec], dtype=torch.float64) * scale
+    end_sites: dict[int, list[list[float]]] = {}
+    for j, n in enumerate(names):
+        if not any(p == j for p in parents):
+            site = _END_SITES.get(n)
+            if site is None:  # continue the last bone a little
+                d = offsets[j] / offsets[j].norm().clamp_min(1e-9)
+                site = tuple((d * 5.0 * scale).tolist())
+            end_sites[j] = [[c * (scale if n in _END_SITES else 1.0) for c in site]]
+    morphology = "quadruped" if kind == "quadruped" else "biped"
+    return Skeleton(names, parents, offsets, end_sites=end_sites, name=kind, morphology=morphology)
+
+
+def generate(
+    kind: str = "biped22",
+    gait: str = "walk",
+    seconds: float = 4.0,
+    fps: float = 30.0,
+    seed: int = 0,
+    frequency: float | None = None,
+    speed: float | None = None,
+    turn_rate: float = 0.0,
+    scale: float | None = None,
+    noise: float = 0.0,
+) -> tuple[Motion, dict[str, Any]]:
+    """Generate a procedural gait with known frequency and phase.
+
+    The seed varies the body size (±8 %), the stride frequency (±8 %), the
+    amplitudes (±10 %) and the start phase unless they are given explicitly.
+
+    Args:
+        kind: Skeleton kind (see :data:`KINDS`).
+        gait: Gait name (see :data:`GAITS`).
+        seconds: Duration.
+        fps: Frame rate of the result.
+        seed: Random seed of the variations.
+        frequency: Stride frequency in Hz (default: the gait's, varied by the seed).
+        speed: Forward speed in cm/s (default: what the stride geometry implies).
+        turn_rate: Heading change in degrees per second.
+        scale: Body size factor (default: varied by the seed around 1).
+        noise: Standard deviation in degrees of i.i.d. rotation noise added to animated joints.
+
+    Returns:
+        ``(motion, info)``: ``info`` holds ``kind``, ``gait``, ``frequency`` (Hz),
+        ``phase`` (``[T]`` tensor in [0, 1), stride phase per frame, 0 at the left
+        hind/leg's forward-most swing), ``speed`` (cm/s), ``seed`` and
+        ``synthetic=True``.
+
+    Raises:
+        SkelagnosticError: For unknown kinds or gaits, or non-positive durations.
+
+    Example:
+        >>> import skelagnostic as sa
+        >>> motion, info = sa.procedural.generate("quadruped", "trot", seconds=1.0, fps=60)
+        >>> motion.num_frames, round(info["frequency"], 2) > 0
+        (61, True)
+    """
+    if kind not in _SPECS:
+        raise SkelagnosticError(f"unknown procedural skeleton {kind!r}; known: {', '.join(KINDS)}")
+    morph = "quadruped" if kind == "quadruped" else "biped"
+    table = _QUAD_GAITS if morph == "quadruped" else _BIPED_GAITS
+    if gait not in table:
+        raise SkelagnosticError(
+            f"unknown gait {gait!r} for a {morph}; known: {', '.join(GAITS[morph])}"
+        )
+    if not seconds > 0 or not fps > 0:
+        raise SkelagnosticError(f"seconds and fps must be positive, got {seconds} and {fps}")
+    rng = np.random.default_rng(seed)
+    g = table[gait]
+    jitter = lambda spread: float(1.0 + spread * (2.0 * rng.random() - 1.0))  # noqa: E731
+    body = scale if scale is not None else jitter(0.08)
+    freq = frequency if frequency is not None else g.frequency * jitter(0.08)
+    amp = jitter(0.10)
+    phase0 = float(rng.random())
+    sk = skeleton(kind, body)
+    spec = _SPECS[kind]
+    roles = {s[3]: j for j, s in enumerate(spec) if s[3] is not None}
+    num_frames = math.floor(seconds * fps + 1e-9) + 1
+    t = torch.arange(num_frames, dtype=torch.float64) / fps
+    phase = torch.remainder(phase0 + freq * t, 1.0)
+    two_pi = 2.0 * math.pi
+    rot = Q.identity(num_frames, sk.num_joints, dtype=torch.float64)
+
+    def put(role: str, q: torch.Tensor) -> None:
+        if role in roles:
+            rot[:, roles[role]] = q
+
+    hip, knee = g.hip * amp, g.knee * amp
+    if morph == "biped":
+        leg = float(sk.offsets[roles["l_knee"]].norm() + sk.offsets[roles["l_ankle"]].norm())
+        for side, shift in (("l", 0.0), ("r", 0.5)):
+            ph = two_pi * (phase + shift)
+            # hip flexion is a negative rotation about +X (the foot moves to +Z)
+            put(f"{side}_hip", _axis_angle("x", -hip * torch.sin(ph)))
+            put(
+                f"{side}_knee",
+                _axis_angle("x", knee * torch.clamp(torch.sin(ph - 1.2), min=0) + 0.1 * knee),
+            )
+            put(f"{side}_ankle", _axis_angle("x", -0.3 * hip * torch.sin(ph - 0.5)))
+            down = 78.0 if side == "l" else -78.0
+            arm = -(g.arm * amp) * torch.sin(ph + math.pi)  # swings opposite to the leg
+            put(f"{side}_shoulder", Q.mul(_axis_angle("x", arm), _axis_angle("z", -down + 0 * t)))
+            bend = g.elbow * amp * (1.0 + 0.3 * torch.sin(ph + math.pi))
+            put(f"{side}_elbow", _axis_angle("y", (-bend if side == "l" else bend)))
+        twist = g.spine * amp * torch.sin(two_pi * phase)
+        put("spine0", _axis_angle("y", -0.5 * twist))
+        put("spine1", _axis_angle("y", -0.5 * twist))
+        put("spine2", _axis_angle("x", torch.full_like(t, 3.0)))
+        put("neck", _axis_angle("y", 0.3 * twist))
+        pelvis = _axis_angle("y", twist)
+        bob = g.bob * leg * torch.cos(2.0 * two_pi * phase)
+        default_speed = 4.0 * leg * math.sin(math.radians(hip)) * freq
+        if gait == "idle":
+            default_speed = 0.0
+            sway = 1.5 * body * torch.sin(two_pi * phase)
+        else:
+            sway = 0.03 * leg * torch.sin(two_pi * phase)
+    else:
+        front = float(sum(sk.offsets[roles[f"lf_{k}"]].norm() for k in (1, 2, 3)))
+        hind = float(sum(sk.offsets[roles[f"lh_{k}"]].norm() for k in (1, 2)))
+        leg = 0.5 * (front + hind)
+        for (prefix, chain), off in zip(
+            (("lf", 3), ("rf", 3), ("lh", 2), ("rh", 2)), g.offsets, strict=True
+        ):
+            ph = two_pi * (phase + off)
+            put(f"{prefix}_1", _axis_angle("x", -hip * torch.sin(ph)))
+            sign = 1.0 if prefix.endswith("f") else -1.0  # elbows and hocks bend opposite ways
+            put(
+                f"{prefix}_2",
+                _axis_angle("x", sign * knee * torch.clamp(torch.sin(ph - 1.2), min=0)),
+            )
+            if chain == 3:
+                put(
+                    f"{prefix}_3",
+                    _axis_angle("x", -0.4 * knee * torch.clamp(torch.sin(ph - 2.0), min=0)),
+                )
+        flex = g.spine * amp * torch.sin(two_pi * phase)
+        put("spine0", _axis_angle("x", flex))
+        put("spine1", _axis_angle("x", -flex))
+        put("neck", _axis_angle("x", 0.5 * flex))
+        put("tail0", _axis_angle("y", 10.0 * torch.sin(two_pi * phase)))
+        put("tail1", _axis_angle("y", 10.0 * torch.sin(two_pi * phase - 1.0)))
+        pelvis = _axis_angle("x", -0.5 * flex)
+        bob = g.bob * leg * torch.cos(2.0 * two_pi * phase)
+        default_speed = 0.0 if gait == "idle" else 4.0 * leg * math.sin(math.radians(hip)) * freq
+        sway = 0.01 * leg * torch.sin(two_pi * phase)
+    spd = default_speed if speed is None else float(speed)
+    heading = torch.deg2rad(torch.as_tensor(turn_rate, dtype=torch.float64) * t)
+    yaw = _axis_angle("y", torch.rad2deg(heading))
+    root_rot = Q.mul(yaw, pelvis)
+    # integrate the heading for the root path
+    if abs(turn_rate) > 1e-9:
+        w = math.radians(turn_rate)
+        x = spd / w * (1.0 - torch.cos(heading))
+        z = spd / w * torch.sin(heading)
+    else:
+        x, z = torch.zeros_like(t), spd * t
+    lateral = torch.stack(
+        [sway * torch.cos(heading), torch.zeros_like(t), -sway * torch.sin(heading)], dim=-1
+    )
+    root = torch.stack([x, sk.offsets[0, 1] + bob, z], dim=-1) + lateral
+    rot[:, 0] = root_rot
+    if noise > 0:
+        animated = sorted(j for r, j in roles.items() if r != "root")
+        gen = torch.Generator().manual_seed(seed)
+        axis = torch.randn(num_frames, len(animated), 3, generator=gen, dtype=torch.float64)
+        ang = torch.randn(num_frames, len(animated), generator=gen, dtype=torch.float64) * noise
+        axis = axis / axis.norm(dim=-1, keepdim=True)
+        half = torch.deg2rad(ang) / 2
+        dq = torch.cat([torch.cos(half)[..., None], torch.sin(half)[..., None] * axis], -1)
+        rot[:, animated] = Q.mul(rot[:, animated], dq)
+    motion = Motion(sk, rot, root, fps, name=f"{kind}_{gait}_{seed}", units="cm")
+    info = {
+        "kind": kind,
+        "gait": gait,
+        "frequency": float(freq),
+        "phase": phase.to(torch.float32),
+        "speed": float(spd),
+        "seed": seed,
+        "synthetic": True,
+    }
+    return motion, info
+
+
+def dataset(
+    kinds: tuple[str, ...] = ("biped22", "biped31", "biped17"),
+    gaits: tuple[str, ...] | None = None,
+    clips_per_gait: int = 2,
+    seconds: float = 4.0,
+    fps: float = 30.0,
+    seed: int = 0,
+) -> list[tuple[Motion, dict[str, Any]]]:
+    """Several procedural clips: every kind x gait x ``clips_per_gait`` seeds.
+
+    Args:
+        kinds: Skeleton kinds.
+        gaits: Gaits to play (default: every gait of each kind's morphology).
+        clips_per_gait: Clips per (kind, gait), each with its own seed.
+        seconds: Duration of each clip.
+        fps: Frame rate.
+        seed: Base seed; clip ``i`` uses ``seed + i``.
+
+    Returns:
+        A list of ``(motion, info)`` pairs, in a deterministic order.
+    """
+    out = []
+    counter = 0
+    for kind in kinds:
+        morph = "quadruped" if kind == "quadruped" else "biped"
+        for gait in gaits or GAITS[morph]:
+            if gait not in GAITS[morph]:
+                continue
+            for _ in range(clips_per_gait):
+                out.append(
+                    generate(
+                        kind,
+                        gait,
+                        seconds=seconds,
+                        fps=fps,
+                        seed=seed + counter,
+                        turn_rate=float(np.random.default_rng(seed + counter).uniform(-20, 20)),
+                    )
+                )
+                counter += 1
+    return out

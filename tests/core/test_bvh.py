@@ -1,0 +1,240 @@
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import skelagnostic as sa
+from skelagnostic.core import quaternion as Q
+
+TINY = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 90 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+  JOINT Spine
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 5 0
+    }
+  }
+  JOINT LeftUpLeg
+  {
+    OFFSET 8 -5 0
+    CHANNELS 3 Xrotation Yrotation Zrotation
+    End Site
+    {
+      OFFSET 0 -40 0
+    }
+  }
+}
+MOTION
+Frames: 3
+Frame Time: 0.0333333
+0 90 0 0 0 0 10 20 30 1 2 3
+1 91 2 5 -5 10 15 25 35 4 5 6
+2 92 4 10 -10 20 20 30 40 7 8 9
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "clip.bvh", newline: str = "\n") -> Path:
+    path = tmp_path / name
+    path.write_bytes(text.replace("\n", newline).encode())
+    return path
+
+
+def max_angle_deg(a: torch.Tensor, b: torch.Tensor) -> float:
+    dots = (a * b).sum(-1).abs().clamp(max=1.0)
+    return float(torch.rad2deg(2 * torch.acos(dots)).max())
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n"])
+def test_read_tiny_file(tmp_path, newline):
+    m = sa.read_bvh(write(tmp_path, TINY, newline=newline))
+    s = m.skeleton
+    assert s.joint_names == ["Hips", "Spine", "LeftUpLeg"] and s.parents == [-1, 0, 0]
+    assert m.num_frames == 3 and m.fps == 30 and m.name == "clip"
+    assert s.end_sites == {1: [[0.0, 5.0, 0.0]], 2: [[0.0, -40.0, 0.0]]}
+    assert s.channels[1] == ["Zrotation", "Xrotation", "Yrotation"]
+    torch.testing.assert_close(
+        m.root_positions[2], torch.tensor([2.0, 92.0, 4.0], dtype=torch.float64)
+    )
+    # Spine: intrinsic Z then X then Y with the values in channel order
+    ref = Q.euler_to_quat(torch.tensor([20.0, 30.0, 40.0], dtype=torch.float64), "ZXY")
+    assert max_angle_deg(m.rotations[2, 1], ref) < 1e-5
+    ref = Q.euler_to_quat(torch.tensor([7.0, 8.0, 9.0], dtype=torch.float64), "XYZ")
+    assert max_angle_deg(m.rotations[2, 2], ref) < 1e-5
+
+
+def test_six_channels_on_every_joint_translate_children(tmp_path):
+    """Bandai-style: every joint has position channels and a non-root joint moves."""
+    text = (
+        TINY.replace(
+            "CHANNELS 3 Zrotation Xrotation Yrotation",
+            "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+        )
+        .replace("10 20 30 1 2 3", "0 10 0 10 20 30 1 2 3")
+        .replace("15 25 35 4 5 6", "0 12 0 15 25 35 4 5 6")
+        .replace("20 30 40 7 8 9", "3 10 0 20 30 40 7 8 9")
+    )
+    m = sa.read_bvh(write(tmp_path, text))
+    assert m.translations is not None
+    torch.testing.assert_close(
+        m.translations[:, 1],
+        torch.tensor([[0.0, 10.0, 0.0], [0.0, 12.0, 0.0], [3.0, 10.0, 0.0]], dtype=torch.float64),
+    )
+    out = tmp_path / "out.bvh"
+    sa.write_bvh(m, out)
+    back = sa.read_bvh(out)
+    torch.testing.assert_close(back.global_positions(), m.global_positions(), atol=1e-5, rtol=0)
+    assert back.skeleton.channels[1][:3] == ["Xposition", "Yposition", "Zposition"]
+
+
+@pytest.mark.parametrize("order", ["".join(p) for p in itertools.permutations("XYZ")])
+def test_round_trip_every_channel_order(tmp_path, order):
+    motion, _ = sa.procedural.generate("biped17", "run", seconds=1, fps=30, seed=2)
+    channels = [[*("Xposition", "Yposition", "Zposition")] + [f"{a}rotation" for a in order]]
+    channels += [[f"{a}rotation" for a in order]] * (motion.num_joints - 1)
+    sk = motion.skeleton
+    sk2 = sa.Skeleton(
+        sk.joint_names, sk.parents, sk.offsets, end_sites=sk.end_sites, channels=channels
+    )
+    m = sa.Motion(sk2, motion.rotations, motion.root_positions, motion.fps)
+    path = tmp_path / "o.bvh"
+    sa.write_bvh(m, path)
+    assert f"CHANNELS 3 {' '.join(channels[1])}" in path.read_text()
+    back = sa.read_bvh(path)
+    assert max_angle_deg(back.rotations, m.rotations) < 1e-4
+    torch.testing.assert_close(back.global_positions(), m.global_positions(), atol=1e-5, rtol=0)
+
+
+@pytest.mark.data
+def test_every_real_clip_loads_and_round_trips(shared_data, tmp_path):
+    files = sorted(shared_data.rglob("*.bvh"))
+    assert len(files) >= 20
+    expected_joints = {"cmu": 31, "xia_cmu": 31, "lafan1": 22, "mann": 21}
+    for path in files:
+        m = sa.read_bvh(path)
+        assert m.num_joints == expected_joints[path.parent.name], path
+        assert torch.isfinite(m.global_positions()).all()
+        out = tmp_path / path.name
+        sa.write_bvh(m, out)
+        back = sa.read_bvh(out)
+        assert back.skeleton.joint_names == m.skeleton.joint_names
+        assert back.skeleton.channels == m.skeleton.channels
+        assert back.fps == m.fps and back.num_frames == m.num_frames
+        assert max_angle_deg(back.rotations, m.rotations) < 1e-4, path
+        torch.testing.assert_close(back.root_positions, m.root_positions, atol=1e-5, rtol=0)
+        torch.testing.assert_close(back.skeleton.offsets, m.skeleton.offsets, atol=1e-5, rtol=0)
+        assert back.skeleton.end_sites.keys() == m.skeleton.end_sites.keys()
+
+
+@pytest.mark.data
+def test_euler_values_round_trip_on_real_clip(shared_data, tmp_path):
+    """The written channel values equal the file's within 1e-4 degrees (mod 360)."""
+    src = shared_data / "dog" / "mann" / "D1_010_KAN01_002.bvh"
+    out = tmp_path / "dog.bvh"
+    sa.write_bvh(sa.read_bvh(src), out)
+
+    def values(path):
+        lines = path.read_text().splitlines()
+        start = next(i for i, line in enumerate(lines) if line.startswith("Frame Time")) + 1
+        return np.array(
+            [[float(v) for v in line.split()] for line in lines[start:] if line.strip()]
+        )
+
+    a, b = values(src), values(out)
+    diff = np.abs((a - b + 180.0) % 360.0 - 180.0)
+    pos_cols = [0, 1, 2]
+    assert diff[:, pos_cols].max() < 1e-5
+    assert diff[:, 3:].max() < 1e-4
+
+
+BAD_CASES = {
+    "truncated hierarchy": (TINY.split("MOTION")[0][:120], "unexpected end", 6),
+    "no motion section": (TINY.split("MOTION")[0], "no MOTION", None),
+    "channel count": (
+        TINY.replace(
+            "CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 4 Zrotation Xrotation Yrotation"
+        ),
+        "declares 4",
+        10,
+    ),
+    "unknown channel": (
+        TINY.replace("Xrotation Yrotation Zrotation", "Xrotation Wrotation Zrotation"),
+        "unknown channel 'Wrotation'",
+        18,
+    ),
+    "duplicate joint": (
+        TINY.replace("JOINT LeftUpLeg", "JOINT Spine"),
+        "duplicate joint name 'Spine'",
+        15,
+    ),
+    "short line": (
+        TINY.replace("1 91 2 5 -5 10 15 25 35 4 5 6", "1 91 2 5 -5 10 15 25 35 4 5"),
+        "has 11 values",
+        29,
+    ),
+    "nan value": (TINY.replace("2 92 4", "2 nan 4"), "not finite", 30),
+    "inf value": (TINY.replace("2 92 4", "2 inf 4"), "not finite", 30),
+    "text value": (TINY.replace("2 92 4", "2 abc 4"), "'abc' is not a number", 30),
+    "zero frames": (
+        TINY.replace("Frames: 3", "Frames: 0").rsplit("Frame Time: 0.0333333", 1)[0]
+        + "Frame Time: 0.0333333\n",
+        "at least one",
+        26,
+    ),
+    "missing frames": (TINY.replace("Frames: 3", "Frames: 5"), "declares 5 frames but has 3", 30),
+    "bad frame time": (TINY.replace("Frame Time: 0.0333333", "Frame Time: -1"), "positive", 27),
+    "bad offset": (TINY.replace("OFFSET 0 10 0", "OFFSET 0 x 0"), "'x' is not a number", 8),
+    "nan offset": (TINY.replace("OFFSET 0 10 0", "OFFSET 0 nan 0"), "not finite", 8),
+    "not a bvh": ("hello world\n", "starts with 'HIERARCHY'", 1),
+    "empty": ("", "empty", 1),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CASES))
+def test_bad_input_names_file_and_line(tmp_path, case):
+    text, message, line = BAD_CASES[case]
+    path = write(tmp_path, text, name="bad.bvh")
+    with pytest.raises(sa.BVHError, match=message) as info:
+        sa.read_bvh(path)
+    err = info.value
+    assert err.path == path and str(path) in str(err)
+    if line is not None:
+        assert err.line == line, str(err)
+        assert f"bad.bvh:{line}:" in str(err)
+    assert isinstance(err, sa.SkelagnosticError) and isinstance(err, ValueError)
+
+
+def test_missing_file_and_directory(tmp_path):
+    with pytest.raises(sa.BVHError, match="no such file"):
+        sa.read_bvh(tmp_path / "nope.bvh")
+    with pytest.raises(sa.BVHError, match="directory"):
+        sa.read_bvh(tmp_path)
+
+
+def test_write_is_atomic(tmp_path):
+    motion, _ = sa.procedural.generate("biped22", "idle", seconds=0.5, fps=30)
+    target = tmp_path / "missing_dir" / "x.bvh"
+    with pytest.raises(sa.BVHError, match="cannot write"):
+        sa.write_bvh(motion, target)
+    out = tmp_path / "x.bvh"
+    sa.write_bvh(motion, out)
+    assert [p.name for p in tmp_path.iterdir()] == ["x.bvh"]  # no temporary left behind
+    back = sa.read_bvh(out)
+    assert back.skeleton.channels[0][:3] == ["Xposition", "Yposition", "Zposition"]
+    torch.testing.assert_close(
+        back.global_positions(), motion.global_positions(), atol=1e-5, rtol=0
+    )
+
+
+def test_parse_bvh_from_text():
+    m = sa.parse_bvh(TINY)
+    assert m.num_frames == 3
+    with pytest.raises(sa.BVHError, match=r"<bvh text>:\d+"):
+        sa.parse_bvh(TINY.replace("2 92 4", "2 nan 4"))
