@@ -40,18 +40,26 @@ __all__ = ["GAITS", "KINDS", "dataset", "generate", "skeleton"]
 _Spec = list[tuple[str, str | None, tuple[float, float, float], str | None]]
 
 
-def _mirror(spec: _Spec, left: str, right: str, rleft: str = "l_", rright: str = "r_") -> _Spec:
-    out = []
-    for name, parent, off, role in spec:
-        out.append(
-            (
-                name.replace(left, right, 1) if name.startswith(left) or left in name else name,
-                None if parent is None else parent.replace(left, right, 1),
-                (-off[0], off[1], off[2]),
-                None if role is None else role.replace(rleft, rright, 1),
-            )
+def _mirror(spec: _Spec, prefixes: tuple[tuple[str, str], ...] = (("Left", "Right"),)) -> _Spec:
+    """The right-side copy of a left limb: names renamed by prefix, X negated, roles l* -> r*."""
+
+    def rename(name: str | None) -> str | None:
+        if name is None:
+            return None
+        for left, right in prefixes:
+            if name.startswith(left):
+                return right + name[len(left) :]
+        return name
+
+    return [
+        (
+            str(rename(name)),
+            rename(parent),
+            (-off[0], off[1], off[2]),
+            None if role is None else "r" + role[1:],
         )
-    return out
+        for name, parent, off, role in spec
+    ]
 
 
 _B22_LEFT_LEG: _Spec = [
@@ -69,14 +77,14 @@ _B22_LEFT_ARM: _Spec = [
 _BIPED22: _Spec = [
     ("Hips", None, (0.0, 95.0, 0.0), "root"),
     *_B22_LEFT_LEG,
-    *_mirror(_B22_LEFT_LEG, "Left", "Right"),
+    *_mirror(_B22_LEFT_LEG),
     ("Spine", "Hips", (0.0, 10.0, 0.0), "spine0"),
     ("Spine1", "Spine", (0.0, 12.0, 0.0), "spine1"),
     ("Spine2", "Spine1", (0.0, 12.0, 0.0), "spine2"),
     ("Neck", "Spine2", (0.0, 16.0, 0.0), "neck"),
     ("Head", "Neck", (0.0, 10.0, 0.0), "head"),
     *_B22_LEFT_ARM,
-    *_mirror(_B22_LEFT_ARM, "Left", "Right"),
+    *_mirror(_B22_LEFT_ARM),
 ]
 
 _B31_LEFT_LEG: _Spec = [
@@ -98,10 +106,7 @@ _B31_LEFT_ARM: _Spec = [
 _BIPED31: _Spec = [
     ("Hips", None, (0.0, 96.0, 0.0), "root"),
     *_B31_LEFT_LEG,
-    *[
-        (n.replace("LHip", "RHip"), p.replace("LHip", "RHip") if p else p, o, r)
-        for n, p, o, r in _mirror(_B31_LEFT_LEG, "Left", "Right")
-    ],
+    *_mirror(_B31_LEFT_LEG, (("Left", "Right"), ("LHip", "RHip"))),
     ("LowerBack", "Hips", (0.0, 0.0, 0.0), None),
     ("Spine", "LowerBack", (0.0, 12.0, 0.0), "spine0"),
     ("Spine1", "Spine", (0.0, 12.0, 0.0), "spine1"),
@@ -109,10 +114,7 @@ _BIPED31: _Spec = [
     ("Neck1", "Neck", (0.0, 7.0, 0.0), None),
     ("Head", "Neck1", (0.0, 7.0, 0.0), "head"),
     *_B31_LEFT_ARM,
-    *[
-        (n.replace("LThumb", "RThumb"), p, o, r)
-        for n, p, o, r in _mirror(_B31_LEFT_ARM, "Left", "Right")
-    ],
+    *_mirror(_B31_LEFT_ARM, (("Left", "Right"), ("LThumb", "RThumb"))),
 ]
 
 _B17_LEFT_LEG: _Spec = [
@@ -127,30 +129,14 @@ _B17_LEFT_ARM: _Spec = [
 ]
 _BIPED17: _Spec = [
     ("Hip", None, (0.0, 87.0, 0.0), "root"),
-    *[
-        (
-            n.replace("L", "R", 1),
-            p.replace("L", "R", 1) if p != "Hip" else p,
-            (-o[0], o[1], o[2]),
-            r.replace("l_", "r_") if r else r,
-        )
-        for n, p, o, r in _B17_LEFT_LEG
-    ],
+    *_mirror(_B17_LEFT_LEG, (("L", "R"),)),
     *_B17_LEFT_LEG,
     ("Spine", "Hip", (0.0, 23.0, 0.0), "spine0"),
     ("Thorax", "Spine", (0.0, 25.0, 0.0), "spine2"),
     ("Neck", "Thorax", (0.0, 9.0, 0.0), "neck"),
     ("Head", "Neck", (0.0, 11.0, 0.0), "head"),
     *_B17_LEFT_ARM,
-    *[
-        (
-            n.replace("L", "R", 1),
-            p.replace("L", "R", 1) if p.startswith("L") else p,
-            (-o[0], o[1], o[2]),
-            r.replace("l_", "r_") if r else r,
-        )
-        for n, p, o, r in _B17_LEFT_ARM
-    ],
+    *_mirror(_B17_LEFT_ARM, (("L", "R"),)),
 ]
 
 _Q_LEFT_FRONT: _Spec = [
@@ -171,9 +157,9 @@ _QUADRUPED: _Spec = [
     ("Neck", "Spine1", (0.0, 8.0, 8.0), "neck"),
     ("Head", "Neck", (0.0, 8.0, 8.0), "head"),
     *_Q_LEFT_FRONT,
-    *_mirror(_Q_LEFT_FRONT, "Left", "Right", "lf_", "rf_"),
+    *_mirror(_Q_LEFT_FRONT),
     *_Q_LEFT_HIND,
-    *_mirror(_Q_LEFT_HIND, "Left", "Right", "lh_", "rh_"),
+    *_mirror(_Q_LEFT_HIND),
     ("Tail", "Hips", (0.0, 3.0, -10.0), "tail0"),
     ("Tail1", "Tail", (0.0, -3.0, -12.0), "tail1"),
 ]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import builtins
 import math
 from typing import Any
 
@@ -281,7 +282,7 @@ class Motion:
         return Q.rotate(inv, vel)
 
     # -------------------------------------------------------------- editing
-    def resample(self, fps: float) -> Motion:
+    def resample(self, fps: builtins.float) -> Motion:
         """The motion at another frame rate: slerp for rotations, lerp for positions.
 
         The new motion covers the same time span, starting at the first frame; its
@@ -332,7 +333,7 @@ class Motion:
         trans = None if self.translations is None else self.translations[:, mapping] * psign
         return self._replace(rotations=rot, root_positions=root, translations=trans)
 
-    def scaled(self, factor: float) -> Motion:
+    def scaled(self, factor: builtins.float) -> Motion:
         """The motion with every length (offsets, root path, translations) times ``factor``."""
         return self._replace(
             skeleton=self.skeleton.scaled(factor),
