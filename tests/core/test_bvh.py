@@ -134,6 +134,13 @@ def test_every_real_clip_loads_and_round_trips(shared_data, tmp_path):
 
 
 @pytest.mark.data
+def test_read_quaternions_are_sign_continuous(shared_data):
+    m = sa.read_bvh(shared_data / "human" / "lafan1" / "Lafan1_example.bvh")
+    dots = (m.rotations[1:] * m.rotations[:-1]).sum(-1)
+    assert (dots >= 0).all()
+
+
+@pytest.mark.data
 def test_euler_values_round_trip_on_real_clip(shared_data, tmp_path):
     """The written channel values equal the file's within 1e-4 degrees (mod 360)."""
     src = shared_data / "dog" / "mann" / "D1_010_KAN01_002.bvh"

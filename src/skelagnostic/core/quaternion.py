@@ -4,7 +4,8 @@ Every function takes tensors with arbitrary leading batch dimensions and keeps
 the input dtype and device. The storage convention of skelagnostic is
 **(w, x, y, z)** (scalar first), as in BVH tooling and the papers; ``roma``, which
 does the Euler and matrix conversions here, is (x, y, z, w), so the conversion
-happens at this boundary and nowhere else.
+happens at this boundary and nowhere else. roma is imported lazily: importing it
+pulls in ``torch._dynamo``, which costs seconds.
 
 Products, inverses and rotations of vectors are written out with plain tensor
 arithmetic: they are one fused expression each and measurably faster in the
@@ -14,7 +15,6 @@ layout (see ``benchmarks/``).
 
 from __future__ import annotations
 
-import roma
 import torch
 
 __all__ = [
@@ -82,11 +82,22 @@ def rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
 
 def to_matrix(q: torch.Tensor) -> torch.Tensor:
     """Unit (w, x, y, z) quaternions ``[..., 4]`` to rotation matrices ``[..., 3, 3]``."""
-    return roma.unitquat_to_rotmat(roma.quat_wxyz_to_xyzw(q))
+    w, x, y, z = q.unbind(-1)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    rows = (
+        1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
+        2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
+        2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
+    )  # fmt: skip
+    return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
 
 
 def from_matrix(m: torch.Tensor) -> torch.Tensor:
     """Rotation matrices ``[..., 3, 3]`` to unit (w, x, y, z) quaternions with ``w >= 0``."""
+    import roma
+
     q = roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(m))
     return torch.where(q[..., :1] < 0, -q, q)
 
@@ -168,6 +179,8 @@ def quat_to_euler(q: torch.Tensor, order: str, degrees: bool = True) -> torch.Te
     )
     locked = sin_mid.abs() > 1.0 - 1e-6
     if bool(locked.any()):
+        import roma
+
         out[locked] = roma.unitquat_to_euler(order, roma.quat_wxyz_to_xyzw(q[locked])).to(out)
     return torch.rad2deg(out) if degrees else out
 

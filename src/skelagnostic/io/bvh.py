@@ -2,8 +2,9 @@
 
 Supported: any rotation channel order per joint, position channels on any
 joint (Bandai-style files translate non-root joints), End Sites, CRLF or LF
-line endings, and tabs or spaces. Position channels *replace* the joint's
-OFFSET for that frame (the convention of the CMU, LaFAN1 and Bandai tools);
+line endings, and tabs or spaces. Local quaternions are made
+sign-continuous along time (``q`` and ``-q`` are the same rotation). Position
+channels *replace* the joint's OFFSET for that frame (the convention of the CMU, LaFAN1 and Bandai tools);
 a root without position channels stays at its OFFSET.
 
 Every problem raises :class:`~skelagnostic.BVHError` with the file and the
@@ -341,6 +342,7 @@ def _build_motion(
             by_order.setdefault(order, []).append(k)
     for order, ks in by_order.items():
         rotations[:, ks] = Q.euler_to_quat(angles[:, ks, : len(order)], order)
+    rotations = Q.continuity(rotations, dim=0)
     try:
         skeleton = Skeleton(
             [j.name for j in joints],
