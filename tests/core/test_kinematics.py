@@ -69,6 +69,15 @@ def test_fk_is_differentiable():
     )
 
 
+def test_fk_gradient_reaches_offsets():
+    rot = Q.normalize(torch.randn(2, len(PARENTS), 4, dtype=torch.float64))
+    root = torch.zeros(2, 3, dtype=torch.float64)
+    offsets = torch.randn(len(PARENTS), 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(
+        lambda o: forward_kinematics(rot, root, o, PARENTS)[1], (offsets,)
+    )
+
+
 def test_depth_levels_and_errors():
     assert depth_levels(PARENTS) == [[0], [1, 4, 6], [2, 5, 7], [3, 8, 9]]
     with pytest.raises(ValueError, match="joints"):
