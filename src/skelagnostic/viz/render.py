@@ -1,0 +1,707 @@
+"""Render stick figures to frames, animated GIF / MP4 and contact-sheet PNG.
+
+Everything is drawn headless on a private matplotlib Agg canvas (no pyplot, no
+display) through an orthographic camera, fixed or travelling with the
+characters. Static parts (floor, labels, and with a fixed camera the grid and
+trajectories) are drawn once; per frame only the moving artists are redrawn on
+top of the saved background (blitting).
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import subprocess
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skelagnostic.viz.camera import Camera, auto_azimuth
+from skelagnostic.viz.stick import (
+    FigureLike,
+    RenderError,
+    StickFigure,
+    synchronise,
+    to_stick_figures,
+)
+
+__all__ = [
+    "BODY_GROUP_COLORS",
+    "Rendering",
+    "contact_sheet",
+    "render_contact_sheet",
+    "render_frames",
+    "render_motion",
+    "write_animation",
+    "write_contact_sheet",
+]
+
+#: Bone colour of each body group (left side cool, right side warm).
+BODY_GROUP_COLORS: dict[str, str] = {
+    "spine": "#37474f",
+    "left_arm": "#1e88e5",
+    "right_arm": "#e53935",
+    "left_leg": "#43a047",
+    "right_leg": "#fb8c00",
+    "tail": "#8e24aa",
+    "other": "#9e9e9e",
+}
+
+_BACKGROUND = "#ffffff"
+_FLOOR = "#eceff1"
+_GRID = "#cfd8dc"
+#: Joint colour and bone line style per character in overlay mode.
+_OVERLAY_JOINTS = ("#212121", "#6a1b9a", "#00838f", "#c62828", "#2e7d32")
+_OVERLAY_STYLES: tuple[Any, ...] = ("solid", (0, (4, 2)), (0, (1, 1.5)))
+_MODES = ("side", "overlay")
+_MARGIN = 0.08
+
+
+@dataclass
+class Rendering:
+    """Rendered frames plus where each character was drawn.
+
+    Attributes:
+        frames: ``[F, H, W, 3]`` uint8 RGB images.
+        times: ``[F]`` time of each frame in seconds (the common clock).
+        fps: Playback rate that keeps the frames in real time.
+        boxes: ``[F, C, 4]`` pixel bounding box ``(x0, y0, x1, y1)`` of the joints
+            of each character in each frame (origin top left, y down).
+        panels: ``[C, 4]`` pixel rectangle ``(x0, y0, x1, y1)`` of the panel each
+            character is drawn in (all the same in overlay mode).
+        names: Label of each character.
+    """
+
+    frames: np.ndarray
+    times: np.ndarray
+    fps: float
+    boxes: np.ndarray
+    panels: np.ndarray
+    names: list[str]
+
+
+def render_frames(
+    motions: FigureLike | Sequence[FigureLike],
+    *,
+    mode: str = "side",
+    labels: Sequence[str] | None = None,
+    fps: float | None = None,
+    max_frames: int | None = None,
+    times: Sequence[float] | np.ndarray | None = None,
+    size: tuple[int, int] = (320, 320),
+    elev: float = 15.0,
+    azim: float | None = None,
+    trajectory: bool = False,
+    follow: bool = False,
+    time_label: bool = True,
+) -> Rendering:
+    """Render one or several motions to in-memory frames.
+
+    Motions with different frame rates are drawn on a common clock (see
+    :func:`~skelagnostic.viz.stick.synchronise`); each is interpolated
+    linearly between its frames and holds its last pose once it ends.
+
+    Args:
+        motions: A :class:`~skelagnostic.Motion`, BVH path or
+            :class:`~skelagnostic.viz.StickFigure`, or a sequence of them.
+        mode: ``"side"`` draws each character in its own panel, left to right,
+            each framed on its own (skeletons in different units are fine);
+            ``"overlay"`` draws all of them in one panel with one camera (source
+            vs result vs ground truth), told apart by line style and joint colour.
+        labels: One label per motion (default: file stem or ``motion k``).
+        fps: Output frame rate (default: highest input rate, at most 30).
+        max_frames: Keep at most this many frames by subsampling the clock
+            (playback stays real time).
+        times: Explicit times in seconds to draw, instead of ``fps``/``max_frames``.
+        size: ``(width, height)`` of one panel in pixels.
+        elev: Camera elevation in degrees.
+        azim: Camera azimuth in degrees; ``None`` picks a three-quarter view
+            across the main direction of each panel's motion.
+        trajectory: Draw the root's path on the floor.
+        follow: Let the camera travel with the characters (the mean horizontal
+            root position of each panel stays put and the floor grid slides
+            under them), instead of a fixed camera framing the whole clip.
+            Keeps characters large in long clips that travel far.
+        time_label: Draw the clock in the top-right corner.
+
+    Returns:
+        The frames with their times, playback rate and character boxes.
+
+    Raises:
+        RenderError: On bad arguments (the message names the argument).
+
+    Examples:
+        >>> import numpy as np
+        >>> from skelagnostic.viz import StickFigure, render_frames
+        >>> t = np.linspace(0, 1, 31)[:, None]
+        >>> pos = np.stack([np.hstack([t, 0 * t + 1, 0 * t]), np.hstack([t, 0 * t, 0 * t])], 1)
+        >>> out = render_frames(StickFigure(pos, parents=[-1, 0], fps=30.0), size=(64, 48))
+        >>> out.frames.shape, out.fps
+        ((31, 48, 64, 3), 30.0)
+    """
+    figures = to_stick_figures(motions, labels)
+    if mode not in _MODES:
+        raise RenderError(f"mode must be one of {_MODES}, got {mode!r}")
+    width, height = (int(v) for v in size)
+    if width < 16 or height < 16:
+        raise RenderError(f"size must be at least 16x16 pixels, got {size}")
+    if not math.isfinite(elev) or not -90.0 <= elev <= 90.0:
+        raise RenderError(f"elev must be within [-90, 90] degrees, got {elev}")
+    if azim is not None and not math.isfinite(azim):
+        raise RenderError(f"azim must be a finite angle in degrees, got {azim}")
+    if times is None:
+        clock, rate = synchronise(figures, fps, max_frames)
+    else:
+        clock = np.asarray(times, dtype=np.float64).reshape(-1)
+        if clock.size == 0 or not np.isfinite(clock).all():
+            raise RenderError("times must be a non-empty sequence of finite seconds")
+        rate = synchronise(figures, fps)[1]
+    groups = [[k] for k in range(len(figures))] if mode == "side" else [list(range(len(figures)))]
+    options = {
+        "elev": elev,
+        "azim": azim,
+        "trajectory": trajectory,
+        "follow": follow,
+        "time_label": time_label,
+    }
+    scene = _Scene(figures, groups, clock, (width, height), options)
+    try:
+        frames, boxes = scene.draw_all()
+    finally:
+        scene.close()
+    return Rendering(
+        frames=frames,
+        times=clock,
+        fps=rate,
+        boxes=boxes,
+        panels=scene.panel_rects(),
+        names=[f.name for f in figures],
+    )
+
+
+def render_motion(
+    motions: FigureLike | Sequence[FigureLike],
+    out: str | Path,
+    *,
+    sheet_frames: int = 8,
+    columns: int = 4,
+    **options: Any,
+) -> Path:
+    """Render motions to a file: ``.gif`` / ``.mp4`` animation or ``.png`` contact sheet.
+
+    Args:
+        motions: What to draw (see :func:`render_frames`).
+        out: Output path; the suffix picks the format.
+        sheet_frames: Number of frames on a ``.png`` contact sheet.
+        columns: Columns of a ``.png`` contact sheet.
+        **options: Passed to :func:`render_frames` (``mode``, ``labels``,
+            ``fps``, ``max_frames``, ``size``, ``elev``, ``azim``, ``trajectory``, ...).
+
+    Returns:
+        The written path.
+
+    Raises:
+        RenderError: On bad arguments, an unknown suffix, or MP4 without ffmpeg.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> from skelagnostic.viz import StickFigure, render_motion
+        >>> fig = StickFigure(np.array([[[0.0, 0, 0], [0, 1, 0]]] * 5), parents=[-1, 0])
+        >>> out = pathlib.Path(tempfile.mkdtemp()) / "still.gif"
+        >>> render_motion(fig, out, size=(48, 48)).exists()
+        True
+    """
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix == ".png":
+        return render_contact_sheet(motions, out, frames=sheet_frames, columns=columns, **options)
+    if suffix not in (".gif", ".mp4"):
+        raise RenderError(f"out: unsupported format {out.suffix!r}; use .gif, .mp4 or .png")
+    if suffix == ".mp4":
+        _ffmpeg()  # fail before rendering when ffmpeg is missing
+    return write_animation(render_frames(motions, **options), out)
+
+
+def render_contact_sheet(
+    motions: FigureLike | Sequence[FigureLike],
+    out: str | Path,
+    *,
+    frames: int = 8,
+    columns: int = 4,
+    **options: Any,
+) -> Path:
+    """Render a PNG contact sheet: ``frames`` evenly spaced instants in a grid.
+
+    Only the frames on the sheet are drawn, so this is cheap for long clips.
+
+    Args:
+        motions: What to draw (see :func:`render_frames`).
+        out: Output ``.png`` path.
+        frames: Number of instants, first and last included.
+        columns: Number of columns of the grid.
+        **options: Passed to :func:`render_frames` (``times`` is computed here).
+
+    Returns:
+        The written path.
+
+    Raises:
+        RenderError: On bad arguments.
+    """
+    if frames < 1:
+        raise RenderError(f"frames must be at least 1, got {frames}")
+    if "times" in options:
+        raise RenderError("times: a contact sheet picks its own times; pass frames= instead")
+    figures = to_stick_figures(motions, options.pop("labels", None))
+    duration = max(f.duration for f in figures)
+    times = np.linspace(0.0, duration, frames) if frames > 1 else np.zeros(1)
+    rendering = render_frames(figures, times=times, **options)
+    return write_contact_sheet(rendering, out, frames=frames, columns=columns)
+
+
+def write_animation(rendering: Rendering, out: str | Path) -> Path:
+    """Write rendered frames as an animated ``.gif`` (Pillow) or ``.mp4`` (ffmpeg).
+
+    GIF timing is stored in hundredths of a second; the per-frame delays are
+    rounded so that the total stays in real time. GIF viewers cannot play more
+    than 50 frames per second, so faster playback rates are refused.
+
+    Args:
+        rendering: Output of :func:`render_frames`.
+        out: Output path ending in ``.gif`` or ``.mp4``.
+
+    Returns:
+        The written path.
+
+    Raises:
+        RenderError: If the suffix is unknown, a GIF would play faster than
+            50 fps, or ffmpeg is missing or fails for MP4.
+    """
+    out = Path(out)
+    suffix = out.suffix.lower()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".gif":
+        _write_gif(rendering.frames, rendering.fps, out)
+    elif suffix == ".mp4":
+        _write_mp4(rendering.frames, rendering.fps, out)
+    else:
+        raise RenderError(f"out: unsupported animation format {out.suffix!r}; use .gif or .mp4")
+    return out
+
+
+def write_contact_sheet(
+    rendering: Rendering, out: str | Path, *, frames: int = 8, columns: int = 4
+) -> Path:
+    """Write a PNG grid of evenly spaced frames of a rendering.
+
+    Args:
+        rendering: Output of :func:`render_frames`.
+        out: Output ``.png`` path.
+        frames: Number of frames to show (at most the number rendered).
+        columns: Number of columns of the grid.
+
+    Returns:
+        The written path.
+
+    Raises:
+        RenderError: If ``frames`` or ``columns`` is not positive or ``out`` is not a PNG.
+    """
+    from PIL import Image
+
+    out = Path(out)
+    if out.suffix.lower() != ".png":
+        raise RenderError(f"out: a contact sheet is a .png file, got {out.name!r}")
+    sheet = contact_sheet(rendering, frames=frames, columns=columns)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(sheet).save(out)
+    return out
+
+
+def contact_sheet(
+    rendering: Rendering, *, frames: int = 8, columns: int = 4, gap: int = 4
+) -> np.ndarray:
+    """Tile evenly spaced frames of a rendering into one image, row by row.
+
+    Args:
+        rendering: Output of :func:`render_frames`.
+        frames: Number of frames to show (at most the number rendered).
+        columns: Number of columns of the grid.
+        gap: Grey gap between tiles in pixels.
+
+    Returns:
+        ``[H', W', 3]`` uint8 image.
+
+    Raises:
+        RenderError: If ``frames`` or ``columns`` is not positive.
+    """
+    if frames < 1 or columns < 1:
+        raise RenderError(f"frames and columns must be at least 1, got {frames} and {columns}")
+    images = rendering.frames
+    count = images.shape[0]
+    index = np.unique(np.round(np.linspace(0, count - 1, min(frames, count))).astype(int))
+    columns = min(columns, len(index))
+    rows = math.ceil(len(index) / columns)
+    _, h, w, _ = images.shape
+    shape = (rows * h + (rows - 1) * gap, columns * w + (columns - 1) * gap, 3)
+    sheet = np.full(shape, 176, np.uint8)
+    for k, i in enumerate(index):
+        r, c = divmod(k, columns)
+        sheet[r * (h + gap) : r * (h + gap) + h, c * (w + gap) : c * (w + gap) + w] = images[i]
+    return sheet
+
+
+def _write_gif(frames: np.ndarray, fps: float, out: Path) -> None:
+    from PIL import Image
+
+    if fps > 50.0:
+        raise RenderError(
+            f"fps: a GIF plays at most 50 frames per second, got {fps:g}; lower fps or write .mp4"
+        )
+    sample = frames[np.unique(np.linspace(0, len(frames) - 1, min(8, len(frames))).astype(int))]
+    palette = Image.fromarray(np.concatenate(list(sample), axis=0)).quantize(
+        colors=256, method=Image.Quantize.MEDIANCUT
+    )
+    images = [
+        Image.fromarray(f).quantize(palette=palette, dither=Image.Dither.NONE) for f in frames
+    ]
+    # Delays in 1/100 s, rounded on the cumulative clock so playback stays real time.
+    ticks = np.round(np.arange(len(frames) + 1) * 100.0 / fps).astype(int)
+    durations = [int(d) * 10 for d in np.diff(ticks)]
+    images[0].save(
+        out, save_all=True, append_images=images[1:], duration=durations, loop=0, optimize=False
+    )
+
+
+def _ffmpeg() -> str:
+    import matplotlib
+
+    exe = shutil.which(matplotlib.rcParams["animation.ffmpeg_path"])
+    if exe is None:
+        raise RenderError(
+            "out: writing .mp4 needs ffmpeg, which was not found "
+            f"(matplotlib rcParams['animation.ffmpeg_path'] = "
+            f"{matplotlib.rcParams['animation.ffmpeg_path']!r}); install ffmpeg or write .gif"
+        )
+    return exe
+
+
+def _write_mp4(frames: np.ndarray, fps: float, out: Path) -> None:
+    exe = _ffmpeg()
+    _, h, w, _ = frames.shape
+    # yuv420p (playable everywhere) needs even dimensions: pad by one white row/column.
+    pad_h, pad_w = h % 2, w % 2
+    if pad_h or pad_w:
+        frames = np.pad(frames, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)), constant_values=255)
+    command = [
+        exe,
+        "-y",
+        "-loglevel",
+        "error",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-s",
+        f"{w + pad_w}x{h + pad_h}",
+        "-r",
+        f"{fps:g}",
+        "-i",
+        "-",
+        "-an",
+        "-pix_fmt",
+        "yuv420p",
+        str(out),
+    ]
+    result = subprocess.run(
+        command, input=np.ascontiguousarray(frames).tobytes(), capture_output=True, check=False
+    )
+    if result.returncode != 0:
+        message = result.stderr.decode(errors="replace").strip()
+        raise RenderError(f"out: ffmpeg failed writing {out} (exit {result.returncode}): {message}")
+
+
+def _nice_step(extent: float) -> float:
+    """A 1/2/5 x 10^k grid spacing giving about eight cells over ``extent``."""
+    raw = max(extent, 1e-9) / 8.0
+    base = 10.0 ** math.floor(math.log10(raw))
+    return base * min((m for m in (1.0, 2.0, 5.0, 10.0) if m * base >= raw), default=10.0)
+
+
+class _Panel:
+    """One axes: its camera, floor, and the per-frame horizontal shift of the follow camera."""
+
+    def __init__(self, ax: Any, members: list[int], camera: Camera, shift: np.ndarray) -> None:
+        self.ax = ax
+        self.members = members
+        self.camera = camera
+        self.shift = shift  # [F, 3] subtracted from world positions (zeros: fixed camera)
+        #: Follow camera only: (LineCollection, [N, 2, 3] world lines) of the sliding grid
+        #: and of the root paths, re-projected every frame.
+        self.grid: tuple[Any, np.ndarray] | None = None
+        self.grid_step = 0.0
+        self.paths: list[tuple[Any, np.ndarray]] = []
+
+
+class _Scene:
+    """Figure, artists and cameras for one rendering; draws frame after frame."""
+
+    def __init__(
+        self,
+        figures: list[StickFigure],
+        groups: list[list[int]],
+        times: np.ndarray,
+        size: tuple[int, int],
+        options: dict[str, Any],
+    ) -> None:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        self.figures = figures
+        self.size = size
+        self.times = times
+        self.world = [f.sample(times) for f in figures]  # [F, J, 3] z-up
+        width, height = size
+        dpi = 100.0
+        self.figure = Figure(figsize=(width * len(groups) / dpi, height / dpi), dpi=dpi)
+        self.figure.patch.set_facecolor(_BACKGROUND)
+        self.canvas = FigureCanvasAgg(self.figure)
+        self.scale = height / 320.0
+        self.panels: list[_Panel] = []
+        self.panel_of: dict[int, _Panel] = {}
+        self.bone_artists: dict[int, Any] = {}
+        self.joint_artists: dict[int, Any] = {}
+        self.bone_colors: dict[int, np.ndarray] = {}
+        for p, members in enumerate(groups):
+            ax = self.figure.add_axes((p / len(groups), 0.0, 1.0 / len(groups), 1.0))
+            ax.set_axis_off()
+            panel = self._build_panel(ax, members, options)
+            self.panels.append(panel)
+            self.panel_of.update(dict.fromkeys(members, panel))
+        self.clock = None
+        if options["time_label"]:
+            ax = self.panels[-1].ax
+            self.clock = ax.text(
+                0.97,
+                0.97,
+                "",
+                transform=ax.transAxes,
+                ha="right",
+                va="top",
+                fontsize=9 * self.scale,
+                color="#455a64",
+                family="monospace",
+                animated=True,
+            )
+
+    def _build_panel(self, ax: Any, members: list[int], options: dict[str, Any]) -> _Panel:
+        from matplotlib.collections import LineCollection
+        from matplotlib.lines import Line2D
+        from matplotlib.patches import Polygon
+
+        world = [self.world[k] for k in members]
+        azim = options["azim"]
+        camera = Camera(auto_azimuth(world) if azim is None else float(azim), options["elev"])
+        ground = min(float(p[..., 2].min()) for p in world)
+        shift = np.zeros((len(self.times), 3))
+        if options["follow"]:
+            shift[:, :2] = np.mean([p[:, 0, :2] for p in world], axis=0)
+        panel = _Panel(ax, members, camera, shift)
+        local = np.concatenate([(p - shift[:, None]).reshape(-1, 3) for p in world])
+        paths = {k: self._root_path(k, ground) for k in members} if options["trajectory"] else {}
+        framed = [local] if options["follow"] else [local, *paths.values()]
+        self._frame(ax, camera.project(np.concatenate(framed))[0])
+
+        # Floor: the horizontal footprint of what is drawn, with a margin.
+        reach = max(float(np.ptp(local[:, 2])), 1e-6)
+        footprint = np.concatenate([local[:, :2], *(q[:, :2] for q in framed[1:])])
+        lo = footprint.min(axis=0) - 0.25 * reach
+        hi = footprint.max(axis=0) + 0.25 * reach
+        step = _nice_step(float((hi - lo).max()))
+        lo, hi = np.floor(lo / step) * step, np.ceil(hi / step) * step
+        corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+        floor_uv, _ = camera.project(np.column_stack([corners, np.full(4, ground)]))
+        floor = Polygon(floor_uv, closed=True, facecolor=_FLOOR, edgecolor="none", zorder=0)
+        ax.add_patch(floor)
+        if options["follow"]:  # one extra cell each side: the grid slides under the figures
+            lo, hi = lo - step, hi + step
+        xs = np.arange(lo[0], hi[0] + step / 2, step)
+        ys = np.arange(lo[1], hi[1] + step / 2, step)
+        lines = [[(x, lo[1]), (x, hi[1])] for x in xs] + [[(lo[0], y), (hi[0], y)] for y in ys]
+        grid_lines = np.concatenate(
+            [np.asarray(lines), np.full((len(lines), 2, 1), ground)], axis=-1
+        )
+        grid = LineCollection(
+            list(camera.project(grid_lines)[0]),
+            colors=_GRID,
+            linewidths=0.8,
+            zorder=1,
+            animated=options["follow"],
+        )
+        grid.set_clip_path(floor)
+        ax.add_collection(grid)
+        if options["follow"]:
+            panel.grid, panel.grid_step = (grid, grid_lines), step
+
+        overlay = len(members) > 1
+        handles = []
+        for rank, k in enumerate(members):
+            figure = self.figures[k]
+            joint_color = _OVERLAY_JOINTS[rank % len(_OVERLAY_JOINTS)] if overlay else "#263238"
+            style: Any = _OVERLAY_STYLES[rank % len(_OVERLAY_STYLES)] if overlay else "solid"
+            if k in paths:
+                segments = np.stack([paths[k][:-1], paths[k][1:]], axis=1)
+                path = LineCollection(
+                    list(camera.project(segments)[0]),
+                    colors=joint_color,
+                    alpha=0.6,
+                    linewidths=1.5 * self.scale,
+                    zorder=2,
+                    animated=options["follow"],
+                )
+                path.set_clip_path(floor)
+                ax.add_collection(path)
+                if options["follow"]:
+                    panel.paths.append((path, segments))
+            groups = list(figure.groups or ())
+            bone_colors = np.array(
+                [_rgba(BODY_GROUP_COLORS[groups[c]]) for _, c in figure.bones]
+            ).reshape(-1, 4)
+            bones = LineCollection(
+                [],
+                linewidths=2.2 * self.scale,
+                linestyles=style,
+                capstyle="round",
+                animated=True,
+                zorder=3,
+            )
+            ax.add_collection(bones)
+            joints = Line2D(
+                [],
+                [],
+                linestyle="none",
+                marker="o",
+                markersize=2.6 * self.scale,
+                color=joint_color,
+                animated=True,
+                zorder=4,
+            )
+            ax.add_line(joints)
+            self.bone_artists[k], self.joint_artists[k] = bones, joints
+            self.bone_colors[k] = bone_colors
+            handles.append(
+                Line2D(
+                    [],
+                    [],
+                    color=BODY_GROUP_COLORS["spine"],
+                    linestyle=style,
+                    marker="o",
+                    markersize=3 * self.scale,
+                    markerfacecolor=joint_color,
+                    markeredgecolor=joint_color,
+                    label=figure.name,
+                )
+            )
+        if overlay:
+            ax.legend(handles=handles, loc="upper left", fontsize=8 * self.scale, frameon=False)
+        elif self.figures[members[0]].name:
+            ax.text(
+                0.03,
+                0.97,
+                self.figures[members[0]].name,
+                transform=ax.transAxes,
+                ha="left",
+                va="top",
+                fontsize=9 * self.scale,
+                color="#263238",
+            )
+        return panel
+
+    def _root_path(self, k: int, ground: float) -> np.ndarray:
+        """Root of figure ``k`` on the floor, at all its frames within the drawn time span."""
+        figure = self.figures[k]
+        first = math.floor(float(self.times.min()) * figure.fps)
+        last = math.ceil(float(self.times.max()) * figure.fps)
+        root = figure.z_up()[max(first, 0) : max(last, 0) + 1, 0].copy()
+        root[:, 2] = ground
+        return root if len(root) > 1 else np.concatenate([root, root])
+
+    def _frame(self, ax: Any, uv: np.ndarray) -> None:
+        """Set fixed limits that show every projected point with the panel's aspect."""
+        lo, hi = uv.min(axis=0), uv.max(axis=0)
+        centre = (lo + hi) / 2.0
+        extent = np.maximum(hi - lo, 1e-6) * (1.0 + 2.0 * _MARGIN)
+        aspect = self.size[0] / self.size[1]
+        if extent[0] / extent[1] < aspect:
+            extent[0] = extent[1] * aspect
+        else:
+            extent[1] = extent[0] / aspect
+        ax.set_xlim(centre[0] - extent[0] / 2.0, centre[0] + extent[0] / 2.0)
+        ax.set_ylim(centre[1] - extent[1] / 2.0, centre[1] + extent[1] / 2.0)
+        ax.set_aspect("auto")
+
+    def panel_rects(self) -> np.ndarray:
+        """Pixel rectangle of the panel of each character."""
+        width, height = self.size
+        rects = np.zeros((len(self.figures), 4))
+        for p, panel in enumerate(self.panels):
+            for k in panel.members:
+                rects[k] = (p * width, 0, (p + 1) * width, height)
+        return rects
+
+    def draw_all(self) -> tuple[np.ndarray, np.ndarray]:
+        """Draw every frame; returns ``[F, H, W, 3]`` frames and ``[F, C, 4]`` boxes."""
+        self.canvas.draw()
+        background = self.canvas.copy_from_bbox(self.figure.bbox)
+        total_height = self.canvas.get_width_height()[1]
+        frames = []
+        boxes = np.zeros((len(self.times), len(self.figures), 4))
+        projected = {}
+        for k, world in enumerate(self.world):
+            panel = self.panel_of[k]
+            projected[k] = panel.camera.project(world - panel.shift[:, None])
+        for f, t in enumerate(self.times):
+            self.canvas.restore_region(background)
+            for panel in self.panels:
+                if panel.grid is not None:  # slides by the shift modulo one cell
+                    grid, lines = panel.grid
+                    offset = np.mod(panel.shift[f], panel.grid_step)
+                    grid.set_segments(panel.camera.project(lines - offset)[0])
+                    panel.ax.draw_artist(grid)
+                for path, segments in panel.paths:
+                    path.set_segments(panel.camera.project(segments - panel.shift[f])[0])
+                    panel.ax.draw_artist(path)
+            for k, figure in enumerate(self.figures):
+                uv, depth = projected[k][0][f], projected[k][1][f]
+                ax = self.panel_of[k].ax
+                bones = self.bone_artists[k]
+                if len(figure.bones):
+                    order = np.argsort(depth[figure.bones].mean(axis=1))
+                    bones.set_segments(uv[figure.bones[order]])
+                    bones.set_color(self.bone_colors[k][order])
+                    ax.draw_artist(bones)
+                self.joint_artists[k].set_data(uv[:, 0], uv[:, 1])
+                ax.draw_artist(self.joint_artists[k])
+                pixels = ax.transData.transform(uv)
+                boxes[f, k] = (
+                    pixels[:, 0].min(),
+                    total_height - pixels[:, 1].max(),
+                    pixels[:, 0].max(),
+                    total_height - pixels[:, 1].min(),
+                )
+            if self.clock is not None:
+                self.clock.set_text(f"{t:6.2f} s")
+                self.clock.axes.draw_artist(self.clock)
+            frames.append(np.asarray(self.canvas.buffer_rgba())[..., :3].copy())
+        return np.stack(frames), boxes
+
+    def close(self) -> None:
+        """Release the figure."""
+        self.figure.clear()
+
+
+def _rgba(color: str) -> tuple[float, float, float, float]:
+    from matplotlib.colors import to_rgba
+
+    return to_rgba(color)
