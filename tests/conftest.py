@@ -5,7 +5,15 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+# Tests run in 2 xdist workers on 2-core machines: one intra-op thread per worker
+# (and per subprocess, through the environment) avoids oversubscription, which
+# makes torch's elementwise kernels an order of magnitude slower.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
 import pytest
+import torch
+
+torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

@@ -109,14 +109,6 @@ def _check_order(order: str) -> str:
     return order
 
 
-def _axis_quat(axis: str, angle: torch.Tensor) -> torch.Tensor:
-    half = 0.5 * angle
-    q = torch.zeros(*angle.shape, 4, dtype=angle.dtype, device=angle.device)
-    q[..., 0] = torch.cos(half)
-    q[..., 1 + "XYZ".index(axis)] = torch.sin(half)
-    return q
-
-
 def euler_to_quat(angles: torch.Tensor, order: str, degrees: bool = True) -> torch.Tensor:
     """Intrinsic Euler angles to unit (w, x, y, z) quaternions.
 
@@ -143,10 +135,23 @@ def euler_to_quat(angles: torch.Tensor, order: str, degrees: bool = True) -> tor
     if angles.shape[-1] != len(order):
         raise ValueError(f"{len(order)} Euler axes {order!r} but angles end in {angles.shape[-1]}")
     rad = torch.deg2rad(angles) if degrees else angles
-    q = _axis_quat(order[0], rad[..., 0])
+    # component-wise product of the per-axis quaternions, on contiguous tensors
+    half = (0.5 * rad).movedim(-1, 0).contiguous()
+    cos, sin = torch.cos(half), torch.sin(half)
+    w = cos[0]
+    v = [torch.zeros_like(w), torch.zeros_like(w), torch.zeros_like(w)]
+    v["XYZ".index(order[0])] = sin[0]
     for i in range(1, len(order)):
-        q = mul(q, _axis_quat(order[i], rad[..., i]))
-    return q
+        # (w, v) * (c, s e_k) = (w c - s v_k, c v + s w e_k + s v x e_k)
+        c, sn, k = cos[i], sin[i], "XYZ".index(order[i])
+        k1, k2 = (k + 1) % 3, (k + 2) % 3
+        new_w = w * c - sn * v[k]
+        new_v = list(v)
+        new_v[k] = v[k] * c + sn * w
+        new_v[k1] = v[k1] * c + sn * v[k2]
+        new_v[k2] = v[k2] * c - sn * v[k1]
+        w, v = new_w, new_v
+    return torch.stack((w, v[0], v[1], v[2]), dim=-1)
 
 
 def quat_to_euler(q: torch.Tensor, order: str, degrees: bool = True) -> torch.Tensor:

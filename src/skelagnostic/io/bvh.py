@@ -2,10 +2,10 @@
 
 Supported: any rotation channel order per joint, position channels on any
 joint (Bandai-style files translate non-root joints), End Sites, CRLF or LF
-line endings, and tabs or spaces. Local quaternions are made
-sign-continuous along time (``q`` and ``-q`` are the same rotation). Position
-channels *replace* the joint's OFFSET for that frame (the convention of the CMU, LaFAN1 and Bandai tools);
-a root without position channels stays at its OFFSET.
+line endings, and tabs or spaces. Local quaternions are made sign-continuous
+along time (``q`` and ``-q`` are the same rotation). Position channels
+*replace* the joint's OFFSET for that frame (the convention of the CMU, LaFAN1
+and Bandai tools); a root without position channels stays at its OFFSET.
 
 Every problem raises :class:`~skelagnostic.BVHError` with the file and the
 1-based line at fault; nothing half-built is returned. Writing goes to a
@@ -17,7 +17,9 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import tempfile
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,6 +37,7 @@ _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 _DEFAULT_ROOT = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
 _DEFAULT_JOINT = ["Zrotation", "Yrotation", "Xrotation"]
+_MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 
 
 @dataclass
@@ -47,20 +50,15 @@ class _Joint:
 
 
 class _Tokens:
-    """Whitespace tokens of the hierarchy section, each with its 1-based line."""
+    """Whitespace tokens of the hierarchy section (the lines before MOTION), with 1-based lines."""
 
     def __init__(self, lines: list[str], path: Path | None):
-        self.items: list[tuple[str, int]] = []
+        self.items: list[tuple[str, int]] = [
+            (w, i) for i, line in enumerate(lines, start=1) for w in line.split()
+        ]
         self.path = path
-        self.motion_line = None
-        for i, line in enumerate(lines, start=1):
-            words = line.split()
-            if words and words[0].upper() == "MOTION":
-                self.motion_line = i
-                break
-            self.items.extend((w, i) for w in words)
         self.pos = 0
-        self.last_line = (lines and len(lines)) or 0
+        self.last_line = len(lines)
 
     def error(self, reason: str, line: int | None = None) -> BVHError:
         if line is None:
@@ -172,12 +170,25 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
     return joints
 
 
-def _diagnose_rows(lines: list[str], first: int, num_channels: int, path: Path | None) -> BVHError:
+def _diagnose_rows(
+    lines: list[str],
+    first: int,
+    num_frames: int,
+    num_channels: int,
+    frames_line: int,
+    path: Path | None,
+) -> BVHError:
     """Find the first bad motion line (slow path, only used after a failure)."""
-    for k, line in enumerate(lines):
-        words = line.split()
-        if not words:
-            continue
+    rows = [k for k, line in enumerate(lines) if line.strip()]
+    if len(rows) != num_frames:
+        return BVHError(
+            f"the file declares {num_frames} frames but has {len(rows)} motion lines"
+            + (" (truncated?)" if len(rows) < num_frames else ""),
+            path,
+            first + rows[-1] if rows else frames_line,
+        )
+    for k in rows:
+        words = lines[k].split()
         if len(words) != num_channels:
             return BVHError(
                 f"motion line has {len(words)} values, the hierarchy declares {num_channels} "
@@ -223,37 +234,41 @@ def parse_bvh(
     """
     path = None if path is None else Path(path)
     if isinstance(data, bytes):
+        raw = data
         try:
-            text = data.decode("utf-8")
+            text, encoding = data.decode("utf-8"), "utf-8"
         except UnicodeDecodeError:
-            text = data.decode("latin-1")
+            text, encoding = data.decode("latin-1"), "latin-1"
     else:
-        text = data
-    lines = text.splitlines()
-    if not any(line.strip() for line in lines):
+        text, encoding = data, "utf-8"
+        raw = data.encode("utf-8")
+    match = _MOTION.search(text)
+    lines = (text if match is None else text[: match.start()]).splitlines()
+    if match is None and not any(line.strip() for line in lines):
         raise BVHError("the file is empty", path, 1)
     tokens = _Tokens(lines, path)
     joints = _parse_hierarchy(tokens)
-    if tokens.motion_line is None:
+    if match is None:
         raise BVHError("no MOTION section (truncated file?)", path, len(lines))
-    # Frames: and Frame Time: lines
-    idx = tokens.motion_line  # 0-based index of the line after MOTION
+    # the 'Frames:' and 'Frame Time:' lines, scanned without splitting the data
+    pos, line_no = match.end(), len(lines) + 1
     header: dict[str, tuple[str, int]] = {}
-    while idx < len(lines) and len(header) < 2:
-        line = lines[idx]
-        idx += 1
-        if not line.strip():
+    while len(header) < 2:
+        if pos >= len(text):
+            missing = "Frames" if "frames" not in header else "Frame Time"
+            raise BVHError(f"missing '{missing}:' line after MOTION", path, line_no)
+        end = text.find("\n", pos + 1)
+        end = len(text) if end < 0 else end
+        line = text[pos:end].strip()
+        pos = end
+        line_no += 1
+        if not line:
             continue
         key, _, value = line.partition(":")
         key = " ".join(key.split()).lower()
         if key not in {"frames", "frame time"}:
-            raise BVHError(
-                f"expected 'Frames:' and 'Frame Time:', found {line.strip()!r}", path, idx
-            )
-        header[key] = (value.strip(), idx)
-    for key in ("frames", "frame time"):
-        if key not in header:
-            raise BVHError(f"missing '{key.title()}:' line after MOTION", path, idx)
+            raise BVHError(f"expected 'Frames:' and 'Frame Time:', found {line!r}", path, line_no)
+        header[key] = (value.strip(), line_no)
     try:
         num_frames = int(header["frames"][0])
     except ValueError:
@@ -279,26 +294,30 @@ def parse_bvh(
             f"Frame Time must be positive, got {frame_time}", path, header["frame time"][1]
         )
     num_channels = sum(len(j.channels) for j in joints)
-    first_data_line = idx + 1
-    body = lines[idx:]
-    data_lines = [k for k, line in enumerate(body) if line.strip()]
-    if len(data_lines) != num_frames:
-        where = first_data_line + (data_lines[-1] if data_lines else 0)
-        raise BVHError(
-            f"the file declares {num_frames} frames but has {len(data_lines)} motion lines"
-            + (" (truncated?)" if len(data_lines) < num_frames else ""),
-            path,
-            where if data_lines else header["frames"][1],
-        )
-    if num_channels == 0:
-        values = np.zeros((num_frames, 0))
-    else:
+    first_data_line = line_no + 1
+    offset = pos + 1 if encoding == "latin-1" else len(text[: pos + 1].encode("utf-8"))
+    body = raw[offset:]
+    values = None
+    if num_channels:
         try:
-            values = np.loadtxt(io.StringIO("\n".join(body)), dtype=np.float64, ndmin=2)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "input contained no data": diagnosed below
+                values = np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2)
         except ValueError:
-            raise _diagnose_rows(body, first_data_line, num_channels, path) from None
-        if values.shape != (num_frames, num_channels) or not np.isfinite(values).all():
-            raise _diagnose_rows(body, first_data_line, num_channels, path)
+            values = None
+    if (
+        values is None
+        or values.shape != (num_frames, num_channels)
+        or not np.isfinite(values).all()
+    ):
+        raise _diagnose_rows(
+            body.decode(encoding).splitlines(),
+            first_data_line,
+            num_frames,
+            num_channels,
+            header["frames"][1],
+            path,
+        )
     return _build_motion(joints, values, frame_time, path, dtype, name)
 
 
@@ -312,27 +331,33 @@ def _build_motion(
 ) -> Motion:
     num_frames, num_joints = values.shape[0], len(joints)
     offsets = np.array([j.offset for j in joints], dtype=np.float64)
-    euler = np.zeros((num_frames, num_joints, 3))
+    # where each channel goes: rotation slot (joint, i) or position (joint, axis)
     orders: list[str] = []
-    translations = None
-    root_positions = np.repeat(offsets[None, 0], num_frames, axis=0)
+    rot: list[tuple[int, int, int]] = []  # (column, joint, Euler slot)
+    pos: list[tuple[int, int, int]] = []  # (column, joint, axis)
     col = 0
     for k, joint in enumerate(joints):
         order = ""
         for ch in joint.channels:
             if ch in _ROT:
-                euler[:, k, len(order)] = values[:, col]
+                rot.append((col, k, len(order)))
                 order += _ROT[ch]
             else:
-                axis = _POS[ch]
-                if k == 0:
-                    root_positions[:, axis] = values[:, col]
-                else:
-                    if translations is None:
-                        translations = np.repeat(offsets[None], num_frames, axis=0)
-                    translations[:, k, axis] = values[:, col]
+                pos.append((col, k, _POS[ch]))
             col += 1
         orders.append(order)
+    rot_cols, rot_joint, rot_slot = (list(v) for v in zip(*rot, strict=True)) if rot else ([],) * 3
+    pos_cols, pos_joint, pos_axis = (list(v) for v in zip(*pos, strict=True)) if pos else ([],) * 3
+    euler = np.zeros((num_frames, num_joints, 3))
+    euler[:, rot_joint, rot_slot] = values[:, rot_cols]
+    root_positions = np.repeat(offsets[None, 0], num_frames, axis=0)
+    translations = None
+    if pos_cols:
+        local = np.repeat(offsets[None], num_frames, axis=0)
+        local[:, pos_joint, pos_axis] = values[:, pos_cols]
+        root_positions = local[:, 0]
+        if any(k > 0 for k in pos_joint):
+            translations = local
     rotations = torch.zeros(num_frames, num_joints, 4, dtype=torch.float64)
     rotations[..., 0] = 1.0
     angles = torch.from_numpy(euler)
@@ -341,7 +366,10 @@ def _build_motion(
         if order:
             by_order.setdefault(order, []).append(k)
     for order, ks in by_order.items():
-        rotations[:, ks] = Q.euler_to_quat(angles[:, ks, : len(order)], order)
+        if len(ks) == num_joints:  # the usual case: one order for every joint
+            rotations = Q.euler_to_quat(angles[..., : len(order)], order)
+        else:
+            rotations[:, ks] = Q.euler_to_quat(angles[:, ks, : len(order)], order)
     rotations = Q.continuity(rotations, dim=0)
     try:
         skeleton = Skeleton(
@@ -355,9 +383,11 @@ def _build_motion(
         return Motion(
             skeleton,
             rotations.to(dtype),
-            torch.from_numpy(root_positions).to(dtype),
+            torch.from_numpy(np.ascontiguousarray(root_positions)).to(dtype),
             _snap_fps(frame_time),
-            translations=None if translations is None else torch.from_numpy(translations).to(dtype),
+            translations=None
+            if translations is None
+            else torch.from_numpy(np.ascontiguousarray(translations)).to(dtype),
             name=name,
         )
     except (SkeletonError, MotionError) as exc:
@@ -380,7 +410,7 @@ def read_bvh(path: str | Path, dtype: torch.dtype = torch.float64) -> Motion:
         BVHError: If the file is missing, unreadable or malformed; the message names
             the file and line.
 
-    Example:
+    Examples:
         >>> import skelagnostic as sa, tempfile, os
         >>> motion, _ = sa.procedural.generate("biped22", "walk", seconds=0.5, fps=30)
         >>> path = os.path.join(tempfile.mkdtemp(), "walk.bvh")
