@@ -28,6 +28,8 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "MotionError": ("skelagnostic.errors", "MotionError"),
     "NotInvertibleError": ("skelagnostic.errors", "NotInvertibleError"),
     "procedural": ("skelagnostic.procedural", None),
+    "plugins": ("skelagnostic.plugins", None),
+    "load_aligner": ("skelagnostic.plugins", "load_aligner"),
 }
 
 __all__ = [
@@ -40,14 +42,16 @@ __all__ = [
     "SkeletonError",
     "__version__",
     "forward_kinematics",
+    "load_aligner",
     "parse_bvh",
+    "plugins",
     "procedural",
     "read_bvh",
     "write_bvh",
 ]
 
 if TYPE_CHECKING:  # pragma: no cover
-    from skelagnostic import procedural
+    from skelagnostic import plugins, procedural
     from skelagnostic.core.kinematics import forward_kinematics
     from skelagnostic.core.motion import Motion
     from skelagnostic.core.skeleton import Skeleton
@@ -59,6 +63,7 @@ if TYPE_CHECKING:  # pragma: no cover
         SkeletonError,
     )
     from skelagnostic.io.bvh import parse_bvh, read_bvh, write_bvh
+    from skelagnostic.plugins import load_aligner
 
 
 def __getattr__(name: str) -> Any:

@@ -1,0 +1,1 @@
+"""Hydra configs shipped by the example plugin (``pkg://skelagnostic_example.conf``)."""

@@ -1,0 +1,28 @@
+"""Hook implementations of the example plugin (the ``skelagnostic`` entry point)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from skelagnostic.plugins import hookimpl
+
+
+@hookimpl
+def register_aligners(register: Callable[..., Any]) -> None:
+    """Register ``model=example``."""
+    from skelagnostic_example.aligner import ExampleAligner, ExampleDataModule
+
+    register(
+        "example",
+        ExampleAligner,
+        ExampleDataModule,
+        config={"hidden": 64, "latent": 16, "lr": 3e-3},
+        description="per-joint GRU autoencoder over root-local positions (tutorial example)",
+    )
+
+
+@hookimpl
+def register_config_paths(register: Callable[..., Any]) -> None:
+    """Ship ``experiment=example_quick``."""
+    register("pkg://skelagnostic_example.conf")

@@ -1,0 +1,10 @@
+"""Aligners: LightningModules that encode motion of any skeleton into a shared latent space.
+
+Build a registered one with :func:`skelagnostic.plugins.load_aligner`; write
+your own by subclassing :class:`Aligner` and registering it through the
+``register_aligners`` hook.
+"""
+
+from skelagnostic.aligners.base import KNOWN_CAPABILITIES, Aligner, CapabilityError, Latent
+
+__all__ = ["KNOWN_CAPABILITIES", "Aligner", "CapabilityError", "Latent"]

@@ -1,0 +1,122 @@
+"""The :class:`Aligner` base class: a LightningModule that maps motion to a shared latent space."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar
+
+import lightning as L
+import torch
+
+from skelagnostic.errors import SkelagnosticError
+
+if TYPE_CHECKING:
+    from skelagnostic.core.motion import Motion
+    from skelagnostic.core.skeleton import Skeleton
+
+#: Capability names with an agreed meaning; aligners may declare others.
+KNOWN_CAPABILITIES = frozenset(
+    {
+        "encode",  # encode(motion) works for the skeletons it was trained on
+        "decode",  # decode(latent, skeleton) returns a Motion
+        "retarget",  # retarget(motion, target) works between trained skeletons
+        "unseen_topology",  # encode/decode/retarget also work for topologies not seen in training
+        "quadruped",  # non-human skeletons are supported
+        "phase",  # the latent carries phase/frequency/amplitude
+        "denoise",  # decode(encode(noisy)) removes noise
+        "interpolate",  # fills frames between keyframes
+    }
+)
+
+
+class CapabilityError(SkelagnosticError, NotImplementedError):
+    """The aligner does not declare the capability an operation needs."""
+
+
+@dataclass
+class Latent:
+    """What :meth:`Aligner.encode` returns.
+
+    Attributes:
+        z: The latent, method-specific shape; per-frame latents put time first (``[T, ...]``).
+        fps: Frame rate of ``z`` along time.
+        extras: What the method carries outside ``z`` (for example the root
+            trajectory, which a root-local latent cannot hold).
+    """
+
+    z: torch.Tensor
+    fps: float
+    extras: dict[str, torch.Tensor] = field(default_factory=dict)
+
+
+class Aligner(L.LightningModule, ABC):
+    """Abstract LightningModule for skeleton-agnostic models.
+
+    Subclasses implement :meth:`encode` and :meth:`decode` (plus the usual
+    ``training_step``/``validation_step``/``configure_optimizers``) and declare
+    :attr:`capabilities`. The training contract with ``skelagnostic fit``:
+
+    * batches come from the registered :class:`~skelagnostic.data.MotionDataModule`:
+      during training a ``dict`` with one batch per dataset (skeleton), during
+      validation/test a ``dict`` where exhausted datasets map to ``None``, during
+      predict a one-entry ``dict`` (``predict_step`` also gets ``dataloader_idx``);
+    * ``validation_step`` logs ``"val/loss"`` (the default checkpoint monitor)
+      and ``training_step`` logs ``"train/loss"``.
+
+    Attributes:
+        capabilities: What the aligner can do; see :data:`KNOWN_CAPABILITIES`.
+    """
+
+    capabilities: ClassVar[frozenset[str]] = frozenset()
+
+    @abstractmethod
+    def encode(self, motion: Motion) -> Latent:
+        """Encode a motion into the aligner's latent space.
+
+        Args:
+            motion: A motion on any skeleton the aligner supports.
+
+        Returns:
+            The latent.
+        """
+
+    @abstractmethod
+    def decode(self, latent: Latent, skeleton: Skeleton) -> Motion:
+        """Decode a latent onto a skeleton.
+
+        Args:
+            latent: Output of :meth:`encode` (possibly of another skeleton).
+            skeleton: The skeleton to animate.
+
+        Returns:
+            A motion on ``skeleton`` at ``latent.fps``.
+        """
+
+    def retarget(self, motion: Motion, target: Skeleton) -> Motion:
+        """Transfer a motion onto another skeleton: ``decode(encode(motion), target)``.
+
+        Args:
+            motion: The source motion.
+            target: The target skeleton.
+
+        Returns:
+            The motion on ``target``.
+
+        Raises:
+            CapabilityError: The aligner does not declare ``"retarget"``.
+        """
+        self.require("retarget")
+        return self.decode(self.encode(motion), target)
+
+    def supports(self, capability: str) -> bool:
+        """Whether the aligner declares ``capability``."""
+        return capability in self.capabilities
+
+    def require(self, capability: str) -> None:
+        """Raise :class:`CapabilityError` unless the aligner declares ``capability``."""
+        if capability not in self.capabilities:
+            declared = ", ".join(sorted(self.capabilities)) or "none"
+            raise CapabilityError(
+                f"{type(self).__name__} does not support {capability!r} (declared: {declared})"
+            )

@@ -1,0 +1,302 @@
+"""``skelagnostic fit|validate|test|predict``: a pure :func:`run` under a thin Hydra wrapper.
+
+The config tree ships inside the package (``pkg://skelagnostic.conf``), so an
+installed ``skelagnostic`` works from any directory. Each registered aligner's
+default config becomes ``model/<name>`` in Hydra's ConfigStore, and plugin
+config paths are added to Hydra's search path. The command is re-entrant from
+``sys.argv`` alone, which Lightning's DDP launcher relies on: it re-executes
+the same command line (plus ``hydra.run.dir=...``) for every extra rank.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import inspect
+import os
+import sys
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import hydra
+import lightning as L
+import torch
+from hydra.core.config_store import ConfigStore
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
+from hydra.utils import instantiate
+from lightning.fabric.utilities.exceptions import MisconfigurationException
+from lightning.pytorch.utilities import rank_zero_only
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.plugins import PluginManager, get_plugin_manager
+
+#: The verbs :func:`run` accepts as ``cfg.task``.
+TASKS = ("fit", "validate", "test", "predict")
+#: Package holding the primary config ``config.yaml``.
+CONFIG_MODULE = "skelagnostic.conf"
+#: Set to ``1`` (or pass ``--debug``) for full tracebacks on configuration errors.
+DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
+#: Data-config keys that are not options of the data module or the dataset source.
+_DATA_KEYS = ("source", "representation", "representation_options")
+
+
+class ConfigError(SkelagnosticError):
+    """A run configuration that cannot work (bad task, unknown options, missing packages)."""
+
+
+# ----------------------------------------------------------------------------- run
+def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModule:
+    """The data module of ``cfg.model.name`` configured by ``cfg.data``.
+
+    Keys of ``cfg.data`` that the aligner's data module accepts go to it; the
+    others (besides ``source`` and ``representation*``) are the options of the
+    dataset factory registered as ``cfg.data.source``.
+
+    Raises:
+        ConfigError: A data key is accepted by neither.
+        PluginError: Unknown aligner, dataset or representation.
+    """
+    spec = pm.aligner(cfg.model.name)
+    data: dict[str, Any] = OmegaConf.to_container(cfg.data, resolve=True)  # type: ignore[assignment]
+    dataset = pm.dataset(data["source"])
+    dm_params = inspect.signature(spec.datamodule).parameters
+    dm_kwargs = {k: data.pop(k) for k in list(data) if k in dm_params and k not in _DATA_KEYS}
+    options = {k: v for k, v in data.items() if k not in _DATA_KEYS}
+    factory_params = inspect.signature(dataset.factory).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in factory_params.values()):
+        unknown = sorted(set(options) - set(factory_params))
+        if unknown:
+            accepted = sorted(set(factory_params) | set(dm_params) - {"sources", "representation"})
+            raise ConfigError(
+                f"data.{unknown[0]} is not an option of data.source={data['source']!r} nor of "
+                f"{spec.datamodule.__name__}; accepted: {', '.join(accepted)}"
+            )
+    representation = None
+    if data.get("representation"):
+        rep_cls = pm.representation(data["representation"]).cls
+        representation = rep_cls(**(data.get("representation_options") or {}))
+    return spec.datamodule(
+        sources=[dataset.factory(**options)], representation=representation, **dm_kwargs
+    )
+
+
+def _instantiate_all(group: DictConfig | None, what: str) -> list[Any]:
+    out = []
+    for name, node in (group or {}).items():
+        if node is None:
+            continue
+        try:
+            out.append(instantiate(node))
+        except Exception as exc:
+            cause = exc.__cause__ or exc
+            if isinstance(cause, (ImportError, ModuleNotFoundError)):
+                raise ConfigError(f"{what}.{name}: {cause}") from exc
+            raise
+    return out
+
+
+@rank_zero_only
+def _save_config(cfg: DictConfig, run_dir: Path) -> None:
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+
+
+@rank_zero_only
+def _save_predictions(predictions: Any, run_dir: Path) -> None:
+    torch.save(predictions, run_dir / "predictions.pt")
+
+
+def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[str, float]:
+    """Train or evaluate an aligner from a composed config (no Hydra needed).
+
+    Steps: seed everything, build the aligner ``cfg.model.name`` (its keyword
+    arguments are the other ``cfg.model`` keys) and its data module
+    (:func:`build_datamodule`), the callbacks and loggers (``_target_`` nodes),
+    a Lightning Trainer from ``cfg.trainer``; save the resolved config as
+    ``<run_dir>/config.yaml``; then call ``trainer.<task>`` with ``cfg.ckpt_path``.
+    ``predict`` also saves ``<run_dir>/predictions.pt``.
+
+    Args:
+        cfg: A config composed from ``pkg://skelagnostic.conf`` (see :func:`compose`).
+        plugin_manager: Where aligners and datasets are looked up (default: the
+            process-wide one).
+
+    Returns:
+        The trainer's final ``callback_metrics`` as floats.
+
+    Raises:
+        ConfigError: Unknown task, or a config that cannot work.
+        PluginError: Unknown aligner, dataset or representation.
+    """
+    pm = plugin_manager or get_plugin_manager()
+    task = cfg.task
+    if task not in TASKS:
+        raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
+    run_dir = Path(cfg.run_dir)
+    L.seed_everything(cfg.seed, workers=True)
+    spec = pm.aligner(cfg.model.name)
+    datamodule = build_datamodule(cfg, pm)
+    model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
+                    if k != "name"}
+    model = spec.module(**model_kwargs)
+    callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
+    loggers = _instantiate_all(cfg.get("logger"), "logger")
+    trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
+    trainer = L.Trainer(
+        **trainer_kwargs,
+        callbacks=callbacks,
+        logger=loggers or False,
+        default_root_dir=str(run_dir),
+    )
+    _save_config(cfg, run_dir)
+    if task == "fit":
+        trainer.fit(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+    elif task == "validate":
+        trainer.validate(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+    elif task == "test":
+        trainer.test(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+    else:
+        _save_predictions(
+            trainer.predict(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path), run_dir
+        )
+    return {k: float(v) for k, v in trainer.callback_metrics.items()}
+
+
+# ----------------------------------------------------------------- composition
+def register_model_configs(pm: PluginManager) -> None:
+    """Store each registered aligner's default config as ``model/<name>`` in the ConfigStore."""
+    store = ConfigStore.instance()
+    for name, spec in pm.aligners.items():
+        store.store(group="model", name=name, node={"name": name, **dict(spec.config)})
+
+
+def compose(
+    overrides: Sequence[str] = (), task: str = "fit", plugin_manager: PluginManager | None = None
+) -> DictConfig:
+    """Compose the run config like the CLI does, for tests and notebooks.
+
+    ``run_dir`` is not resolvable outside a Hydra run: set it, e.g.
+    ``compose(["model=example", "run_dir=/tmp/run"])``.
+
+    Args:
+        overrides: Hydra overrides (``key=value``, ``group=option``, ``+key=value``).
+        task: One of :data:`TASKS`.
+        plugin_manager: Where aligners and config paths come from.
+
+    Returns:
+        The composed config.
+    """
+    pm = plugin_manager or get_plugin_manager()
+    register_model_configs(pm)
+    with hydra.initialize_config_module(CONFIG_MODULE, version_base="1.3"):
+        return hydra.compose(
+            "config", overrides=[*_searchpath_overrides(pm, overrides), *overrides, f"task={task}"]
+        )
+
+
+def _searchpath_overrides(pm: PluginManager, args: Sequence[str]) -> list[str]:
+    """``hydra.searchpath=[...]`` with the plugins' config paths (merged with the user's)."""
+    paths = list(pm.config_paths)
+    if not paths:
+        return []
+    for arg in args:
+        if arg.split("=", 1)[0].lstrip("+~") == "hydra.searchpath":
+            parsed = OverridesParser.create().parse_override(arg)
+            paths = [*parsed.value(), *paths]
+    quoted = ",".join(f"'{p}'" for p in dict.fromkeys(paths))
+    return [f"hydra.searchpath=[{quoted}]"]
+
+
+# ------------------------------------------------------------------ the CLI verbs
+@contextlib.contextmanager
+def _patched(argv: list[str], env: dict[str, str]) -> Iterator[None]:
+    old_argv, old_env = sys.argv, {k: os.environ.get(k) for k in env}
+    sys.argv = argv
+    os.environ.update(env)
+    try:
+        yield
+    finally:
+        sys.argv = old_argv
+        for k, v in old_env.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    text = text.split(" Config search path:")[0]
+    cause = exc.__cause__
+    if isinstance(cause, OmegaConfBaseException) and str(cause).splitlines()[0] not in text:
+        text += f" ({str(cause).splitlines()[0]})"
+    return text
+
+
+def main(task: str, argv: Sequence[str]) -> int:
+    """Run one verb with Hydra command-line overrides.
+
+    ``--debug`` (or ``SKELAGNOSTIC_DEBUG=1``) shows full tracebacks; otherwise
+    configuration errors and :class:`~skelagnostic.errors.SkelagnosticError`
+    print one line to stderr and return exit code 1.
+
+    Args:
+        task: One of :data:`TASKS`.
+        argv: The arguments after the verb.
+
+    Returns:
+        The exit code.
+    """
+    args = [a for a in argv if a != "--debug"]
+    debug = len(args) != len(argv) or os.environ.get(DEBUG_ENV, "") not in {"", "0"}
+    outer_argv = list(sys.argv)
+    try:
+        pm = get_plugin_manager()
+        register_model_configs(pm)
+        hydra_args = [*_searchpath_overrides(pm, args), *args, f"task={task}"]
+
+        failures: list[Exception] = []
+
+        def task_function(cfg: DictConfig) -> None:
+            with _patched(outer_argv, {}):  # Lightning's DDP launcher re-executes sys.argv
+                try:
+                    run(cfg, pm)
+                except (SkelagnosticError, MisconfigurationException) as exc:
+                    failures.append(exc)  # re-raised below, after Hydra cleaned up
+
+        entry = hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name="config",
+                           version_base="1.3")(task_function)
+        with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}):
+            entry()
+        if failures:
+            raise failures[0]
+    except (SkelagnosticError, HydraException, OmegaConfBaseException,
+            MisconfigurationException) as exc:
+        if debug:
+            raise
+        print(f"skelagnostic {task}: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def fit(argv: Sequence[str]) -> int:
+    """``skelagnostic fit model=<name> [overrides]``: train."""
+    return main("fit", argv)
+
+
+def validate(argv: Sequence[str]) -> int:
+    """``skelagnostic validate model=<name> ckpt_path=<ckpt> [overrides]``."""
+    return main("validate", argv)
+
+
+def test(argv: Sequence[str]) -> int:
+    """``skelagnostic test model=<name> ckpt_path=<ckpt> [overrides]``."""
+    return main("test", argv)
+
+
+def predict(argv: Sequence[str]) -> int:
+    """``skelagnostic predict model=<name> ckpt_path=<ckpt>``: latents to ``predictions.pt``."""
+    return main("predict", argv)

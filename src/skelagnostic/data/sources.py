@@ -1,0 +1,292 @@
+"""Clip sources: where motion clips come from (BVH directories, presets, the procedural generator).
+
+A :class:`ClipSource` lists its clips cheaply (:meth:`ClipSource.clips`, with a
+content key per clip used by the window cache) and loads one on demand
+(:meth:`ClipSource.load`). Sources are small picklable objects, safe to send to
+DDP ranks and data-loader workers. Motions with known units are converted to
+metres.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = [
+    "PRESETS",
+    "BVHSource",
+    "ClipRef",
+    "ClipSource",
+    "DatasetPreset",
+    "ProceduralSource",
+    "preset_source",
+    "reroot",
+]
+
+
+@dataclass(frozen=True)
+class ClipRef:
+    """One clip of a source.
+
+    Attributes:
+        id: Identifier, unique and stable within the source (e.g. a relative path).
+        key: Hash of the clip's content; cached windows are keyed by it.
+        split: ``"test"`` to force the clip into the test split, else ``None``.
+    """
+
+    id: str
+    key: str
+    split: str | None = None
+
+
+class ClipSource(ABC):
+    """A collection of motion clips.
+
+    Attributes:
+        name: Label of the source; data-module dataset names start with it.
+    """
+
+    name: str
+
+    @abstractmethod
+    def clips(self) -> list[ClipRef]:
+        """The clips, in a deterministic order."""
+
+    @abstractmethod
+    def load(self, clip: ClipRef) -> Motion:
+        """Read one clip."""
+
+
+def _to_metres(motion: Motion, units: str | None) -> Motion:
+    units = units or motion.units
+    if units is None or units == "m":
+        return motion
+    return motion.convert_units("m", from_=units)
+
+
+def reroot(motion: Motion, joint: str) -> Motion:
+    """Drop the joints above ``joint`` and make it the root (keeping its global motion).
+
+    Used for rigs whose file root is a fixed helper (Bandai-Namco's ``joint_Root``).
+
+    Raises:
+        SkeletonError: ``joint`` is unknown.
+    """
+    sk = motion.skeleton
+    new_root = sk.index(joint)
+    if new_root == 0:
+        return motion
+    keep = [new_root]
+    for j in range(new_root + 1, sk.num_joints):
+        if sk.parents[j] in keep:
+            keep.append(j)
+    index = {j: i for i, j in enumerate(keep)}
+    parents = [-1] + [index[sk.parents[j]] for j in keep[1:]]
+    offsets = sk.offsets[keep].clone()
+    skeleton = Skeleton(
+        [sk.joint_names[j] for j in keep],
+        parents,
+        offsets,
+        end_sites={index[j]: v for j, v in sk.end_sites.items() if j in index},
+        body_groups=[sk.body_groups[j] for j in keep],
+        up_axis=sk.up_axis,
+        name=sk.name,
+        morphology=sk.morphology,
+    )
+    rotations = motion.rotations[:, keep].clone()
+    rotations[:, 0] = motion.global_rotations()[:, new_root]
+    root = motion.global_positions()[:, new_root]
+    trans = None if motion.translations is None else motion.translations[:, keep]
+    return Motion(skeleton, rotations, root, motion.fps, translations=trans, name=motion.name,
+                  units=motion.units)
+
+
+def _file_key(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@dataclass
+class BVHSource(ClipSource):
+    """BVH files from files or directories.
+
+    Args:
+        paths: Files or directories (searched with ``pattern``).
+        pattern: Glob for directories, e.g. ``"**/*.bvh"``.
+        test_pattern: Regular expression; clips whose path matches go to the test split.
+        units: Length unit of the files (a key of :data:`~skelagnostic.core.UNITS`);
+            the clips are converted to metres. ``None`` keeps the file's units.
+        root_joint: Re-root every clip at this joint (see :func:`reroot`).
+        name: Label of the source.
+
+    Raises:
+        SkelagnosticError: A path does not exist, the units are unknown, or no file matches.
+    """
+
+    paths: Sequence[str | Path]
+    pattern: str = "**/*.bvh"
+    test_pattern: str | None = None
+    units: str | None = None
+    root_joint: str | None = None
+    name: str = "bvh"
+    _files: list[Path] = field(default_factory=list, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.paths, (str, Path)):
+            self.paths = [self.paths]
+        if self.units is not None and self.units not in UNITS:
+            raise SkelagnosticError(f"data.units: unknown unit {self.units!r}; known: "
+                                    f"{', '.join(UNITS)}")
+        files: list[Path] = []
+        for raw in self.paths:
+            path = Path(raw).expanduser()
+            if path.is_file():
+                files.append(path.resolve())
+            elif path.is_dir():
+                files.extend(sorted(p.resolve() for p in path.glob(self.pattern) if p.is_file()))
+            else:
+                raise SkelagnosticError(f"data.paths: {str(path)!r} does not exist")
+        if not files:
+            raise SkelagnosticError(
+                f"data.paths: no file matches {self.pattern!r} in {[str(p) for p in self.paths]}"
+            )
+        self._files = list(dict.fromkeys(files))
+
+    def clips(self) -> list[ClipRef]:
+        """One clip per file, keyed by the file's SHA-256."""
+        test = re.compile(self.test_pattern) if self.test_pattern else None
+        return [
+            ClipRef(str(path), _file_key(path), "test" if test and test.search(str(path)) else None)
+            for path in self._files
+        ]
+
+    def load(self, clip: ClipRef) -> Motion:
+        """Read the BVH file of ``clip``."""
+        from skelagnostic.io.bvh import read_bvh
+
+        motion = read_bvh(clip.id)
+        if self.root_joint is not None:
+            motion = reroot(motion, self.root_joint)
+        return _to_metres(motion, self.units)
+
+
+@dataclass
+class ProceduralSource(ClipSource):
+    """Clips of :func:`skelagnostic.procedural.dataset` (no files needed).
+
+    Args:
+        kinds: Skeleton kinds (see ``skelagnostic.procedural.KINDS``).
+        gaits: Gaits; ``None`` plays every gait of each kind except ``idle``.
+        clips_per_gait: Clips per (kind, gait).
+        seconds: Duration of each clip.
+        seed: Base seed.
+        name: Label of the source.
+    """
+
+    kinds: Sequence[str] = ("biped22", "quadruped")
+    gaits: Sequence[str] | None = None
+    clips_per_gait: int = 2
+    seconds: float = 4.0
+    seed: int = 0
+    name: str = "procedural"
+    _motions: dict[str, Motion] = field(default_factory=dict, init=False, repr=False)
+
+    def _generate(self) -> dict[str, Motion]:
+        from skelagnostic import procedural
+
+        if not self._motions:
+            gaits = self.gaits
+            if gaits is None:
+                gaits = sorted({g for table in procedural.GAITS.values() for g in table} - {"idle"})
+            clips = procedural.dataset(tuple(self.kinds), tuple(gaits), self.clips_per_gait,
+                                       self.seconds, seed=self.seed)
+            if not clips:
+                raise SkelagnosticError(
+                    f"data: the procedural kinds {list(self.kinds)} have none of the gaits "
+                    f"{list(gaits)}"
+                )
+            for motion, info in clips:
+                self._motions[f"{info['kind']}_{info['gait']}_{info['seed']}"] = motion
+        return self._motions
+
+    def clips(self) -> list[ClipRef]:
+        """The generated clips, keyed by a hash of their content."""
+        out = []
+        for clip_id, motion in self._generate().items():
+            digest = hashlib.sha256(clip_id.encode())
+            for tensor in (motion.skeleton.offsets, motion.rotations, motion.root_positions):
+                digest.update(tensor.detach().to(torch.float64).contiguous().numpy().tobytes())
+            out.append(ClipRef(clip_id, digest.hexdigest()))
+        return out
+
+    def load(self, clip: ClipRef) -> Motion:
+        """The generated motion of ``clip``, in metres."""
+        return _to_metres(self._generate()[clip.id], None)
+
+    def __getstate__(self) -> dict[str, object]:
+        state = dict(self.__dict__)
+        state["_motions"] = {}  # regenerated on demand; keeps pickles small
+        return state
+
+
+@dataclass(frozen=True)
+class DatasetPreset:
+    """Known layout of a public dataset: file pattern, units, test split, root fix.
+
+    Attributes:
+        name: Preset name (``data=<name>``).
+        description: One line.
+        units: Length unit of the files.
+        pattern: Glob below the dataset root.
+        test_pattern: Regular expression selecting the test clips, if the
+            dataset defines a test split.
+        root_joint: Joint to re-root at (rigs whose file root is a fixed helper).
+    """
+
+    name: str
+    description: str
+    units: str
+    pattern: str = "**/*.bvh"
+    test_pattern: str | None = None
+    root_joint: str | None = None
+
+
+#: Presets of the datasets users have (see METHODS.md "Datasets").
+PRESETS: dict[str, DatasetPreset] = {
+    p.name: p
+    for p in (
+        DatasetPreset("lafan1", "Ubisoft LaFAN1: 22 joints, 30 fps, cm; subject 5 is the test set",
+                      "cm", test_pattern=r"subject5"),
+        DatasetPreset("cmu", "CMU mocap (BVH conversions): 31 joints, 120 fps, CMU units",
+                      "cmu"),
+        DatasetPreset("mann_dog", "MANN dog: 21 joints, 60 fps, cm, human-style joint names",
+                      "cm"),
+        DatasetPreset("bandai", "Bandai-Namco: joint_Root fixed at the origin, Hips carry the "
+                      "translation (re-rooted at Hips)", "cm", root_joint="Hips"),
+    )
+}
+
+
+def preset_source(preset: str, root: str | Path) -> BVHSource:
+    """The :class:`BVHSource` of a dataset preset below ``root``.
+
+    Raises:
+        SkelagnosticError: Unknown preset, or ``root`` missing or without matching files.
+    """
+    if preset not in PRESETS:
+        raise SkelagnosticError(f"unknown dataset preset {preset!r}; known: {', '.join(PRESETS)}")
+    p = PRESETS[preset]
+    return BVHSource([root], p.pattern, p.test_pattern, p.units, p.root_joint, name=p.name)

@@ -1,0 +1,107 @@
+"""Plugins: how aligners, representations, datasets and configs get into skelagnostic.
+
+A plugin is a module with :data:`hookimpl` functions named after the hooks in
+:mod:`skelagnostic.plugins.hookspecs`, exposed through the ``skelagnostic``
+entry-point group. The built-in components use the same path
+(:mod:`skelagnostic.plugins.builtin`).
+
+``SKELAGNOSTIC_LOAD_PLUGINS=a,b`` restricts which entry points are loaded
+(empty: none); the built-in plugin is always loaded.
+
+Examples:
+    >>> import skelagnostic.plugins as plugins
+    >>> "local_quaternions" in plugins.list_representations()
+    True
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from skelagnostic.plugins.manager import (
+    ENTRY_POINT_GROUP,
+    LOAD_PLUGINS_ENV,
+    AlignerSpec,
+    DatasetSpec,
+    PluginError,
+    PluginInfo,
+    PluginLoadWarning,
+    PluginManager,
+    RepresentationSpec,
+    hookimpl,
+)
+
+if TYPE_CHECKING:
+    from skelagnostic.aligners import Aligner
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "LOAD_PLUGINS_ENV",
+    "AlignerSpec",
+    "DatasetSpec",
+    "PluginError",
+    "PluginInfo",
+    "PluginLoadWarning",
+    "PluginManager",
+    "RepresentationSpec",
+    "get_plugin_manager",
+    "hookimpl",
+    "list_aligners",
+    "list_datasets",
+    "list_representations",
+    "load_aligner",
+]
+
+
+@lru_cache(maxsize=1)
+def get_plugin_manager() -> PluginManager:
+    """The process-wide :class:`PluginManager`, created (and plugins loaded) on first use.
+
+    ``get_plugin_manager.cache_clear()`` forgets it, e.g. after changing
+    ``SKELAGNOSTIC_LOAD_PLUGINS``.
+    """
+    return PluginManager()
+
+
+def list_aligners() -> list[str]:
+    """Names of the registered aligners, sorted (the values ``model=`` accepts)."""
+    return sorted(get_plugin_manager().aligners)
+
+
+def list_representations() -> list[str]:
+    """Names of the registered motion representations, sorted."""
+    return sorted(get_plugin_manager().representations)
+
+
+def list_datasets() -> list[str]:
+    """Names of the registered dataset readers/presets, sorted (values of ``data.source``)."""
+    return sorted(get_plugin_manager().datasets)
+
+
+def load_aligner(name: str, checkpoint: str | Path | None = None, **overrides: Any) -> Aligner:
+    """Build a registered aligner, from its default config or from a checkpoint.
+
+    Args:
+        name: Registered aligner name (see :func:`list_aligners`).
+        checkpoint: A Lightning checkpoint written by ``skelagnostic fit``; ``None``
+            builds an untrained aligner from the registered default config.
+        **overrides: Keyword arguments replacing the default (or saved) hyper-parameters.
+
+    Returns:
+        The aligner, in eval mode.
+
+    Raises:
+        PluginError: ``name`` is not registered.
+        FileNotFoundError: ``checkpoint`` does not exist.
+    """
+    spec = get_plugin_manager().aligner(name)
+    if checkpoint is None:
+        model = spec.module(**{**spec.config, **overrides})
+    else:
+        path = Path(checkpoint)
+        if not path.is_file():
+            raise FileNotFoundError(f"checkpoint {str(path)!r} of aligner {name!r} does not exist")
+        model = spec.module.load_from_checkpoint(path, map_location="cpu", **overrides)
+    return model.eval()

@@ -1,0 +1,80 @@
+"""The hook specifications of skelagnostic plugins.
+
+Every hook is *callback-style*: skelagnostic calls it with a ``register``
+function, and the plugin calls ``register(...)`` once per thing it contributes.
+A plugin is a module (or any object) with functions decorated by
+:data:`skelagnostic.plugins.hookimpl` whose names match the specs below; it is
+found through the ``skelagnostic`` entry-point group::
+
+    # pyproject.toml of the plugin distribution
+    [project.entry-points.skelagnostic]
+    example = "skelagnostic_example.plugin"
+
+Built-in components register through these same hooks (see
+:mod:`skelagnostic.plugins.builtin`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import pluggy
+
+#: Marker for hook specifications (project name ``skelagnostic``).
+hookspec = pluggy.HookspecMarker("skelagnostic")
+
+
+@hookspec
+def register_aligners(register: Callable[..., Any]) -> None:
+    """Contribute aligners (trainable models) to ``model=<name>``.
+
+    Call ``register(name, module, datamodule=MotionDataModule, config=None,
+    description="")`` once per aligner, where ``module`` is an
+    :class:`~skelagnostic.aligners.Aligner` subclass, ``datamodule`` a
+    :class:`~skelagnostic.data.MotionDataModule` subclass that produces the
+    batches the aligner trains on, and ``config`` a mapping of default keyword
+    arguments for ``module``. ``config`` becomes the Hydra config ``model/<name>``.
+
+    Args:
+        register: The registration callback.
+    """
+
+
+@hookspec
+def register_representations(register: Callable[..., Any]) -> None:
+    """Contribute motion representations, selectable with ``data.representation=<name>``.
+
+    Call ``register(name, cls)`` once per representation, where ``cls`` is a
+    :class:`~skelagnostic.representations.MotionRepresentation` subclass whose
+    constructor takes keyword options only.
+
+    Args:
+        register: The registration callback.
+    """
+
+
+@hookspec
+def register_datasets(register: Callable[..., Any]) -> None:
+    """Contribute dataset readers and presets, selectable with ``data.source=<name>``.
+
+    Call ``register(name, factory, description="")`` once per dataset, where
+    ``factory(**options)`` returns a :class:`~skelagnostic.data.ClipSource`
+    (``options`` come from ``data.options`` in the config).
+
+    Args:
+        register: The registration callback.
+    """
+
+
+@hookspec
+def register_config_paths(register: Callable[..., Any]) -> None:
+    """Contribute Hydra config search paths (extra ``model/``, ``experiment/``, ... files).
+
+    Call ``register(path)`` with a Hydra search-path URL, for example
+    ``"pkg://my_plugin.conf"`` (a package holding YAML files) or
+    ``"file:///abs/dir"``.
+
+    Args:
+        register: The registration callback.
+    """

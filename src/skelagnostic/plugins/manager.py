@@ -1,0 +1,387 @@
+"""Plugin discovery and the registry of aligners, representations, datasets and config paths.
+
+:class:`PluginManager` wraps a :class:`pluggy.PluginManager` (project name
+``skelagnostic``). It registers the built-in plugin, then every entry point of
+the ``skelagnostic`` group, and calls the registration hooks of
+:mod:`skelagnostic.plugins.hookspecs` one plugin at a time so that each
+contribution is attributed to its plugin. A plugin that fails to import, or
+whose hook raises, is skipped with a :class:`PluginLoadWarning` and reported
+as ``failed``; two contributions with the same name raise :class:`PluginError`.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from importlib import metadata
+from types import MappingProxyType
+from typing import Any
+
+import pluggy
+
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.plugins import hookspecs
+
+#: The pluggy project name and the entry-point group plugins register under.
+ENTRY_POINT_GROUP = "skelagnostic"
+#: Comma-separated entry-point names to load; unset loads all, empty loads none.
+LOAD_PLUGINS_ENV = "SKELAGNOSTIC_LOAD_PLUGINS"
+#: Name of the built-in plugin (the package's own representations and datasets).
+BUILTIN_NAME = "skelagnostic"
+
+#: Marker for hook implementations in plugins: ``@hookimpl def register_aligners(register): ...``.
+hookimpl = pluggy.HookimplMarker(ENTRY_POINT_GROUP)
+
+_HOOKS = ("register_aligners", "register_representations", "register_datasets",
+          "register_config_paths")
+
+
+class PluginError(SkelagnosticError):
+    """A plugin problem: a name registered twice, or an unknown aligner/representation/dataset."""
+
+
+class PluginLoadWarning(UserWarning):
+    """A plugin was skipped because it failed to import or to register."""
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """What ``skelagnostic plugins`` shows about one plugin.
+
+    Attributes:
+        name: Entry-point name (``"skelagnostic"`` for the built-in plugin).
+        version: Version of the distribution providing it.
+        source: ``"built-in"`` or the providing distribution's name.
+        status: ``"loaded"``, ``"failed"`` or ``"disabled"`` (filtered out by
+            ``SKELAGNOSTIC_LOAD_PLUGINS``).
+        error: ``"ExceptionType: message"`` when the plugin failed.
+        hooks: Names of the hooks the plugin implements.
+        provides: What it registered, as ``"kind:name"`` strings.
+    """
+
+    name: str
+    version: str
+    source: str
+    status: str
+    error: str | None = None
+    hooks: tuple[str, ...] = ()
+    provides: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class AlignerSpec:
+    """An aligner contributed through ``register_aligners``.
+
+    Attributes:
+        name: The ``model=<name>`` of the aligner.
+        module: The :class:`~skelagnostic.aligners.Aligner` subclass.
+        datamodule: The :class:`~skelagnostic.data.MotionDataModule` subclass feeding it.
+        config: Default keyword arguments of ``module`` (the ``model/<name>`` config).
+        description: One line for ``skelagnostic plugins``.
+        plugin: Name of the plugin that registered it.
+    """
+
+    name: str
+    module: type
+    datamodule: type
+    config: Mapping[str, Any] = field(default_factory=dict)
+    description: str = ""
+    plugin: str = ""
+
+
+@dataclass(frozen=True)
+class RepresentationSpec:
+    """A motion representation contributed through ``register_representations``."""
+
+    name: str
+    cls: type
+    plugin: str = ""
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """A dataset reader or preset contributed through ``register_datasets``.
+
+    Attributes:
+        name: The ``data.source=<name>`` of the dataset.
+        factory: ``factory(**options)`` returns a :class:`~skelagnostic.data.ClipSource`.
+        description: One line for ``skelagnostic plugins``.
+        plugin: Name of the plugin that registered it.
+    """
+
+    name: str
+    factory: Callable[..., Any]
+    description: str = ""
+    plugin: str = ""
+
+
+@dataclass
+class _Contributions:
+    aligners: list[AlignerSpec] = field(default_factory=list)
+    representations: list[RepresentationSpec] = field(default_factory=list)
+    datasets: list[DatasetSpec] = field(default_factory=list)
+    config_paths: list[tuple[str, str]] = field(default_factory=list)
+
+
+def _allowed_plugins() -> frozenset[str] | None:
+    value = os.environ.get(LOAD_PLUGINS_ENV)
+    if value is None:
+        return None
+    return frozenset(name.strip() for name in value.split(",") if name.strip())
+
+
+def _error_text(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+class PluginManager:
+    """Loads plugins and holds what they registered.
+
+    Args:
+        load_entrypoints: Load the ``skelagnostic`` entry-point group.
+        builtins: Register the built-in plugin (:mod:`skelagnostic.plugins.builtin`).
+        only: Entry-point names to load; ``None`` reads ``SKELAGNOSTIC_LOAD_PLUGINS``
+            (unset: all). The built-in plugin is always loaded.
+
+    Examples:
+        >>> from skelagnostic.plugins import PluginManager
+        >>> pm = PluginManager(load_entrypoints=False)
+        >>> "global_positions" in pm.representations
+        True
+    """
+
+    def __init__(
+        self,
+        *,
+        load_entrypoints: bool = True,
+        builtins: bool = True,
+        only: Iterable[str] | None = None,
+    ) -> None:
+        self._pm = pluggy.PluginManager(ENTRY_POINT_GROUP)
+        self._pm.add_hookspecs(hookspecs)
+        self._infos: dict[str, PluginInfo] = {}
+        self._collected: _Contributions | None = None
+        if builtins:
+            from skelagnostic import __version__
+            from skelagnostic.plugins import builtin
+
+            self.register(builtin, BUILTIN_NAME, version=__version__, source="built-in")
+        if load_entrypoints:
+            self.load_entrypoints(_allowed_plugins() if only is None else frozenset(only))
+
+    def register(self, plugin: object, name: str, *, version: str = "", source: str = "") -> None:
+        """Register a plugin object (usually a module with ``@hookimpl`` functions).
+
+        Args:
+            plugin: The plugin.
+            name: Its unique name.
+            version: Version shown by ``skelagnostic plugins``.
+            source: Where it comes from (distribution name, ``"built-in"``, ...).
+
+        Raises:
+            PluginError: ``name`` or the plugin object is already registered, or the
+                plugin implements an unknown hook.
+        """
+        if name in self._infos:
+            raise PluginError(
+                f"plugin name {name!r} is registered twice "
+                f"(by {self._infos[name].source!r} and {source!r})"
+            )
+        try:
+            self._pm.register(plugin, name=name)
+            self._pm.check_pending()  # rejects misspelt hook names
+        except (ValueError, pluggy.PluginValidationError) as exc:
+            if self._pm.get_plugin(name) is plugin:
+                self._pm.unregister(name=name)
+            raise PluginError(f"plugin {name!r}: {exc}") from exc
+        hooks = tuple(h.name for h in self._pm.get_hookcallers(plugin) or ())
+        self._infos[name] = PluginInfo(name, version, source, "loaded", hooks=hooks)
+        self._collected = None
+
+    def load_entrypoints(self, only: frozenset[str] | None = None) -> None:
+        """Import and register every entry point of the ``skelagnostic`` group.
+
+        Args:
+            only: Names to load; the others are listed as ``disabled``. ``None`` loads all.
+        """
+        for ep in sorted(metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+            dist = ep.dist
+            version = dist.version if dist is not None else ""
+            source = dist.name if dist is not None else ep.value
+            if only is not None and ep.name not in only:
+                self._infos.setdefault(ep.name, PluginInfo(ep.name, version, source, "disabled"))
+                continue
+            try:
+                plugin = ep.load()
+                self.register(plugin, ep.name, version=version, source=source)
+            except PluginError as exc:
+                if not isinstance(exc.__cause__, pluggy.PluginValidationError):
+                    raise  # two plugins under one name: a collision, not a broken plugin
+                self._fail(ep.name, version, source, exc)
+            except Exception as exc:  # a broken third-party plugin must not break the CLI
+                self._fail(ep.name, version, source, exc)
+
+    def _fail(self, name: str, version: str, source: str, exc: BaseException) -> None:
+        warnings.warn(
+            f"skelagnostic plugin {name!r} ({source}) skipped: {_error_text(exc)}",
+            PluginLoadWarning,
+            stacklevel=3,
+        )
+        old = self._infos.get(name)
+        hooks = old.hooks if old is not None else ()
+        self._infos[name] = PluginInfo(name, version, source, "failed", _error_text(exc), hooks)
+
+    def plugins(self) -> list[PluginInfo]:
+        """Every plugin seen, in registration order, with what it provides."""
+        self._collect()
+        return list(self._infos.values())
+
+    @property
+    def aligners(self) -> Mapping[str, AlignerSpec]:
+        """Registered aligners by name."""
+        return MappingProxyType({s.name: s for s in self._collect().aligners})
+
+    @property
+    def representations(self) -> Mapping[str, RepresentationSpec]:
+        """Registered motion representations by name."""
+        return MappingProxyType({s.name: s for s in self._collect().representations})
+
+    @property
+    def datasets(self) -> Mapping[str, DatasetSpec]:
+        """Registered dataset readers/presets by name."""
+        return MappingProxyType({s.name: s for s in self._collect().datasets})
+
+    @property
+    def config_paths(self) -> list[str]:
+        """Hydra search-path URLs registered by plugins, in plugin order."""
+        return [path for path, _ in self._collect().config_paths]
+
+    def aligner(self, name: str) -> AlignerSpec:
+        """The aligner registered as ``name``; :class:`PluginError` lists the known ones."""
+        return _lookup(self.aligners, name, "aligner")
+
+    def representation(self, name: str) -> RepresentationSpec:
+        """The representation registered as ``name``; :class:`PluginError` lists the known ones."""
+        return _lookup(self.representations, name, "representation")
+
+    def dataset(self, name: str) -> DatasetSpec:
+        """The dataset registered as ``name``; :class:`PluginError` lists the known ones."""
+        return _lookup(self.datasets, name, "dataset")
+
+    def _collect(self) -> _Contributions:
+        if self._collected is not None:
+            return self._collected
+        total = _Contributions()
+        owners: dict[tuple[str, str], str] = {}
+        for name, info in list(self._infos.items()):
+            if info.status != "loaded":
+                continue
+            plugin = self._pm.get_plugin(name)
+            try:
+                mine = _call_hooks(self._pm, plugin, name)
+            except Exception as exc:  # a plugin whose registration raises is skipped
+                self._pm.unregister(plugin)
+                self._fail(name, info.version, info.source, exc)
+                continue
+            provides = []
+            for kind, items in (
+                ("aligner", mine.aligners),
+                ("representation", mine.representations),
+                ("dataset", mine.datasets),
+            ):
+                for item in items:
+                    if (kind, item.name) in owners:
+                        raise PluginError(
+                            f"{kind} {item.name!r} is registered by both plugin "
+                            f"{owners[kind, item.name]!r} and plugin {name!r}"
+                        )
+                    owners[kind, item.name] = name
+                    provides.append(f"{kind}:{item.name}")
+            provides += [f"config_path:{path}" for path, _ in mine.config_paths]
+            total.aligners += mine.aligners
+            total.representations += mine.representations
+            total.datasets += mine.datasets
+            total.config_paths += mine.config_paths
+            self._infos[name] = PluginInfo(
+                info.name, info.version, info.source, info.status, None, info.hooks,
+                tuple(provides),
+            )
+        self._collected = total
+        return total
+
+
+def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
+    if name not in table:
+        known = ", ".join(sorted(table)) or "none"
+        raise PluginError(f"unknown {kind} {name!r}; registered: {known}")
+    return table[name]
+
+
+def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _Contributions:
+    """Call one plugin's registration hooks and return what it registered."""
+    out = _Contributions()
+
+    def register_aligner(
+        name: str,
+        module: type,
+        datamodule: type | None = None,
+        config: Mapping[str, Any] | None = None,
+        description: str = "",
+    ) -> None:
+        from skelagnostic.aligners import Aligner
+        from skelagnostic.data import MotionDataModule
+
+        datamodule = MotionDataModule if datamodule is None else datamodule
+        if not (isinstance(module, type) and issubclass(module, Aligner)):
+            raise PluginError(
+                f"aligner {name!r}: module must be an Aligner subclass, got {module!r}"
+            )
+        if not (isinstance(datamodule, type) and issubclass(datamodule, MotionDataModule)):
+            raise PluginError(
+                f"aligner {name!r}: datamodule must be a MotionDataModule subclass, "
+                f"got {datamodule!r}"
+            )
+        config = dict(config or {})
+        if "name" in config:
+            raise PluginError(f"aligner {name!r}: config key 'name' is reserved")
+        out.aligners.append(
+            AlignerSpec(name, module, datamodule, MappingProxyType(config), description,
+                        plugin_name)
+        )
+
+    def register_representation(name: str, cls: type) -> None:
+        from skelagnostic.representations import MotionRepresentation
+
+        if not (isinstance(cls, type) and issubclass(cls, MotionRepresentation)):
+            raise PluginError(
+                f"representation {name!r}: cls must be a MotionRepresentation subclass, "
+                f"got {cls!r}"
+            )
+        out.representations.append(RepresentationSpec(name, cls, plugin_name))
+
+    def register_dataset(name: str, factory: Callable[..., Any], description: str = "") -> None:
+        if not callable(factory):
+            raise PluginError(f"dataset {name!r}: factory must be callable, got {factory!r}")
+        out.datasets.append(DatasetSpec(name, factory, description, plugin_name))
+
+    def register_config_path(path: str) -> None:
+        if not isinstance(path, str) or "://" not in path:
+            raise PluginError(
+                f"config path {path!r}: expected a Hydra search-path URL such as "
+                "'pkg://my_plugin.conf' or 'file:///abs/dir'"
+            )
+        out.config_paths.append((path, plugin_name))
+
+    callbacks = {
+        "register_aligners": register_aligner,
+        "register_representations": register_representation,
+        "register_datasets": register_dataset,
+        "register_config_paths": register_config_path,
+    }
+    for hook_name in _HOOKS:
+        for impl in getattr(pm.hook, hook_name).get_hookimpls():
+            if impl.plugin is plugin:
+                impl.function(register=callbacks[hook_name])
+    return out

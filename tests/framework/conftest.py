@@ -1,0 +1,73 @@
+"""Fixtures of the framework tests: fake plugin distributions on sys.path, fresh plugin managers."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from skelagnostic.plugins import LOAD_PLUGINS_ENV, get_plugin_manager
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLE_SRC = REPO / "plugins" / "example-aligner" / "src"
+
+
+def write_dist(site: Path, name: str, version: str, entry_points: dict[str, str]) -> Path:
+    """A minimal ``.dist-info`` that importlib.metadata finds when ``site`` is on sys.path."""
+    dist = site / f"{name.replace('-', '_')}-{version}.dist-info"
+    dist.mkdir(parents=True, exist_ok=True)
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n")
+    lines = ["[skelagnostic]", *(f"{k} = {v}" for k, v in entry_points.items())]
+    (dist / "entry_points.txt").write_text("\n".join(lines) + "\n")
+    return dist
+
+
+@pytest.fixture
+def fake_site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    """An empty directory prepended to sys.path; the plugin manager is reset around the test."""
+    site = tmp_path / "site"
+    site.mkdir()
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.delenv(LOAD_PLUGINS_ENV, raising=False)
+    get_plugin_manager.cache_clear()
+    yield site
+    get_plugin_manager.cache_clear()
+
+
+@pytest.fixture
+def example_plugin(fake_site: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """The example aligner installed as a (fake) distribution; only it is loaded."""
+    monkeypatch.syspath_prepend(str(EXAMPLE_SRC))
+    write_dist(fake_site, "skelagnostic-example-aligner", "0.1.0",
+               {"example": "skelagnostic_example.plugin"})
+    monkeypatch.setenv(LOAD_PLUGINS_ENV, "example")
+    return fake_site
+
+
+@pytest.fixture
+def add_plugin(fake_site: Path) -> Callable[[str, str], None]:
+    """``add_plugin(name, source)``: a one-module plugin distribution named ``name``."""
+
+    def add(name: str, source: str) -> None:
+        module = f"fake_plugin_{name}"
+        (fake_site / f"{module}.py").write_text(source)
+        write_dist(fake_site, f"fake-{name}", "1.2.3", {name: module})
+        sys.modules.pop(module, None)
+
+    return add
+
+
+@pytest.fixture
+def subprocess_env(tmp_path: Path) -> dict[str, str]:
+    """Environment for CLI subprocesses: the example plugin importable, a private cache."""
+    site = tmp_path / "subsite"
+    write_dist(site, "skelagnostic-example-aligner", "0.1.0",
+               {"example": "skelagnostic_example.plugin"})
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(site), str(EXAMPLE_SRC), str(REPO / "src")])
+    env[LOAD_PLUGINS_ENV] = "example"
+    env["SKELAGNOSTIC_CACHE"] = str(tmp_path / "cache")
+    return env

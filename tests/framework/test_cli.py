@@ -1,0 +1,213 @@
+"""Config composition, run(cfg), the CLI verbs, DDP and the wheel-installed CLI."""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import subprocess
+import sys
+import venv
+from importlib import resources
+from pathlib import Path
+
+import pytest
+import torch
+
+import skelagnostic.plugins as plugins
+from skelagnostic import cli
+from skelagnostic.cli import app
+
+REPO = Path(__file__).resolve().parents[2]
+FAST = ["experiment=smoke", "data.seconds=2.0", "data.clips_per_gait=1", "data.window=16",
+        "data.stride=8", "model.hidden=16", "model.latent=4"]
+
+
+def group_options() -> list[tuple[str, str]]:
+    conf = resources.files("skelagnostic.conf")
+    return [(group.name, f.name.removesuffix(".yaml")) for group in conf.iterdir()
+            if group.is_dir() and not group.name.startswith("_")
+            for f in group.iterdir() if f.name.endswith(".yaml") and not f.name.startswith("_")]
+
+
+def test_compose_defaults(example_plugin: Path) -> None:
+    cfg = app.compose(["model=example", "run_dir=/tmp/x"])
+    assert cfg.task == "fit" and cfg.model.name == "example" and cfg.model.hidden == 64
+    assert cfg.data.source == "procedural" and cfg.trainer.accelerator == "cpu"
+    assert set(cfg.callbacks) == {"model_checkpoint", "rich_progress_bar"}
+    assert cfg.callbacks.model_checkpoint.dirpath == "/tmp/x/checkpoints"
+    assert set(cfg.logger) == {"csv"}
+
+
+def test_every_packaged_option_composes(example_plugin: Path) -> None:
+    options = group_options()
+    assert {g for g, _ in options} == {"data", "trainer", "callbacks", "logger", "experiment"}
+    for group, option in options:
+        cfg = app.compose(["model=example", "run_dir=/tmp/x", f"{group}={option}"])
+        if group == "data":
+            assert cfg.data.source == option
+        if group == "trainer" and option == "ddp":
+            assert cfg.trainer.strategy == "ddp" and cfg.trainer.devices == 2
+
+
+def test_plugin_config_path_adds_experiments(example_plugin: Path) -> None:
+    cfg = app.compose(["experiment=example_quick", "run_dir=/tmp/x"])
+    assert cfg.model.name == "example" and cfg.model.hidden == 32
+
+
+def test_build_datamodule_routes_keys(example_plugin: Path, tmp_path: Path) -> None:
+    pm = plugins.get_plugin_manager()
+    cfg = app.compose(["model=example", "run_dir=/tmp/x", "data.seconds=1.5", "data.window=12",
+                       "data.representation=point_cloud",
+                       "+data.representation_options={num_points: 10}"])
+    dm = app.build_datamodule(cfg, pm)
+    assert dm.window == 12 and dm.sources[0].seconds == 1.5
+    assert dm.representation.num_points == 10
+    cfg = app.compose(["model=example", "run_dir=/tmp/x", "+data.bogus=1"])
+    with pytest.raises(app.ConfigError, match=r"data\.bogus is not an option of "
+                                              r"data\.source='procedural'"):
+        app.build_datamodule(cfg, pm)
+
+
+def read_metrics(run_dir: Path) -> list[dict[str, str]]:
+    with (run_dir / "csv" / "metrics.csv").open() as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_run_fit_resume_validate_predict(example_plugin: Path, tmp_path: Path) -> None:
+    common = ["model=example", f"data.cache_dir={tmp_path / 'cache'}", *FAST]
+    run_dir = tmp_path / "run"
+    metrics = app.run(app.compose([*common, f"run_dir={run_dir}"]))
+    assert metrics["val/loss"] > 0
+    for name in ("checkpoints/best.ckpt", "checkpoints/last.ckpt", "csv/metrics.csv",
+                 "config.yaml"):
+        assert (run_dir / name).is_file(), name
+    saved = (run_dir / "config.yaml").read_text()
+    assert f"run_dir: {run_dir}" in saved and "${" not in saved
+    assert {row["epoch"] for row in read_metrics(run_dir)} == {"0", "1"}
+
+    resumed = tmp_path / "resumed"
+    app.run(app.compose([*common, f"run_dir={resumed}", "trainer.max_epochs=3",
+                         f"ckpt_path={run_dir / 'checkpoints' / 'last.ckpt'}"]))
+    assert {row["epoch"] for row in read_metrics(resumed)} == {"2"}  # epochs 0-1 restored
+
+    best = run_dir / "checkpoints" / "best.ckpt"
+    val = app.run(app.compose([*common, f"run_dir={tmp_path / 'val'}", f"ckpt_path={best}"],
+                              task="validate"))
+    assert val["val/loss"] == pytest.approx(
+        min(float(r["val/loss"]) for r in read_metrics(run_dir) if r["val/loss"]), rel=1e-4)
+    app.run(app.compose([*common, f"run_dir={tmp_path / 'pred'}", f"ckpt_path={best}"],
+                        task="predict"))
+    preds = torch.load(tmp_path / "pred" / "predictions.pt")
+    assert [list(p[0]) for p in preds] == [["procedural/biped22"], ["procedural/quadruped"]]
+    assert preds[0][0]["procedural/biped22"].shape[-1] == 4
+
+    model = plugins.load_aligner("example", checkpoint=best)
+    assert model.hparams.hidden == 16
+
+
+def test_run_rejects_unknown_task(example_plugin: Path) -> None:
+    cfg = app.compose(["model=example", "run_dir=/tmp/x"], task="dance")
+    with pytest.raises(app.ConfigError, match="task must be one of"):
+        app.run(cfg)
+
+
+def test_usage_lists_the_verbs(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main([]) == 0
+    out = capsys.readouterr().out
+    for verb in ("fit", "validate", "test", "predict", "plugins", "render"):
+        assert f"  {verb}" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [([], "You must specify 'model', e.g, model=<OPTION> Available options: example"),
+     (["model=nope"], "Could not find 'model/nope'"),
+     (["model=example", "trainer.foo=1"], "Could not override 'trainer.foo'"),
+     (["model=example", "data.window=0"], "data.window must be > 0, got 0")],
+)
+def test_cli_errors_are_one_line(example_plugin: Path, tmp_path: Path, args: list[str],
+                                 message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    code = cli.main(["fit", *args, f"runs_dir={tmp_path}", f"data.cache_dir={tmp_path}"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert err[-1].startswith("skelagnostic fit: error: ") and message in err[-1]
+    assert not any("Traceback" in line or "Error executing job" in line for line in err)
+
+
+def test_cli_debug_flag_raises(example_plugin: Path, tmp_path: Path) -> None:
+    with pytest.raises(Exception, match="You must specify 'model'"):
+        cli.main(["fit", "--debug", f"runs_dir={tmp_path}"])
+
+
+def run_cli(cmd: list[str], env: dict[str, str], cwd: Path, timeout: float) -> str:
+    proc = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc.stdout + proc.stderr
+
+
+def only_run_dir(root: Path) -> Path:
+    (run_dir,) = [p for p in (root / "example" / "fit").iterdir()]
+    return run_dir
+
+
+@pytest.mark.slow
+def test_cli_fit_ddp_two_cpu_processes(subprocess_env: dict[str, str], tmp_path: Path) -> None:
+    out = run_cli(
+        [sys.executable, "-m", "skelagnostic.cli", "fit", "model=example", *FAST,
+         "trainer.strategy=ddp", "trainer.devices=2", "trainer.accelerator=cpu",
+         f"runs_dir={tmp_path / 'runs'}"],
+        subprocess_env, tmp_path, timeout=170,
+    )
+    assert "Starting with 2 processes" in out and "distributed_backend=gloo" in out
+    run_dir = only_run_dir(tmp_path / "runs")
+    assert (run_dir / "checkpoints" / "best.ckpt").is_file()
+    assert (run_dir / "checkpoints" / "last.ckpt").is_file()
+    assert (run_dir / "train_ddp_process_1.log").is_file()  # rank 1 re-ran the command line
+    assert {row["epoch"] for row in read_metrics(run_dir)} == {"0", "1"}
+
+
+def _copy_filter(root: Path):
+    """Copy a project's sources only (not venvs, caches, build outputs or sibling projects)."""
+    top = {".venv", ".git", "build", "dist", "runs", "outputs", "tests", "docs", "plugins",
+           "benchmarks"}
+
+    def ignore(directory: str, names: list[str]) -> list[str]:
+        at_top = Path(directory) == root
+        return [n for n in names if n == "__pycache__" or n.endswith(".egg-info")
+                or (at_top and n in top)]
+
+    return ignore
+
+
+@pytest.mark.slow
+def test_wheel_installed_cli_from_another_directory(tmp_path: Path) -> None:
+    wheels = tmp_path / "wheels"
+    for project in (REPO, REPO / "plugins" / "example-aligner"):
+        build = tmp_path / "build" / project.name
+        shutil.copytree(project, build, ignore=_copy_filter(project))
+        subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
+                        "-q", "-w", str(wheels), str(build)], check=True, timeout=300)
+    env_dir = tmp_path / "env"
+    venv.create(env_dir, system_site_packages=True, with_pip=False)
+    py = env_dir / "bin" / "python"
+    site = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    # the test interpreter's packages (torch, lightning, ...) without its editable skelagnostic
+    deps = [p for p in sys.path if p.endswith("site-packages")]
+    Path(site, "deps.pth").write_text("\n".join(deps) + "\n")
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "--no-deps",
+                    "--no-index", "-q", *map(str, wheels.glob("*.whl"))], check=True, timeout=300)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env.update({"SKELAGNOSTIC_CACHE": str(tmp_path / "cache"), plugins.LOAD_PLUGINS_ENV: "example"})
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    where = run_cli([str(py), "-c", "import skelagnostic.conf as c; print(c.__file__)"], env,
+                    elsewhere, timeout=60)
+    assert str(env_dir) in where  # the wheel's copy, not the source tree
+    out = run_cli([str(env_dir / "bin" / "skelagnostic"), "plugins", "--json"], env, elsewhere,
+                  timeout=120)
+    assert '"source": "skelagnostic-example-aligner"' in out
+    run_cli([str(env_dir / "bin" / "skelagnostic"), "fit", "model=example", *FAST], env,
+            elsewhere, timeout=240)
+    assert (only_run_dir(elsewhere / "runs") / "checkpoints" / "last.ckpt").is_file()

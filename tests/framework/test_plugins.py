@@ -1,0 +1,195 @@
+"""Plugin manager: hook registration, collisions, broken plugins, env filtering, docs coverage."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import skelagnostic.plugins as plugins
+from skelagnostic.aligners import Aligner, CapabilityError
+from skelagnostic.plugins import (
+    PluginError,
+    PluginLoadWarning,
+    PluginManager,
+    hookimpl,
+    hookspecs,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+HOOKS = [name for name, f in inspect.getmembers(hookspecs, inspect.isfunction)
+         if name.startswith("register_")]
+
+REGISTERING_PLUGIN = """
+from skelagnostic.plugins import hookimpl
+from skelagnostic.representations import GlobalPositions
+from skelagnostic.data import ProceduralSource
+
+class Mine(GlobalPositions):
+    name = "mine"
+
+@hookimpl
+def register_representations(register):
+    register("mine", Mine)
+
+@hookimpl
+def register_datasets(register):
+    register("tiny", ProceduralSource, "one-kind procedural data")
+
+@hookimpl
+def register_config_paths(register):
+    register("file:///nonexistent/conf")
+"""
+
+
+def test_hookspecs_are_the_documented_four() -> None:
+    assert sorted(HOOKS) == ["register_aligners", "register_config_paths",
+                             "register_datasets", "register_representations"]
+
+
+@pytest.mark.parametrize("hook", HOOKS)
+def test_every_hook_is_documented(hook: str) -> None:
+    assert hook in (REPO / "docs" / "plugins.md").read_text()
+
+
+def test_builtin_registers_through_hooks() -> None:
+    pm = PluginManager(load_entrypoints=False)
+    (info,) = pm.plugins()
+    assert (info.name, info.source, info.status) == ("skelagnostic", "built-in", "loaded")
+    assert set(info.hooks) == {"register_representations", "register_datasets"}
+    assert {"global_positions", "root_local_velocities", "local_quaternions", "foq",
+            "point_cloud"} == set(pm.representations)
+    assert {"procedural", "bvh", "lafan1", "cmu", "mann_dog", "bandai"} == set(pm.datasets)
+    assert pm.aligners == {}
+
+
+def test_entry_point_plugin_registers_everything(add_plugin) -> None:
+    add_plugin("good", REGISTERING_PLUGIN)
+    pm = PluginManager()
+    info = {i.name: i for i in pm.plugins()}["good"]
+    assert (info.version, info.source, info.status) == ("1.2.3", "fake-good", "loaded")
+    assert pm.representation("mine").plugin == "good"
+    assert pm.dataset("tiny").description == "one-kind procedural data"
+    assert pm.config_paths == ["file:///nonexistent/conf"]
+    assert "representation:mine" in info.provides
+
+
+def test_example_aligner_is_listed_and_loadable(example_plugin) -> None:
+    assert plugins.list_aligners() == ["example"]
+    spec = plugins.get_plugin_manager().aligner("example")
+    assert spec.plugin == "example" and spec.config["hidden"] == 64
+    model = plugins.load_aligner("example", hidden=8)
+    assert isinstance(model, Aligner) and not model.training
+    assert model.hparams.hidden == 8
+
+
+def test_unknown_names_list_the_known_ones(example_plugin) -> None:
+    pm = plugins.get_plugin_manager()
+    with pytest.raises(PluginError, match="unknown aligner 'nope'; registered: example"):
+        pm.aligner("nope")
+    with pytest.raises(PluginError, match="unknown dataset 'x'"):
+        pm.dataset("x")
+    with pytest.raises(FileNotFoundError, match=r"missing\.ckpt"):
+        plugins.load_aligner("example", checkpoint="missing.ckpt")
+
+
+def test_name_collision_between_plugins_raises(add_plugin) -> None:
+    add_plugin("first", REGISTERING_PLUGIN)
+    add_plugin("second", REGISTERING_PLUGIN)
+    pm = PluginManager()
+    with pytest.raises(PluginError, match="representation 'mine' is registered by both plugin "
+                                          "'first' and plugin 'second'"):
+        pm.representations  # noqa: B018
+
+
+def test_collision_with_a_builtin_raises() -> None:
+    class Clash:
+        @hookimpl
+        def register_datasets(self, register):
+            register("procedural", lambda: None)
+
+    pm = PluginManager(load_entrypoints=False)
+    pm.register(Clash(), "clash")
+    with pytest.raises(PluginError, match="dataset 'procedural' is registered by both plugin "
+                                          "'skelagnostic' and plugin 'clash'"):
+        pm.datasets  # noqa: B018
+
+
+def test_duplicate_plugin_name_raises() -> None:
+    pm = PluginManager(load_entrypoints=False)
+    with pytest.raises(PluginError, match="plugin name 'skelagnostic' is registered twice"):
+        pm.register(object(), "skelagnostic")
+
+
+def test_unknown_hook_is_rejected() -> None:
+    class Typo:
+        @hookimpl
+        def register_aligner(self, register):  # missing "s"
+            pass
+
+    with pytest.raises(PluginError, match="register_aligner"):
+        PluginManager(load_entrypoints=False).register(Typo(), "typo")
+
+
+def test_plugin_failing_at_import_is_skipped_with_warning(add_plugin) -> None:
+    add_plugin("broken", "raise RuntimeError('boom at import')\n")
+    add_plugin("good", REGISTERING_PLUGIN)
+    with pytest.warns(PluginLoadWarning, match="'broken'.*RuntimeError: boom at import"):
+        pm = PluginManager()
+    infos = {i.name: i for i in pm.plugins()}
+    assert infos["broken"].status == "failed"
+    assert infos["broken"].error == "RuntimeError: boom at import"
+    assert infos["good"].status == "loaded" and "mine" in pm.representations
+
+
+def test_plugin_failing_at_registration_is_skipped(add_plugin) -> None:
+    add_plugin("badreg", """
+from skelagnostic.plugins import hookimpl
+
+@hookimpl
+def register_aligners(register):
+    register("notanaligner", object)
+""")
+    pm = PluginManager()
+    with pytest.warns(PluginLoadWarning, match="module must be an Aligner subclass"):
+        infos = {i.name: i for i in pm.plugins()}
+    assert infos["badreg"].status == "failed"
+    assert "notanaligner" not in pm.aligners
+
+
+def test_load_plugins_env_restricts(add_plugin, monkeypatch: pytest.MonkeyPatch) -> None:
+    add_plugin("broken", "raise RuntimeError('boom')\n")
+    add_plugin("good", REGISTERING_PLUGIN)
+    monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, "good")
+    pm = PluginManager()
+    status = {i.name: i.status for i in pm.plugins()}
+    assert status == {"skelagnostic": "loaded", "broken": "disabled", "good": "loaded"}
+    monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, "")
+    assert "mine" not in PluginManager().representations
+
+
+def test_capabilities_are_enforced(example_plugin) -> None:
+    model = plugins.load_aligner("example", hidden=8)
+    assert model.supports("retarget") and not model.supports("phase")
+    with pytest.raises(CapabilityError, match="does not support 'phase'"):
+        model.require("phase")
+
+
+def test_plugins_command_lists_broken_plugin(add_plugin, fake_site: Path) -> None:
+    add_plugin("broken", "raise ImportError('no such thing')\n")
+    env_path = [str(fake_site), str(REPO / "src")]
+    out = subprocess.run(
+        [sys.executable, "-m", "skelagnostic.cli", "plugins", "--json"],
+        capture_output=True, text=True, check=True,
+        env={"PYTHONPATH": ":".join(env_path), "PATH": "/usr/bin:/bin"},
+    )
+    rows = {row["name"]: row for row in json.loads(out.stdout)}
+    assert rows["broken"]["status"] == "failed"
+    assert rows["broken"]["version"] == "1.2.3"
+    assert rows["broken"]["source"] == "fake-broken"
+    assert rows["broken"]["error"] == "ImportError: no such thing"
+    assert rows["skelagnostic"]["status"] == "loaded"
