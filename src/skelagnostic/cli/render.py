@@ -1,0 +1,228 @@
+"""``skelagnostic render``: draw BVH clips to an animated GIF/MP4 or a contact sheet.
+
+Usage::
+
+    skelagnostic render a.bvh [b.bvh ...] out=anim.gif [mode=side|overlay] [fps=30]
+        [sheet=frames.png] [frames=8] [columns=4] [max_frames=N] [start=S] [end=S]
+        [size=WxH] [elev=DEG] [azim=DEG] [trajectory=true] [follow=true] [labels=a,b]
+
+Other verbs that produce motion reuse :func:`render_from_options` so that
+``render=out.gif`` / ``sheet=out.png`` work the same way everywhere.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = ["RENDER_OPTIONS", "main", "parse_arguments", "render_from_options"]
+
+#: Rendering options understood by :func:`render_from_options`, with their help.
+RENDER_OPTIONS: dict[str, str] = {
+    "mode": "side (one panel per clip) or overlay (one panel, one camera); default side",
+    "fps": "output frame rate; default: highest input rate, at most 30",
+    "sheet": "also write a PNG contact sheet to this path",
+    "frames": "frames on a contact sheet; default 8",
+    "columns": "columns of a contact sheet; default 4",
+    "max_frames": "keep at most N animation frames (playback stays real time)",
+    "start": "start time in seconds (each clip is cut); default 0",
+    "end": "end time in seconds (each clip is cut); default: the end",
+    "size": "panel size in pixels, WxH or N; default 320x320",
+    "elev": "camera elevation in degrees; default 15",
+    "azim": "camera azimuth in degrees; default: three-quarter view across the motion",
+    "trajectory": "true to draw the root path on the floor",
+    "follow": "true for a camera that travels with the characters (long clips)",
+    "labels": "comma-separated labels, one per clip; default: file names",
+}
+
+_USAGE = """usage: skelagnostic render A.bvh [B.bvh ...] [out=render.gif] [key=value ...]
+
+Draw BVH clips as stick figures (bones coloured by body group) to an animated
+GIF (.gif), an MP4 (.mp4, needs ffmpeg) or a PNG contact sheet (.png).
+
+options:
+  out         output path (.gif, .mp4 or .png); default render.gif
+{options}"""
+
+
+def _usage() -> str:
+    lines = [f"  {key:<11} {text}" for key, text in RENDER_OPTIONS.items()]
+    return _USAGE.format(options="\n".join(lines))
+
+
+def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
+    """Split command-line words into positional arguments and ``key=value`` options.
+
+    Args:
+        argv: The words after the verb.
+
+    Returns:
+        ``(positional, options)``.
+
+    Raises:
+        SkelagnosticError: If an option is given twice.
+
+    Examples:
+        >>> parse_arguments(["a.bvh", "out=x.gif", "mode=overlay"])
+        (['a.bvh'], {'out': 'x.gif', 'mode': 'overlay'})
+    """
+    positional, options = [], {}
+    for word in argv:
+        key, sep, value = word.partition("=")
+        if sep and key.isidentifier():
+            if key in options:
+                raise SkelagnosticError(f"option {key}= is given twice")
+            options[key] = value
+        else:
+            positional.append(word)
+    return positional, options
+
+
+def render_from_options(
+    motions: Sequence[Any], options: Mapping[str, str], *, out_key: str = "out"
+) -> list[Path]:
+    """Render motions as the ``key=value`` options ask; the shared back end of all verbs.
+
+    Writes the animation or sheet named by ``options[out_key]`` (if present) and
+    the contact sheet named by ``options["sheet"]`` (if present).
+
+    Args:
+        motions: Motions (or BVH paths / stick figures) to draw.
+        options: Options as strings; only :data:`RENDER_OPTIONS` and ``out_key``
+            are read, others are ignored so that verbs can pass all their options.
+        out_key: Option holding the main output path (``"render"`` in verbs
+            whose ``out=`` is a BVH file).
+
+    Returns:
+        The written paths (empty when neither output was asked for).
+
+    Raises:
+        SkelagnosticError: On a malformed option value; the message names the option.
+    """
+    from skelagnostic.viz import render_contact_sheet, render_motion
+
+    common: dict[str, Any] = {}
+    if "mode" in options:
+        common["mode"] = options["mode"]
+    if "fps" in options:
+        common["fps"] = _number(options, "fps", float)
+    if "elev" in options:
+        common["elev"] = _number(options, "elev", float)
+    if "azim" in options:
+        common["azim"] = _number(options, "azim", float)
+    if "size" in options:
+        common["size"] = _size(options["size"])
+    if "max_frames" in options:
+        common["max_frames"] = _number(options, "max_frames", int)
+    for flag in ("trajectory", "follow"):
+        if flag in options:
+            common[flag] = _flag(options, flag)
+    if "labels" in options:
+        common["labels"] = [label.strip() for label in options["labels"].split(",")]
+    sheet = {
+        "frames": _number(options, "frames", int) if "frames" in options else 8,
+        "columns": _number(options, "columns", int) if "columns" in options else 4,
+    }
+    motions = _cut(motions, options)
+    written = []
+    if out_key in options:
+        written.append(
+            render_motion(
+                motions,
+                options[out_key],
+                sheet_frames=sheet["frames"],
+                columns=sheet["columns"],
+                **common,
+            )
+        )
+    if "sheet" in options:
+        written.append(render_contact_sheet(motions, options["sheet"], **sheet, **common))
+    return written
+
+
+def main(argv: list[str]) -> int:
+    """Run ``skelagnostic render``.
+
+    Args:
+        argv: Words after the verb: BVH paths and ``key=value`` options.
+
+    Returns:
+        0 on success, 2 on bad arguments or unreadable input.
+    """
+    if not argv or any(word in ("-h", "--help", "help") for word in argv):
+        print(_usage())
+        return 0 if argv else 2
+    try:
+        paths, options = parse_arguments(argv)
+        unknown = sorted(set(options) - set(RENDER_OPTIONS) - {"out"})
+        if unknown:
+            raise SkelagnosticError(
+                f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
+                "see 'skelagnostic render --help'"
+            )
+        if not paths:
+            raise SkelagnosticError("no input: give at least one BVH file")
+        from skelagnostic import read_bvh
+
+        motions = [read_bvh(path) for path in paths]
+        options.setdefault("out", "render.gif")
+        for path in render_from_options(motions, options):
+            print(path)
+    except SkelagnosticError as error:
+        print(f"skelagnostic render: error: {error}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _number(options: Mapping[str, str], key: str, kind: type) -> Any:
+    try:
+        return kind(options[key])
+    except ValueError:
+        raise SkelagnosticError(
+            f"option {key}={options[key]!r} is not {'an integer' if kind is int else 'a number'}"
+        ) from None
+
+
+def _flag(options: Mapping[str, str], key: str) -> bool:
+    value = options[key].strip().lower()
+    if value in ("1", "true", "yes", "on"):
+        return True
+    if value in ("0", "false", "no", "off"):
+        return False
+    raise SkelagnosticError(f"option {key}={options[key]!r} is not true/false")
+
+
+def _size(text: str) -> tuple[int, int]:
+    parts = text.lower().split("x")
+    try:
+        values = [int(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 2):
+        raise SkelagnosticError(f"option size={text!r} is not WxH or N pixels")
+    return (values[0], values[-1])
+
+
+def _cut(motions: Sequence[Any], options: Mapping[str, str]) -> list[Any]:
+    """Apply ``start=`` / ``end=`` (seconds) to every Motion."""
+    if "start" not in options and "end" not in options:
+        return list(motions)
+    start = _number(options, "start", float) if "start" in options else 0.0
+    end = _number(options, "end", float) if "end" in options else None
+    if start < 0 or (end is not None and end <= start):
+        raise SkelagnosticError(f"options start={start} end={end}: need 0 <= start < end")
+    cut = []
+    for motion in motions:
+        first = round(start * motion.fps)
+        last = motion.num_frames if end is None else round(end * motion.fps) + 1
+        if first >= motion.num_frames:
+            raise SkelagnosticError(
+                f"option start={start}: past the end of {motion.name or 'a clip'} "
+                f"({motion.duration:.2f} s)"
+            )
+        cut.append(motion[first:last])
+    return cut
