@@ -290,7 +290,7 @@ def generate(
     Raises:
         SkelagnosticError: For unknown kinds or gaits, or non-positive durations.
 
-    Example:
+    Examples:
         >>> import skelagnostic as sa
         >>> motion, info = sa.procedural.generate("quadruped", "trot", seconds=1.0, fps=60)
         >>> motion.num_frames, round(info["frequency"], 2) > 0

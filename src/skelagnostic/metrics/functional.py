@@ -149,7 +149,7 @@ def mpjpe(
     Raises:
         MotionError: On mismatched shapes, NaN/inf, non-positive heights or an unknown mode.
 
-    Example:
+    Examples:
         >>> import torch
         >>> target = torch.zeros(2, 4, 3)
         >>> preds = target + torch.tensor([3.0, 4.0, 0.0])
@@ -261,7 +261,7 @@ def l2p(
     Raises:
         MotionError: On mismatched shapes, NaN/inf, bad statistics or an empty mask.
 
-    Example:
+    Examples:
         >>> import torch
         >>> target = torch.zeros(1, 2, 2, 3)
         >>> preds = target.clone()
@@ -329,7 +329,7 @@ def l2q(
     Raises:
         MotionError: On mismatched shapes, NaN/inf or an empty mask.
 
-    Example:
+    Examples:
         >>> import torch
         >>> target = torch.tensor([1.0, 0.0, 0.0, 0.0]).expand(1, 3, 2, 4)
         >>> preds = target.clone()
@@ -446,7 +446,7 @@ def npss(
     Raises:
         MotionError: On mismatched shapes, NaN/inf, a non-contiguous or empty mask row.
 
-    Example:
+    Examples:
         >>> import torch
         >>> t = torch.arange(8.0)
         >>> target = torch.stack([torch.cos(t), torch.sin(t), 0 * t, 0 * t], -1)[None, :, None]
@@ -544,7 +544,7 @@ def manifold_overlap(codes: Sequence[Tensor], num_codes: int) -> dict[str, float
     Raises:
         MotionError: On non-integer or out-of-range codes, or a dataset without frames.
 
-    Example:
+    Examples:
         >>> import torch
         >>> human = torch.tensor([0, 0, 1, 2])
         >>> dog = torch.tensor([1, 1, 2, 3])
@@ -628,7 +628,7 @@ def bone_length_consistency(
     Raises:
         MotionError: On mismatched shapes, NaN/inf, bad bones or zero-length target bones.
 
-    Example:
+    Examples:
         >>> import torch
         >>> target = torch.tensor([[0.0, 0, 0], [0, 1, 0]]).expand(4, 2, 3)
         >>> preds = target * torch.tensor([1.0, 1.0, 1.0, 3.0])[:, None, None]
@@ -771,7 +771,7 @@ def temporal_knn_distance(
         MotionError: On mismatched shapes, NaN/inf, or a body group with fewer than
             ``k`` predicted points.
 
-    Example:
+    Examples:
         >>> import torch
         >>> target = torch.zeros(3, 2, 3)               # 3 frames, 2 points at the origin
         >>> preds = torch.zeros(3, 2, 3)
@@ -861,7 +861,7 @@ def end_effector_error(
     Raises:
         MotionError: On mismatched shapes, NaN/inf or unmatched index lists.
 
-    Example:
+    Examples:
         >>> import torch
         >>> target = torch.zeros(2, 5, 3)               # 2 frames, 5 joints
         >>> preds = torch.zeros(2, 3, 3)                # 2 frames, 3 joints

@@ -35,7 +35,7 @@ class L2P(_SumCountMetric):
         std: Per-channel standard deviation, same layout, all ``> 0``.
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = L2P(mean=torch.zeros(3), std=torch.ones(3))
         >>> target = torch.zeros(2, 4, 1, 3)                 # [B, T, J, 3]
@@ -78,7 +78,7 @@ class L2Q(_SumCountMetric):
         continuity: Remove sign flips along time before comparing (default ``True``).
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = L2Q()
         >>> target = torch.tensor([1.0, 0.0, 0.0, 0.0]).expand(1, 4, 2, 4)
@@ -117,7 +117,7 @@ class NPSS(Metric):
         continuity: Remove quaternion sign flips along time first (default ``True``).
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = NPSS()
         >>> target = torch.nn.functional.normalize(torch.randn(3, 16, 2, 4), dim=-1)

@@ -32,7 +32,7 @@ class ManifoldOverlap(Metric):
         num_datasets: Number of datasets (characters) sharing the codebook.
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = ManifoldOverlap(num_codes=4, num_datasets=2)
         >>> metric.update(torch.tensor([0, 1, 1]), dataset=0)     # e.g. the human batch

@@ -27,7 +27,7 @@ class TemporalKNNDistance(_SumCountMetric):
             Table 2; default) or ``"sum"`` (Eq. 5).
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = TemporalKNNDistance(k=2)
         >>> target = torch.zeros(1, 3, 4, 3)              # [B, T, M points, 3]

@@ -61,7 +61,7 @@ class MPJPE(_SumCountMetric):
             height is an error, so normalised and raw errors never mix.
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = MPJPE()
         >>> target = torch.zeros(2, 3, 4, 3)                  # [B, T, J, 3]
@@ -120,7 +120,7 @@ class BoneLengthConsistency(_SumCountMetric):
         correction: ``0`` population variance (default), ``1`` sample variance.
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = BoneLengthConsistency(bones=[(0, 1)])
         >>> target = torch.tensor([[0.0, 0, 0], [0, 1, 0]]).expand(1, 4, 2, 3)
@@ -162,7 +162,7 @@ class EndEffectorError(_SumCountMetric):
         reduction: ``"sum"`` over pairs (Eq. 6, default) or ``"mean"``.
         **kwargs: Passed to `torchmetrics.Metric`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> metric = EndEffectorError(preds_indices=[0, 1], target_indices=[2, 0])
         >>> target = torch.zeros(2, 5, 3, 3)                # [B, T, J_A, 3]

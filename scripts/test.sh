@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Set up a virtual environment and run every check CI runs: ruff, the test
+# suite (pytest, slow tests included), the benchmark smoke sizes and the docs
+# build. Usage: bash scripts/test.sh [extra pytest args]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+VENV=${SKELAGNOSTIC_VENV:-.venv}
+if [ ! -x "$VENV/bin/python" ]; then
+  "$PY" -m venv "$VENV"
+fi
+# constraints.txt pins the CPU build of torch (an unpinned torch pulls CUDA wheels).
+"$VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
+  -c constraints.txt -e ".[test,bench,docs]"
+echo "== ruff"
+"$VENV/bin/ruff" check src tests benchmarks plugins
+echo "== pytest"
+"$VENV/bin/python" -m pytest -n 2 --durations=15 "$@"
+echo "== docs"
+"$VENV/bin/mkdocs" build --strict --quiet --site-dir "$(mktemp -d)"

@@ -1,0 +1,54 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import skelagnostic as sa
+from skelagnostic.cli import main
+
+
+def test_demo_procedural_writes_bvh_png_and_summary(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--seconds", "1", "--no-gif"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [m["joints"] for m in summary["motions"]] == [22, 31, 17, 21]
+    for entry in summary["motions"]:
+        back = sa.read_bvh(entry["bvh"])
+        assert back.num_frames == entry["frames"] == 31
+        assert entry["round_trip_max_position_error"] < 1e-4
+    sheet = np.asarray(Image.open(out / "demo.png").convert("L"))
+    assert sheet.shape[0] > 100 and (sheet < 128).mean() > 0.001  # something was drawn
+    assert "biped31_run_1" in capsys.readouterr().out
+
+
+@pytest.mark.data
+def test_demo_on_real_bvh(tmp_path, shared_data):
+    clip = shared_data / "human" / "xia_cmu" / "angry_13_000.bvh"
+    out = tmp_path / "real"
+    assert main(["demo", str(clip), "--out", str(out), "--no-gif"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["motions"][0]["frames"] == 140
+
+
+def test_demo_bad_bvh_is_one_clear_line(tmp_path):
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "skelagnostic.cli", "demo", str(bad), "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 1
+    assert "broken.bvh:4:" in proc.stderr and "Traceback" not in proc.stdout + proc.stderr
+    assert not (tmp_path / "o" / "summary.json").exists()
+
+
+def test_unknown_verb_and_help(capsys):
+    assert main(["frobnicate"]) == 2
+    assert "unknown verb" in capsys.readouterr().err
+    assert main(["--help"]) == 0
+    assert "demo" in capsys.readouterr().out
