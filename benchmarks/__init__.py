@@ -1,0 +1,1 @@
+"""Benchmarks of skelagnostic: ``python benchmarks/run.py --suite NAME``."""

@@ -1,0 +1,181 @@
+"""Shared pieces of the benchmark suites: results, timing, memory, machine info.
+
+A suite is a module with ``run(size: str) -> list[Result]`` (``size`` is one of
+:data:`SIZES`) and, optionally, ``BASELINE_PACKAGES``: the distributions whose
+versions the report should record (e.g. ``("pybvh",)``). Register it in
+``benchmarks/run.py``.
+"""
+
+from __future__ import annotations
+
+import gc
+import importlib
+import importlib.metadata
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SIZES = ("smoke", "default", "large")
+_CHILD_MARK = "@@benchmark-child@@"
+#: Environment variable holding the torch thread count for suites and children.
+THREADS_ENV = "SKELAGNOSTIC_BENCH_THREADS"
+
+
+@dataclass
+class Result:
+    """One figure of a suite.
+
+    ``value`` and ``baseline_value`` are measured in the same run; ``speedup`` is
+    derived so that > 1 always means skelagnostic is better.
+    """
+
+    name: str
+    unit: str
+    value: float
+    baseline: str | None = None
+    baseline_value: float | None = None
+    higher_is_better: bool = False
+
+    @property
+    def speedup(self) -> float | None:
+        if self.baseline_value is None or self.value == 0 or self.baseline_value == 0:
+            return None
+        if self.higher_is_better:
+            return self.value / self.baseline_value
+        return self.baseline_value / self.value
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "unit": self.unit,
+            "value": float(self.value),
+            "baseline": self.baseline,
+            "baseline_value": None if self.baseline_value is None else float(self.baseline_value),
+            "speedup": self.speedup,
+            "higher_is_better": bool(self.higher_is_better),
+        }
+
+
+def timeit_median(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> float:
+    """Median wall time of ``fn()`` in seconds over ``repeats`` runs after ``warmup`` runs."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(max(1, repeats)):
+        gc.collect()
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def peak_rss() -> float:
+    """Peak resident set size of this process so far, in MiB."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # Linux reports KiB, macOS bytes
+    return peak / 2**20 if sys.platform == "darwin" else peak / 2**10
+
+
+def run_child(target: str, **kwargs: Any) -> tuple[Any, float]:
+    """Run ``module:function(**kwargs)`` in a fresh Python process.
+
+    The function must return something JSON-serialisable. A fresh process makes
+    its peak RSS a measure of that work alone.
+
+    Returns:
+        ``(return value, peak RSS of the child in MiB)``.
+    """
+    module, function = target.split(":")
+    code = (
+        "import json, sys\n"
+        "from benchmarks.harness import _child_main\n"
+        f"_child_main({module!r}, {function!r}, json.loads(sys.stdin.read()))\n"
+    )
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(REPO_ROOT), str(REPO_ROOT / "src"), env.get("PYTHONPATH")) if p
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        input=json.dumps(kwargs),
+        capture_output=True,
+        text=True,
+        cwd=REPO_ROOT,
+        env=env,
+        check=False,
+    )
+    for line in reversed(proc.stdout.splitlines()):
+        if line.startswith(_CHILD_MARK):
+            payload = json.loads(line[len(_CHILD_MARK) :])
+            return payload["result"], payload["peak_rss_mib"]
+    raise RuntimeError(
+        f"benchmark child {target} failed (exit {proc.returncode}):\n{proc.stderr[-4000:]}"
+    )
+
+
+def apply_threads() -> None:
+    """Set torch's intra-op thread count from ``SKELAGNOSTIC_BENCH_THREADS`` (if set)."""
+    threads = os.environ.get(THREADS_ENV)
+    if threads:
+        import torch
+
+        torch.set_num_threads(int(threads))
+
+
+def _child_main(module: str, function: str, kwargs: dict[str, Any]) -> None:
+    apply_threads()
+    result = getattr(importlib.import_module(module), function)(**kwargs)
+    payload = {"result": result, "peak_rss_mib": peak_rss()}
+    print(_CHILD_MARK + json.dumps(payload), flush=True)
+
+
+def _ram_bytes() -> int | None:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def machine_info() -> dict[str, Any]:
+    """CPU count, platform, processor and RAM of this machine."""
+    processor = platform.processor()
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                processor = line.split(":", 1)[1].strip()
+                break
+    ram = _ram_bytes()
+    threads = os.environ.get(THREADS_ENV)
+    return {
+        "cpu_count": os.cpu_count(),
+        "torch_threads": int(threads) if threads else None,
+        "platform": platform.platform(),
+        "processor": processor,
+        "ram_gib": None if ram is None else round(ram / 2**30, 2),
+    }
+
+
+def _version(distribution: str) -> str | None:
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+def versions(extra: tuple[str, ...] = ()) -> dict[str, str | None]:
+    """Versions of python, torch, numpy, skelagnostic and the given baseline packages."""
+    out: dict[str, str | None] = {"python": platform.python_version()}
+    for name in ("torch", "numpy", "skelagnostic", *extra):
+        out[name] = _version(name)
+    return out

@@ -1,0 +1,78 @@
+"""Turn benchmark JSON files into a Markdown table (for docs/performance.md).
+
+Usage::
+
+    python benchmarks/report.py results/*.json                  # print the table
+    python benchmarks/report.py results/*.json --update docs/performance.md
+
+``--update`` replaces what lies between the ``<!-- benchmarks:start -->`` and
+``<!-- benchmarks:end -->`` lines of the file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+START, END = "<!-- benchmarks:start -->", "<!-- benchmarks:end -->"
+
+
+def _num(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
+def render(reports: list[dict[str, Any]]) -> str:
+    """One Markdown section per JSON report: machine line and a results table."""
+    parts = []
+    for report in reports:
+        machine, versions = report["machine"], report["versions"]
+        threads = machine.get("torch_threads")
+        parts.append(
+            f"**Suite `{report['suite']}`**: {machine['cpu_count']} CPUs "
+            f"({machine['processor']}), {machine['ram_gib']} GiB RAM"
+            + (f", {threads} torch thread(s)" if threads else "")
+            + "; "
+            + ", ".join(f"{name} {version}" for name, version in versions.items() if version)
+            + "\n"
+        )
+        rows = [
+            "| figure | value | unit | baseline | baseline value | speedup |",
+            "|---|---:|---|---|---:|---:|",
+        ]
+        for r in report["results"]:
+            speedup = "-" if r["speedup"] is None else f"{r['speedup']:.2f}x"
+            rows.append(
+                f"| `{r['name']}` | {_num(r['value'])} | {r['unit']} | {r['baseline'] or '-'} "
+                f"| {_num(r['baseline_value'])} | {speedup} |"
+            )
+        parts.append("\n".join(rows) + "\n")
+    return "\n".join(parts)
+
+
+def update(path: Path, table: str) -> None:
+    """Replace the marked block of ``path`` with ``table``."""
+    text = path.read_text()
+    if START not in text or END not in text:
+        raise SystemExit(f"{path}: no {START} ... {END} block to update")
+    head, rest = text.split(START, 1)
+    _, tail = rest.split(END, 1)
+    path.write_text(f"{head}{START}\n{table}{END}{tail}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("reports", nargs="+", type=Path, help="JSON files from run.py --json")
+    parser.add_argument("--update", type=Path, default=None, help="Markdown file to update")
+    args = parser.parse_args(argv)
+    table = render([json.loads(p.read_text()) for p in args.reports])
+    if args.update is None:
+        print(table)
+    else:
+        update(args.update, table)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,130 @@
+"""Run a benchmark suite, print a table and optionally write JSON.
+
+Usage::
+
+    python benchmarks/run.py --suite matching [--size smoke|default|large] [--json OUT]
+                             [--threads N]
+    python benchmarks/run.py --suite all --size smoke
+
+The JSON (read by external tooling; keep the format stable) is::
+
+    {"suite": str, "machine": {...}, "versions": {...},
+     "results": [{"name", "unit", "value", "baseline", "baseline_value",
+                  "speedup", "higher_is_better"}, ...]}
+
+With ``--suite all`` the suite is ``"all"`` and every result name is prefixed
+with ``"<suite>/"``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+if str(REPO_ROOT) not in sys.path:
+    sys.path.insert(0, str(REPO_ROOT))
+
+from benchmarks.harness import (  # noqa: E402
+    SIZES,
+    THREADS_ENV,
+    Result,
+    apply_threads,
+    machine_info,
+    versions,
+)
+
+#: Suite name -> module exposing ``run(size) -> list[Result]``.
+SUITES: dict[str, str] = {
+    "io": "benchmarks.suites.io",
+    "kinematics": "benchmarks.suites.kinematics",
+    "matching": "benchmarks.suites.matching",
+}
+
+
+def _format(value: float | None) -> str:
+    if value is None:
+        return "-"
+    return f"{value:.4g}"
+
+
+def print_table(suite: str, size: str, results: list[Result]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"benchmarks: {suite} ({size})")
+    table.add_column("name", overflow="fold", max_width=56)
+    for column in ("value", "unit"):
+        table.add_column(column, justify="right", no_wrap=True)
+    table.add_column("baseline", overflow="fold", max_width=28)
+    for column in ("baseline value", "speedup"):
+        table.add_column(column, justify="right", no_wrap=True)
+    for r in results:
+        speedup = r.speedup
+        text = "-" if speedup is None else f"{speedup:.2f}x"
+        style = "" if speedup is None else ("green" if speedup >= 1 else "red")
+        table.add_row(
+            r.name,
+            _format(r.value),
+            r.unit,
+            r.baseline or "-",
+            _format(r.baseline_value),
+            f"[{style}]{text}[/]" if style else text,
+        )
+    Console(width=max(Console().width, 120)).print(table)
+
+
+def run_suites(
+    names: list[str], size: str, prefix: bool = False
+) -> tuple[list[Result], tuple[str, ...]]:
+    results: list[Result] = []
+    baselines: tuple[str, ...] = ()
+    for name in names:
+        module = importlib.import_module(SUITES[name])
+        suite_results = module.run(size)
+        if prefix:
+            for r in suite_results:
+                r.name = f"{name}/{r.name}"
+        results.extend(suite_results)
+        baselines += tuple(getattr(module, "BASELINE_PACKAGES", ()))
+    return results, baselines
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--suite", required=True, choices=[*SUITES, "all"])
+    parser.add_argument("--size", default="default", choices=SIZES)
+    parser.add_argument("--json", type=Path, default=None, help="write the results here")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="torch intra-op threads for every measurement (default: torch's choice); "
+        "1 gives steadier figures on a busy machine",
+    )
+    args = parser.parse_args(argv)
+    if args.threads is not None:
+        os.environ[THREADS_ENV] = str(args.threads)
+    apply_threads()
+    names = list(SUITES) if args.suite == "all" else [args.suite]
+    results, baselines = run_suites(names, args.size, prefix=args.suite == "all")
+    print_table(args.suite, args.size, results)
+    report: dict[str, Any] = {
+        "suite": args.suite,
+        "machine": machine_info(),
+        "versions": versions(baselines),
+        "results": [r.to_dict() for r in results],
+    }
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
