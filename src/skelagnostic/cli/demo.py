@@ -100,10 +100,14 @@ def main(argv: Sequence[str]) -> int:
             )
         console.print(table)
         labels = [str(m.name) for m in motions]
-        sheet = render_motion(motions, out / "demo.png", labels=labels, sheet_frames=8)
+        sheet = render_motion(
+            motions, out / "demo.png", labels=labels, sheet_frames=6, columns=3, follow=True
+        )
         outputs = {"contact_sheet": str(sheet)}
         if not args.no_gif:
-            gif = render_motion(motions, out / "demo.gif", labels=labels, max_frames=90)
+            gif = render_motion(
+                motions, out / "demo.gif", labels=labels, max_frames=90, follow=True
+            )
             outputs["animation"] = str(gif)
         (out / "summary.json").write_text(
             json.dumps({"source": source, "motions": summary, "outputs": outputs}, indent=2)
