@@ -1,0 +1,436 @@
+"""The HuMoT :class:`~skelagnostic.aligners.Aligner`: training, inference and retargeting.
+
+Training (Sec. 3.4, App. A.4-A.5): each step takes one batch of chunks per
+topology; every chunk gets two independent joint subsets, the first is
+encoded with its template and decoded with the second's template, and the
+loss ``L_rec + lambda_blc * L_blc`` is computed on the second subset. Adam
+(0.9, 0.999) with a triangular cyclic learning rate between ``lr_min`` and
+``lr_max`` whose full period is ``lr_period_epochs`` epochs.
+
+Inference works on whole motions of any length: the motion is resampled to
+30 fps, converted to metres, cut into ``chunk``-frame windows every
+``chunk // 2`` frames, each centred by its major joints and encoded. Decoding
+adds the chunk centres back (scaled by the target/source leg-length ratio,
+Sec. A.6) and cross-fades the overlapping chunks with triangular weights.
+Positions become a :class:`~skelagnostic.Motion` by
+:func:`skelagnostic.representations.inverse_kinematics` (per-bone swing from
+the rest pose onto the predicted bone direction, accumulated down the chain;
+joints with several children take the best rotation of all their child bones;
+no twist about the bone axis, since positions do not determine it).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import torch
+from lightning.pytorch.utilities import rank_zero_only
+
+from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.representations import inverse_kinematics
+from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks, sample_keep
+from skelagnostic_humot.model import HuMoT, bone_length_consistency_loss, reconstruction_loss
+from skelagnostic_humot.template import from_model_frame, major_joints, to_model_frame
+
+__all__ = ["HumotAligner", "infer_units", "leg_length"]
+
+#: Typical standing height (m) used to guess the units of a motion that does not state them.
+_HUMAN_HEIGHT = 1.7
+
+
+def infer_units(skeleton: Skeleton, units: str | None = None) -> str:
+    """The length unit of a human skeleton: ``units`` if given, else a guess from its height.
+
+    The guess is the unit of :data:`skelagnostic.core.motion.UNITS` that makes
+    :meth:`Skeleton.height` closest (in ratio) to 1.7 m.
+
+    Raises:
+        SkelagnosticError: ``units`` is not a known unit.
+    """
+    if units is not None:
+        if units not in UNITS:
+            raise SkelagnosticError(f"units: unknown unit {units!r}; known: {', '.join(UNITS)}")
+        return units
+    height = skeleton.height()
+    return min(UNITS, key=lambda u: abs(math.log(max(height * UNITS[u], 1e-9) / _HUMAN_HEIGHT)))
+
+
+def leg_length(template: torch.Tensor, skeleton: Skeleton) -> float:
+    """Mean hip-knee-ankle length of the legs of ``template`` ``[J, 3]`` (0 without legs)."""
+    major = major_joints(skeleton)
+    legs = []
+    for side in ("left", "right"):
+        keys = [f"{side}_hip", f"{side}_knee", f"{side}_ankle"]
+        if all(k in major for k in keys):
+            a, b, c = (template[major[k]] for k in keys)
+            legs.append(float((b - a).norm() + (c - b).norm()))
+    return sum(legs) / len(legs) if legs else 0.0
+
+
+def _chunk_starts(frames: int, chunk: int, hop: int) -> list[int]:
+    if frames <= chunk:
+        return [0]
+    starts = list(range(0, frames - chunk + 1, hop))
+    if starts[-1] != frames - chunk:
+        starts.append(frames - chunk)
+    return starts
+
+
+class HumotAligner(Aligner):
+    """HuMoT: topology-agnostic transformer autoencoder for human motion.
+
+    Args:
+        dim: Token channels (paper: 128).
+        latent: Latent channels ``Z`` (paper: 128).
+        blocks: XCiT blocks in the encoder and in the decoder (paper: 4).
+        heads: Attention heads (paper: 8).
+        kernel_size: Temporal kernel of the Conv1d layers (not in the paper; 5 gives
+            2.36 M parameters against the paper's 2,475,511).
+        mlp_ratio: XCiT MLP width ratio (XCiT default 4).
+        layer_scale: Initial XCiT layer-scale value.
+        lambda_blc: Weight of the bone-length consistency loss (paper: 0.5).
+        subsampling: Stochastic joint subsampling (paper: on; off = "no SJS" ablation).
+        p_major: Drop probability of major joints (paper: 0.1).
+        p_other: Drop probability of other joints (paper: 0.5).
+        lr_min: Lower bound of the cyclic learning rate (paper: 1e-5).
+        lr_max: Upper bound (paper: 1e-4).
+        lr_period_epochs: Full period of the triangular cycle in epochs (paper: 10).
+        betas: Adam betas (paper: 0.9, 0.999).
+        chunk: Frames per chunk at inference (paper's training chunks: 30).
+
+    Raises:
+        SkelagnosticError: A hyper-parameter is out of range (the message names it).
+    """
+
+    capabilities: ClassVar[frozenset[str]] = frozenset(
+        {"encode", "decode", "retarget", "unseen_topology", "denoise"}
+    )
+
+    def __init__(self, dim: int = 128, latent: int = 128, blocks: int = 4, heads: int = 8,
+                 kernel_size: int = 5, mlp_ratio: float = 4.0, layer_scale: float = 1.0,
+                 lambda_blc: float = 0.5, subsampling: bool = True, p_major: float = 0.1,
+                 p_other: float = 0.5, lr_min: float = 1e-5, lr_max: float = 1e-4,
+                 lr_period_epochs: float = 10.0, betas: Sequence[float] = (0.9, 0.999),
+                 chunk: int = 30) -> None:
+        super().__init__()
+        checks = (("dim", dim > 0 and dim % heads == 0, "a positive multiple of heads"),
+                  ("lambda_blc", lambda_blc >= 0, ">= 0"),
+                  ("p_major", 0 <= p_major < 1, "in [0, 1)"),
+                  ("p_other", 0 <= p_other < 1, "in [0, 1)"),
+                  ("lr_min", 0 < lr_min <= lr_max, "in (0, lr_max]"),
+                  ("lr_period_epochs", lr_period_epochs > 0, "> 0"),
+                  ("chunk", chunk > 0, "> 0"),
+                  ("kernel_size", kernel_size % 2 == 1, "odd"))
+        for name, ok, what in checks:
+            if not ok:
+                raise SkelagnosticError(f"model.{name} must be {what}, got {locals()[name]!r}")
+        self.save_hyperparameters()
+        self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale)
+        self._topologies: dict[tuple[Any, ...], Topology] = {}
+
+    # ----------------------------------------------------------------- topology
+    def topology(self, skeleton: Skeleton) -> Topology:
+        """The cached :class:`~skelagnostic_humot.data.Topology` of ``skeleton``."""
+        key = skeleton.topology_key()
+        if key not in self._topologies:
+            self._topologies[key] = Topology.of(skeleton)
+        return self._topologies[key]
+
+    def _dataset_topology(self, name: str) -> Topology:
+        return self.topology(self.trainer.datamodule.skeletons[name])
+
+    # ------------------------------------------------------------------ losses
+    def chunk_loss(self, world: torch.Tensor, topology: Topology, up_axis: str = "y",
+                   subsample: bool | None = None) -> dict[str, torch.Tensor]:
+        """Losses of a batch of chunks of one topology.
+
+        Args:
+            world: ``[B, F, J, 3]`` world positions in metres.
+            topology: Their topology.
+            up_axis: Up axis of ``world``.
+            subsample: Stochastic joint subsampling (default: the ``subsampling``
+                hyper-parameter in training, off in evaluation).
+
+        Returns:
+            ``loss``, ``rec``, ``blc`` and ``mpjpe`` (metres, on the decoded joints).
+        """
+        pos, tmpl = prepare_chunks(world.float(), topology, up_axis)
+        if subsample is None:
+            subsample = self.hparams.subsampling and self.training
+        if subsample:
+            major = topology.major
+            s1 = gather_subset(sample_keep(major, len(pos), self.hparams.p_major,
+                                           self.hparams.p_other), topology.skeleton.parents)
+            s2 = gather_subset(sample_keep(major, len(pos), self.hparams.p_major,
+                                           self.hparams.p_other), topology.skeleton.parents)
+            pred = self.net(s1.take(pos, 2), s1.take(tmpl, 1), s2.take(tmpl, 1),
+                            s1.mask.to(pos.device), s2.mask.to(pos.device))
+            target, mask = s2.take(pos, 2), s2.mask.to(pos.device)
+            bones, bone_mask = s2.bones.to(pos.device), s2.bone_mask.to(pos.device)
+        else:
+            pred = self.net(pos, tmpl, tmpl)
+            target, mask, bone_mask = pos, None, None
+            bones = torch.tensor(topology.skeleton.bones(), device=pos.device).expand(
+                len(pos), -1, -1)
+        rec = reconstruction_loss(pred, target, mask)
+        blc = bone_length_consistency_loss(pred, target, bones, bone_mask)
+        err = (pred - target).norm(dim=-1)
+        if mask is None:
+            mpjpe = err.mean()
+        else:
+            m = mask[:, None].to(err.dtype).expand_as(err)
+            mpjpe = (err * m).sum() / m.sum()
+        return {"loss": rec + self.hparams.lambda_blc * blc, "rec": rec, "blc": blc,
+                "mpjpe": mpjpe}
+
+    def _step(self, batch: dict[str, Any], stage: str) -> torch.Tensor:
+        parts = {n: b for n, b in batch.items() if b is not None}
+        dm = self.trainer.datamodule
+        out = [self.chunk_loss(b["features"], self._dataset_topology(n), dm.skeletons[n].up_axis)
+               for n, b in parts.items()]
+        size = sum(len(b["features"]) for b in parts.values())
+        metrics = {k: torch.stack([o[k] for o in out]).mean() for k in out[0]}
+        sync = stage != "train"
+        self.log(f"{stage}/loss", metrics["loss"], prog_bar=True, batch_size=size, sync_dist=sync)
+        for key in ("rec", "blc"):
+            self.log(f"{stage}/{key}", metrics[key], batch_size=size, sync_dist=sync)
+        self.log(f"{stage}/mpjpe_cm", 100 * metrics["mpjpe"], batch_size=size, sync_dist=sync)
+        return metrics["loss"]
+
+    # --------------------------------------------------------------- lightning
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        """Mean over topologies of ``L_rec + lambda_blc * L_blc`` with joint subsampling."""
+        return self._step(batch, "train")
+
+    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        """Full-skeleton reconstruction losses and MPJPE (cm): ``val/loss``, ``val/mpjpe_cm``."""
+        return self._step(batch, "val")
+
+    def test_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        """As :meth:`validation_step`, logged under ``test/``."""
+        return self._step(batch, "test")
+
+    def predict_step(self, batch: dict[str, Any], batch_idx: int, dataloader_idx: int = 0
+                     ) -> dict[str, torch.Tensor]:
+        """Per dataset, the latent codes ``[B, F, Z]`` of the (full-skeleton) chunks."""
+        out = {}
+        for name, b in batch.items():
+            topo = self._dataset_topology(name)
+            pos, tmpl = prepare_chunks(b["features"].float(), topo,
+                                       self.trainer.datamodule.skeletons[name].up_axis)
+            out[name] = self.net.encoder(pos, tmpl)
+        return out
+
+    def configure_optimizers(self) -> dict[str, Any]:
+        """Adam with a per-step triangular cyclic learning rate (Smith 2017)."""
+        hp = self.hparams
+        optimizer = torch.optim.Adam(self.parameters(), lr=hp.lr_min, betas=tuple(hp.betas))
+        steps_per_epoch = self._steps_per_epoch()
+        half = max(1, round(hp.lr_period_epochs * steps_per_epoch / 2))
+        scheduler = torch.optim.lr_scheduler.CyclicLR(
+            optimizer, base_lr=hp.lr_min, max_lr=hp.lr_max, step_size_up=half,
+            mode="triangular", cycle_momentum=False)
+        return {"optimizer": optimizer,
+                "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+
+    def _steps_per_epoch(self) -> int:
+        trainer = self._trainer
+        if trainer is None:
+            return 1
+        total = trainer.estimated_stepping_batches
+        epochs = trainer.max_epochs
+        if epochs is None or epochs < 1 or not math.isfinite(total):
+            return max(1, int(trainer.num_training_batches or 1))
+        return max(1, int(total // epochs))
+
+    @torch.no_grad()
+    def render_sample(self, batch: dict[str, Any]) -> dict[str, Any]:
+        """Input chunk, its reconstruction and its retargeting to another topology."""
+        from skelagnostic.viz import StickFigure
+
+        dm = self.trainer.datamodule
+        names = [n for n, b in batch.items() if b is not None]
+        src = names[0]
+        topo = self._dataset_topology(src)
+        pos, tmpl = prepare_chunks(batch[src]["features"][:1].float(), topo,
+                                   dm.skeletons[src].up_axis)
+        z = self.net.encoder(pos, tmpl)
+        figs = {"input": (pos[0], topo), "reconstruction": (self.net.decoder(z, tmpl)[0], topo)}
+        others = [n for n in dm.skeletons if n != src]
+        if others:
+            dst = self._dataset_topology(others[0])
+            dst_tmpl = dst.templates(dst.skeleton.bone_lengths().float())[None].to(z)
+            figs[f"retarget -> {others[0]}"] = (self.net.decoder(z, dst_tmpl)[0], dst)
+        return {k: StickFigure(p.cpu(), t.skeleton.parents, t.skeleton.body_groups,
+                               fps=dm.fps, name=k, up_axis="z")
+                for k, (p, t) in figs.items()}
+
+    def on_fit_end(self) -> None:
+        """Write ``humot_retarget.gif`` (retargeted validation chunk), ``humot_metrics.json``."""
+        self._write_fit_outputs()
+
+    @rank_zero_only
+    def _write_fit_outputs(self) -> None:
+        trainer = self.trainer
+        run_dir = Path(trainer.default_root_dir)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
+        (run_dir / "humot_metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        dm = trainer.datamodule
+        split = "val" if dm.datasets["val"] else "train"
+        name, dataset = next(iter(dm.datasets[split].items()))
+        item = dataset[0]
+        batch = {name: {"features": item["features"][None].to(self.device)}}
+        was_training = self.training
+        self.eval()
+        try:
+            from skelagnostic.viz import render_motion
+
+            figures = list(self.render_sample(batch).values())
+            render_motion(figures, run_dir / "humot_retarget.gif", size=(200, 200))
+        finally:
+            self.train(was_training)
+
+    # ------------------------------------------------------------------ aligner
+    def _motion_positions(self, motion: Motion, units: str | None) -> torch.Tensor:
+        """``[T, J, 3]`` positions of the motion at 30 fps, in metres, model frame."""
+        unit = infer_units(motion.skeleton, units or motion.units)
+        if motion.fps != 30.0:
+            motion = motion.resample(30.0)
+        pos = motion.global_positions().float() * UNITS[unit]
+        return to_model_frame(pos, motion.skeleton.up_axis)
+
+    @torch.no_grad()
+    def encode_positions(self, positions: torch.Tensor, skeleton: Skeleton) -> Latent:
+        """Encode ``[T, J, 3]`` positions (metres, model frame, 30 fps) of ``skeleton``.
+
+        Returns:
+            A :class:`~skelagnostic.aligners.Latent` whose ``z`` is ``[C, chunk, Z]`` (one
+            latent sequence per chunk); extras: ``starts`` ``[C]``, ``centres`` ``[C, 3]``
+            (removed chunk means, model frame, metres), ``num_frames``, ``leg_length``
+            (source template, metres).
+        """
+        topo = self.topology(skeleton)
+        frames = positions.shape[0]
+        chunk = min(self.hparams.chunk, frames)
+        starts = _chunk_starts(frames, chunk, max(1, chunk // 2))
+        world = torch.stack([positions[s : s + chunk] for s in starts]).to(self.device)
+        major = topo.major.to(world.device)
+        ref = world[:, :, major] if bool(major.any()) else world
+        centres = ref.mean(dim=(1, 2))
+        parents = topo.parents.to(world.device)
+        # one template for the whole motion: the clip's median bone lengths (App. A.2)
+        lengths = (positions - positions[:, parents.cpu()]).norm(dim=-1).median(dim=0).values
+        tmpl = topo.templates(lengths.to(world))
+        z = self.net.encoder(world - centres[:, None, None], tmpl.expand(len(starts), -1, -1))
+        return Latent(z.cpu(), 30.0, {
+            "starts": torch.tensor(starts), "centres": centres.cpu(),
+            "num_frames": torch.tensor(frames), "leg_length": torch.tensor(
+                leg_length(tmpl.cpu(), skeleton)),
+        })
+
+    @torch.no_grad()
+    def decode_positions(self, latent: Latent, skeleton: Skeleton,
+                         lengths: torch.Tensor | None = None) -> torch.Tensor:
+        """Decode to ``[T, J, 3]`` positions (metres, model frame) of ``skeleton``.
+
+        Args:
+            latent: Output of :meth:`encode_positions` / :meth:`encode`.
+            skeleton: Target skeleton.
+            lengths: ``[J]`` target bone lengths in metres (default: the skeleton's
+                offsets, assumed in metres).
+
+        Returns:
+            Positions; the chunk centres are scaled by the target/source leg-length ratio.
+        """
+        topo = self.topology(skeleton)
+        if lengths is None:
+            lengths = skeleton.bone_lengths()
+        tmpl = topo.templates(lengths.float()).to(self.device)
+        z = latent.z.to(self.device)
+        out = self.net.decoder(z, tmpl.expand(len(z), -1, -1))
+        src_leg = float(latent.extras["leg_length"])
+        dst_leg = leg_length(tmpl.cpu(), skeleton)
+        ratio = dst_leg / src_leg if src_leg > 0 and dst_leg > 0 else 1.0
+        out = out + (latent.extras["centres"].to(out) * ratio)[:, None, None]
+        frames = int(latent.extras["num_frames"])
+        chunk = out.shape[1]
+        ramp = torch.arange(chunk, dtype=out.dtype, device=out.device)
+        weight = torch.minimum(ramp + 1, chunk - ramp)
+        acc = out.new_zeros(frames, out.shape[2], 3)
+        total = out.new_zeros(frames, 1, 1)
+        for c, s in enumerate(latent.extras["starts"].tolist()):
+            acc[s : s + chunk] += weight[:, None, None] * out[c]
+            total[s : s + chunk] += weight[:, None, None]
+        return (acc / total).cpu()
+
+    def encode(self, motion: Motion, units: str | None = None) -> Latent:
+        """Encode a motion of a human skeleton (any length, fps and unit).
+
+        Args:
+            motion: The motion.
+            units: Its length unit (default: ``motion.units``, else guessed with
+                :func:`infer_units`).
+
+        Returns:
+            The latent (see :meth:`encode_positions`), at 30 fps.
+        """
+        return self.encode_positions(self._motion_positions(motion, units), motion.skeleton)
+
+    def decode(self, latent: Latent, skeleton: Skeleton, units: str | None = None) -> Motion:
+        """Decode onto ``skeleton`` and fit rotations (see the module notes).
+
+        Args:
+            latent: A latent of :meth:`encode`.
+            skeleton: The target skeleton; its bone lengths define the template.
+            units: Length unit of ``skeleton`` (default: guessed with :func:`infer_units`).
+
+        Returns:
+            A 30 fps motion on ``skeleton`` in the skeleton's units.
+        """
+        scale = UNITS[infer_units(skeleton, units)]
+        pos = self.decode_positions(latent, skeleton, skeleton.bone_lengths() * scale)
+        pos = from_model_frame(pos.double(), skeleton.up_axis) / scale
+        rotations, root = inverse_kinematics(pos, skeleton)
+        return Motion(skeleton, rotations, root, latent.fps)
+
+    def retarget(self, motion: Motion, target: Skeleton, source_units: str | None = None,
+                 target_units: str | None = None) -> Motion:
+        """Encode with the source template, decode with the target's (Sec. 4.2).
+
+        The root trajectory (chunk centres) is scaled by the leg-length ratio.
+        Write the result with :func:`skelagnostic.write_bvh`.
+        """
+        self.require("retarget")
+        return self.decode(self.encode(motion, source_units), target, target_units)
+
+    def denoise(self, motion: Motion, units: str | None = None) -> Motion:
+        """Encode and decode on the motion's own skeleton (Sec. 4.3)."""
+        return self.decode(self.encode(motion, units), motion.skeleton, units)
+
+    def upsample_joints(self, motion: Motion, full: Skeleton, units: str | None = None
+                        ) -> Motion:
+        """Motion of a joint subset of ``full`` -> motion of ``full`` (Sec. 4.4).
+
+        Args:
+            motion: Motion on a skeleton whose joints are a subset of ``full``'s
+                (e.g. ``full.subset(names)``).
+            full: The complete skeleton.
+            units: Length unit of both.
+
+        Raises:
+            SkelagnosticError: ``motion``'s joints are not all in ``full``.
+        """
+        missing = set(motion.skeleton.joint_names) - set(full.joint_names)
+        if missing:
+            raise SkelagnosticError(
+                f"motion: joints {sorted(missing)} are not in the full skeleton"
+            )
+        return self.decode(self.encode(motion, units), full, units)

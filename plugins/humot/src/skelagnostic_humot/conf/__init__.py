@@ -1,0 +1,1 @@
+"""Hydra configs shipped by the HuMoT plugin (``pkg://skelagnostic_humot.conf``)."""

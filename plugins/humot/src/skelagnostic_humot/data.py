@@ -1,0 +1,260 @@
+"""HuMoT data: 1 s chunks of joint positions, per-chunk templates, stochastic joint subsampling.
+
+Preprocessing (Sec. 3.4.1): clips resampled to 30 Hz, converted to metres and
+to joint positions, cut into 30-frame chunks overlapping by 24 frames
+(``window=30, stride=6``), each centred by the mean position of its major
+joints over the chunk. :class:`HumotDataModule` caches the world positions;
+:func:`prepare_chunks` does the per-batch part (model axes, centring,
+templates from the chunk's median bone lengths).
+
+Stochastic joint subsampling (Sec. 3.4.2, App. A.4): :func:`sample_keep`
+drops each major joint with probability 0.1 and every other joint with 0.5;
+:func:`gather_subset` packs the kept joints first (skeleton order kept),
+pads, and lists the subset's bones (each kept joint to its nearest kept
+ancestor).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.data import ClipSource, MotionDataModule
+from skelagnostic.data.cache import CacheEntry
+from skelagnostic.data.sources import ClipRef
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.representations import GlobalPositions, MotionRepresentation
+from skelagnostic_humot.template import major_mask, skeleton_template, to_model_frame
+
+__all__ = [
+    "HumotDataModule",
+    "Subset",
+    "Topology",
+    "gather_subset",
+    "prepare_chunks",
+    "sample_keep",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Topology:
+    """What HuMoT needs of a skeleton topology, precomputed once.
+
+    Attributes:
+        skeleton: The skeleton.
+        directions: ``[J, 3]`` unit direction of each bone in the template (model frame).
+        ancestors: ``[J, J]`` 1 where column ``k`` is ``j`` or an ancestor of row ``j``.
+        major: ``[J]`` major-joint mask.
+        parents: ``[J]`` parent indices (root: itself).
+    """
+
+    skeleton: Skeleton
+    directions: torch.Tensor
+    ancestors: torch.Tensor
+    major: torch.Tensor
+    parents: torch.Tensor
+
+    @classmethod
+    def of(cls, skeleton: Skeleton) -> Topology:
+        """Precompute the topology data of ``skeleton``."""
+        num = skeleton.num_joints
+        unit = Skeleton(skeleton.joint_names, skeleton.parents,
+                        torch.where(skeleton.offsets.norm(dim=-1, keepdim=True) > 0,
+                                    skeleton.offsets / skeleton.offsets.norm(
+                                        dim=-1, keepdim=True).clamp_min(1e-12), 0.0),
+                        body_groups=skeleton.body_groups, morphology=skeleton.morphology)
+        tmpl = skeleton_template(unit)
+        parents = torch.tensor([max(p, 0) for p in skeleton.parents])
+        directions = (tmpl - tmpl[parents]).float()
+        ancestors = torch.zeros(num, num)
+        for j in range(num):
+            k = j
+            while k > 0:
+                ancestors[j, k] = 1.0
+                k = skeleton.parents[k]
+        return cls(skeleton, directions, ancestors, major_mask(skeleton), parents)
+
+    def templates(self, lengths: torch.Tensor) -> torch.Tensor:
+        """``[..., J, 3]`` templates (model frame) for bone lengths ``[..., J]``."""
+        d = self.directions.to(lengths)
+        return self.ancestors.to(lengths) @ (lengths[..., None] * d)
+
+
+def prepare_chunks(world: torch.Tensor, topology: Topology, up_axis: str = "y"
+                   ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Chunks ready for the network: model axes, centred by the major joints, with templates.
+
+    Args:
+        world: ``[B, F, J, 3]`` world joint positions (metres) in the skeleton's axes.
+        topology: The chunks' topology.
+        up_axis: Up axis of ``world``.
+
+    Returns:
+        ``(positions [B, F, J, 3], templates [B, J, 3])``: positions minus the mean of
+        the major joints over the chunk (all joints if the skeleton has none), and
+        templates with each chunk's median bone lengths.
+    """
+    pos = to_model_frame(world, up_axis)
+    major = topology.major.to(pos.device)
+    ref = pos[:, :, major] if bool(major.any()) else pos
+    pos = pos - ref.mean(dim=(1, 2), keepdim=True)
+    parents = topology.parents.to(pos.device)
+    lengths = (pos - pos[:, :, parents]).norm(dim=-1).median(dim=1).values
+    return pos, topology.templates(lengths)
+
+
+def sample_keep(major: torch.Tensor, batch: int, p_major: float = 0.1, p_other: float = 0.5,
+                generator: torch.Generator | None = None) -> torch.Tensor:
+    """``[batch, J]`` random keep masks: drop major joints with ``p_major``, others ``p_other``.
+
+    A draw that drops every joint is replaced by keeping all of them.
+
+    Raises:
+        SkelagnosticError: A probability is outside [0, 1).
+    """
+    for name, p in (("p_major", p_major), ("p_other", p_other)):
+        if not 0.0 <= p < 1.0:
+            raise SkelagnosticError(f"{name} must be in [0, 1), got {p}")
+    drop = torch.where(major, p_major, p_other).to(torch.float32)
+    keep = torch.rand(batch, major.numel(), generator=generator) >= drop
+    empty = ~keep.any(dim=1)
+    keep[empty] = True
+    return keep
+
+
+@dataclass
+class Subset:
+    """Packed joint subsets of a batch.
+
+    Attributes:
+        index: ``[B, J']`` source joint index of each packed slot (0 on padding).
+        mask: ``[B, J']`` valid slots (kept joints first).
+        bones: ``[B, K, 2]`` (parent, child) slot indices of the subset's bones.
+        bone_mask: ``[B, K]`` valid bones.
+    """
+
+    index: torch.Tensor
+    mask: torch.Tensor
+    bones: torch.Tensor
+    bone_mask: torch.Tensor
+
+    def take(self, x: torch.Tensor, joint_dim: int) -> torch.Tensor:
+        """Gather the packed joints of ``x`` (batch first) along ``joint_dim``; padding is 0."""
+        moved = x.movedim(joint_dim, 1)
+        rest = moved.shape[2:]
+        view = (*self.index.shape, *([1] * len(rest)))
+        idx = self.index.to(x.device).reshape(view).expand(*self.index.shape, *rest)
+        out = moved.gather(1, idx) * self.mask.to(x.device).reshape(view).to(x.dtype)
+        return out.movedim(1, joint_dim)
+
+
+def gather_subset(keep: torch.Tensor, parents: Sequence[int]) -> Subset:
+    """Pack the kept joints of each sample and find the subset's bones.
+
+    Args:
+        keep: ``[B, J]`` keep masks.
+        parents: Parent index per joint of the full skeleton (root ``-1``).
+
+    Returns:
+        The packed :class:`Subset`; the width ``J'`` is the largest kept count.
+    """
+    b = keep.shape[0]
+    counts = keep.sum(1)
+    width = int(counts.max())
+    index = torch.zeros(b, width, dtype=torch.long)
+    mask = torch.arange(width)[None] < counts[:, None]
+    bones_list: list[list[tuple[int, int]]] = []
+    for i in range(b):
+        kept = keep[i].nonzero().flatten().tolist()
+        index[i, : len(kept)] = torch.tensor(kept, dtype=torch.long)
+        slot = {j: s for s, j in enumerate(kept)}
+        bones = []
+        for s, j in enumerate(kept):
+            p = parents[j]
+            while p >= 0 and p not in slot:
+                p = parents[p]
+            if p >= 0:
+                bones.append((slot[p], s))
+        bones_list.append(bones)
+    k = max(1, max(len(x) for x in bones_list))
+    bones_t = torch.zeros(b, k, 2, dtype=torch.long)
+    bone_mask = torch.zeros(b, k, dtype=torch.bool)
+    for i, bones in enumerate(bones_list):
+        if bones:
+            bones_t[i, : len(bones)] = torch.tensor(bones)
+            bone_mask[i, : len(bones)] = True
+    return Subset(index, mask, bones_t, bone_mask)
+
+
+class HumotDataModule(MotionDataModule):
+    """World joint positions of human clips, in HuMoT's 1 s chunks.
+
+    A :class:`~skelagnostic.data.MotionDataModule` with the paper's defaults
+    (30 fps, ``window=30``, ``stride=6``: 24 overlapping frames; batch 32) and
+    the :class:`~skelagnostic.representations.GlobalPositions` representation.
+    HuMoT models humans: clips of non-biped skeletons (e.g. the procedural
+    quadruped of the framework's default data) are left out with a log message.
+
+    Args:
+        sources: Clip sources.
+        representation: Features (default: world joint positions).
+        fps: Frame rate (paper: 30).
+        window: Chunk length in frames (paper: 30).
+        stride: Frames between chunk starts (paper: 6).
+        batch_size: Chunks per batch and topology (paper: 32).
+        num_workers: Data-loader workers.
+        val_fraction: Share of each topology's clips used for validation.
+        test_fraction: Share of clips used for testing.
+        split_seed: Seed of the clip split.
+        cache_dir: Window cache directory.
+        per_element_stats: Passed to the base class (HuMoT does not normalise features).
+    """
+
+    def __init__(self, sources: ClipSource | Sequence[ClipSource] | None = None,
+                 representation: MotionRepresentation | None = None, fps: float = 30.0,
+                 window: int = 30, stride: int = 6, batch_size: int = 32, num_workers: int = 0,
+                 val_fraction: float = 0.2, test_fraction: float = 0.0, split_seed: int = 0,
+                 cache_dir: str | Path | None = None, per_element_stats: bool = True) -> None:
+        super().__init__(sources, representation, fps=fps, window=window, stride=stride,
+                         batch_size=batch_size, num_workers=num_workers,
+                         val_fraction=val_fraction, test_fraction=test_fraction,
+                         split_seed=split_seed, cache_dir=cache_dir,
+                         per_element_stats=per_element_stats)
+        #: Datasets left out because their skeleton is not a biped.
+        self.skipped: list[str] = []
+
+    def default_representation(self) -> MotionRepresentation:
+        """World joint positions (centring happens per batch)."""
+        return GlobalPositions()
+
+    def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+        skeleton = Skeleton.from_dict(members[0][1].meta["skeleton"])
+        if skeleton.morphology != "biped":
+            log.info("humot: skipping dataset %r (%s skeleton, HuMoT models humans)", name,
+                     skeleton.morphology)
+            self.skipped.append(name)
+            return
+        super()._add_dataset(name, members)
+
+    def setup(self, stage: str | None = None) -> None:
+        """As the base class, without non-human datasets.
+
+        Raises:
+            SkelagnosticError: No human clip is long enough for one chunk.
+        """
+        try:
+            super().setup(stage)
+        except SkelagnosticError as exc:
+            if self.skipped:
+                raise SkelagnosticError(
+                    f"data: HuMoT needs human (biped) clips; only non-human datasets were "
+                    f"found ({', '.join(self.skipped)})"
+                ) from exc
+            raise
