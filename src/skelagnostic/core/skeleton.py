@@ -616,14 +616,4 @@ class Skeleton:
         return self.to_dict()
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(  # type: ignore[misc]
-            state["joint_names"],
-            state["parents"],
-            state["offsets"],
-            end_sites={int(k): v for k, v in (state.get("end_sites") or {}).items()},
-            body_groups=state.get("body_groups"),
-            up_axis=state.get("up_axis", "y"),
-            name=state.get("name"),
-            morphology=state.get("morphology"),
-            channels=state.get("channels"),
-        )
+        self.__dict__.update(Skeleton.from_dict(state).__dict__)
