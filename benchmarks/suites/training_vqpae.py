@@ -1,0 +1,93 @@
+"""Suite ``training`` (VQ-PAE part): training throughput at the authors' settings.
+
+Two datasets (LaFAN1 human + MANN dog from ``$SKELAGNOSTIC_TEST_DATA`` or
+``../shared/data``; procedural biped + quadruped when the clips are absent),
+batch 32 per dataset, 1 s windows at 60 fps (T = 61), K = 32, the full Lightning
+training step (data loading, both VQ-PAEs, codebook re-initialisation, AdamW,
+scheduler) on CPU:
+
+* ``vqpae_windows_per_s_pose``: with the average-pose MLPs trained alongside
+  (``pose_mlp="joint"``, as the authors' trainer does);
+* ``vqpae_windows_per_s_nopose``: without them (``pose_mlp="none"``).
+
+Windows/s = 64 windows per step / median step time. There is no baseline
+column: the authors' trainer cannot be run here, and the harness only compares
+against baselines measured in the same run. For orientation, issue 10 reports
+the authors' trainer on this class of 2-core machine at a median 5.0 it/s
+(320 windows/s) with its pose decoder and 16 it/s (1024 windows/s) without.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from benchmarks.harness import REPO_ROOT, Result, run_child
+
+STEPS = {"smoke": 15, "default": 60, "large": 200}
+
+
+def _data_root() -> Path | None:
+    env = os.environ.get("SKELAGNOSTIC_TEST_DATA")
+    root = Path(env) if env else REPO_ROOT.parent / "shared" / "data"
+    return root if (root / "dog" / "mann").is_dir() else None
+
+
+def measure(pose_mlp: str, steps: int) -> dict[str, Any]:
+    """Median training-step time (seconds) of ``steps`` steps after 5 warm-up steps."""
+    sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
+    import lightning as L
+    from skelagnostic_vqpae.aligner import VQPAEAligner
+    from skelagnostic_vqpae.data import MultiSource, VQPAEDataModule
+
+    from skelagnostic.data import BVHSource, ProceduralSource
+
+    root = _data_root()
+    if root is not None:
+        human = BVHSource([root / "human" / "lafan1" / "Lafan1_example.bvh",
+                           root / "human" / "lafan1" / "walk4_subject1.bvh"], units="cm",
+                          name="human")
+        dog = BVHSource([root / "dog" / "mann"], units="cm", name="dog")
+        source: Any = MultiSource([human, dog])
+        data = "LaFAN1 (2 clips) + MANN dog (8 clips)"
+    else:
+        source = ProceduralSource(kinds=["biped22", "quadruped"], seconds=20.0)
+        data = "procedural biped22 + quadruped"
+    cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
+    dm = VQPAEDataModule(source, fps=60, stride=1, batch_size=32, cache_dir=cache)
+    times: list[float] = []
+
+    class Timer(L.Callback):
+        def on_train_batch_start(self, *args: Any) -> None:
+            self.start = time.perf_counter()
+
+        def on_train_batch_end(self, *args: Any) -> None:
+            times.append(time.perf_counter() - self.start)
+
+    model = VQPAEAligner(num_codes=32, pose_mlp=pose_mlp)
+    trainer = L.Trainer(max_steps=steps + 5, accelerator="cpu", devices=1, logger=False,
+                        enable_checkpointing=False, enable_progress_bar=False,
+                        enable_model_summary=False, limit_val_batches=0,
+                        num_sanity_val_steps=0, callbacks=[Timer()])
+    trainer.fit(model, datamodule=dm)
+    median = statistics.median(times[5:])
+    return {"median_step_s": median, "data": data,
+            "threads": __import__("torch").get_num_threads()}
+
+
+def run(size: str) -> list[Result]:
+    """Windows/s with and without the pose MLPs."""
+    steps = STEPS[size]
+    results = []
+    for mode, label in (("joint", "pose"), ("none", "nopose")):
+        out, _ = run_child("benchmarks.suites.training_vqpae:measure", pose_mlp=mode,
+                           steps=steps)
+        results.append(Result(
+            f"vqpae_windows_per_s_{label}", "windows/s", 64.0 / out["median_step_s"],
+            higher_is_better=True))
+    return results

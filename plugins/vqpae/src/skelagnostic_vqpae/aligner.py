@@ -1,0 +1,421 @@
+"""The VQ-PAE aligner: one VQ-PAE per dataset, one shared codebook, trained with Lightning.
+
+Training step (Sec. 3.3, Eq. 4): for every dataset's batch, reconstruct the
+window (MSE) and add ``lambda_vq`` times the codebook loss; the step's loss is
+the mean over datasets (the authors' code). The optional average-pose MLP per
+dataset (Sec. 5.2, Eq. 10) learns the root-local pose of every window frame
+from its manifold point, alongside (``pose_mlp="detached"``: its gradient does
+not reach the VQ-PAE, equivalent to the paper's separate training) or jointly
+(``"joint"``: the authors' code, whose pose loss also trains the VQ-PAE).
+The codebook is re-initialised in ``on_before_optimizer_step`` (after the
+backward pass, before the optimiser step, as in the paper).
+
+Optimiser: AdamW (lr 1e-4, weight decay 1e-4) with cosine annealing and warm
+restarts every ``restart_period`` epochs (period doubling, ``restart_mult`` 2),
+stepped per batch like the authors' ``CyclicLRWithRestarts``; the pose MLPs
+have their own parameter group (lr 1e-3, no weight decay; the authors use a
+separate Adam with a constant rate).
+
+Validation logs ``val/loss``, ``val/rec``, the manifold overlap of the
+validation codes (``val/usage``, ``val/overlap``, ``val/overlap/<dataset>``),
+the codebook usage per dataset (``val/codes/<dataset>``: number of codes used)
+and, with a pose MLP, ``val/pose_mpjpe/<dataset>`` in metres at the pivot frames.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import torch
+from torch import Tensor, nn
+
+from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.core.motion import Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.metrics import ManifoldOverlap
+from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
+from skelagnostic_vqpae.codebook import SharedCodebook
+from skelagnostic_vqpae.model import VQPAE, AveragePoseMLP, PhaseParameters
+
+__all__ = ["DatasetSpec", "VQPAEAligner"]
+
+POSE_MODES = ("none", "detached", "joint")
+
+#: Per dataset: ``{"channels", "window", "fps", "skeleton" (Skeleton.to_dict())}``.
+DatasetSpec = Mapping[str, Any]
+
+
+class _Character(nn.Module):
+    """One dataset's VQ-PAE, average-pose MLP and normalisation statistics."""
+
+    def __init__(self, spec: DatasetSpec, latent: int, kernel_size: int, freq_layers: int,
+                 amp_layers: int, decoder_centering: bool, spectrum: str,
+                 pose_layers: int) -> None:
+        super().__init__()
+        channels, window = int(spec["channels"]), int(spec["window"])
+        self.pae = VQPAE(channels, window, float(spec["fps"]), latent, kernel_size,
+                         freq_layers=freq_layers, amp_layers=amp_layers,
+                         decoder_centering=decoder_centering, spectrum=spectrum)
+        self.pose = AveragePoseMLP(latent, channels, pose_layers)
+        for name in ("input_mean", "pose_mean"):
+            self.register_buffer(name, torch.zeros(channels))
+        for name in ("input_std", "pose_std"):
+            self.register_buffer(name, torch.ones(channels))
+        self.register_buffer("pose_fitted", torch.tensor(False))
+
+
+class VQPAEAligner(Aligner):
+    """VQ-PAEs of several characters sharing one amplitude codebook (WalkTheDog).
+
+    The networks are built from the data module in :meth:`setup` (or from
+    ``datasets``, which checkpoints store), one per dataset.
+
+    Args:
+        latent: ``d``, latent / phase-manifold channels (10).
+        num_codes: Codebook size ``K`` (32 human-dog, 64 stylized).
+        kernel_size: Encoder/decoder kernel (23).
+        freq_layers: Layers of the frequency MLP (5; the authors' code: 7).
+        amp_layers: Layers of the amplitude MLP (5).
+        decoder_centering: Temporal centering after the first decoder conv (authors' code).
+        spectrum: Frequency-MLP input, ``"normalized"`` or ``"power"`` (authors' code);
+            see :class:`~skelagnostic_vqpae.model.VQPAE`.
+        beta: Commitment weight (0.25).
+        lambda_vq: Weight of the codebook loss (1).
+        reinit: Re-initialise the codebook every step (``False``: ablation).
+        reinit_decay: ``gamma`` of the usage EMA (0.99).
+        reinit_eps: ``epsilon`` of Eq. 7 (1e-3).
+        reinit_squared_distance: Draw targets with the squared distance (authors' code).
+        seed: Seed of the re-initialisation generator.
+        lr: AdamW learning rate (1e-4).
+        weight_decay: AdamW weight decay (1e-4).
+        restart_period: Epochs of the first cosine cycle (10).
+        restart_mult: Growth of the cycle length at each restart (2).
+        pose_mlp: ``"none"``, ``"detached"`` or ``"joint"`` (see the module docstring).
+        pose_layers: Layers of the average-pose MLP (8).
+        pose_lr: Learning rate of the pose MLPs (1e-3).
+        datasets: Dataset name -> :data:`DatasetSpec` (filled in by :meth:`setup`).
+
+    Raises:
+        SkelagnosticError: An option is out of range.
+    """
+
+    capabilities: ClassVar[frozenset[str]] = frozenset({"encode", "decode", "phase",
+                                                        "quadruped"})
+
+    def __init__(
+        self,
+        latent: int = 10,
+        num_codes: int = 32,
+        kernel_size: int = 23,
+        freq_layers: int = 5,
+        amp_layers: int = 5,
+        decoder_centering: bool = False,
+        spectrum: str = "normalized",
+        beta: float = 0.25,
+        lambda_vq: float = 1.0,
+        reinit: bool = True,
+        reinit_decay: float = 0.99,
+        reinit_eps: float = 1e-3,
+        reinit_squared_distance: bool = False,
+        seed: int = 0,
+        lr: float = 1e-4,
+        weight_decay: float = 1e-4,
+        restart_period: int = 10,
+        restart_mult: int = 2,
+        pose_mlp: str = "detached",
+        pose_layers: int = 8,
+        pose_lr: float = 1e-3,
+        datasets: Mapping[str, DatasetSpec] | None = None,
+    ) -> None:
+        super().__init__()
+        if pose_mlp not in POSE_MODES:
+            raise SkelagnosticError(f"model.pose_mlp must be one of {POSE_MODES}, got {pose_mlp!r}")
+        for arg, value in (("latent", latent), ("num_codes", num_codes), ("lr", lr),
+                           ("restart_period", restart_period), ("restart_mult", restart_mult)):
+            if value <= 0:
+                raise SkelagnosticError(f"model.{arg} must be positive, got {value}")
+        self.save_hyperparameters()
+        self.dataset_names: list[str] = []
+        self.characters = nn.ModuleList()
+        self.codebook: SharedCodebook | None = None
+        self._metrics: dict[str, ManifoldOverlap] = {}  # not a submodule: rebuilt per epoch
+        #: Per dataset, the ``[K]`` code histogram of the last validation/test epoch.
+        self.last_code_counts: dict[str, Tensor] = {}
+        if datasets:
+            self._build(datasets)
+
+    # ------------------------------------------------------------------ building
+    def _build(self, datasets: Mapping[str, DatasetSpec]) -> None:
+        hp = self.hparams
+        self.dataset_names = list(datasets)
+        self.characters = nn.ModuleList(
+            _Character(spec, hp.latent, hp.kernel_size, hp.freq_layers, hp.amp_layers,
+                       hp.decoder_centering, hp.spectrum, hp.pose_layers)
+            for spec in datasets.values()
+        )
+        self.codebook = SharedCodebook(hp.num_codes, 2 * hp.latent, len(datasets), hp.beta,
+                                       hp.reinit_decay, hp.reinit_eps, hp.reinit,
+                                       hp.reinit_squared_distance, hp.seed)
+
+    def setup(self, stage: str) -> None:
+        """Build the networks from the data module's datasets and copy its statistics."""
+        if self.codebook is not None:
+            return
+        dm = self.trainer.datamodule
+        dm.setup(stage)
+        specs = {
+            name: {"channels": dm.channels(name), "window": dm.window, "fps": dm.fps,
+                   "skeleton": dm.skeletons[name].to_dict()}
+            for name in dm.dataset_names
+        }
+        self.hparams["datasets"] = specs
+        self._build(specs)
+        for name, char in zip(self.dataset_names, self.characters, strict=True):
+            rep, pose = dm.representations[name], dm.pose_representations[name]
+            char.input_mean.copy_(rep.mean.reshape(-1))
+            char.input_std.copy_(rep.std.reshape(-1))
+            char.pose_mean.copy_(pose.mean.reshape(-1))
+            char.pose_std.copy_(pose.std.reshape(-1))
+
+    def _require_built(self) -> SharedCodebook:
+        if self.codebook is None:
+            raise SkelagnosticError(
+                "VQPAEAligner: no datasets yet; train it, load a checkpoint or pass datasets="
+            )
+        return self.codebook
+
+    # ------------------------------------------------------------------ network
+    def forward_dataset(self, index: int, windows: Tensor) -> tuple[Tensor, PhaseParameters]:
+        """Run dataset ``index``'s VQ-PAE on normalised windows ``[B, C, T]``."""
+        book = self._require_built()
+        return self.characters[index].pae(windows, book.quantizer(index))
+
+    def _losses(self, batch: Mapping[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
+        hp = self.hparams
+        parts: list[Tensor] = []
+        logs: dict[str, Tensor] = {}
+        for name, b in batch.items():
+            if b is None:
+                continue
+            k = self.dataset_names.index(name)
+            x = b["features"]
+            rec, params = self.forward_dataset(k, x)
+            rec_loss = nn.functional.mse_loss(rec, x)
+            loss = rec_loss + hp.lambda_vq * params.vq_loss
+            logs[f"rec/{name}"] = rec_loss.detach()
+            logs[f"vq/{name}"] = params.vq_loss.detach()
+            if hp.pose_mlp != "none":
+                points = params.manifold.transpose(1, 2)
+                if hp.pose_mlp == "detached":
+                    points = points.detach()
+                pose_loss = nn.functional.mse_loss(self.characters[k].pose(points), b["poses"])
+                loss = loss + pose_loss
+                logs[f"pose/{name}"] = pose_loss.detach()
+            parts.append(loss)
+            if "overlap" in self._metrics and not self.training:
+                self._metrics["overlap"].update(params.code, dataset=k)
+            if not self.training and hp.pose_mlp != "none":
+                logs[f"pose_mpjpe/{name}"] = self._pivot_mpjpe(k, params, b["poses"])
+        return torch.stack(parts).mean(), logs
+
+    def _pivot_mpjpe(self, k: int, params: PhaseParameters, poses: Tensor) -> Tensor:
+        char = self.characters[k]
+        pivot = params.manifold.shape[-1] // 2
+        pred = char.pose(params.manifold[..., pivot]) * char.pose_std + char.pose_mean
+        true = poses[:, pivot] * char.pose_std + char.pose_mean
+        return (pred - true).view(len(pred), -1, 3).norm(dim=-1).mean()
+
+    # ---------------------------------------------------------------- lightning
+    def training_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
+        """Mean over datasets of reconstruction + lambda_vq * VQ (+ pose) losses."""
+        loss, logs = self._losses(batch)
+        size = sum(len(b["features"]) for b in batch.values() if b is not None)
+        self.log("train/loss", loss, prog_bar=True, batch_size=size)
+        self.log_dict({f"train/{k}": v for k, v in logs.items()}, batch_size=size)
+        return loss
+
+    def on_before_optimizer_step(self, optimizer: torch.optim.Optimizer) -> None:
+        """Re-initialise the codebook (Eqs. 5-8) before the gradient step."""
+        self._require_built().reinitialize()
+
+    def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
+        """Logs ``val/loss`` and per-dataset terms; counts codes for the overlap."""
+        return self._evaluate(batch, "val")
+
+    def test_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
+        """Logs ``test/loss`` and per-dataset terms."""
+        return self._evaluate(batch, "test")
+
+    def _evaluate(self, batch: Mapping[str, Any], stage: str) -> Tensor:
+        loss, logs = self._losses(batch)
+        size = sum(len(b["features"]) for b in batch.values() if b is not None)
+        self.log(f"{stage}/loss", loss, prog_bar=True, batch_size=size, sync_dist=True)
+        self.log_dict({f"{stage}/{k}": v for k, v in logs.items()}, batch_size=size,
+                      sync_dist=True)
+        return loss
+
+    def _start_overlap(self) -> None:
+        if self.codebook is not None:
+            self._metrics["overlap"] = ManifoldOverlap(self.codebook.num_codes,
+                                                       len(self.dataset_names)).to(self.device)
+
+    def _log_overlap(self, stage: str) -> None:
+        metric = self._metrics.pop("overlap", None)
+        if metric is None:
+            return
+        out = metric.compute()
+        with metric.sync_context():
+            counts = metric.counts.clone()
+        if int(counts.sum()) > 0:
+            self.log(f"{stage}/usage", out["usage"])
+            self.log(f"{stage}/overlap", out["overlap"])
+            for name, share, row in zip(self.dataset_names, out["per_dataset"], counts,
+                                        strict=True):
+                if not torch.isnan(share):
+                    self.log(f"{stage}/overlap/{name}", share)
+                self.log(f"{stage}/codes/{name}", (row > 0).sum().float())
+            self.last_code_counts = dict(zip(self.dataset_names, counts.cpu(), strict=True))
+
+    def on_validation_epoch_start(self) -> None:
+        """Start counting the validation codes."""
+        self._start_overlap()
+
+    def on_test_epoch_start(self) -> None:
+        """Start counting the test codes."""
+        self._start_overlap()
+
+    def on_validation_epoch_end(self) -> None:
+        """Log manifold overlap and codebook usage of the validation codes."""
+        self._log_overlap("val")
+
+    def on_test_epoch_end(self) -> None:
+        """Log manifold overlap and codebook usage of the test codes."""
+        self._log_overlap("test")
+
+    def predict_step(self, batch: Mapping[str, Any], batch_idx: int,
+                     dataloader_idx: int = 0) -> dict[str, dict[str, Tensor]]:
+        """Per dataset: pivot phase, frequency, code and manifold point of every window."""
+        out = {}
+        for name, b in batch.items():
+            _, p = self.forward_dataset(self.dataset_names.index(name), b["features"])
+            pivot = p.manifold.shape[-1] // 2
+            out[name] = {"phase": p.phase, "frequency": p.frequency, "code": p.code,
+                         "manifold": p.manifold[..., pivot], "clip": b["clip"],
+                         "pivot": b["pivot"]}
+        return out
+
+    def configure_optimizers(self) -> Any:
+        """AdamW + cosine annealing with warm restarts (per step); pose MLPs in their own group."""
+        hp = self.hparams
+        book = self._require_built()
+        main = [p for c in self.characters for p in c.pae.parameters()] + [book.weight]
+        groups = [{"params": main, "lr": hp.lr, "weight_decay": hp.weight_decay}]
+        if hp.pose_mlp != "none":
+            groups.append({"params": [p for c in self.characters for p in c.pose.parameters()],
+                           "lr": hp.pose_lr, "weight_decay": 0.0})
+        optimizer = torch.optim.AdamW(groups, foreach=True)
+        steps = self._steps_per_epoch()
+        scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
+            optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult)
+        return {"optimizer": optimizer,
+                "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+
+    def _steps_per_epoch(self) -> int:
+        dm = self.trainer.datamodule
+        if dm is None or not dm.datasets["train"]:
+            return 1
+        longest = max(len(ds) for ds in dm.datasets["train"].values())
+        return max(1, math.ceil(longest / dm.batch_size))
+
+    def on_train_epoch_end(self) -> None:
+        """Mark the pose MLPs as trained (they learn alongside, unless ``pose_mlp="none"``)."""
+        if self.hparams.pose_mlp != "none":
+            for char in self.characters:
+                char.pose_fitted.fill_(True)
+
+    # ------------------------------------------------------------------ aligner
+    def dataset_of(self, skeleton: Skeleton) -> int:
+        """Index of the dataset whose skeleton has ``skeleton``'s topology.
+
+        Raises:
+            SkelagnosticError: No trained dataset has that topology.
+        """
+        specs = self.hparams["datasets"] or {}
+        for k, spec in enumerate(specs.values()):
+            sk = spec["skeleton"]
+            if list(sk["joint_names"]) == list(skeleton.joint_names) and list(
+                    sk["parents"]) == list(skeleton.parents):
+                return k
+        raise SkelagnosticError(
+            f"VQPAEAligner: no trained dataset has the topology of {skeleton!r} "
+            f"({skeleton.num_joints} joints); datasets: {self.dataset_names}"
+        )
+
+    def _windows(self, k: int, motion: Motion) -> tuple[Tensor, Motion]:
+        """Normalised windows centred on every frame ``[F, C, T]`` (edges repeat the end frames)."""
+        spec = self.hparams["datasets"][self.dataset_names[k]]
+        fps, window = float(spec["fps"]), int(spec["window"])
+        if motion.fps != fps:
+            motion = motion.resample(fps)
+        char = self.characters[k]
+        feats = RootLocalVelocities().encode(motion).float().flatten(1).to(char.input_mean)
+        feats = (feats - char.input_mean) / char.input_std
+        half = window // 2
+        padded = torch.cat([feats[:1].expand(half, -1), feats, feats[-1:].expand(half, -1)])
+        return padded.unfold(0, window, 1), motion
+
+    @torch.no_grad()
+    def encode(self, motion: Motion, batch_size: int = 512) -> Latent:
+        """Per-frame embedding of a whole clip (each frame = pivot of its own 1 s window).
+
+        Returns:
+            ``Latent`` with ``z`` the ``[F, d]`` manifold points at the dataset frame
+            rate; extras: ``phase`` ``[F]`` (cycles), ``frequency`` ``[F]`` (Hz),
+            ``code`` ``[F]``, ``amplitude`` ``[F, 2d]``, ``raw_amplitude`` ``[F, 2d]``
+            and ``dataset`` (index).
+        """
+        k = self.dataset_of(motion.skeleton)
+        windows, motion = self._windows(k, motion)
+        was_training = self.training
+        self.eval()
+        outs: dict[str, list[Tensor]] = {n: [] for n in ("z", "phase", "frequency", "code",
+                                                         "amplitude", "raw_amplitude")}
+        for chunk in windows.split(batch_size):
+            _, p = self.forward_dataset(k, chunk)
+            outs["z"].append(p.manifold[..., p.manifold.shape[-1] // 2])
+            outs["phase"].append(p.phase)
+            outs["frequency"].append(p.frequency)
+            outs["code"].append(p.code)
+            outs["amplitude"].append(p.amplitude)
+            outs["raw_amplitude"].append(p.raw_amplitude)
+        self.train(was_training)
+        cat = {n: torch.cat(v).cpu() for n, v in outs.items()}
+        z = cat.pop("z")
+        return Latent(z, motion.fps, {**cat, "dataset": torch.tensor(k)})
+
+    @torch.no_grad()
+    def decode(self, latent: Latent, skeleton: Skeleton) -> Motion:
+        """The average pose at every manifold point, on ``skeleton`` (Sec. 5.2).
+
+        The dataset's average-pose MLP gives root-local joint positions; inverse
+        kinematics turns them into a motion standing at the origin.
+
+        Raises:
+            SkelagnosticError: ``skeleton`` is not a trained topology or its pose MLP
+                was never trained.
+        """
+        k = self.dataset_of(skeleton)
+        char = self.characters[k]
+        if not bool(char.pose_fitted):
+            raise SkelagnosticError(
+                f"VQPAEAligner: the average-pose MLP of {self.dataset_names[k]!r} is not "
+                "trained (train with model.pose_mlp=detached|joint or call "
+                "skelagnostic_vqpae.embed.fit_average_pose)"
+            )
+        pose = char.pose(latent.z.to(char.pose_mean)) * char.pose_std + char.pose_mean
+        positions = pose.view(len(pose), -1, 3).double().cpu()
+        rotations, root = inverse_kinematics(positions, skeleton)
+        return Motion(skeleton, rotations, root, latent.fps)

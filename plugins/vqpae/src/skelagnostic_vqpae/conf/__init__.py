@@ -1,0 +1,1 @@
+"""Hydra configs of the vqpae plugin (``pkg://skelagnostic_vqpae.conf``)."""

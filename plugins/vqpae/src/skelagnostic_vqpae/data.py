@@ -1,0 +1,378 @@
+"""VQ-PAE data: 1 s windows of root-local joint velocities centred on every pivot frame.
+
+Per frame the input is the flattened root-local joint velocities
+(:class:`~skelagnostic.representations.RootLocalVelocities`, ``J x 3``
+channels), z-scored per channel over the frames of the dataset's training
+clips. Constant channels (the authors' trainer divides them by zero and
+produces NaN) and nearly constant ones (which blow up on clips outside the
+training split) are guarded: every standard deviation is raised to at least
+``std_floor`` times the dataset's mean channel standard deviation (0.01), and
+one that is still below ``1e-6`` becomes 1. A window has ``T = round(fps *
+window_seconds) + 1`` frames (odd) centred on its pivot; pivots are every
+``stride``-th frame whose window stays inside its clip. Frames are kept once in
+memory and windows are gathered per batch, so stride 1 (the authors' setting)
+costs no extra memory.
+
+Every clip also keeps its root-local joint positions (normalised the same way)
+for the average-pose MLP (Sec. 5.2).
+
+Several characters: one dataset per source and skeleton topology; training
+steps draw one batch from every dataset. :class:`MultiSource` bundles several
+sources (a human and a dog directory, several style sets) into the one
+``data.source`` the CLI passes; each part becomes its own dataset.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+from torch.utils.data import DataLoader, Dataset
+
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.data import BVHSource, ClipRef, ClipSource, MotionDataModule, preset_source
+from skelagnostic.data.cache import CacheEntry, cache_key
+from skelagnostic.data.datamodule import _split_clips
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
+
+__all__ = ["FrameWindows", "MultiSource", "VQPAEDataModule", "human_dog_source", "styles_source"]
+
+#: Version of the cached per-clip layout (velocities and root-local positions per frame).
+_LAYOUT = "vqpae-frames-1"
+
+
+@dataclass
+class MultiSource(ClipSource):
+    """Several clip sources that :class:`VQPAEDataModule` turns into separate datasets.
+
+    Args:
+        parts: The sources; their ``name`` labels the datasets.
+        name: Label of the bundle.
+
+    Raises:
+        SkelagnosticError: ``parts`` is empty or two parts share a name.
+    """
+
+    parts: Sequence[ClipSource]
+    name: str = "multi"
+    _index: dict[str, int] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.parts = list(self.parts)
+        names = [p.name for p in self.parts]
+        if not names:
+            raise SkelagnosticError("MultiSource: parts must hold at least one source")
+        if len(set(names)) != len(names):
+            raise SkelagnosticError(f"MultiSource: part names must differ, got {names}")
+
+    def clips(self) -> list[ClipRef]:
+        """Clips of every part, ids prefixed by the part name."""
+        return [ClipRef(f"{p.name}:{c.id}", c.key, c.split) for p in self.parts for c in p.clips()]
+
+    def load(self, clip: ClipRef) -> Any:
+        """Load a clip from its part."""
+        part, _, inner = clip.id.partition(":")
+        source = next(p for p in self.parts if p.name == part)
+        return source.load(ClipRef(inner, clip.key, clip.split))
+
+
+def human_dog_source(
+    human_root: str | Path,
+    dog_root: str | Path,
+    human_preset: str = "lafan1",
+    dog_preset: str = "mann_dog",
+) -> MultiSource:
+    """The human-dog setting: a human dataset preset plus the MANN dog (``data.source=human_dog``).
+
+    Args:
+        human_root: Directory of the human BVH files.
+        dog_root: Directory of the dog BVH files.
+        human_preset: Preset of the human files (``lafan1``, ``cmu``, ``bandai``, ...).
+        dog_preset: Preset of the dog files.
+
+    Returns:
+        A :class:`MultiSource` with parts ``human`` and ``dog``.
+    """
+    human = preset_source(human_preset, human_root)
+    dog = preset_source(dog_preset, dog_root)
+    human.name, dog.name = "human", "dog"
+    return MultiSource([human, dog], name="human_dog")
+
+
+def styles_source(
+    root: str | Path,
+    styles: Sequence[str],
+    pattern: str = "**/{style}_*.bvh",
+    units: str | None = "cmu",
+) -> MultiSource:
+    """One dataset per motion style (``data.source=styles``), e.g. the Xia set's file prefixes.
+
+    Args:
+        root: Directory of the BVH files.
+        styles: Style names; ``pattern`` with ``{style}`` selects each style's files.
+        pattern: Glob below ``root``.
+        units: Length unit of the files (see :data:`skelagnostic.core.UNITS`).
+
+    Returns:
+        A :class:`MultiSource` with one part per style.
+
+    Raises:
+        SkelagnosticError: Fewer than two styles, unknown units, or a style without files.
+    """
+    if len(styles) < 2:
+        raise SkelagnosticError(f"data.styles: give at least two styles, got {list(styles)}")
+    parts = [BVHSource([root], pattern.format(style=s), units=units, name=s) for s in styles]
+    return MultiSource(parts, name="styles")
+
+
+class FrameWindows(Dataset):
+    """Windows of one dataset gathered from per-frame features.
+
+    Items (and batches, through ``__getitems__``) are dicts: ``features``
+    ``[C, T]`` normalised velocities (``C = J * 3``, channels first), ``poses``
+    ``[T, P]`` normalised root-local positions (``P = J * 3``), ``clip`` and
+    ``pivot`` (frame index of the window centre within its clip).
+
+    Args:
+        features: ``[F, C]`` normalised features of all clips, concatenated.
+        poses: ``[F, P]`` normalised poses.
+        bounds: ``[(first, end)]`` frame range of every clip in the concatenation.
+        window: ``T`` (odd).
+        stride: Frames between pivots.
+    """
+
+    def __init__(self, features: Tensor, poses: Tensor, bounds: Sequence[tuple[int, int]],
+                 window: int, stride: int) -> None:
+        self.features, self.poses, self.window = features, poses, window
+        half = window // 2
+        starts, clips, pivots = [], [], []
+        for c, (first, end) in enumerate(bounds):
+            local = torch.arange(half, end - first - half, stride)
+            starts.append(first + local - half)
+            pivots.append(local)
+            clips.append(torch.full_like(local, c))
+        self.starts = torch.cat(starts) if starts else torch.zeros(0, dtype=torch.long)
+        self.pivots = torch.cat(pivots) if pivots else torch.zeros(0, dtype=torch.long)
+        self.clips = torch.cat(clips) if clips else torch.zeros(0, dtype=torch.long)
+        self._offsets = torch.arange(window)
+
+    def __len__(self) -> int:
+        return int(self.starts.numel())
+
+    def __getitems__(self, indices: Sequence[int]) -> dict[str, Tensor]:
+        idx = torch.as_tensor(indices, dtype=torch.long)
+        frames = self.starts[idx, None] + self._offsets
+        return {
+            "features": self.features[frames].transpose(1, 2).contiguous(),
+            "poses": self.poses[frames],
+            "clip": self.clips[idx],
+            "pivot": self.pivots[idx],
+        }
+
+    def __getitem__(self, index: int) -> dict[str, Tensor]:
+        if not 0 <= index < len(self):
+            raise IndexError(f"window index {index} out of range [0, {len(self)})")
+        return {k: v[0] for k, v in self.__getitems__([index]).items()}
+
+
+def _passthrough(batch: dict[str, Tensor]) -> dict[str, Tensor]:
+    """Collate function for batches already stacked by ``__getitems__``."""
+    return batch
+
+
+class _Tagged:
+    """Collate function wrapping a stacked batch as ``{name: batch}`` (predict loaders)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __call__(self, batch: dict[str, Tensor]) -> dict[str, Any]:
+        return {self.name: batch}
+
+
+class VQPAEDataModule(MotionDataModule):
+    """Multi-dataset windows for the VQ-PAE (see the module docstring).
+
+    Args:
+        sources: Clip sources (default: procedural biped + quadruped); a
+            :class:`MultiSource` gives one dataset per part.
+        representation: Input features (default :class:`RootLocalVelocities`).
+        fps: Frame rate the clips are resampled to (the authors: 60).
+        window: Frames per window, used only when ``window_seconds`` is ``None``; odd.
+        stride: Frames between pivots (the authors: 1, every frame).
+        batch_size: Windows per batch and dataset (32).
+        num_workers: Data-loader workers.
+        val_fraction: Share of each dataset's clips used for validation.
+        test_fraction: Share of clips used for testing.
+        split_seed: Seed of the clip split.
+        cache_dir: Cache of the per-clip features.
+        window_seconds: Window length in seconds (1.0): ``T = round(fps * window_seconds) + 1``,
+            plus one if that is even.
+        std_floor: Lower bound of every channel's standard deviation, as a fraction of
+            the dataset's mean channel standard deviation (0 turns the floor off).
+
+    Raises:
+        SkelagnosticError: The window length is even or not positive, or another argument is
+            out of range.
+    """
+
+    def __init__(
+        self,
+        sources: ClipSource | Sequence[ClipSource] | None = None,
+        representation: MotionRepresentation | None = None,
+        fps: float = 30.0,
+        window: int = 31,
+        stride: int = 1,
+        batch_size: int = 32,
+        num_workers: int = 0,
+        val_fraction: float = 0.2,
+        test_fraction: float = 0.0,
+        split_seed: int = 0,
+        cache_dir: str | Path | None = None,
+        window_seconds: float | None = 1.0,
+        std_floor: float = 0.01,
+    ) -> None:
+        if not 0 <= std_floor < 1:
+            raise SkelagnosticError(f"data.std_floor must be in [0, 1), got {std_floor}")
+        if window_seconds is not None:
+            if not window_seconds > 0:
+                raise SkelagnosticError(f"data.window_seconds must be > 0, got {window_seconds}")
+            window = round(float(fps) * window_seconds) + 1
+            if window % 2 == 0:
+                window += 1  # the pivot must be unique
+        if window % 2 == 0:
+            raise SkelagnosticError(
+                f"data.window must be odd so the pivot frame is unique, got {window}"
+            )
+        flat: list[ClipSource] = []
+        for s in ([] if sources is None else [sources] if isinstance(sources, ClipSource)
+                  else sources):
+            flat.extend(s.parts if isinstance(s, MultiSource) else [s])
+        super().__init__(flat or None, representation, fps, window, stride, batch_size,
+                         num_workers, val_fraction, test_fraction, split_seed, cache_dir,
+                         per_element_stats=True)
+        self.window_seconds = window_seconds
+        self.std_floor = float(std_floor)
+        self._poses = GlobalPositions(frame="root")
+        #: Per dataset, the root-local position representation with its normalisation.
+        self.pose_representations: dict[str, MotionRepresentation] = {}
+        #: Per dataset and split, the clip ids in :class:`FrameWindows` order.
+        self.clip_ids: dict[str, dict[str, list[str]]] = {s: {} for s in ("train", "val", "test")}
+
+    def default_representation(self) -> MotionRepresentation:
+        """Root-local joint velocities."""
+        return RootLocalVelocities()
+
+    def preprocessing(self) -> dict[str, Any]:
+        """What the cached per-clip features depend on."""
+        rep = type(self.representation)
+        return {
+            "representation": f"{rep.__module__}.{rep.__qualname__}",
+            "options": self.representation.config(),
+            "fps": self.fps,
+            "layout": _LAYOUT,
+        }
+
+    def _entry(self, source: ClipSource, clip: ClipRef) -> CacheEntry:
+        key = cache_key(clip.key, self.preprocessing())
+        entry = self.cache.get(key)
+        if entry is not None:
+            return entry
+        motion = source.load(clip)
+        if motion.fps != self.fps:
+            motion = motion.resample(self.fps)
+        feats = torch.cat([self.representation.encode(motion), self._poses.encode(motion)], -1)
+        long_enough = motion.num_frames >= self.window
+        array = feats.float().numpy()[None] if long_enough else np.zeros(
+            (0, *feats.shape), np.float32)
+        meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(),
+                "starts": [0] if long_enough else [], "fps": self.fps}
+        return self.cache.put(key, array, meta)
+
+    def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+        entries = {clip.id: entry for clip, entry in members}
+        split = _split_clips([c for c, _ in members], self.val_fraction, self.test_fraction,
+                             self.split_seed)
+        n_in = len(self.representation.channels)
+        arrays = {cid: torch.from_numpy(np.array(e.open()[0])) for cid, e in entries.items()}
+        train = [arrays[c.id] for c in split["train"]]
+        rep = copy.deepcopy(self.representation)
+        rep.fit_normalization([a[..., :n_in] for a in train], per_element=True)
+        poses = copy.deepcopy(self._poses)
+        poses.fit_normalization([a[..., n_in:] for a in train], per_element=True)
+        for r in (rep, poses):
+            if r.std is not None:
+                r.std = torch.maximum(r.std, self.std_floor * r.std.mean())
+        self.representations[name] = rep
+        self.pose_representations[name] = poses
+        self.skeletons[name] = Skeleton.from_dict(entries[split["train"][0].id].meta["skeleton"])
+        for part, clips in split.items():
+            if not clips:
+                continue
+            chunks = [arrays[c.id] for c in clips]
+            lengths = np.cumsum([0] + [len(a) for a in chunks])
+            feats = torch.cat([rep.normalize(a[..., :n_in]).flatten(1) for a in chunks])
+            pos = torch.cat([poses.normalize(a[..., n_in:]).flatten(1) for a in chunks])
+            bounds = list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True))
+            ds = FrameWindows(feats, pos, bounds, self.window, self.stride)
+            if len(ds):
+                self.datasets[part][name] = ds  # type: ignore[assignment]
+                self.clip_ids[part][name] = [c.id for c in clips]
+
+    def channels(self, name: str) -> int:
+        """Input channels ``C = J * 3`` of dataset ``name``."""
+        return self.skeletons[name].num_joints * len(self.representation.channels)
+
+    def _loaders(self, split: str, shuffle: bool) -> dict[str, DataLoader]:
+        return {
+            name: DataLoader(
+                ds,
+                batch_size=self.batch_size,
+                shuffle=shuffle,
+                num_workers=self.num_workers,
+                persistent_workers=self.num_workers > 0,
+                collate_fn=_passthrough,
+            )
+            for name, ds in self.datasets[split].items()
+        }
+
+    def train_dataloader(self) -> Any:
+        """The base class's resumable, rank-sharded loaders, with batches gathered in one go."""
+        combined = super().train_dataloader()
+        for loader in combined.iterables.values():
+            loader.collate_fn = _passthrough
+        return combined
+
+    def predict_dataloader(self) -> Any:
+        """The test windows (else validation), dataset after dataset, as ``{name: batch}``."""
+        from lightning.pytorch.utilities import CombinedLoader
+
+        split = "test" if self.datasets["test"] else "val"
+        loaders = [
+            DataLoader(ds, batch_size=self.batch_size, num_workers=self.num_workers,
+                       collate_fn=_Tagged(name))
+            for name, ds in self.datasets[split].items()
+        ]
+        return CombinedLoader(loaders, mode="sequential")
+
+    def state_dict(self) -> dict[str, Any]:
+        """Velocity and pose normalisation statistics per dataset."""
+        return {
+            name: {"input": rep.normalization_state(),
+                   "pose": self.pose_representations[name].normalization_state()}
+            for name, rep in self.representations.items()
+        }
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Restore statistics saved by :meth:`state_dict`."""
+        for name, stats in state_dict.items():
+            if name in self.representations:
+                self.representations[name].load_normalization_state(stats["input"])
+                self.pose_representations[name].load_normalization_state(stats["pose"])

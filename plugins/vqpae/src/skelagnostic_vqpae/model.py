@@ -1,0 +1,300 @@
+"""The VQ-PAE network of one dataset (WalkTheDog, Li et al. 2024, Sec. 3.2 and supplement).
+
+Shapes follow PyTorch's ``Conv1d`` layout: an input window is ``[B, C_in, T]``
+(``C_in`` = joints x 3 velocity channels, ``T`` odd, the pivot frame at index
+``T // 2``). The pieces map to the paper as follows:
+
+* encoder: two ``Conv1d`` (kernel 23, "same" padding, ``C_in -> C_in // 3 -> d``),
+  each followed by :class:`TemporalCentering` and ELU (Fig. 2, supplement 2.1);
+* timing branch: ``Conv1d(d -> 1, kernel 1)``, the FFT power spectrum of that
+  signal through a 5-layer MLP for the frequency ``f`` (Fig. 3) and
+  :func:`mason_phase` for the pivot phase ``phi`` (supplement Eq. 1);
+* amplitude branch: temporal mean of the latent, a 5-layer MLP to the raw
+  amplitude ``A~`` (size ``2d``), quantised by the shared codebook
+  (:class:`~skelagnostic_vqpae.codebook.SharedCodebook`);
+* manifold: :func:`phase_manifold` of Eq. 1 with ``Phi = phi + f * t``;
+* decoder: two ``Conv1d`` (kernel 23, ELU between, ``d -> C_in // 3 -> C_in``).
+
+:class:`AveragePoseMLP` is the per-dataset MLP of Sec. 5.2 (Eq. 10).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from itertools import pairwise
+
+import torch
+from torch import Tensor, nn
+
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = [
+    "VQPAE",
+    "AveragePoseMLP",
+    "PhaseParameters",
+    "TemporalCentering",
+    "mason_phase",
+    "phase_manifold",
+    "relative_times",
+]
+
+#: ``quantize(raw [B, 2d]) -> (quantised [B, 2d] with straight-through gradient, codes [B], loss)``
+Quantizer = Callable[[Tensor], tuple[Tensor, Tensor, Tensor]]
+
+
+def relative_times(window: int, fps: float) -> Tensor:
+    """Frame times relative to the pivot, ``t_i = (i - (T + 1) / 2) dt`` for ``i = 1..T``.
+
+    Args:
+        window: ``T``, odd.
+        fps: Frame rate (``dt = 1 / fps``).
+
+    Returns:
+        ``[T]`` float32 times in seconds, 0 at the pivot ``T // 2``.
+
+    Raises:
+        SkelagnosticError: ``window`` is not a positive odd number or ``fps`` is not positive.
+
+    Example:
+        >>> [round(x, 3) for x in relative_times(5, 10.0).tolist()]
+        [-0.2, -0.1, 0.0, 0.1, 0.2]
+    """
+    if window <= 0 or window % 2 == 0:
+        raise SkelagnosticError(f"window must be a positive odd number of frames, got {window}")
+    if not fps > 0:
+        raise SkelagnosticError(f"fps must be positive, got {fps}")
+    i = torch.arange(1, window + 1, dtype=torch.float64)
+    return ((i - (window + 1) / 2) / fps).float()
+
+
+def mason_phase(signal: Tensor, frequency: Tensor, times: Tensor) -> Tensor:
+    r"""Phase of a 1-channel signal at the pivot (Mason 2022; supplement Eq. 1).
+
+    With the signal centred (its temporal mean removed, as the authors' code
+    does, so a constant offset does not bias the sums):
+    $s_x = \sum_i y_i \cos(2\pi f t_i)$, $s_y = \sum_i y_i \sin(2\pi f t_i)$,
+    $\phi = \operatorname{atan2}(-s_y, s_x) / 2\pi$. The minus sign (the
+    authors' code has it; the supplement's formula drops it) makes
+    $y = \cos(2\pi(f t + \phi_0))$ give $\phi = \phi_0$, so the pivot phase grows
+    with time like the extrapolated phase $\Phi = \phi + f t$ the decoder sees.
+
+    Args:
+        signal: ``[..., T]`` the timing-branch signal ``y``.
+        frequency: ``[...]`` frequency in Hz.
+        times: ``[T]`` relative times in seconds (:func:`relative_times`).
+
+    Returns:
+        ``[...]`` phase in cycles, in ``(-1/2, 1/2]``.
+
+    Example:
+        >>> t = relative_times(61, 60.0)
+        >>> y = torch.cos(2 * math.pi * (2.0 * t + 0.3))  # two whole cycles in the window
+        >>> round(float(mason_phase(y, torch.tensor(2.0), t)), 2)
+        0.3
+    """
+    y = signal - signal.mean(dim=-1, keepdim=True)
+    angle = 2 * math.pi * frequency.unsqueeze(-1) * times.to(signal)
+    sx = (y * torch.cos(angle)).sum(-1)
+    sy = (y * torch.sin(angle)).sum(-1)
+    return torch.atan2(-sy, sx) / (2 * math.pi)
+
+
+def phase_manifold(amplitude: Tensor, phase: Tensor) -> Tensor:
+    r"""Points of the phase manifold, $\Psi(A, \phi) = A^0 \sin 2\pi\phi + A^1 \cos 2\pi\phi$.
+
+    Eq. 1 of the paper.
+
+    Args:
+        amplitude: ``[..., 2d]``; ``A^0`` is the first half, ``A^1`` the second.
+        phase: ``[..., T]`` phases in cycles (or ``[...]`` for a single point,
+            then pass ``phase.unsqueeze(-1)``).
+
+    Returns:
+        ``[..., d, T]`` manifold points.
+
+    Example:
+        >>> a = torch.tensor([1.0, 0.0, 0.0, 2.0])  # d = 2
+        >>> phase_manifold(a, torch.tensor([0.0, 0.25])).tolist()
+        [[0.0, 1.0], [2.0, -8.742277657347586e-08]]
+    """
+    d = amplitude.shape[-1] // 2
+    a0, a1 = amplitude[..., :d, None], amplitude[..., d:, None]
+    angle = 2 * math.pi * phase.unsqueeze(-2)
+    return a0 * torch.sin(angle) + a1 * torch.cos(angle)
+
+
+class TemporalCentering(nn.Module):
+    """Removes the temporal mean of every channel of ``[B, C, T]`` (the authors' ``LN_v3``)."""
+
+    def forward(self, x: Tensor) -> Tensor:
+        """``x - x.mean(-1)``."""
+        return x - x.mean(dim=-1, keepdim=True)
+
+
+def _mlp(sizes: list[int], slope: float = 0.2) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i, (a, b) in enumerate(pairwise(sizes)):
+        layers.append(nn.Linear(a, b))
+        if i < len(sizes) - 2:
+            layers.append(nn.LeakyReLU(slope))
+    return nn.Sequential(*layers)
+
+
+@dataclass
+class PhaseParameters:
+    """What :meth:`VQPAE.forward` returns besides the reconstruction.
+
+    Attributes:
+        phase: ``[B]`` pivot phase ``phi`` in cycles, ``(-1/2, 1/2]``.
+        frequency: ``[B]`` frequency ``f`` in Hz.
+        raw_amplitude: ``[B, 2d]`` the amplitude MLP's output ``A~``.
+        amplitude: ``[B, 2d]`` the quantised amplitude ``A`` (straight-through gradient).
+        code: ``[B]`` codebook index of ``A``.
+        manifold: ``[B, d, T]`` ``P = Psi(A, phi + f t)``.
+        signal: ``[B, T]`` the timing-branch signal ``y``.
+        vq_loss: Scalar codebook + beta * commitment loss.
+    """
+
+    phase: Tensor
+    frequency: Tensor
+    raw_amplitude: Tensor
+    amplitude: Tensor
+    code: Tensor
+    manifold: Tensor
+    signal: Tensor
+    vq_loss: Tensor
+
+
+class VQPAE(nn.Module):
+    """One dataset's vector-quantised periodic autoencoder (the codebook is shared, outside).
+
+    Args:
+        channels: ``C_in``, input channels per frame (joints x 3).
+        window: ``T``, frames per window (odd; 1 s windows have ``fps + 1``).
+        fps: Frame rate of the windows (``dt = 1 / fps``).
+        latent: ``d``, latent channels (10 in the paper).
+        kernel_size: Kernel of the encoder/decoder convolutions (23).
+        intermediate: Channels between the two convolutions (default ``C_in // 3``).
+        freq_layers: Layers of the frequency MLP (5 in the paper; the authors' code uses 7).
+        amp_layers: Layers of the amplitude MLP (5).
+        decoder_centering: Also remove the temporal mean after the first decoder
+            convolution, as the authors' code does (the paper only has ELU there).
+        spectrum: Input of the frequency MLP. ``"normalized"`` (default): the power
+            spectrum of the centred signal divided by its sum, so the frequency
+            depends on the spectrum's shape only. ``"power"``: the raw powers (the
+            authors' code); the MLP is then driven by the signal's scale too, and on
+            our data the frequency diverged to thousands of Hz within a few hundred
+            steps (the decoder exploits aliased high-frequency sinusoids).
+
+    Raises:
+        SkelagnosticError: A size is not positive, ``window`` is even or ``kernel_size`` even.
+    """
+
+    def __init__(
+        self,
+        channels: int,
+        window: int,
+        fps: float,
+        latent: int = 10,
+        kernel_size: int = 23,
+        intermediate: int | None = None,
+        freq_layers: int = 5,
+        amp_layers: int = 5,
+        decoder_centering: bool = False,
+        spectrum: str = "normalized",
+    ) -> None:
+        super().__init__()
+        if spectrum not in ("normalized", "power"):
+            raise SkelagnosticError(
+                f"VQPAE: spectrum must be 'normalized' or 'power', got {spectrum!r}")
+        self.spectrum = spectrum
+        for arg, value in (("channels", channels), ("latent", latent),
+                           ("freq_layers", freq_layers), ("amp_layers", amp_layers)):
+            if value <= 0:
+                raise SkelagnosticError(f"VQPAE: {arg} must be positive, got {value}")
+        if kernel_size <= 0 or kernel_size % 2 == 0:
+            raise SkelagnosticError(
+                f"VQPAE: kernel_size must be positive and odd, got {kernel_size}")
+        mid = intermediate if intermediate is not None else max(1, channels // 3)
+        if mid <= 0:
+            raise SkelagnosticError(f"VQPAE: intermediate must be positive, got {mid}")
+        self.channels, self.window, self.fps, self.latent = channels, window, float(fps), latent
+        self.register_buffer("times", relative_times(window, fps), persistent=False)
+        self.encoder = nn.Sequential(
+            nn.Conv1d(channels, mid, kernel_size, padding="same"), TemporalCentering(), nn.ELU(),
+            nn.Conv1d(mid, latent, kernel_size, padding="same"), TemporalCentering(), nn.ELU(),
+        )
+        self.phase_conv = nn.Conv1d(latent, 1, 1)
+        bins = window // 2 + 1
+        self.freq_mlp = _mlp([bins] * freq_layers + [1])
+        self.amp_mlp = _mlp([latent] + [2 * latent] * amp_layers)
+        self.decoder = nn.Sequential(
+            nn.Conv1d(latent, mid, kernel_size, padding="same"),
+            *([TemporalCentering()] if decoder_centering else []),
+            nn.ELU(),
+            nn.Conv1d(mid, channels, kernel_size, padding="same"),
+        )
+
+    def timing(self, latent: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Timing branch: ``latent [B, d, T] -> (phase [B], frequency [B], signal [B, T])``.
+
+        The frequency is ``ELU(MLP(power)) + 1`` (positive), with ``power`` the
+        squared magnitudes of ``rfft(y) * 2 / T`` (``T // 2 + 1`` bins), of the
+        centred ``y`` and summing to one with ``spectrum="normalized"``.
+        """
+        y = self.phase_conv(latent).squeeze(1)
+        if self.spectrum == "normalized":
+            centred = y - y.mean(dim=-1, keepdim=True)
+            power = torch.fft.rfft(centred, dim=-1).abs().square()
+            power = power / power.sum(dim=-1, keepdim=True).clamp_min(1e-12)
+        else:
+            power = (torch.fft.rfft(y, dim=-1) * (2.0 / y.shape[-1])).abs().square()
+        frequency = nn.functional.elu(self.freq_mlp(power).squeeze(-1)) + 1.0
+        return mason_phase(y, frequency, self.times), frequency, y
+
+    def encode(self, x: Tensor, quantize: Quantizer) -> PhaseParameters:
+        """Encoder, timing and amplitude branches and the manifold of ``x [B, C_in, T]``."""
+        if x.dim() != 3 or x.shape[1] != self.channels or x.shape[2] != self.window:
+            raise SkelagnosticError(
+                f"VQPAE: input must be [B, {self.channels}, {self.window}], got {list(x.shape)}"
+            )
+        latent = self.encoder(x)
+        phase, frequency, signal = self.timing(latent)
+        raw = self.amp_mlp(latent.mean(dim=-1))
+        amplitude, code, vq_loss = quantize(raw)
+        big_phi = phase.unsqueeze(-1) + frequency.unsqueeze(-1) * self.times
+        return PhaseParameters(phase, frequency, raw, amplitude, code,
+                               phase_manifold(amplitude, big_phi), signal, vq_loss)
+
+    def forward(self, x: Tensor, quantize: Quantizer) -> tuple[Tensor, PhaseParameters]:
+        """Reconstruct ``x [B, C_in, T]``: ``(reconstruction [B, C_in, T], parameters)``."""
+        params = self.encode(x, quantize)
+        return self.decoder(params.manifold), params
+
+
+class AveragePoseMLP(nn.Module):
+    """Maps a manifold point to the average pose there (Sec. 5.2, Eq. 10).
+
+    ``layers`` linear layers, hidden width = pose size, LeakyReLU 0.2 between
+    (supplement 2.1: 8 layers).
+
+    Args:
+        latent: ``d``, size of a manifold point.
+        pose: Size of the (normalised) pose vector.
+        layers: Number of linear layers.
+    """
+
+    def __init__(self, latent: int, pose: int, layers: int = 8) -> None:
+        super().__init__()
+        if layers <= 0 or pose <= 0 or latent <= 0:
+            raise SkelagnosticError(
+                f"AveragePoseMLP: latent, pose and layers must be positive, got {latent}, {pose}, "
+                f"{layers}"
+            )
+        self.net = _mlp([latent] + [pose] * layers)
+
+    def forward(self, points: Tensor) -> Tensor:
+        """``[..., d] -> [..., pose]``."""
+        return self.net(points)

@@ -1,0 +1,64 @@
+"""Hook implementations of the ``vqpae`` plugin (entry point ``skelagnostic: vqpae``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from skelagnostic.plugins import hookimpl
+
+#: Default ``model=vqpae`` config: the authors' settings (METHODS.md "VQ-PAE").
+DEFAULT_CONFIG: dict[str, Any] = {
+    "latent": 10,
+    "num_codes": 32,
+    "kernel_size": 23,
+    "freq_layers": 5,
+    "amp_layers": 5,
+    "decoder_centering": False,
+    "spectrum": "normalized",
+    "beta": 0.25,
+    "lambda_vq": 1.0,
+    "reinit": True,
+    "reinit_decay": 0.99,
+    "reinit_eps": 1e-3,
+    "reinit_squared_distance": False,
+    "seed": 0,
+    "lr": 1e-4,
+    "weight_decay": 1e-4,
+    "restart_period": 10,
+    "restart_mult": 2,
+    "pose_mlp": "detached",
+    "pose_layers": 8,
+    "pose_lr": 1e-3,
+    "datasets": None,
+}
+
+
+@hookimpl
+def register_aligners(register: Callable[..., Any]) -> None:
+    """Register ``model=vqpae``."""
+    from skelagnostic_vqpae.aligner import VQPAEAligner
+    from skelagnostic_vqpae.data import VQPAEDataModule
+
+    register(
+        "vqpae",
+        VQPAEAligner,
+        VQPAEDataModule,
+        config=DEFAULT_CONFIG,
+        description="WalkTheDog VQ-PAE: phase manifold shared across characters (human, dog, ...)",
+    )
+
+
+@hookimpl
+def register_datasets(register: Callable[..., Any]) -> None:
+    """``data.source=human_dog`` and ``data.source=styles`` (one dataset per part)."""
+    from skelagnostic_vqpae.data import human_dog_source, styles_source
+
+    register("human_dog", human_dog_source, "a human dataset preset + the MANN dog (VQ-PAE)")
+    register("styles", styles_source, "one dataset per motion style of a BVH directory (VQ-PAE)")
+
+
+@hookimpl
+def register_config_paths(register: Callable[..., Any]) -> None:
+    """Ship ``experiment=human_dog`` and ``experiment=stylized``."""
+    register("pkg://skelagnostic_vqpae.conf")

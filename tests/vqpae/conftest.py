@@ -1,0 +1,79 @@
+"""Make the in-repo ``skelagnostic_vqpae`` importable; plugin manager and a trained model."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import pytest
+
+PLUGIN_SRC = Path(__file__).resolve().parents[2] / "plugins" / "vqpae" / "src"
+if str(PLUGIN_SRC) not in sys.path:
+    sys.path.insert(0, str(PLUGIN_SRC))
+
+#: Frame rate of the small test datasets (windows of FPS + 1 frames).
+FPS = 20
+
+
+@pytest.fixture
+def vqpae_pm():
+    """A plugin manager with the built-ins and the vqpae plugin registered explicitly."""
+    from skelagnostic_vqpae import plugin
+
+    from skelagnostic.plugins import PluginManager
+
+    pm = PluginManager(load_entrypoints=False)
+    pm.register(plugin, "vqpae", source="tests")
+    return pm
+
+
+@pytest.fixture
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A per-test window cache."""
+    return tmp_path_factory.mktemp("vqpae-cache")
+
+
+def make_datamodule(cache_dir: Path) -> Any:
+    """Procedural biped + quadruped, every gait, 3 s clips at 20 fps, pivots every 2 frames."""
+    from skelagnostic_vqpae.data import VQPAEDataModule
+
+    from skelagnostic.data import ProceduralSource
+
+    src = ProceduralSource(kinds=["biped22", "quadruped"], clips_per_gait=2, seconds=3.0)
+    return VQPAEDataModule(src, fps=FPS, stride=2, batch_size=16, cache_dir=cache_dir)
+
+
+def make_trainer(root: Path, steps: int, validate: bool = True) -> L.Trainer:
+    """A quiet CPU trainer for ``steps`` steps."""
+    return L.Trainer(max_steps=steps, accelerator="cpu", devices=1, logger=False,
+                     limit_val_batches=None if validate else 0,
+                     enable_checkpointing=True, enable_progress_bar=False,
+                     enable_model_summary=False, default_root_dir=str(root),
+                     num_sanity_val_steps=0, deterministic=True)
+
+
+@pytest.fixture
+def helpers() -> dict[str, Callable[..., Any]]:
+    """``make_datamodule`` and ``make_trainer`` for tests that train their own model."""
+    return {"datamodule": make_datamodule, "trainer": make_trainer}
+
+
+@pytest.fixture(scope="session")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """A small aligner trained for 200 steps, its data, validation before/after, checkpoint."""
+    from skelagnostic_vqpae.aligner import VQPAEAligner
+
+    root = tmp_path_factory.mktemp("vqpae-train")
+    L.seed_everything(0, verbose=False)
+    dm = make_datamodule(root / "cache")
+    model = VQPAEAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000)
+    before = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
+    trainer = make_trainer(root, 200, validate=False)
+    trainer.fit(model, datamodule=dm)
+    after = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
+    ckpt = root / "final.ckpt"
+    trainer.save_checkpoint(ckpt)
+    return {"model": model, "dm": dm, "before": before, "after": after, "ckpt": ckpt}

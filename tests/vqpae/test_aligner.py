@@ -1,0 +1,128 @@
+"""The Lightning aligner: a short real training run, checkpoints, encode/decode, CLI configs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import lightning as L
+import pytest
+import torch
+from skelagnostic_vqpae.aligner import VQPAEAligner
+from skelagnostic_vqpae.data import VQPAEDataModule
+
+from skelagnostic import procedural
+from skelagnostic.errors import SkelagnosticError
+
+FPS = 20  # the frame rate of conftest.make_datamodule
+
+
+def test_short_training_lowers_the_reconstruction_loss(trained: dict) -> None:
+    before, after = trained["before"], trained["after"]
+    names = trained["dm"].dataset_names
+    for name in names:  # held-out clips: every dataset improves, the mean by a fifth
+        assert after[f"val/rec/{name}"] < before[f"val/rec/{name}"], name
+    mean = {k: sum(d[f"val/rec/{n}"] for n in names) / len(names) for k, d in
+            (("before", before), ("after", after))}
+    assert mean["after"] < 0.8 * mean["before"]
+    assert 0.0 < after["val/usage"] <= 1.0
+    assert all(torch.isfinite(torch.tensor(v)) for v in after.values())
+
+
+def test_networks_per_dataset_and_one_codebook(trained: dict) -> None:
+    model: VQPAEAligner = trained["model"]
+    assert model.dataset_names == ["procedural/biped22", "procedural/quadruped"]
+    assert model.codebook is not None and model.codebook.weight.shape == (8, 20)
+    assert model.characters[0].pae.channels == 66 and model.characters[1].pae.channels == 63
+    assert model.hparams["datasets"]["procedural/biped22"]["window"] == FPS + 1
+    assert float(model.codebook.usage.sum()) > 0  # re-initialisation ran and tracked usage
+
+
+def test_checkpoint_round_trip_encodes_identically(trained: dict) -> None:
+    model: VQPAEAligner = trained["model"]
+    loaded = VQPAEAligner.load_from_checkpoint(trained["ckpt"])
+    motion, _ = procedural.generate("quadruped", "trot", seconds=2.0, fps=30, seed=5)
+    a, b = model.encode(motion), loaded.encode(motion)
+    assert torch.equal(a.z, b.z)
+    assert torch.equal(a.extras["code"], b.extras["code"])
+
+
+def test_encode_gives_one_embedding_per_frame(trained: dict) -> None:
+    model: VQPAEAligner = trained["model"]
+    motion, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=40, seed=3)
+    latent = model.encode(motion)
+    frames = 2 * FPS + 1  # resampled to the dataset frame rate
+    assert latent.fps == FPS
+    assert latent.z.shape == (frames, 10)
+    for key, shape in {"phase": (frames,), "frequency": (frames,), "code": (frames,),
+                       "amplitude": (frames, 20)}.items():
+        assert latent.extras[key].shape == shape
+    assert bool((latent.extras["frequency"] > 0).all())
+
+
+def test_decode_gives_the_average_pose_on_the_skeleton(trained: dict) -> None:
+    model: VQPAEAligner = trained["model"]
+    motion, _ = procedural.generate("quadruped", "trot", seconds=1.0, fps=FPS, seed=2)
+    out = model.decode(model.encode(motion), motion.skeleton)
+    assert out.skeleton is motion.skeleton
+    assert out.num_frames == motion.num_frames
+    assert bool(torch.isfinite(out.global_positions()).all())
+
+
+def test_unknown_skeleton_is_rejected(trained: dict) -> None:
+    motion, _ = procedural.generate("biped17", "walk", seconds=1.0, fps=FPS, seed=1)
+    with pytest.raises(SkelagnosticError, match="no trained dataset"):
+        trained["model"].encode(motion)
+
+
+def test_untrained_pose_mlp_cannot_decode(trained: dict) -> None:
+    loaded = VQPAEAligner.load_from_checkpoint(trained["ckpt"])
+    for char in loaded.characters:
+        char.pose_fitted.fill_(False)
+    motion, _ = procedural.generate("biped22", "walk", seconds=1.0, fps=FPS, seed=1)
+    with pytest.raises(SkelagnosticError, match="average-pose MLP"):
+        loaded.decode(loaded.encode(motion), motion.skeleton)
+
+
+def test_reinit_switch_off_keeps_codebook_usage_untracked(cache_dir: Path, tmp_path: Path,
+                                                           helpers: dict) -> None:
+    L.seed_everything(0, verbose=False)
+    model = VQPAEAligner(num_codes=8, kernel_size=7, reinit=False, pose_mlp="none")
+    helpers["trainer"](tmp_path, 3).fit(model, datamodule=helpers["datamodule"](cache_dir))
+    assert model.codebook is not None
+    assert float(model.codebook.usage.abs().sum()) == 0.0
+
+
+def test_bad_options_are_rejected() -> None:
+    with pytest.raises(SkelagnosticError, match="pose_mlp"):
+        VQPAEAligner(pose_mlp="sometimes")
+    with pytest.raises(SkelagnosticError, match="num_codes"):
+        VQPAEAligner(num_codes=0)
+    with pytest.raises(SkelagnosticError, match="no datasets yet"):
+        VQPAEAligner().forward_dataset(0, torch.zeros(1, 3, 5))
+
+
+def test_cli_run_with_the_registered_plugin(vqpae_pm, tmp_path: Path, cache_dir: Path) -> None:
+    from skelagnostic.cli.app import compose, run
+
+    cfg = compose(["model=vqpae", f"run_dir={tmp_path}", "experiment=smoke", "callbacks=none",
+                   "logger=none", "model.num_codes=8", "model.kernel_size=7",
+                   f"data.cache_dir={cache_dir}", "data.seconds=2.0"], plugin_manager=vqpae_pm)
+    metrics = run(cfg, vqpae_pm)
+    assert "val/overlap" in metrics and "train/loss" in metrics
+    assert (tmp_path / "config.yaml").exists()
+
+
+@pytest.mark.parametrize(("experiment", "codes", "source"), [("human_dog", 32, "human_dog"),
+                                                             ("stylized", 64, "styles")])
+def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, source: str) -> None:
+    from skelagnostic.cli.app import build_datamodule, compose
+
+    cfg = compose(["model=vqpae", f"experiment={experiment}", "run_dir=/tmp/unused"],
+                  plugin_manager=vqpae_pm)
+    assert cfg.model.num_codes == codes
+    assert cfg.data.source == source
+    assert cfg.data.fps == 60 and cfg.data.stride == 1 and cfg.data.batch_size == 32
+    assert cfg.model.lr == 1e-4 and cfg.model.weight_decay == 1e-4
+    if Path(str(cfg.data.get("root", cfg.data.get("human_root")))).exists():
+        dm = build_datamodule(cfg, vqpae_pm)
+        assert isinstance(dm, VQPAEDataModule) and dm.window == 61

@@ -1,0 +1,171 @@
+"""The VQ-PAE network: shapes, Mason phase, manifold, straight-through gradient, determinism."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+import torch
+from skelagnostic_vqpae.codebook import SharedCodebook
+from skelagnostic_vqpae.model import (
+    VQPAE,
+    AveragePoseMLP,
+    mason_phase,
+    phase_manifold,
+    relative_times,
+)
+
+from skelagnostic.errors import SkelagnosticError
+
+
+def _net(channels: int = 12, window: int = 21, latent: int = 4, seed: int = 0) -> VQPAE:
+    torch.manual_seed(seed)
+    return VQPAE(channels, window, fps=20.0, latent=latent, kernel_size=5)
+
+
+class TestRelativeTimes:
+    def test_pivot_is_zero_and_spacing_is_dt(self) -> None:
+        t = relative_times(61, 60.0)
+        assert t.shape == (61,)
+        assert float(t[30]) == 0.0
+        assert torch.allclose(t.diff(), torch.full((60,), 1 / 60))
+        assert math.isclose(float(t[0]), -0.5, abs_tol=1e-6)
+
+    @pytest.mark.parametrize("window", [0, 4, -3])
+    def test_rejects_even_or_non_positive_window(self, window: int) -> None:
+        with pytest.raises(SkelagnosticError, match="window"):
+            relative_times(window, 30.0)
+
+
+class TestMasonPhase:
+    @pytest.mark.parametrize("phi0", [-0.45, -0.2, 0.0, 0.13, 0.37, 0.49])
+    @pytest.mark.parametrize(("freq", "tol"), [(1.0, 0.005), (2.0, 0.005), (1.7, 0.02),
+                                               (3.1, 0.01), (0.8, 0.04)])
+    def test_recovers_known_phase_of_a_sinusoid(self, phi0: float, freq: float,
+                                                tol: float) -> None:
+        # exact for whole cycles in the window; a fractional cycle leaves a small bias
+        t = relative_times(61, 60.0)
+        y = 0.7 * torch.cos(2 * math.pi * (freq * t + phi0)) + 0.3  # offset must not matter
+        phi = float(mason_phase(y, torch.tensor(freq), t))
+        err = (phi - phi0 + 0.5) % 1.0 - 0.5
+        assert abs(err) < tol, (phi, phi0)
+
+    def test_phase_advances_with_the_pivot(self) -> None:
+        freq, fps = 2.0, 60.0
+        t = relative_times(61, fps)
+        phases = [float(mason_phase(torch.sin(2 * math.pi * freq * (t + k / fps)),
+                                    torch.tensor(freq), t)) for k in range(5)]
+        steps = [((b - a + 0.5) % 1.0) - 0.5 for a, b in itertools.pairwise(phases)]
+        assert all(math.isclose(s, freq / fps, abs_tol=2e-3) for s in steps)
+
+    def test_batched_shapes(self) -> None:
+        t = relative_times(9, 10.0)
+        assert mason_phase(torch.randn(3, 4, 9), torch.rand(3, 4) + 0.5, t).shape == (3, 4)
+
+
+class TestManifold:
+    def test_matches_equation_one(self) -> None:
+        amp = torch.randn(2, 6)
+        phase = torch.rand(2, 5)
+        got = phase_manifold(amp, phase)
+        assert got.shape == (2, 3, 5)
+        want = (amp[:, :3, None] * torch.sin(2 * math.pi * phase[:, None])
+                + amp[:, 3:, None] * torch.cos(2 * math.pi * phase[:, None]))
+        assert torch.allclose(got, want)
+
+    def test_is_periodic_in_phase(self) -> None:
+        amp = torch.randn(6)
+        phase = torch.rand(7)
+        assert torch.allclose(phase_manifold(amp, phase), phase_manifold(amp, phase + 1.0),
+                              atol=1e-5)
+
+
+class TestVQPAE:
+    def test_shapes(self) -> None:
+        net = _net()
+        book = SharedCodebook(8, 8, 1)
+        rec, p = net(torch.randn(5, 12, 21), book.quantizer(0))
+        assert rec.shape == (5, 12, 21)
+        assert p.manifold.shape == (5, 4, 21)
+        assert p.phase.shape == p.frequency.shape == p.code.shape == (5,)
+        assert p.raw_amplitude.shape == p.amplitude.shape == (5, 8)
+        assert p.signal.shape == (5, 21)
+        assert bool((p.frequency > 0).all())
+        assert bool((p.phase > -0.5).all() and (p.phase <= 0.5).all())
+
+    def test_layer_layout_follows_the_paper(self) -> None:
+        net = VQPAE(66, 61, 60.0)
+        convs = [m for m in net.encoder if isinstance(m, torch.nn.Conv1d)]
+        assert [(c.in_channels, c.out_channels, c.kernel_size[0]) for c in convs] == [
+            (66, 22, 23), (22, 10, 23)]
+        assert net.phase_conv.kernel_size == (1,) and net.phase_conv.out_channels == 1
+        freq = [m for m in net.freq_mlp if isinstance(m, torch.nn.Linear)]
+        assert len(freq) == 5 and freq[0].in_features == 31 and freq[-1].out_features == 1
+        amp = [m for m in net.amp_mlp if isinstance(m, torch.nn.Linear)]
+        assert len(amp) == 5 and amp[0].in_features == 10 and amp[-1].out_features == 20
+        dec = [m for m in net.decoder if isinstance(m, torch.nn.Conv1d)]
+        assert [(c.in_channels, c.out_channels) for c in dec] == [(10, 22), (22, 66)]
+
+    def test_encoder_removes_the_temporal_mean(self) -> None:
+        net = _net()
+        latent = net.encoder[:2](torch.randn(3, 12, 21))
+        assert torch.allclose(latent.mean(-1), torch.zeros(3, 4), atol=1e-6)
+
+    def test_straight_through_gradient_reaches_the_encoder(self) -> None:
+        net = _net()
+        book = SharedCodebook(8, 8, 1)
+        x = torch.randn(4, 12, 21)
+        rec, p = net(x, book.quantizer(0))
+        assert torch.allclose(p.amplitude.detach(), book.weight.detach()[p.code], atol=1e-7)
+        p.amplitude.sum().backward(retain_graph=True)
+        # d(sum A)/d(A~) is exactly one through the straight-through estimator
+        grads = torch.autograd.grad(p.amplitude.sum(), p.raw_amplitude, retain_graph=True)[0]
+        assert torch.equal(grads, torch.ones_like(grads))
+        net.zero_grad()
+        torch.nn.functional.mse_loss(rec, x).backward()
+        assert net.amp_mlp[0].weight.grad is not None
+        assert float(net.amp_mlp[0].weight.grad.abs().sum()) > 0
+        assert float(net.encoder[0].weight.grad.abs().sum()) > 0
+
+    def test_vq_loss_trains_the_codebook_and_commits_the_encoder(self) -> None:
+        book = SharedCodebook(4, 2, 1, beta=0.25)
+        raw = torch.randn(6, 2, requires_grad=True)
+        _, codes, loss = book.quantize(raw)
+        loss.backward()
+        diff = book.weight.detach()[codes] - raw.detach()
+        want = (2 * 0.25 / diff.numel()) * (-diff)
+        assert torch.allclose(raw.grad, want, atol=1e-6)
+        assert book.weight.grad is not None
+
+    def test_deterministic(self) -> None:
+        x = torch.randn(3, 12, 21)
+        outs = []
+        for _ in range(2):
+            torch.manual_seed(1)
+            net, book = _net(seed=1), SharedCodebook(8, 8, 1, seed=3)
+            net.eval()
+            outs.append(net(x, book.quantizer(0)))
+        assert torch.equal(outs[0][0], outs[1][0])
+        assert torch.equal(outs[0][1].phase, outs[1][1].phase)
+        assert torch.equal(outs[0][1].code, outs[1][1].code)
+
+    def test_rejects_wrong_input_shape(self) -> None:
+        net = _net()
+        with pytest.raises(SkelagnosticError, match=r"\[B, 12, 21\]"):
+            net(torch.randn(2, 12, 20), SharedCodebook(8, 8, 1).quantizer(0))
+
+    @pytest.mark.parametrize("kwargs", [{"kernel_size": 4}, {"latent": 0}, {"channels": -1}])
+    def test_rejects_bad_sizes(self, kwargs: dict[str, int]) -> None:
+        args = {"channels": 12, "window": 21, "fps": 20.0, **kwargs}
+        with pytest.raises(SkelagnosticError, match=next(iter(kwargs))):
+            VQPAE(**args)
+
+
+def test_average_pose_mlp_has_eight_layers() -> None:
+    mlp = AveragePoseMLP(10, 63)
+    linears = [m for m in mlp.net if isinstance(m, torch.nn.Linear)]
+    assert len(linears) == 8
+    assert all(isinstance(m, torch.nn.LeakyReLU) and m.negative_slope == 0.2
+               for m in mlp.net if not isinstance(m, torch.nn.Linear))
+    assert mlp(torch.randn(5, 7, 10)).shape == (5, 7, 63)
