@@ -52,6 +52,12 @@ class XCA(nn.Module):
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         """Apply the attention.
 
+        The L2 normalisation of q and k along the tokens is applied to the small
+        ``d x d`` product ``q^T k`` (divided by the outer product of the norms)
+        instead of to the ``N x d`` tensors: the same value, without two passes
+        over all tokens in the forward and backward passes. Tokens stay in
+        ``[B, H, N, d]`` layout throughout (no transposed copies).
+
         Args:
             x: ``[B, N, C]`` tokens.
             mask: ``[B, N]`` valid tokens (``None``: all).
@@ -60,16 +66,17 @@ class XCA(nn.Module):
             ``[B, N, C]``, zero on padded tokens.
         """
         b, n, c = x.shape
-        qkv = self.qkv(x).reshape(b, n, 3, self.heads, c // self.heads).permute(2, 0, 3, 4, 1)
-        q, k, v = qkv[0], qkv[1], qkv[2]  # [B, H, d, N]
+        qkv = self.qkv(x)
         if mask is not None:
-            keep = mask[:, None, None, :].to(x.dtype)
-            q, k, v = q * keep, k * keep, v * keep
-        q = F.normalize(q, dim=-1)
-        k = F.normalize(k, dim=-1)
-        attn = (q @ k.transpose(-2, -1)) * self.temperature
-        out = attn.softmax(dim=-1) @ v  # [B, H, d, N]
-        out = self.proj(out.permute(0, 3, 1, 2).reshape(b, n, c))
+            qkv = qkv * mask[..., None].to(qkv.dtype)
+        q, k, v = qkv.reshape(b, n, 3, self.heads, c // self.heads).permute(2, 0, 3, 1, 4)
+        # F.normalize(q, dim=tokens) == q / max(|q|, eps)
+        q_norm = torch.linalg.vector_norm(q, dim=-2).clamp_min(1e-12)  # [B, H, d]
+        k_norm = torch.linalg.vector_norm(k, dim=-2).clamp_min(1e-12)
+        attn = (q.transpose(-2, -1) @ k) / (q_norm[..., :, None] * k_norm[..., None, :])
+        attn = (attn * self.temperature).softmax(dim=-1)  # [B, H, d, d]
+        out = v @ attn.transpose(-2, -1)  # [B, H, N, d]: out[n, i] = sum_j attn[i, j] v[n, j]
+        out = self.proj(out.transpose(1, 2).reshape(b, n, c))
         if mask is not None:
             out = out * mask[..., None].to(out.dtype)
         return out
@@ -78,30 +85,33 @@ class XCA(nn.Module):
 class MaskedBatchNorm(nn.BatchNorm2d):
     """``BatchNorm2d`` whose training statistics ignore padded grid cells.
 
-    With a full mask it equals :class:`torch.nn.BatchNorm2d` (same running
-    statistics, unbiased running variance); in eval mode the running
-    statistics are used as usual.
+    In training with a mask, the valid cells are gathered and normalised by
+    :func:`torch.nn.functional.batch_norm` (same statistics, running-statistics
+    update and unbiased running variance as :class:`torch.nn.BatchNorm2d` on
+    those cells alone). In eval mode the running statistics are used as usual.
+    With a mask, padded cells of the output are zero; without one it is
+    :class:`torch.nn.BatchNorm2d`.
     """
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-        """Normalise ``x`` ``[B, C, G, F]``; training statistics use the cells of ``mask``."""
-        if mask is None or not self.training:
+        """Normalise ``x`` ``[B, C, G, F]``; training statistics use the rows ``G`` of ``mask``."""
+        if mask is None:
             return super().forward(x)
-        cells = mask[:, None, :, None].to(x.dtype).expand(x.shape[0], 1, x.shape[2], x.shape[3])
-        count = cells.sum()
-        mean = (x * cells).sum(dim=(0, 2, 3)) / count
-        var = (((x - mean[None, :, None, None]) ** 2) * cells).sum(dim=(0, 2, 3)) / count
-        if self.track_running_stats and self.running_mean is not None:
-            with torch.no_grad():
-                m = self.momentum if self.momentum is not None else 0.1
-                unbiased = var * count / (count - 1).clamp_min(1)
-                self.running_mean.mul_(1 - m).add_(m * mean)
-                self.running_var.mul_(1 - m).add_(m * unbiased)
-                self.num_batches_tracked.add_(1)
-        out = (x - mean[None, :, None, None]) / torch.sqrt(var[None, :, None, None] + self.eps)
-        if self.affine:
-            out = out * self.weight[None, :, None, None] + self.bias[None, :, None, None]
-        return out
+        if not self.training:
+            return super().forward(x) * mask[:, None, :, None].to(x.dtype)
+        b, c, g, f = x.shape
+        factor = 0.0
+        if self.track_running_stats and self.num_batches_tracked is not None:
+            self.num_batches_tracked.add_(1)
+            factor = (self.momentum if self.momentum is not None
+                      else 1.0 / float(self.num_batches_tracked))
+        grid = x.permute(0, 2, 3, 1)  # [B, G, F, C]: contiguous for channels-last input
+        valid = grid[mask]  # [N, F, C]
+        normed = F.batch_norm(valid.reshape(-1, c), self.running_mean, self.running_var,
+                              self.weight, self.bias, True, factor, self.eps)
+        out = grid.new_zeros(b, g, f, c)
+        out[mask] = normed.reshape(valid.shape)
+        return out.permute(0, 3, 1, 2)
 
 
 class LocalPatchInteraction(nn.Module):
@@ -121,18 +131,19 @@ class LocalPatchInteraction(nn.Module):
         self.conv2 = nn.Conv2d(dim, dim, kernel_size, padding=pad, groups=dim)
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-        """``[B, G, F, C]`` tokens (mask ``[B, G]``) -> ``[B, G, F, C]``."""
-        cells = None if mask is None else mask[:, None, :, None].to(x.dtype)
-        h = x.permute(0, 3, 1, 2)
+        """``[B, G, F, C]`` tokens (mask ``[B, G]``) -> ``[B, G, F, C]``.
+
+        The convolutions run on a channels-last view of the tokens (no copies);
+        padded cells are zeroed before each convolution and in the output.
+        """
+        cells = None if mask is None else mask[:, :, None, None].to(x.dtype)
+        if cells is not None:
+            x = x * cells
+        h = self.bn(self.act(self.conv1(x.permute(0, 3, 1, 2))), mask)  # padded cells: 0
+        h = self.conv2(h).permute(0, 2, 3, 1)
         if cells is not None:
             h = h * cells
-        h = self.bn(self.act(self.conv1(h)), mask)
-        if cells is not None:
-            h = h * cells
-        h = self.conv2(h)
-        if cells is not None:
-            h = h * cells
-        return h.permute(0, 2, 3, 1)
+        return h
 
 
 class XCiTBlock(nn.Module):

@@ -59,7 +59,7 @@ def test_cyclic_learning_rate(tmp_path):
     model = HumotAligner(**SMALL, lr_period_epochs=2)
     dm = _datamodule(tmp_path)
     trainer = L.Trainer(max_epochs=4, accelerator="cpu", logger=False, enable_checkpointing=False,
-                        enable_progress_bar=False, limit_val_batches=0)
+                        enable_progress_bar=False, limit_val_batches=0, default_root_dir=tmp_path)
     lrs = []
 
     class Record(L.Callback):
