@@ -44,6 +44,8 @@ SUITES: dict[str, str] = {
     "io": "benchmarks.suites.io",
     "kinematics": "benchmarks.suites.kinematics",
     "matching": "benchmarks.suites.matching",
+    "bigdata": "benchmarks.suites.bigdata",
+    "training": "benchmarks.suites.training_vqpae",
 }
 
 

@@ -13,10 +13,13 @@ from __future__ import annotations
 import contextlib
 import inspect
 import os
+import shutil
 import sys
+import types
+import typing
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, Union
 
 import hydra
 import lightning as L
@@ -27,6 +30,7 @@ from hydra.errors import HydraException
 from hydra.utils import instantiate
 from lightning.fabric.utilities.exceptions import MisconfigurationException
 from lightning.pytorch.utilities import rank_zero_only
+from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
@@ -39,6 +43,10 @@ TASKS = ("fit", "validate", "test", "predict")
 CONFIG_MODULE = "skelagnostic.conf"
 #: Set to ``1`` (or pass ``--debug``) for full tracebacks on configuration errors.
 DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
+#: Exit code of a run stopped by SIGTERM (128 + 15, as the shell reports it).
+SIGTERM_EXIT_CODE = 143
+#: ``ckpt_path`` values Lightning resolves itself.
+_CKPT_ALIASES = ("last", "best", "hpc", "registry")
 #: Data-config keys that are not options of the data module or the dataset source.
 _DATA_KEYS = ("source", "representation", "representation_options")
 
@@ -98,6 +106,53 @@ def _instantiate_all(group: DictConfig | None, what: str) -> list[Any]:
     return out
 
 
+def _accepts(hint: Any, value: Any) -> bool:
+    """Whether ``value`` (from YAML) fits a simple type hint; other hints accept anything."""
+    origin = typing.get_origin(hint)
+    if origin in (Union, types.UnionType):
+        return any(_accepts(h, value) for h in typing.get_args(hint))
+    if origin is Literal:
+        return value in typing.get_args(hint)
+    if hint is type(None):
+        return value is None
+    if hint is bool or hint is str:
+        return isinstance(value, hint)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return True  # classes, containers, ...: left to the callee
+
+
+def _check_options(options: dict[str, Any], cls: type, prefix: str, owner: str) -> None:
+    """Raise :class:`ConfigError` for the first option ``cls()`` does not take or cannot type.
+
+    Args:
+        options: Keyword arguments from the config.
+        cls: The class they go to.
+        prefix: Config path of the options (``"model"``, ``"trainer"``).
+        owner: Who takes them, for the message.
+    """
+    params = inspect.signature(cls.__init__).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        unknown = sorted(set(options) - set(params))
+        if unknown:
+            accepted = sorted(k for k, p in params.items() if k != "self"
+                              and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY))
+            raise ConfigError(f"{prefix}.{unknown[0]} is not an option of {owner}; "
+                              f"accepted: {', '.join(accepted)}")
+    try:
+        hints = typing.get_type_hints(cls.__init__)
+    except Exception:  # unresolvable annotations: no type check
+        return
+    for key, value in options.items():
+        if key in hints and not _accepts(hints[key], value):
+            hint = hints[key]
+            hint = hint.__name__ if isinstance(hint, type) else str(hint).replace("typing.", "")
+            raise ConfigError(f"{prefix}.{key}={value!r} has the wrong type for {owner} "
+                              f"(expected {hint})")
+
+
 @rank_zero_only
 def _save_config(cfg: DictConfig, run_dir: Path) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -128,7 +183,9 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         The trainer's final ``callback_metrics`` as floats.
 
     Raises:
-        ConfigError: Unknown task, or a config that cannot work.
+        ConfigError: Unknown task, a missing ``ckpt_path`` file, a model or
+            trainer option the aligner or ``lightning.Trainer`` does not take (or
+            of the wrong type), or another config that cannot work.
         PluginError: Unknown aligner, dataset or representation.
     """
     pm = plugin_manager or get_plugin_manager()
@@ -136,15 +193,20 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     if task not in TASKS:
         raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
     run_dir = Path(cfg.run_dir)
+    ckpt = cfg.ckpt_path
+    if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt) and not Path(ckpt).is_file():
+        raise ConfigError(f"ckpt_path: no checkpoint file {str(ckpt)!r}")
     L.seed_everything(cfg.seed, workers=True)
     spec = pm.aligner(cfg.model.name)
     datamodule = build_datamodule(cfg, pm)
     model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
                     if k != "name"}
+    _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
+    _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")
     trainer = L.Trainer(
         **trainer_kwargs,
         callbacks=callbacks,
@@ -227,6 +289,41 @@ def _patched(argv: list[str], env: dict[str, str]) -> Iterator[None]:
                 os.environ[k] = v
 
 
+#: Files a run directory holds before it produced anything (Hydra's and ours).
+_BOOKKEEPING = frozenset({".hydra/config.yaml", ".hydra/hydra.yaml", ".hydra/overrides.yaml",
+                          "app.log", "config.yaml", "csv/hparams.yaml"})
+
+
+def _discard_failed_run(run_dir: Path) -> str:
+    """After a failure: delete ``run_dir`` if it holds only bookkeeping files.
+
+    A run directory with anything else (checkpoints, logged metrics, renders,
+    files of an earlier run) is kept so the run can be inspected or resumed.
+
+    Returns:
+        Text appended to the error line.
+    """
+    cwd = Path.cwd()
+    if rank_zero_only.rank != 0 or not run_dir.is_dir() or run_dir.resolve() in (cwd,
+                                                                                 *cwd.parents):
+        return ""
+    files = {p.relative_to(run_dir).as_posix() for p in run_dir.rglob("*") if not p.is_dir()}
+    kept = sorted(f for f in files if f not in _BOOKKEEPING and not f.endswith(".log"))
+    if kept:
+        last = run_dir / "checkpoints" / "last.ckpt"
+        hint = f"; resume with ckpt_path={last}" if last.is_file() else ""
+        return f" [run directory kept: {run_dir}{hint}]"
+    shutil.rmtree(run_dir, ignore_errors=True)
+    return ""
+
+
+def _failed_plugins(pm: PluginManager | None) -> str:
+    if pm is None:
+        return ""
+    failed = [f"{p.name} ({p.error})" for p in pm.plugins() if p.status == "failed"]
+    return f" [plugins that failed to load: {'; '.join(failed)}]" if failed else ""
+
+
 def _one_line(exc: BaseException) -> str:
     text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
     text = text.split(" Config search path:")[0]
@@ -241,7 +338,11 @@ def main(task: str, argv: Sequence[str]) -> int:
 
     ``--debug`` (or ``SKELAGNOSTIC_DEBUG=1``) shows full tracebacks; otherwise
     configuration errors and :class:`~skelagnostic.errors.SkelagnosticError`
-    print one line to stderr and return exit code 1.
+    print one line to stderr and return exit code 1. The line also names the
+    plugins that failed to load, if any. A failed run's directory is deleted
+    when it holds nothing but the resolved configs and logs; otherwise it is
+    kept (and the line says where, with the checkpoint to resume from). A
+    run stopped by SIGTERM returns :data:`SIGTERM_EXIT_CODE`.
 
     Args:
         task: One of :data:`TASKS`.
@@ -253,19 +354,25 @@ def main(task: str, argv: Sequence[str]) -> int:
     args = [a for a in argv if a != "--debug"]
     debug = len(args) != len(argv) or os.environ.get(DEBUG_ENV, "") not in {"", "0"}
     outer_argv = list(sys.argv)
+    pm: PluginManager | None = None
+    run_dirs: list[Path] = []
     try:
         pm = get_plugin_manager()
         register_model_configs(pm)
         hydra_args = [*_searchpath_overrides(pm, args), *args, f"task={task}"]
 
         failures: list[Exception] = []
+        terminated: list[bool] = []
 
         def task_function(cfg: DictConfig) -> None:
+            run_dirs.append(Path(cfg.run_dir))
             with _patched(outer_argv, {}):  # Lightning's DDP launcher re-executes sys.argv
                 try:
                     run(cfg, pm)
-                except (SkelagnosticError, MisconfigurationException) as exc:
+                except (SkelagnosticError, MisconfigurationException, HydraException) as exc:
                     failures.append(exc)  # re-raised below, after Hydra cleaned up
+                except SIGTERMException:  # a SystemExit with status 0: report it as a failure
+                    terminated.append(True)
 
         entry = hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name="config",
                            version_base="1.3")(task_function)
@@ -273,11 +380,17 @@ def main(task: str, argv: Sequence[str]) -> int:
             entry()
         if failures:
             raise failures[0]
+        if terminated:
+            kept = "".join(_discard_failed_run(d) for d in run_dirs)
+            print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
+            return SIGTERM_EXIT_CODE
     except (SkelagnosticError, HydraException, OmegaConfBaseException,
             MisconfigurationException) as exc:
+        kept = "".join(_discard_failed_run(d) for d in run_dirs)
         if debug:
             raise
-        print(f"skelagnostic {task}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"skelagnostic {task}: error: {_one_line(exc)}{_failed_plugins(pm)}{kept}",
+              file=sys.stderr)
         return 1
     return 0
 

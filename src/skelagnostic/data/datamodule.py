@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import os
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -12,7 +13,7 @@ import lightning as L
 import numpy as np
 import torch
 from lightning.pytorch.utilities import CombinedLoader
-from torch.utils.data import DataLoader, Dataset, default_collate
+from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
 
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data.cache import CacheEntry, WindowCache, cache_key, default_cache_dir
@@ -80,6 +81,66 @@ class WindowDataset(Dataset):
         state = dict(self.__dict__)
         state["_arrays"] = {}
         return state
+
+
+class _ResumableSampler(DistributedSampler):
+    """A :class:`DistributedSampler` (one shard per rank) that can start a pass part-way.
+
+    The order of a pass depends only on ``seed`` and the epoch (never on the
+    global RNG), so a resumed run sees the same windows as an uninterrupted one.
+    """
+
+    def __init__(self, dataset: Dataset, num_replicas: int, rank: int, shuffle: bool,
+                 seed: int) -> None:
+        super().__init__(dataset, num_replicas=num_replicas, rank=rank, shuffle=shuffle,
+                         seed=seed)
+        #: Indices to drop from the start of the next pass (set when resuming).
+        self.skip = 0
+
+    def __iter__(self) -> Iterator[int]:
+        indices = list(super().__iter__())[self.skip :]
+        self.skip = 0
+        return iter(indices)
+
+
+class ResumableDataLoader(DataLoader):
+    """A training :class:`DataLoader` whose position is saved in checkpoints.
+
+    Lightning stores :meth:`state_dict` with every checkpoint (``combined_loader``
+    in the fit-loop state) and calls :meth:`load_state_dict` before iterating
+    again, so training resumed from a mid-epoch checkpoint continues with the
+    very next batch of the interrupted pass: exact resume. It counts the
+    batches handed to the training loop (not those prefetched by workers).
+
+    Args:
+        dataset: The windows.
+        batch_size: Windows per batch.
+        sampler: The pass order.
+        num_workers: Worker processes.
+    """
+
+    def __init__(self, dataset: Dataset, batch_size: int, sampler: _ResumableSampler,
+                 num_workers: int = 0) -> None:
+        super().__init__(dataset, batch_size=batch_size, sampler=sampler,
+                         num_workers=num_workers, persistent_workers=num_workers > 0)
+        self._served = 0
+        self._resume_at = 0
+
+    def __iter__(self) -> Iterator[Any]:
+        self._served, self._resume_at = self._resume_at, 0
+        for batch in super().__iter__():
+            self._served += 1
+            yield batch
+
+    def state_dict(self) -> dict[str, int]:
+        """The epoch of the sampler and the batches served in the current pass."""
+        return {"epoch": int(self.sampler.epoch), "served": self._served}
+
+    def load_state_dict(self, state_dict: dict[str, int]) -> None:
+        """Continue the pass of :meth:`state_dict` with its next batch."""
+        self.sampler.set_epoch(state_dict["epoch"])
+        self.sampler.skip = state_dict["served"] * int(self.batch_size)
+        self._resume_at = state_dict["served"]
 
 
 class _Tagged:
@@ -268,6 +329,12 @@ class MotionDataModule(L.LightningDataModule):
                 if entry.num_windows == 0:
                     continue
                 sk = entry.meta["skeleton"]
+                if Skeleton.from_dict(sk).height() <= 0:
+                    raise SkelagnosticError(
+                        f"data: clip {clip.id!r} has a skeleton of height 0 ({len(sk['parents'])} "
+                        "joint(s), no bone of non-zero length); features are normalised by "
+                        "the skeleton height"
+                    )
                 topo = (tuple(sk["joint_names"]), tuple(sk["parents"]))
                 groups.setdefault(topo, []).append((clip, entry))
             for members in groups.values():
@@ -318,8 +385,22 @@ class MotionDataModule(L.LightningDataModule):
         }
 
     def train_dataloader(self) -> CombinedLoader:
-        """One batch per dataset per step (``max_size_cycle``)."""
-        return CombinedLoader(self._loaders("train", shuffle=True), mode="max_size_cycle")
+        """One batch per dataset per step (``max_size_cycle``), resumable mid-epoch.
+
+        Each dataset's order is a permutation seeded by the run's ``seed``
+        (``PL_GLOBAL_SEED``, set by :func:`lightning.seed_everything`) and the
+        epoch, sharded over the DDP ranks (:class:`ResumableDataLoader`).
+        """
+        trainer = self.trainer
+        replicas, rank = (trainer.world_size, trainer.global_rank) if trainer else (1, 0)
+        seed = int(os.environ.get("PL_GLOBAL_SEED", "0"))
+        loaders = {
+            name: ResumableDataLoader(ds, self.batch_size,
+                                      _ResumableSampler(ds, replicas, rank, True, seed),
+                                      self.num_workers)
+            for name, ds in self.datasets["train"].items()
+        }
+        return CombinedLoader(loaders, mode="max_size_cycle")
 
     def val_dataloader(self) -> CombinedLoader:
         """Every validation window once (``max_size``: exhausted datasets give ``None``)."""

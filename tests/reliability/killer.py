@@ -1,0 +1,30 @@
+"""A callback that kills its own process after a given training step (resume tests)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from typing import Any
+
+import lightning as L
+
+
+class KillAt(L.Callback):
+    """Send ``signum`` to this process when ``trainer.global_step`` reaches ``step``.
+
+    It fires in ``on_train_batch_end`` before :class:`ModelCheckpoint` (Lightning
+    runs checkpoint callbacks last), so the newest checkpoint is the previous step's.
+
+    Args:
+        step: Global step (optimizer steps taken) at which to kill.
+        signum: Signal number, e.g. 9 (SIGKILL) or 15 (SIGTERM).
+    """
+
+    def __init__(self, step: int, signum: int) -> None:
+        self.step = step
+        self.signum = signal.Signals(signum)
+
+    def on_train_batch_end(self, trainer: L.Trainer, *args: Any) -> None:
+        """Kill the process at :attr:`step`."""
+        if trainer.global_step == self.step:
+            os.kill(os.getpid(), self.signum)

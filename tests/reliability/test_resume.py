@@ -1,0 +1,102 @@
+"""Exact resume: a fit killed mid-epoch, resumed, ends with the weights of an uninterrupted fit."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from torch.utils.data import TensorDataset
+
+from skelagnostic.data.datamodule import ResumableDataLoader, _ResumableSampler
+
+#: Small procedural data: two datasets of different lengths (the shorter one cycles).
+ARGS = ["model=example", "model.hidden=16", "model.latent=4", "data.seconds=2.0",
+        "data.clips_per_gait=1", "data.window=16", "data.stride=4", "data.batch_size=4",
+        "trainer.max_epochs=2", "trainer.limit_val_batches=1", "trainer.log_every_n_steps=1",
+        "trainer.enable_model_summary=false", "callbacks=default", "seed=7",
+        # last.ckpt after every step (the default checkpoint waits for val/loss)
+        "callbacks.model_checkpoint.save_last=false",
+        "+callbacks.resume._target_=lightning.pytorch.callbacks.ModelCheckpoint",
+        "+callbacks.resume.dirpath=${run_dir}/checkpoints", "+callbacks.resume.save_top_k=0",
+        "+callbacks.resume.save_last=true", "+callbacks.resume.every_n_train_steps=1"]
+
+
+def fit(env: dict[str, str], cwd: Path, run_dir: Path, *extra: str) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", *ARGS, f"hydra.run.dir={run_dir}",
+           *extra]
+    return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=240)
+
+
+def final_state(run_dir: Path) -> dict:
+    return torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu",
+                      weights_only=False)
+
+
+def assert_same_training_state(a: dict, b: dict) -> None:
+    assert a["global_step"] == b["global_step"] and a["epoch"] == b["epoch"]
+    assert a["state_dict"].keys() == b["state_dict"].keys()
+    for name, tensor in a["state_dict"].items():
+        assert torch.equal(tensor, b["state_dict"][name]), name  # bitwise
+    for x, y in zip(a["optimizer_states"][0]["state"].values(),
+                    b["optimizer_states"][0]["state"].values(), strict=True):
+        for key in x:
+            assert torch.equal(x[key], y[key]), key
+
+
+def test_loader_resumes_mid_pass_with_the_same_batches() -> None:
+    ds = TensorDataset(torch.arange(10))
+
+    def loader() -> ResumableDataLoader:
+        return ResumableDataLoader(ds, 3, _ResumableSampler(ds, 1, 0, True, seed=5))
+
+    ref = loader()
+    ref.sampler.set_epoch(1)
+    batches = [b[0].tolist() for b in ref]
+    it, partial = iter(ref), loader()
+    consumed = [next(it)[0].tolist() for _ in range(2)]
+    partial.load_state_dict(ref.state_dict())
+    assert ref.state_dict() == {"epoch": 1, "served": 2}
+    assert consumed + [b[0].tolist() for b in partial] == batches
+    assert partial.state_dict() == {"epoch": 1, "served": 4}
+    assert sorted(i for b in batches for i in b) == list(range(10))
+
+
+def test_ranks_get_disjoint_shards() -> None:
+    ds = TensorDataset(torch.arange(10))
+    shards = [list(_ResumableSampler(ds, 2, r, True, seed=0)) for r in (0, 1)]
+    assert sorted(shards[0] + shards[1]) == list(range(10))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGTERM])
+def test_killed_fit_resumes_bitwise(cli_env: dict[str, str], tmp_path: Path,
+                                    signum: signal.Signals) -> None:
+    ref = fit(cli_env, tmp_path, tmp_path / "ref")
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    reference = final_state(tmp_path / "ref")
+    steps_per_epoch = reference["global_step"] // 2
+    assert steps_per_epoch >= 4
+    # SIGKILL in the middle of epoch 0, SIGTERM in the middle of epoch 1
+    kill_step = 2 if signum == signal.SIGKILL else steps_per_epoch + 2
+    killed = fit(cli_env, tmp_path, tmp_path / "killed", "+callbacks.kill._target_=killer.KillAt",
+                 f"+callbacks.kill.step={kill_step}", f"+callbacks.kill.signum={int(signum)}")
+    assert killed.returncode == (143 if signum == signal.SIGTERM else -signal.SIGKILL)
+    if signum == signal.SIGTERM:
+        assert killed.stderr.strip().splitlines()[-1] == (
+            f"skelagnostic fit: terminated by SIGTERM [run directory kept: {tmp_path / 'killed'}; "
+            f"resume with ckpt_path={tmp_path / 'killed' / 'checkpoints' / 'last.ckpt'}]")
+    last = tmp_path / "killed" / "checkpoints" / "last.ckpt"
+    interrupted = torch.load(last, map_location="cpu", weights_only=False)
+    # SIGKILL: the checkpoint of the step before; SIGTERM: Lightning finishes the step
+    # (its handler only sets a flag), the checkpoint callback saves it, then the run stops.
+    saved = kill_step - 1 if signum == signal.SIGKILL else kill_step
+    assert interrupted["global_step"] == saved
+    assert interrupted["global_step"] % steps_per_epoch != 0
+    resumed = fit(cli_env, tmp_path, tmp_path / "resumed", f"ckpt_path={last}")
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "not resumable" not in resumed.stderr + resumed.stdout
+    assert_same_training_state(final_state(tmp_path / "resumed"), reference)
