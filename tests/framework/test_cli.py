@@ -211,3 +211,16 @@ def test_wheel_installed_cli_from_another_directory(tmp_path: Path) -> None:
     run_cli([str(env_dir / "bin" / "skelagnostic"), "fit", "model=example", *FAST], env,
             elsewhere, timeout=240)
     assert (only_run_dir(elsewhere / "runs") / "checkpoints" / "last.ckpt").is_file()
+
+
+def test_threads_option_sets_torch_threads(example_plugin: Path, tmp_path: Path) -> None:
+    common = ["model=example", f"data.cache_dir={tmp_path / 'cache'}", *FAST]
+    before = torch.get_num_threads()
+    try:
+        app.run(app.compose([*common, f"run_dir={tmp_path / 'run'}", "threads=1",
+                             "trainer.max_epochs=1"]))
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
+    with pytest.raises(app.ConfigError, match="threads must be a positive integer"):
+        app.run(app.compose([*common, f"run_dir={tmp_path / 'bad'}", "threads=0"]))

@@ -167,7 +167,8 @@ def _save_predictions(predictions: Any, run_dir: Path) -> None:
 def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[str, float]:
     """Train or evaluate an aligner from a composed config (no Hydra needed).
 
-    Steps: seed everything, build the aligner ``cfg.model.name`` (its keyword
+    Steps: set torch's intra-op threads (``cfg.threads``, when not null), seed
+    everything, build the aligner ``cfg.model.name`` (its keyword
     arguments are the other ``cfg.model`` keys) and its data module
     (:func:`build_datamodule`), the callbacks and loggers (``_target_`` nodes),
     a Lightning Trainer from ``cfg.trainer``; save the resolved config as
@@ -196,6 +197,11 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     ckpt = cfg.ckpt_path
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt) and not Path(ckpt).is_file():
         raise ConfigError(f"ckpt_path: no checkpoint file {str(ckpt)!r}")
+    threads = cfg.get("threads")
+    if threads is not None:
+        if not isinstance(threads, int) or threads < 1:
+            raise ConfigError(f"threads must be a positive integer or null, got {threads!r}")
+        torch.set_num_threads(threads)
     L.seed_everything(cfg.seed, workers=True)
     spec = pm.aligner(cfg.model.name)
     datamodule = build_datamodule(cfg, pm)
