@@ -224,3 +224,17 @@ def test_threads_option_sets_torch_threads(example_plugin: Path, tmp_path: Path)
         torch.set_num_threads(before)
     with pytest.raises(app.ConfigError, match="threads must be a positive integer"):
         app.run(app.compose([*common, f"run_dir={tmp_path / 'bad'}", "threads=0"]))
+
+
+def test_fit_with_render_callback_writes_renders(example_plugin: Path, tmp_path: Path) -> None:
+    from PIL import Image
+
+    run_dir = tmp_path / "run"
+    app.run(app.compose(["model=example", f"data.cache_dir={tmp_path / 'cache'}", *FAST,
+                         f"run_dir={run_dir}", "callbacks=render", "trainer.max_epochs=2",
+                         "callbacks.render_samples.every_n_epochs=1"]))
+    renders = sorted(p.name for p in (run_dir / "renders").iterdir())
+    assert any(n.endswith(".gif") for n in renders) and any(n.endswith(".png") for n in renders)
+    sheet = next((run_dir / "renders").glob("*.png"))
+    pixels = Image.open(sheet).convert("L")
+    assert min(pixels.getextrema()) < 128  # something is drawn, not a blank image
