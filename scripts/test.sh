@@ -16,5 +16,7 @@ echo "== ruff"
 "$VENV/bin/ruff" check src tests benchmarks plugins
 echo "== pytest"
 "$VENV/bin/python" -m pytest -n 2 --durations=15 "$@"
+echo "== doctests (the docstring examples of the library)"
+"$VENV/bin/python" -m pytest -q -n 2 -p no:cacheprovider --doctest-modules src/skelagnostic
 echo "== docs"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$(mktemp -d)"
