@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Set up a virtual environment and run every check CI runs: ruff, the test
-# suite (pytest, slow tests included), the benchmark smoke sizes and the docs
-# build. Usage: bash scripts/test.sh [extra pytest args]
+# suite (pytest, slow tests and benchmark smoke sizes included), the library's
+# docstring examples and the strict docs build.
+# Usage: bash scripts/test.sh [extra pytest args]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
