@@ -3,6 +3,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
+import skelagnostic as sa
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.kinematics import depth_levels, forward_kinematics
 
@@ -80,7 +81,7 @@ def test_fk_gradient_reaches_offsets():
 
 def test_depth_levels_and_errors():
     assert depth_levels(PARENTS) == [[0], [1, 4, 6], [2, 5, 7], [3, 8, 9]]
-    with pytest.raises(ValueError, match="joints"):
+    with pytest.raises(sa.MotionError, match="joints"):
         forward_kinematics(
             torch.zeros(1, 3, 4), torch.zeros(1, 3), torch.zeros(4, 3), [-1, 0, 1, 2]
         )

@@ -18,6 +18,8 @@ from functools import lru_cache
 
 import torch
 
+from skelagnostic.errors import MotionError
+
 __all__ = ["depth_levels", "forward_kinematics"]
 
 
@@ -58,12 +60,13 @@ def forward_kinematics(
         ``(global_rotations [..., J, 4], global_positions [..., J, 3])``.
 
     Raises:
-        ValueError: If the shapes disagree with ``parents`` or the hierarchy is invalid.
+        MotionError: If the shapes disagree with ``parents`` or the hierarchy is invalid
+            (a ``ValueError`` subclass).
     """
     parents = tuple(int(p) for p in parents)
     num_joints = len(parents)
     if rotations.shape[-2] != num_joints or offsets.shape[-2] != num_joints:
-        raise ValueError(
+        raise MotionError(
             f"forward_kinematics: {num_joints} parents but rotations have "
             f"{rotations.shape[-2]} joints and offsets {offsets.shape[-2]}"
         )
@@ -72,7 +75,7 @@ def forward_kinematics(
         or parents[0] >= 0
         or any(not 0 <= p < j for j, p in enumerate(parents) if j > 0)
     ):
-        raise ValueError(
+        raise MotionError(
             "forward_kinematics: joint 0 must be the only root and parents must precede children"
         )
     # [4, J, ...] and [3, ...]: one contiguous tensor per component
