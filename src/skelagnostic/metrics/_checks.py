@@ -155,3 +155,16 @@ def check_indices(name: str, arg: str, indices: Sequence[int] | None) -> list[in
     if not out or not all(isinstance(i, int) and not isinstance(i, bool) for i in out):
         raise fail(name, f"{arg} must be a non-empty sequence of joint indices")
     return out
+
+
+def check_same_frames(metric: str, preds: Tensor, target: Tensor) -> None:
+    """Raise unless ``preds`` and ``target`` share every dimension before the last two.
+
+    For point sets whose point counts may differ (``[..., T, N, 3]`` vs ``[..., T, M, 3]``).
+    """
+    if preds.shape[:-2] != target.shape[:-2]:
+        raise fail(
+            metric,
+            "preds and target must share their sequence and frame dimensions, got "
+            f"preds {list(preds.shape)} and target {list(target.shape)}",
+        )

@@ -26,6 +26,7 @@ from skelagnostic.metrics._checks import (
     check_frame_mask,
     check_indices,
     check_positive_int,
+    check_same_frames,
     check_same_shape,
     check_tensor,
     fail,
@@ -695,12 +696,7 @@ def _temporal_knn_update(
     check_choice(name, "reduction", reduction, REDUCTIONS)
     check_tensor(name, "preds", preds, min_ndim=3, last_dim=3, layout="[..., T, N, 3]")
     check_tensor(name, "target", target, min_ndim=3, last_dim=3, layout="[..., T, M, 3]")
-    if preds.shape[:-2] != target.shape[:-2]:
-        raise fail(
-            name,
-            "preds and target must share their sequence and frame dimensions, got "
-            f"preds {list(preds.shape)} and target {list(target.shape)}",
-        )
+    check_same_frames(name, preds, target)
     frames, num_p, num_t = preds.shape[-3], preds.shape[-2], target.shape[-2]
     g_p, g_t = _group_ids(name, preds_groups, target_groups, num_p, num_t, preds.device)
     for group in g_t.unique().tolist():
@@ -803,12 +799,7 @@ def _end_effector_update(
     check_choice(name, "reduction", reduction, REDUCTIONS)
     check_tensor(name, "preds", preds, min_ndim=3, last_dim=3, layout="[..., T, J, 3]")
     check_tensor(name, "target", target, min_ndim=3, last_dim=3, layout="[..., T, J, 3]")
-    if preds.shape[:-2] != target.shape[:-2]:
-        raise fail(
-            name,
-            "preds and target must share their sequence and frame dimensions, got "
-            f"preds {list(preds.shape)} and target {list(target.shape)}",
-        )
+    check_same_frames(name, preds, target)
     preds, target = promote(preds, target)
     idx_p = check_indices(name, "preds_indices", preds_indices)
     idx_t = check_indices(name, "target_indices", target_indices)
