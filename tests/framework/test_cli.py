@@ -238,3 +238,53 @@ def test_fit_with_render_callback_writes_renders(example_plugin: Path, tmp_path:
     sheet = next((run_dir / "renders").glob("*.png"))
     pixels = Image.open(sheet).convert("L")
     assert min(pixels.getextrema()) < 128  # something is drawn, not a blank image
+
+
+class _DataDefaultsPlugin:
+    """A plugin whose aligner brings its own default data and data-module keys."""
+
+    @staticmethod
+    @plugins.hookimpl
+    def register_aligners(register) -> None:
+        from skelagnostic_example.aligner import ExampleAligner
+
+        register("withdata", ExampleAligner, config={"hidden": 8},
+                 data={"source": "procedural", "kinds": ["biped31"], "seconds": 3.0},
+                 data_options={"window": 20, "fps": 25})
+
+
+def test_aligner_data_defaults_merge_under_the_command_line(example_plugin: Path) -> None:
+    pm = plugins.PluginManager(load_entrypoints=False)
+    pm.register(_DataDefaultsPlugin(), "withdata")
+    # The aligner's default data replaces data=procedural's options ...
+    cfg = app.compose(["model=withdata", "run_dir=/tmp/x"], plugin_manager=pm)
+    assert cfg.model.hidden == 8
+    assert list(cfg.data.kinds) == ["biped31"] and cfg.data.seconds == 3.0
+    assert cfg.data.window == 20 and cfg.data.fps == 25 and cfg.data.batch_size == 32
+    # ... a data=... choice wins over it, but keeps the aligner's data-module keys ...
+    cfg = app.compose(["model=withdata", "run_dir=/tmp/x", "data=bvh", "data.paths=[a]"],
+                      plugin_manager=pm)
+    assert cfg.data.source == "bvh" and "kinds" not in cfg.data and cfg.data.window == 20
+    # ... and data.<key>=... overrides everything.
+    cfg = app.compose(["model=withdata", "run_dir=/tmp/x", "data.window=7",
+                       "data.kinds=[quadruped]"], plugin_manager=pm)
+    assert cfg.data.window == 7 and list(cfg.data.kinds) == ["quadruped"]
+    # Aligners without data defaults keep data=procedural.
+    cfg = app.compose(["model=example", "run_dir=/tmp/x"])
+    assert cfg.data.source == "procedural" and cfg.data.window == 32
+
+
+def test_aligner_data_defaults_need_a_source() -> None:
+    class Bad:
+        @staticmethod
+        @plugins.hookimpl
+        def register_aligners(register) -> None:
+            from skelagnostic_example.aligner import ExampleAligner
+
+            register("bad", ExampleAligner, data={"kinds": ["biped31"]})
+
+    pm = plugins.PluginManager(load_entrypoints=False)
+    pm.register(Bad(), "bad")
+    with pytest.warns(plugins.PluginLoadWarning, match="needs a 'source'"):
+        assert "bad" not in pm.aligners
+    assert "needs a 'source'" in pm.plugins()[-1].error

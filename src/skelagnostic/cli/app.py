@@ -238,7 +238,15 @@ def register_model_configs(pm: PluginManager) -> None:
     """Store each registered aligner's default config as ``model/<name>`` in the ConfigStore."""
     store = ConfigStore.instance()
     for name, spec in pm.aligners.items():
-        store.store(group="model", name=name, node={"name": name, **dict(spec.config)})
+        node: dict[str, Any] = {"model": {"name": name, **dict(spec.config)}}
+        if spec.data:
+            # The aligner's default data: selected unless the command line names data=...
+            store.store(group="data", name=name,
+                        node={"defaults": ["_base", "_self_"], **dict(spec.data)})
+            node["defaults"] = [{"override /data": name}, "_self_"]
+        if spec.data_options:
+            node["data"] = dict(spec.data_options)
+        store.store(group="model", name=name, node=node, package="_global_")
 
 
 def compose(

@@ -30,11 +30,19 @@ def register_aligners(register: Callable[..., Any]) -> None:
     """Contribute aligners (trainable models) to ``model=<name>``.
 
     Call ``register(name, module, datamodule=MotionDataModule, config=None,
-    description="")`` once per aligner, where ``module`` is an
-    :class:`~skelagnostic.aligners.Aligner` subclass, ``datamodule`` a
-    :class:`~skelagnostic.data.MotionDataModule` subclass that produces the
-    batches the aligner trains on, and ``config`` a mapping of default keyword
-    arguments for ``module``. ``config`` becomes the Hydra config ``model/<name>``.
+    description="", data=None, data_options=None)`` once per aligner, where
+    ``module`` is an :class:`~skelagnostic.aligners.Aligner` subclass,
+    ``datamodule`` a :class:`~skelagnostic.data.MotionDataModule` subclass that
+    produces the batches the aligner trains on, and ``config`` a mapping of
+    default keyword arguments for ``module``. ``config`` becomes the Hydra
+    config ``model/<name>``.
+
+    ``data`` (optional) is the aligner's default data config, with a ``source``
+    key: it becomes ``data/<name>`` and is used when the command line names no
+    ``data=...``. ``data_options`` (optional) are data-module keys the aligner
+    needs whatever the data (e.g. ``{"fps": 30, "window": 30}``): they are
+    merged over the selected data config, and command-line ``data.<key>=...``
+    overrides still win.
 
     Args:
         register: The registration callback.

@@ -81,6 +81,11 @@ class AlignerSpec:
         config: Default keyword arguments of ``module`` (the ``model/<name>`` config).
         description: One line for ``skelagnostic plugins``.
         plugin: Name of the plugin that registered it.
+        data: The aligner's default data config (stored as ``data/<name>`` and selected
+            when the command line names no ``data=``), or empty for ``data: procedural``.
+        data_options: Data-module keys (e.g. ``window``, ``fps``) the aligner needs
+            whatever the data source; merged over the selected data config, under the
+            command line's overrides.
     """
 
     name: str
@@ -89,6 +94,8 @@ class AlignerSpec:
     config: Mapping[str, Any] = field(default_factory=dict)
     description: str = ""
     plugin: str = ""
+    data: Mapping[str, Any] = field(default_factory=dict)
+    data_options: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -329,6 +336,8 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
         datamodule: type | None = None,
         config: Mapping[str, Any] | None = None,
         description: str = "",
+        data: Mapping[str, Any] | None = None,
+        data_options: Mapping[str, Any] | None = None,
     ) -> None:
         from skelagnostic.aligners import Aligner
         from skelagnostic.data import MotionDataModule
@@ -346,9 +355,13 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
         config = dict(config or {})
         if "name" in config:
             raise PluginError(f"aligner {name!r}: config key 'name' is reserved")
+        data = dict(data or {})
+        if data and "source" not in data:
+            raise PluginError(f"aligner {name!r}: data needs a 'source' (a registered dataset)")
         out.aligners.append(
             AlignerSpec(name, module, datamodule, MappingProxyType(config), description,
-                        plugin_name)
+                        plugin_name, MappingProxyType(data),
+                        MappingProxyType(dict(data_options or {})))
         )
 
     def register_representation(name: str, cls: type) -> None:
