@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
 
@@ -25,7 +26,8 @@ KNOWN_CAPABILITIES = frozenset(
         "quadruped",  # non-human skeletons are supported
         "phase",  # the latent carries phase/frequency/amplitude
         "denoise",  # decode(encode(noisy)) removes noise
-        "interpolate",  # fills frames between keyframes
+        "interpolate",  # fills frames between keyframes: interpolate(motion, keyframes)
+        "transfer",  # motion of one character -> another by matching: transfer(motion, targets)
     }
 )
 
@@ -108,6 +110,49 @@ class Aligner(L.LightningModule, ABC):
         """
         self.require("retarget")
         return self.decode(self.encode(motion), target)
+
+    def interpolate(self, motion: Motion, keyframes: Sequence[int]) -> Motion:
+        """Fill the frames between keyframes (capability ``"interpolate"``).
+
+        Aligners that declare ``"interpolate"`` override this.
+
+        Args:
+            motion: A motion whose frames at ``keyframes`` are the keys; other
+                frames are ignored.
+            keyframes: Increasing frame indices, the first being 0 and the last
+                ``motion.num_frames - 1``.
+
+        Returns:
+            A motion of the same skeleton, length and fps whose keyframes equal
+            the input's and whose other frames are generated.
+
+        Raises:
+            CapabilityError: The aligner does not declare ``"interpolate"``.
+        """
+        self.require("interpolate")
+        raise NotImplementedError(f"{type(self).__name__} declares 'interpolate' but "
+                                  "does not override Aligner.interpolate")
+
+    def transfer(self, motion: Motion, targets: Sequence[Motion]) -> Motion:
+        """Re-enact ``motion`` with another character's motion (capability ``"transfer"``).
+
+        Aligners that declare ``"transfer"`` override this (for example by
+        matching in a shared latent space, as VQ-PAE does).
+
+        Args:
+            motion: The source motion.
+            targets: Clips of the target character (all on one skeleton): the
+                material the result is assembled from.
+
+        Returns:
+            A motion on the targets' skeleton following ``motion``.
+
+        Raises:
+            CapabilityError: The aligner does not declare ``"transfer"``.
+        """
+        self.require("transfer")
+        raise NotImplementedError(f"{type(self).__name__} declares 'transfer' but "
+                                  "does not override Aligner.transfer")
 
     def supports(self, capability: str) -> bool:
         """Whether the aligner declares ``capability``."""

@@ -19,6 +19,12 @@ VERBS: dict[str, tuple[str, str, str]] = {
     "predict": ("skelagnostic.cli.app", "predict", "aligner outputs -> predictions.pt"),
     "plugins": ("skelagnostic.cli.plugins", "main", "list plugins: name, version, source, status"),
     "render": ("skelagnostic.cli.render", "main", "render a motion to PNG/GIF"),
+    "retarget": ("skelagnostic.cli.infer", "retarget",
+                 "a trained aligner moves a BVH onto another skeleton"),
+    "interpolate": ("skelagnostic.cli.infer", "interpolate",
+                    "a trained aligner fills the frames between keyframes of a BVH"),
+    "transfer": ("skelagnostic.cli.infer", "transfer",
+                 "a trained aligner re-enacts a BVH with another character's clips"),
 }
 
 

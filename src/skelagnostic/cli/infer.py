@@ -1,0 +1,282 @@
+"""``skelagnostic retarget|interpolate|transfer``: apply a trained aligner to BVH files.
+
+Usage::
+
+    skelagnostic retarget SOURCE.bvh TARGET.bvh ckpt=PATH [model=NAME] out=OUT.bvh
+    skelagnostic interpolate INPUT.bvh ckpt=PATH (every=N | keys=0,15,40) out=OUT.bvh
+    skelagnostic transfer SOURCE.bvh TARGET.bvh|DIR [...] ckpt=PATH out=OUT.bvh
+
+Every verb also takes ``render=OUT.gif`` (or ``.png``/``.mp4``) to draw the input
+next to the result, plus the rendering options of ``skelagnostic render``.
+
+The aligner is built from a checkpoint written by ``skelagnostic fit``; its name
+comes from ``model=`` or, when omitted, from the run's ``config.yaml`` next to
+the checkpoint. Each verb calls one method of
+:class:`~skelagnostic.aligners.Aligner` (``retarget``, ``interpolate``,
+``transfer``), so it works with any plugin that declares the capability.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from skelagnostic.cli.render import RENDER_OPTIONS, parse_arguments, render_from_options
+from skelagnostic.errors import SkelagnosticError
+
+if TYPE_CHECKING:
+    from skelagnostic.aligners import Aligner
+    from skelagnostic.core.motion import Motion
+
+__all__ = ["interpolate", "keyframes_from_options", "load_from_checkpoint", "retarget",
+           "transfer"]
+
+_COMMON = {
+    "ckpt": "checkpoint written by `skelagnostic fit` (required)",
+    "model": "registered aligner name; default: model.name of the run's config.yaml",
+    "out": "output BVH path (required); written atomically",
+    "render": "also draw input and result side by side (.gif, .mp4 or .png)",
+}
+
+_USAGE = {
+    "retarget": (
+        "usage: skelagnostic retarget SOURCE.bvh TARGET.bvh ckpt=PATH out=OUT.bvh "
+        "[key=value ...]\n\n"
+        "Move the motion of SOURCE.bvh onto the skeleton of TARGET.bvh (only its\n"
+        "hierarchy is used) with a trained aligner that declares 'retarget'.",
+        {},
+    ),
+    "interpolate": (
+        "usage: skelagnostic interpolate INPUT.bvh ckpt=PATH (every=N | keys=I,J,...) "
+        "out=OUT.bvh [key=value ...]\n\n"
+        "Keep the keyframes of INPUT.bvh and generate the frames between them with a\n"
+        "trained aligner that declares 'interpolate'.",
+        {
+            "every": "a keyframe every N frames (the first and last frames are always keys)",
+            "keys": "explicit comma-separated keyframe indices (0 and the last are added)",
+        },
+    ),
+    "transfer": (
+        "usage: skelagnostic transfer SOURCE.bvh TARGET.bvh|DIR [...] ckpt=PATH out=OUT.bvh "
+        "[key=value ...]\n\n"
+        "Re-enact SOURCE.bvh with the target character's clips (BVH files or\n"
+        "directories of them, one skeleton) with a trained aligner that declares\n"
+        "'transfer' (for example VQ-PAE's frequency-scaled motion matching).",
+        {},
+    ),
+}
+
+
+def _usage(verb: str) -> str:
+    head, extra = _USAGE[verb]
+    options = {**_COMMON, **extra, **RENDER_OPTIONS}
+    lines = [f"  {key:<11} {text}" for key, text in options.items()]
+    return head + "\n\noptions:\n" + "\n".join(lines)
+
+
+def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
+    """Build the aligner saved in a ``skelagnostic fit`` checkpoint.
+
+    Args:
+        ckpt: The checkpoint file.
+        model: Registered aligner name; ``None`` reads ``model.name`` from the
+            ``config.yaml`` of the run directory holding the checkpoint
+            (``<run>/checkpoints/<file>.ckpt`` or ``<run>/<file>.ckpt``).
+
+    Returns:
+        The aligner in eval mode.
+
+    Raises:
+        SkelagnosticError: The checkpoint is missing, the name cannot be found,
+            or the name is not registered.
+    """
+    from skelagnostic.plugins import load_aligner
+
+    path = Path(ckpt)
+    if not path.is_file():
+        raise SkelagnosticError(f"ckpt={str(path)!r}: no such checkpoint file")
+    if model is None:
+        model = _model_name_near(path)
+    try:
+        return load_aligner(model, path)
+    except FileNotFoundError as error:  # pragma: no cover - checked above, kept for races
+        raise SkelagnosticError(str(error)) from None
+
+
+def _model_name_near(ckpt: Path) -> str:
+    from omegaconf import OmegaConf
+
+    for run_dir in (ckpt.parent, ckpt.parent.parent):
+        config = run_dir / "config.yaml"
+        if config.is_file():
+            name = OmegaConf.select(OmegaConf.load(config), "model.name")
+            if isinstance(name, str) and name:
+                return name
+            raise SkelagnosticError(f"{config}: has no model.name; give model=NAME")
+    raise SkelagnosticError(
+        f"ckpt={str(ckpt)!r}: no config.yaml of a skelagnostic run next to it; give model=NAME"
+    )
+
+
+def keyframes_from_options(num_frames: int, every: str | None, keys: str | None) -> list[int]:
+    """The keyframe indices asked for by ``every=`` or ``keys=``.
+
+    The first and last frames are always keys.
+
+    Args:
+        num_frames: Length of the clip.
+        every: ``every=`` value (a positive integer as text) or ``None``.
+        keys: ``keys=`` value (comma-separated indices) or ``None``.
+
+    Returns:
+        Sorted, unique keyframe indices.
+
+    Raises:
+        SkelagnosticError: Neither or both given, a malformed value, or an index
+            outside the clip.
+
+    Examples:
+        >>> keyframes_from_options(10, "4", None)
+        [0, 4, 8, 9]
+        >>> keyframes_from_options(10, None, "3,5")
+        [0, 3, 5, 9]
+    """
+    if (every is None) == (keys is None):
+        raise SkelagnosticError("give exactly one of every=N or keys=I,J,...")
+    if num_frames < 2:
+        raise SkelagnosticError(f"the clip has {num_frames} frame(s); need at least 2")
+    if every is not None:
+        try:
+            step = int(every)
+        except ValueError:
+            step = 0
+        if step < 1:
+            raise SkelagnosticError(f"option every={every!r} is not a positive integer")
+        chosen = set(range(0, num_frames, step))
+    else:
+        try:
+            chosen = {int(k) for k in str(keys).split(",") if k.strip()}
+        except ValueError:
+            raise SkelagnosticError(f"option keys={keys!r} is not a list of integers") from None
+        bad = sorted(k for k in chosen if not 0 <= k < num_frames)
+        if bad:
+            raise SkelagnosticError(
+                f"option keys: frame(s) {bad} are outside the clip (0..{num_frames - 1})"
+            )
+    return sorted(chosen | {0, num_frames - 1})
+
+
+def _bvh_paths(items: Sequence[str]) -> list[Path]:
+    paths: list[Path] = []
+    for item in items:
+        path = Path(item)
+        if path.is_dir():
+            found = sorted(p for p in path.rglob("*") if p.suffix.lower() == ".bvh")
+            if not found:
+                raise SkelagnosticError(f"{path}: directory holds no .bvh file")
+            paths.extend(found)
+        elif path.is_file():
+            paths.append(path)
+        else:
+            raise SkelagnosticError(f"{path}: no such file or directory")
+    return paths
+
+
+def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
+         apply: Callable[[Aligner, list[Path], dict[str, str]], tuple[Motion, Motion]]) -> int:
+    """Shared driver: parse, check options, load the aligner, apply, write, render."""
+    if not argv or any(word in ("-h", "--help", "help") for word in argv):
+        print(_usage(verb))
+        return 0 if argv else 2
+    try:
+        from skelagnostic import write_bvh
+
+        words, options = parse_arguments(argv)
+        known = set(_COMMON) | set(_USAGE[verb][1]) | set(RENDER_OPTIONS)
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise SkelagnosticError(
+                f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
+                f"see 'skelagnostic {verb} --help'"
+            )
+        low, high = positional
+        if len(words) < low or (high is not None and len(words) > high):
+            raise SkelagnosticError(
+                f"expected {low if high == low else f'at least {low}'} input path(s), "
+                f"got {len(words)}; see 'skelagnostic {verb} --help'"
+            )
+        for key in ("ckpt", "out"):
+            if key not in options:
+                raise SkelagnosticError(f"missing option {key}=")
+        if Path(options["out"]).suffix.lower() != ".bvh":
+            raise SkelagnosticError(f"option out={options['out']!r}: must be a .bvh path")
+        paths = [Path(w) for w in words]
+        for path in paths[: 1 if verb == "transfer" else len(paths)]:
+            if not path.is_file():
+                raise SkelagnosticError(f"{path}: no such file")
+        aligner = load_from_checkpoint(options["ckpt"], options.get("model"))
+        source, result = apply(aligner, paths, options)
+        Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
+        write_bvh(result, options["out"])
+        print(options["out"])
+        if "render" in options:
+            labels = options.get("labels")
+            render_options = {**options, "labels": labels or f"input,{verb}"}
+            for path in render_from_options([source, result], render_options, out_key="render"):
+                print(path)
+    except SkelagnosticError as error:
+        print(f"skelagnostic {verb}: error: {error}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def retarget(argv: list[str]) -> int:
+    """Run ``skelagnostic retarget`` (``Aligner.retarget``)."""
+
+    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
+              ) -> tuple[Motion, Motion]:
+        from skelagnostic import read_bvh
+
+        source, target = read_bvh(paths[0]), read_bvh(paths[1])
+        aligner.require("retarget")
+        return source, aligner.retarget(source, target.skeleton)
+
+    return _run("retarget", argv, (2, 2), apply)
+
+
+def interpolate(argv: list[str]) -> int:
+    """Run ``skelagnostic interpolate`` (``Aligner.interpolate``)."""
+
+    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
+              ) -> tuple[Motion, Motion]:
+        from skelagnostic import read_bvh
+
+        motion = read_bvh(paths[0])
+        keys = keyframes_from_options(motion.num_frames, options.get("every"),
+                                      options.get("keys"))
+        aligner.require("interpolate")
+        return motion, aligner.interpolate(motion, keys)
+
+    return _run("interpolate", argv, (1, 1), apply)
+
+
+def transfer(argv: list[str]) -> int:
+    """Run ``skelagnostic transfer`` (``Aligner.transfer``)."""
+
+    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
+              ) -> tuple[Motion, Motion]:
+        from skelagnostic import read_bvh
+
+        source = read_bvh(paths[0])
+        targets = [read_bvh(p) for p in _bvh_paths([str(p) for p in paths[1:]])]
+        skeletons = {tuple(t.skeleton.joint_names) for t in targets}
+        if len(skeletons) > 1:
+            raise SkelagnosticError(
+                "the target clips are on different skeletons; give clips of one character"
+            )
+        aligner.require("transfer")
+        return source, aligner.transfer(source, targets)
+
+    return _run("transfer", argv, (2, None), apply)
