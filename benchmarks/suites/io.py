@@ -11,6 +11,9 @@ result names say so.
   ``Motion.global_positions()`` vs pybvh's ``Bvh.joint_positions()``. pybvh
   caches its result on the object, so each of its repeats times a freshly read
   object (the read itself is not timed).
+* ``read_bvh+global_positions``: a file to world positions, end to end.
+  ``read_bvh`` converts Euler angles to quaternions only when the rotations are
+  first used, so the conversion is timed here (and not in ``read_bvh``).
 * ``write_bvh``: ``skelagnostic.write_bvh`` vs ``pybvh.write_bvh_file``.
 
 Unless ``--threads`` is given, torch runs on one thread here: pybvh is
@@ -100,6 +103,8 @@ def run(size: str) -> list[Result]:
         read_base = timeit_median(lambda: pybvh.read_bvh_file(path), repeats)
         fk_ours = timeit_median(motion.global_positions, repeats)
         fk_base = _fresh_pybvh_fk(path, repeats)
+        e2e_ours = timeit_median(lambda: sa.read_bvh(path).global_positions(), repeats)
+        e2e_base = timeit_median(lambda: pybvh.read_bvh_file(path).joint_positions(), repeats)
         bvh_obj = pybvh.read_bvh_file(path)
         write_ours = timeit_median(lambda: sa.write_bvh(motion, workdir / "ours.bvh"), repeats)
         write_base = timeit_median(
@@ -115,6 +120,8 @@ def run(size: str) -> list[Result]:
             "pybvh Bvh.joint_positions",
             fk_base * 1e3,
         ),
+        Result("read_bvh+global_positions" + tag, "ms", e2e_ours * 1e3,
+               "pybvh.read_bvh_file + joint_positions", e2e_base * 1e3),
         Result("write_bvh" + tag, "ms", write_ours * 1e3, "pybvh.write_bvh_file", write_base * 1e3),
         Result("positions_max_rel_diff_vs_pybvh" + tag, "ratio", error),
     ]

@@ -245,3 +245,23 @@ def test_parse_bvh_from_text():
     assert m.num_frames == 3
     with pytest.raises(sa.BVHError, match=r"<bvh text>:\d+"):
         sa.parse_bvh(TINY.replace("2 92 4", "2 nan 4"))
+
+
+def test_rotations_are_converted_once_on_first_use(tmp_path):
+    import copy
+    import pickle
+
+    motion, _ = sa.procedural.generate("biped31", "run", seconds=1.0, fps=30)
+    path = tmp_path / "run.bvh"
+    sa.write_bvh(motion, path)
+    read = sa.read_bvh(path)
+    # metadata does not need the rotations ...
+    assert read._rotations is None
+    assert (read.num_frames, read.num_joints, read.dtype) == (31, 31, torch.float64)
+    # ... a pickle or a copy carries them, computed once
+    for other in (pickle.loads(pickle.dumps(read)), copy.deepcopy(read)):
+        assert torch.equal(other.rotations, read.rotations)
+    first = read.rotations
+    assert read.rotations is first and read._pending is None
+    assert torch.allclose(read.global_positions(), motion.global_positions(), atol=1e-5)
+    assert sa.read_bvh(path, dtype=torch.float32).rotations.dtype == torch.float32

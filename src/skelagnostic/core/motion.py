@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import builtins
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -123,18 +124,66 @@ class Motion:
         if units is not None and units not in UNITS:
             raise MotionError(f"unknown units {units!r}; known: {', '.join(UNITS)}")
         self.skeleton = skeleton
-        self.rotations = rot / norms.unsqueeze(-1).clamp_min(1e-12)
+        self._rotations: torch.Tensor | None = rot / norms.unsqueeze(-1).clamp_min(1e-12)
+        self._pending: Callable[[], torch.Tensor] | None = None
         self.root_positions = root
         self.translations = trans
         self.fps = fps
         self.name = name
         self.units = units
 
+    @classmethod
+    def _deferred(
+        cls,
+        skeleton: Skeleton,
+        rotations: Callable[[], torch.Tensor],
+        root_positions: torch.Tensor,
+        fps: float,
+        translations: torch.Tensor | None = None,
+        name: str | None = None,
+    ) -> Motion:
+        """A motion whose rotations are computed on first access (for readers).
+
+        The caller guarantees what ``__init__`` would check: ``rotations()``
+        returns finite unit quaternions ``[T, J, 4]`` of ``root_positions``'s
+        dtype and device, ``root_positions`` (``[T, 3]``) and ``translations``
+        are finite, and ``fps`` is positive. BVH reading uses it so that a file
+        is parsed without converting every Euler angle up front; the conversion
+        runs once, when :attr:`rotations` (or anything built on it) is first used.
+        """
+        motion = cls.__new__(cls)
+        motion.skeleton = skeleton
+        motion._rotations = None
+        motion._pending = rotations
+        motion.root_positions = root_positions
+        motion.translations = translations
+        motion.fps = float(fps)
+        motion.name = name
+        motion.units = None
+        return motion
+
+    @property
+    def rotations(self) -> torch.Tensor:
+        """``[T, J, 4]`` local rotations, unit quaternions (w, x, y, z)."""
+        if self._rotations is None:
+            assert self._pending is not None
+            self._rotations, self._pending = self._pending(), None
+        return self._rotations
+
+    @rotations.setter
+    def rotations(self, value: torch.Tensor) -> None:
+        self._rotations, self._pending = value, None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_rotations"], state["_pending"] = self.rotations, None
+        return state
+
     # ------------------------------------------------------------------ basics
     @property
     def num_frames(self) -> int:
         """Number of frames ``T``."""
-        return int(self.rotations.shape[0])
+        return int(self.root_positions.shape[0])
 
     @property
     def num_joints(self) -> int:
@@ -149,12 +198,12 @@ class Motion:
     @property
     def dtype(self) -> torch.dtype:
         """Floating dtype of the tensors."""
-        return self.rotations.dtype
+        return self.root_positions.dtype
 
     @property
     def device(self) -> torch.device:
         """Device of the tensors."""
-        return self.rotations.device
+        return self.root_positions.device
 
     def __len__(self) -> int:
         return self.num_frames

@@ -29,7 +29,7 @@ import torch
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.errors import BVHError, MotionError, SkeletonError
+from skelagnostic.errors import BVHError, SkeletonError
 
 __all__ = ["parse_bvh", "read_bvh", "write_bvh"]
 
@@ -358,19 +358,24 @@ def _build_motion(
         root_positions = local[:, 0]
         if any(k > 0 for k in pos_joint):
             translations = local
-    rotations = torch.zeros(num_frames, num_joints, 4, dtype=torch.float64)
-    rotations[..., 0] = 1.0
     angles = torch.from_numpy(euler)
     by_order: dict[str, list[int]] = {}
     for k, order in enumerate(orders):
         if order:
             by_order.setdefault(order, []).append(k)
-    for order, ks in by_order.items():
-        if len(ks) == num_joints:  # the usual case: one order for every joint
-            rotations = Q.euler_to_quat(angles[..., : len(order)], order)
-        else:
-            rotations[:, ks] = Q.euler_to_quat(angles[:, ks, : len(order)], order)
-    rotations = Q.continuity(rotations, dim=0)
+
+    def rotations() -> torch.Tensor:
+        # Euler -> quaternions runs on first use of Motion.rotations, not while reading:
+        # the angles are finite (checked above), so the result is finite and unit.
+        quats = torch.zeros(num_frames, num_joints, 4, dtype=torch.float64)
+        quats[..., 0] = 1.0
+        for order, ks in by_order.items():
+            if len(ks) == num_joints:  # the usual case: one order for every joint
+                quats = Q.euler_to_quat(angles[..., : len(order)], order)
+            else:
+                quats[:, ks] = Q.euler_to_quat(angles[:, ks, : len(order)], order)
+        return Q.continuity(quats, dim=0).to(dtype)
+
     try:
         skeleton = Skeleton(
             [j.name for j in joints],
@@ -380,18 +385,18 @@ def _build_motion(
             channels=[j.channels for j in joints],
             name=name,
         )
-        return Motion(
-            skeleton,
-            rotations.to(dtype),
-            torch.from_numpy(np.ascontiguousarray(root_positions)).to(dtype),
-            _snap_fps(frame_time),
-            translations=None
-            if translations is None
-            else torch.from_numpy(np.ascontiguousarray(translations)).to(dtype),
-            name=name,
-        )
-    except (SkeletonError, MotionError) as exc:
+    except SkeletonError as exc:
         raise BVHError(str(exc), path) from None
+    return Motion._deferred(
+        skeleton,
+        rotations,
+        torch.from_numpy(np.ascontiguousarray(root_positions)).to(dtype),
+        _snap_fps(frame_time),
+        translations=None
+        if translations is None
+        else torch.from_numpy(np.ascontiguousarray(translations)).to(dtype),
+        name=name,
+    )
 
 
 def read_bvh(path: str | Path, dtype: torch.dtype = torch.float64) -> Motion:
