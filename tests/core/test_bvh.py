@@ -265,3 +265,20 @@ def test_rotations_are_converted_once_on_first_use(tmp_path):
     assert read.rotations is first and read._pending is None
     assert torch.allclose(read.global_positions(), motion.global_positions(), atol=1e-5)
     assert sa.read_bvh(path, dtype=torch.float32).rotations.dtype == torch.float32
+
+
+@pytest.mark.parametrize("encoding", ["utf-8", "latin-1"])
+def test_header_encodings_blank_lines_and_bad_bytes_in_the_data(tmp_path, encoding):
+    # Only the hierarchy and the two header lines are decoded; blank lines may sit
+    # between MOTION, Frames: and Frame Time:, and stray bytes in the data are reported
+    # with their line.
+    text = TINY.replace("Spine", "Spíne").replace("Frames: 3\n", "\n\nFrames: 3\n\n")
+    path = tmp_path / "enc.bvh"
+    path.write_bytes(text.encode(encoding))
+    m = sa.read_bvh(path)
+    assert m.skeleton.joint_names[1] == "Spíne" and m.num_frames == 3
+    bad = text.encode(encoding).replace(b"\n2 92", b"\n\xff 92")
+    path.write_bytes(bad)
+    line = text.splitlines().index("2 92 4 10 -10 20 20 30 40 7 8 9") + 1
+    with pytest.raises(sa.BVHError, match=rf"enc.bvh:{line}: motion value '.' is not a number"):
+        sa.read_bvh(path)

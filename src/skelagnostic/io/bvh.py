@@ -38,6 +38,25 @@ _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 _DEFAULT_ROOT = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
 _DEFAULT_JOINT = ["Zrotation", "Yrotation", "Xrotation"]
 _MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
+_MOTION_BYTES = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
+
+
+def _head(raw: bytes) -> bytes:
+    """``raw`` up to the end of the second non-blank line after ``MOTION``.
+
+    Only this part is decoded to text: the motion lines go to numpy as bytes.
+    Without a ``MOTION`` line the whole file is returned (for the error message).
+    """
+    match = _MOTION_BYTES.search(raw)
+    if match is None:
+        return raw
+    pos, found = match.end(), 0
+    while found < 2 and pos < len(raw):
+        end = raw.find(b"\n", pos)
+        end = len(raw) if end < 0 else end
+        found += bool(raw[pos:end].strip()) and pos > match.end()
+        pos = end + 1
+    return raw[:pos]
 
 
 @dataclass
@@ -235,10 +254,11 @@ def parse_bvh(
     path = None if path is None else Path(path)
     if isinstance(data, bytes):
         raw = data
+        head = _head(raw)
         try:
-            text, encoding = data.decode("utf-8"), "utf-8"
+            text, encoding = head.decode("utf-8"), "utf-8"
         except UnicodeDecodeError:
-            text, encoding = data.decode("latin-1"), "latin-1"
+            text, encoding = head.decode("latin-1"), "latin-1"
     else:
         text, encoding = data, "utf-8"
         raw = data.encode("utf-8")
@@ -311,7 +331,7 @@ def parse_bvh(
         or not np.isfinite(values).all()
     ):
         raise _diagnose_rows(
-            body.decode(encoding).splitlines(),
+            body.decode(encoding, errors="replace").splitlines(),
             first_data_line,
             num_frames,
             num_channels,
@@ -348,8 +368,6 @@ def _build_motion(
         orders.append(order)
     rot_cols, rot_joint, rot_slot = (list(v) for v in zip(*rot, strict=True)) if rot else ([],) * 3
     pos_cols, pos_joint, pos_axis = (list(v) for v in zip(*pos, strict=True)) if pos else ([],) * 3
-    euler = np.zeros((num_frames, num_joints, 3))
-    euler[:, rot_joint, rot_slot] = values[:, rot_cols]
     root_positions = np.repeat(offsets[None, 0], num_frames, axis=0)
     translations = None
     if pos_cols:
@@ -358,7 +376,6 @@ def _build_motion(
         root_positions = local[:, 0]
         if any(k > 0 for k in pos_joint):
             translations = local
-    angles = torch.from_numpy(euler)
     by_order: dict[str, list[int]] = {}
     for k, order in enumerate(orders):
         if order:
@@ -367,6 +384,9 @@ def _build_motion(
     def rotations() -> torch.Tensor:
         # Euler -> quaternions runs on first use of Motion.rotations, not while reading:
         # the angles are finite (checked above), so the result is finite and unit.
+        euler = np.zeros((num_frames, num_joints, 3))
+        euler[:, rot_joint, rot_slot] = values[:, rot_cols]
+        angles = torch.from_numpy(euler)
         quats = torch.zeros(num_frames, num_joints, 4, dtype=torch.float64)
         quats[..., 0] = 1.0
         for order, ks in by_order.items():
