@@ -250,7 +250,8 @@ class _DataDefaultsPlugin:
 
         register("withdata", ExampleAligner, config={"hidden": 8},
                  data={"source": "procedural", "kinds": ["biped31"], "seconds": 3.0},
-                 data_options={"window": 20, "fps": 25})
+                 data_options={"window": 20, "fps": 25},
+                 trainer_options={"max_time": "00:00:01:00", "max_epochs": 3})
 
 
 def test_aligner_data_defaults_merge_under_the_command_line(example_plugin: Path) -> None:
@@ -261,14 +262,21 @@ def test_aligner_data_defaults_merge_under_the_command_line(example_plugin: Path
     assert cfg.model.hidden == 8
     assert list(cfg.data.kinds) == ["biped31"] and cfg.data.seconds == 3.0
     assert cfg.data.window == 20 and cfg.data.fps == 25 and cfg.data.batch_size == 32
+    assert cfg.trainer.max_time == "00:00:01:00" and cfg.trainer.max_epochs == 3
+    assert cfg.trainer.accelerator == "cpu"  # the rest of trainer=default stays
     # ... a data=... choice wins over it, but keeps the aligner's data-module keys ...
     cfg = app.compose(["model=withdata", "run_dir=/tmp/x", "data=bvh", "data.paths=[a]"],
                       plugin_manager=pm)
     assert cfg.data.source == "bvh" and "kinds" not in cfg.data and cfg.data.window == 20
     # ... and data.<key>=... overrides everything.
     cfg = app.compose(["model=withdata", "run_dir=/tmp/x", "data.window=7",
-                       "data.kinds=[quadruped]"], plugin_manager=pm)
+                       "data.kinds=[quadruped]", "trainer.max_epochs=9"], plugin_manager=pm)
     assert cfg.data.window == 7 and list(cfg.data.kinds) == ["quadruped"]
+    assert cfg.trainer.max_epochs == 9
+    # experiment=smoke (after model in the defaults list) still sets the trainer
+    cfg = app.compose(["model=withdata", "run_dir=/tmp/x", "experiment=smoke"],
+                      plugin_manager=pm)
+    assert cfg.trainer.max_epochs == 2
     # Aligners without data defaults keep data=procedural.
     cfg = app.compose(["model=example", "run_dir=/tmp/x"])
     assert cfg.data.source == "procedural" and cfg.data.window == 32

@@ -246,6 +246,8 @@ def register_model_configs(pm: PluginManager) -> None:
             node["defaults"] = [{"override /data": name}, "_self_"]
         if spec.data_options:
             node["data"] = dict(spec.data_options)
+        if spec.trainer_options:
+            node["trainer"] = dict(spec.trainer_options)
         store.store(group="model", name=name, node=node, package="_global_")
 
 

@@ -30,7 +30,8 @@ def register_aligners(register: Callable[..., Any]) -> None:
     """Contribute aligners (trainable models) to ``model=<name>``.
 
     Call ``register(name, module, datamodule=MotionDataModule, config=None,
-    description="", data=None, data_options=None)`` once per aligner, where
+    description="", data=None, data_options=None, trainer_options=None)`` once
+    per aligner, where
     ``module`` is an :class:`~skelagnostic.aligners.Aligner` subclass,
     ``datamodule`` a :class:`~skelagnostic.data.MotionDataModule` subclass that
     produces the batches the aligner trains on, and ``config`` a mapping of
@@ -42,7 +43,8 @@ def register_aligners(register: Callable[..., Any]) -> None:
     ``data=...``. ``data_options`` (optional) are data-module keys the aligner
     needs whatever the data (e.g. ``{"fps": 30, "window": 30}``): they are
     merged over the selected data config, and command-line ``data.<key>=...``
-    overrides still win.
+    overrides still win. ``trainer_options`` (optional) do the same for the
+    trainer config (e.g. ``{"max_time": "00:00:04:30"}`` for a CPU budget).
 
     Args:
         register: The registration callback.

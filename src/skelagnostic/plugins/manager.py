@@ -86,6 +86,9 @@ class AlignerSpec:
         data_options: Data-module keys (e.g. ``window``, ``fps``) the aligner needs
             whatever the data source; merged over the selected data config, under the
             command line's overrides.
+        trainer_options: Trainer keys the aligner needs by default (e.g. a
+            ``max_time`` budget); merged over the selected trainer config, under
+            the command line's overrides.
     """
 
     name: str
@@ -96,6 +99,7 @@ class AlignerSpec:
     plugin: str = ""
     data: Mapping[str, Any] = field(default_factory=dict)
     data_options: Mapping[str, Any] = field(default_factory=dict)
+    trainer_options: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -338,6 +342,7 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
         description: str = "",
         data: Mapping[str, Any] | None = None,
         data_options: Mapping[str, Any] | None = None,
+        trainer_options: Mapping[str, Any] | None = None,
     ) -> None:
         from skelagnostic.aligners import Aligner
         from skelagnostic.data import MotionDataModule
@@ -361,7 +366,8 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
         out.aligners.append(
             AlignerSpec(name, module, datamodule, MappingProxyType(config), description,
                         plugin_name, MappingProxyType(data),
-                        MappingProxyType(dict(data_options or {})))
+                        MappingProxyType(dict(data_options or {})),
+                        MappingProxyType(dict(trainer_options or {})))
         )
 
     def register_representation(name: str, cls: type) -> None:
