@@ -74,6 +74,19 @@ def test_cyclic_learning_rate(tmp_path):
     assert lrs[2 * per_epoch] == pytest.approx(1e-5)  # full period: 2 epochs
 
 
+def test_cyclic_learning_rate_with_max_steps(tmp_path):
+    """``max_steps`` without ``max_epochs``: the period still counts the loader's batches."""
+    model = HumotAligner(**SMALL, lr_period_epochs=2)
+    dm = _datamodule(tmp_path, batch_size=4)
+    trainer = L.Trainer(max_steps=3, accelerator="cpu", logger=False, enable_checkpointing=False,
+                        enable_progress_bar=False, limit_val_batches=0, default_root_dir=tmp_path)
+    trainer.fit(model, datamodule=dm)
+    per_epoch = max(len(x) for x in dm.train_dataloader().iterables.values())
+    assert per_epoch > 1
+    scheduler = trainer.lr_scheduler_configs[0].scheduler
+    assert scheduler.total_size == 2 * per_epoch  # one full period = 2 epochs of batches
+
+
 def test_save_and_load(tmp_path):
     torch.manual_seed(0)
     model = HumotAligner(**SMALL)
@@ -111,11 +124,16 @@ def test_leg_length():
 
 
 @pytest.mark.data
-def test_retarget_between_real_skeletons(shared_data, tmp_path):
+@pytest.mark.parametrize(("source", "target", "frames"), [
+    ("cmu/131_01.bvh", "lafan1/Lafan1_example.bvh", 120),  # 1 s at 120 fps, CMU units -> cm
+    ("lafan1/Lafan1_example.bvh", "xia_cmu/angry_13_000.bvh", 30),  # 1 s at 30 fps, cm -> CMU
+])
+def test_retarget_between_real_skeletons(shared_data, tmp_path, source, target, frames):
+    """``retarget(motion, skeleton)`` alone (what ``skelagnostic retarget`` calls) on real rigs."""
     torch.manual_seed(0)
     model = HumotAligner(**SMALL).eval()
-    src = sa.read_bvh(shared_data / "human" / "cmu" / "131_01.bvh")[:120]  # 1 s at 120 fps
-    dst = sa.read_bvh(shared_data / "human" / "lafan1" / "Lafan1_example.bvh").skeleton
+    src = sa.read_bvh(shared_data / "human" / source)[:frames]
+    dst = sa.read_bvh(shared_data / "human" / target).skeleton
     out = model.retarget(src, dst)
     assert out.skeleton is dst and out.fps == 30.0
     assert out.num_frames == src.resample(30.0).num_frames

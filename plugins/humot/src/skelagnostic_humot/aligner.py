@@ -241,14 +241,33 @@ class HumotAligner(Aligner):
                 "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
 
     def _steps_per_epoch(self) -> int:
+        """Optimiser steps per epoch, for the epoch-based cyclic schedule.
+
+        From the trainer's estimate when it is bounded by epochs; otherwise (e.g.
+        ``max_steps`` with ``max_epochs=-1``) from the length of the training loader.
+        """
         trainer = self._trainer
         if trainer is None:
             return 1
         total = trainer.estimated_stepping_batches
         epochs = trainer.max_epochs
-        if epochs is None or epochs < 1 or not math.isfinite(total):
-            return max(1, int(trainer.num_training_batches or 1))
-        return max(1, int(total // epochs))
+        if epochs is not None and epochs >= 1 and math.isfinite(total):
+            return max(1, int(total // epochs))
+        batches = trainer.num_training_batches
+        if isinstance(batches, (int, float)) and math.isfinite(batches) and batches >= 1:
+            return max(1, int(batches) // max(1, trainer.accumulate_grad_batches))
+        datamodule = getattr(trainer, "datamodule", None)
+        if datamodule is not None:
+            # a CombinedLoader (max_size_cycle): as many batches as its longest loader
+            loader = datamodule.train_dataloader()
+            iterables = getattr(loader, "iterables", loader)
+            loaders = iterables.values() if isinstance(iterables, dict) else [iterables]
+            try:
+                batches = max(len(x) for x in loaders)
+            except TypeError:  # an iterable without a length
+                return 1
+            return max(1, batches // max(1, trainer.accumulate_grad_batches))
+        return 1
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Any]:
@@ -273,7 +292,12 @@ class HumotAligner(Aligner):
                 for k, (p, t) in figs.items()}
 
     def on_fit_end(self) -> None:
-        """Write ``humot_retarget.gif`` (retargeted validation chunk), ``humot_metrics.json``."""
+        """Write ``humot_metrics.json`` and ``humot_retarget.gif`` / ``.png``.
+
+        The render shows a validation chunk (input), its reconstruction and its
+        retargeting onto another topology of the data, side by side (GIF and a
+        contact sheet of 4 instants).
+        """
         self._write_fit_outputs()
 
     @rank_zero_only
@@ -295,6 +319,8 @@ class HumotAligner(Aligner):
 
             figures = list(self.render_sample(batch).values())
             render_motion(figures, run_dir / "humot_retarget.gif", size=(200, 200))
+            render_motion(figures, run_dir / "humot_retarget.png", size=(200, 200),
+                          sheet_frames=4)
         finally:
             self.train(was_training)
 

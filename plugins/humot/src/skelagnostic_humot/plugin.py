@@ -27,6 +27,31 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "chunk": 30,
 }
 
+#: ``data/humot``, the default data of ``skelagnostic fit model=humot`` (no ``data=``):
+#: procedural humans of three topologies (22, 31 and 17 joints), walking and running, 4 clips
+#: of 2 s per topology (one held out for validation). Sized for the CPU budget of the issue
+#: (under 5 minutes on 2 cores): the trainer's default 10 epochs are 10 steps of the
+#: paper-size network (one batch of 18 chunks per topology; a step of 64 chunks costs
+#: ~0.4 TFLOP). Ten steps show that the pipeline runs end to end (checkpoint, metrics,
+#: rendered retargeting), not a trained model: ``experiment=humot_quick`` is the CPU
+#: configuration that learns (docs/methods/humot.md, "Status and results").
+DEFAULT_DATA: dict[str, Any] = {
+    "source": "procedural",
+    "kinds": ["biped22", "biped31", "biped17"],
+    "gaits": ["walk", "run"],
+    "clips_per_gait": 2,
+    "seconds": 2.0,
+    "seed": 0,
+}
+
+#: Data-module keys of the paper's preprocessing (Sec. 3.4.1), whatever the data:
+#: 30 Hz, 1 s chunks overlapping by 24 frames.
+DATA_OPTIONS: dict[str, Any] = {"fps": 30, "window": 30, "stride": 6}
+
+#: The CPU budget of ``skelagnostic fit model=humot``: stop after 4.5 minutes of training
+#: even on a slow or busy machine (``trainer.max_time=null`` lifts it).
+TRAINER_OPTIONS: dict[str, Any] = {"max_time": "00:00:04:30"}
+
 
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
@@ -40,6 +65,9 @@ def register_aligners(register: Callable[..., Any]) -> None:
         HumotDataModule,
         config=DEFAULT_CONFIG,
         description="HuMoT: topology-agnostic XCiT autoencoder for human retargeting",
+        data=DEFAULT_DATA,
+        data_options=DATA_OPTIONS,
+        trainer_options=TRAINER_OPTIONS,
     )
 
 
