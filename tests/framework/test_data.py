@@ -127,8 +127,9 @@ def test_datamodule_pickles_without_arrays(tmp_path: Path) -> None:
     dm.setup()
     ds = dm.datasets["train"]["procedural/biped22"]
     ds[0]
+    windows = sum(e.array.stat().st_size for e in ds.entries)
+    assert len(pickle.dumps(ds)) < windows / 2  # metadata only: windows stay in the files
     clone = pickle.loads(pickle.dumps(dm))
-    assert clone.datasets["train"]["procedural/biped22"]._arrays == {}
     torch.testing.assert_close(clone.datasets["train"]["procedural/biped22"][0]["features"],
                                ds[0]["features"])
 

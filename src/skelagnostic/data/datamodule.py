@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import math
 import os
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -16,12 +17,24 @@ from lightning.pytorch.utilities import CombinedLoader
 from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
 
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.data.cache import CacheEntry, WindowCache, cache_key, default_cache_dir
+from skelagnostic.data.cache import (
+    CacheEntry,
+    WindowCache,
+    cache_key,
+    default_cache_dir,
+    read_exactly,
+)
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation
 
 SPLITS = ("train", "val", "test")
+
+
+#: Values (frames x elements x channels) per chunk of the normalisation pass. The
+#: pass reads the training windows in chunks of this fixed size, so what it
+#: allocates does not depend on the corpus or the clip lengths.
+STATS_CHUNK_VALUES = 1 << 20
 
 
 class WindowDataset(Dataset):
@@ -30,8 +43,10 @@ class WindowDataset(Dataset):
     Items are dicts of tensors: ``features`` ``[window, N, C]`` float32 (not
     normalised), ``clip`` (index into :attr:`clip_ids`), ``start`` (first
     frame), and the clip's skeleton: ``offsets`` ``[J, 3]``, ``template``
-    ``[J, 3]`` (:meth:`Skeleton.template`) and ``height``. Arrays are memory
-    mapped lazily in each process, so the dataset pickles cheaply into workers.
+    ``[J, 3]`` (:meth:`Skeleton.template`) and ``height``. Each item is read
+    from its cache file when asked for (:meth:`CacheEntry.read`, no memory
+    map), so a process holds only the windows of its current batches and the
+    dataset pickles cheaply into workers.
 
     Args:
         entries: Cache entries of the clips.
@@ -47,15 +62,9 @@ class WindowDataset(Dataset):
             self._skeletons.append(
                 (sk.offsets.float(), sk.template().float(), torch.tensor(sk.height()).float())
             )
-        self._arrays: dict[int, np.ndarray] = {}
 
     def __len__(self) -> int:
         return int(self._bounds[-1])
-
-    def _array(self, clip: int) -> np.ndarray:
-        if clip not in self._arrays:
-            self._arrays[clip] = self.entries[clip].open()
-        return self._arrays[clip]
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         if not 0 <= index < len(self):
@@ -64,7 +73,7 @@ class WindowDataset(Dataset):
         k = index - int(self._bounds[clip])
         offsets, template, height = self._skeletons[clip]
         return {
-            "features": torch.from_numpy(np.array(self._array(clip)[k])),
+            "features": torch.from_numpy(self.entries[clip].read(k, k + 1)[0]),
             "clip": torch.tensor(clip),
             "start": torch.tensor(self.entries[clip].meta["starts"][k]),
             "offsets": offsets,
@@ -72,15 +81,51 @@ class WindowDataset(Dataset):
             "height": height,
         }
 
-    def feature_chunks(self) -> Iterator[torch.Tensor]:
-        """The features clip by clip (``[num_windows, window, N, C]`` each), for statistics."""
-        for clip in range(len(self.entries)):
-            yield torch.from_numpy(np.array(self._array(clip)))
+    def feature_chunks(self, chunk_values: int | None = None) -> Iterator[torch.Tensor]:
+        """All features as ``[frames, N, C]`` chunks of a fixed size, for statistics.
 
-    def __getstate__(self) -> dict[str, Any]:
-        state = dict(self.__dict__)
-        state["_arrays"] = {}
-        return state
+        The windows of all clips are read from their files one after the
+        other (no memory map), frames packed across window and clip boundaries
+        into chunks of ``max(1, chunk_values // (N * C))`` frames (fewer if the
+        dataset is smaller; the last chunk may be shorter). Each chunk is a new
+        tensor, but all have the same size whatever the clips, so a pass that
+        reduces them (:meth:`MotionRepresentation.fit_normalization`) runs in
+        constant memory: the allocator reuses the freed chunks and temporaries.
+        Variable, large per-clip temporaries were what made glibc's heap grow
+        with the corpus when torch reduced them on several threads.
+
+        Args:
+            chunk_values: Values per chunk (default: :data:`STATS_CHUNK_VALUES`).
+
+        Raises:
+            SkelagnosticError: Two clips' windows have different element or channel counts.
+        """
+        if not self.entries:
+            return
+        item = self.entries[0].layout[1][2:]
+        values = STATS_CHUNK_VALUES if chunk_values is None else chunk_values
+        total = sum(e.layout[1][0] * e.layout[1][1] for e in self.entries)
+        rows = max(1, min(total, values // max(1, math.prod(item))))
+        buf, filled = np.empty((rows, *item), np.float32), 0
+        for entry in self.entries:
+            offset, shape = entry.layout
+            if shape[2:] != item:
+                raise SkelagnosticError(
+                    f"data: clip {entry.meta['clip']!r} has windows of {shape[2:]} values per "
+                    f"frame, clip {self.clip_ids[0]!r} of {item} (cache entry {entry.array})"
+                )
+            remaining = shape[0] * shape[1]
+            with entry.array.open("rb", buffering=0) as fh:
+                fh.seek(offset)
+                while remaining:
+                    n = min(rows - filled, remaining)
+                    read_exactly(fh, buf[filled : filled + n], entry.array)
+                    filled, remaining = filled + n, remaining - n
+                    if filled == rows:
+                        yield torch.from_numpy(buf)
+                        buf, filled = np.empty((rows, *item), np.float32), 0
+        if filled:
+            yield torch.from_numpy(buf[:filled])
 
 
 class _ResumableSampler(DistributedSampler):
