@@ -45,7 +45,7 @@ SUITES: dict[str, str] = {
     "kinematics": "benchmarks.suites.kinematics",
     "matching": "benchmarks.suites.matching",
     "bigdata": "benchmarks.suites.bigdata",
-    "training": "benchmarks.suites.training_vqpae",
+    "training": "benchmarks.suites.training",
 }
 
 

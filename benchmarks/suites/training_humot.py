@@ -86,11 +86,13 @@ def measure(steps: int) -> dict[str, Any]:
 
     torch.manual_seed(0)
     model = HumotAligner()
-    trainer = L.Trainer(max_steps=steps + 1, accelerator="cpu", devices=1, logger=False,
-                        enable_checkpointing=False, enable_progress_bar=False,
-                        enable_model_summary=False, limit_val_batches=0,
-                        num_sanity_val_steps=0, callbacks=[Timer()])
-    trainer.fit(model, datamodule=dm)
+    with tempfile.TemporaryDirectory() as run_dir:  # the aligner writes its renders here
+        trainer = L.Trainer(max_steps=steps + 1, accelerator="cpu", devices=1, logger=False,
+                            enable_checkpointing=False, enable_progress_bar=False,
+                            enable_model_summary=False, limit_val_batches=0,
+                            num_sanity_val_steps=0, callbacks=[Timer()],
+                            default_root_dir=run_dir)
+        trainer.fit(model, datamodule=dm)
     # the first step is a warm-up; fetch[i] precedes compute[i + 1]
     steps_s = [c + f for c, f in zip(compute[1:], fetch, strict=True)]
     return {"median_step_s": statistics.median(steps_s),

@@ -1,0 +1,32 @@
+"""Suite ``training``: training throughput of every method at its paper's settings on CPU.
+
+Runs each method's part in turn (each in a child process, as the parts do
+themselves) and concatenates their results:
+
+* ``benchmarks.suites.training_vqpae``: VQ-PAE windows/s with and without the
+  average-pose MLPs, against the authors' trainer's figures from the issue;
+* ``benchmarks.suites.training_humot``: HuMoT steps/s, windows/s and the
+  data-loading share of the paper-size network.
+
+Each part documents its settings, sizes and baselines in its own docstring.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from benchmarks.harness import Result
+
+#: method -> module of its part (each has ``run(size) -> list[Result]``).
+PARTS: dict[str, str] = {
+    "vqpae": "benchmarks.suites.training_vqpae",
+    "humot": "benchmarks.suites.training_humot",
+}
+
+
+def run(size: str) -> list[Result]:
+    """Run every method's training-throughput part at ``size``."""
+    results: list[Result] = []
+    for module in PARTS.values():
+        results.extend(importlib.import_module(module).run(size))
+    return results
