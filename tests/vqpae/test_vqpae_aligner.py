@@ -126,3 +126,18 @@ def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, sourc
     if Path(str(cfg.data.get("root", cfg.data.get("human_root")))).exists():
         dm = build_datamodule(cfg, vqpae_pm)
         assert isinstance(dm, VQPAEDataModule) and dm.window == 61
+
+
+def test_fit_without_data_uses_procedural_biped_and_quadruped(vqpae_pm) -> None:
+    from skelagnostic.cli.app import build_datamodule, compose
+
+    cfg = compose(["model=vqpae", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm)
+    assert cfg.data.source == "procedural"
+    assert list(cfg.data.kinds) == ["biped22", "quadruped"]
+    assert cfg.data.fps == 60 and cfg.data.window_seconds == 1.0 and cfg.data.stride == 1
+    assert cfg.model.padding_mode == "replicate" and cfg.model.center_windows
+    dm = build_datamodule(cfg, vqpae_pm)
+    assert isinstance(dm, VQPAEDataModule) and dm.window == 61 and dm.stride == 1
+    override = compose(["model=vqpae", "run_dir=/tmp/unused", "data.fps=30"],
+                       plugin_manager=vqpae_pm)
+    assert override.data.fps == 30

@@ -111,3 +111,47 @@ def test_transfer_biped_to_quadruped_writes_a_bvh(trained: dict, tmp_path: Path)
     assert read_bvh(path).num_frames == source.num_frames
     with pytest.raises(SkelagnosticError, match="different characters"):
         build_database(model, [dogs[0], source])
+
+
+def test_aligner_transfer_matches_the_module_function(trained: dict) -> None:
+    model = trained["model"]
+    assert model.supports("transfer")
+    dogs = [procedural.generate("quadruped", g, seconds=3.0, fps=FPS, seed=3)[0]
+            for g in ("walk", "trot")]
+    source, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=FPS, seed=8)
+    out = model.transfer(source, dogs)
+    expected = transfer(model, source, build_database(model, dogs)).motion
+    assert out.skeleton is dogs[0].skeleton and out.num_frames == source.num_frames
+    assert torch.equal(out.rotations, expected.rotations)
+    with pytest.raises(SkelagnosticError, match="empty"):
+        model.transfer(source, [])
+
+
+def test_predict_writes_per_clip_embeddings(trained: dict, tmp_path: Path) -> None:
+    import lightning as L
+    import numpy as np
+
+    model, dm = trained["model"], trained["dm"]
+    trainer = L.Trainer(accelerator="cpu", devices=1, logger=False, enable_progress_bar=False,
+                        enable_model_summary=False, default_root_dir=str(tmp_path))
+    batches = trainer.predict(model, datamodule=dm)
+    path = tmp_path / "embeddings.npz"
+    assert model.predictions_path == path and path.is_file()
+    data = np.load(path)
+    assert float(data["fps"]) == FPS
+    name = dm.dataset_names[0]
+    windows = dm.datasets["val"][name]
+    clip = dm.clip_ids["val"][name][int(windows.clips[0])]
+    frames = data[f"{name}/{clip}/frame"]
+    assert (np.diff(frames) > 0).all() and frames[0] == int(windows.pivots[0])
+    with torch.no_grad():
+        _, params = model.forward_dataset(0, windows[0]["features"][None])
+    for key, value in (("phase", params.phase), ("frequency", params.frequency),
+                       ("code", params.code)):
+        assert np.allclose(data[f"{name}/{clip}/{key}"][0], value[0].numpy(), atol=1e-5), key
+    assert data[f"{name}/{clip}/manifold"].shape[1] == 10
+    assert data[f"{name}/{clip}/amplitude"].shape[1] == 20
+    flat = [b for group in batches for b in (group if isinstance(group, list) else [group])]
+    total = sum(len(b[n]["phase"]) for b in flat for n in b)
+    keys = [k for k in data.files if k.endswith("/frame")]
+    assert sum(len(data[k]) for k in keys) == total

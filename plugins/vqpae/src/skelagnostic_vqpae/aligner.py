@@ -25,9 +25,11 @@ and, with a pose MLP, ``val/pose_mpjpe/<dataset>`` in metres at the pivot frames
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -51,14 +53,11 @@ DatasetSpec = Mapping[str, Any]
 class _Character(nn.Module):
     """One dataset's VQ-PAE, average-pose MLP and normalisation statistics."""
 
-    def __init__(self, spec: DatasetSpec, latent: int, kernel_size: int, freq_layers: int,
-                 amp_layers: int, decoder_centering: bool, spectrum: str,
-                 pose_layers: int) -> None:
+    def __init__(self, spec: DatasetSpec, latent: int, pose_layers: int,
+                 **pae_options: Any) -> None:
         super().__init__()
         channels, window = int(spec["channels"]), int(spec["window"])
-        self.pae = VQPAE(channels, window, float(spec["fps"]), latent, kernel_size,
-                         freq_layers=freq_layers, amp_layers=amp_layers,
-                         decoder_centering=decoder_centering, spectrum=spectrum)
+        self.pae = VQPAE(channels, window, float(spec["fps"]), latent, **pae_options)
         self.pose = AveragePoseMLP(latent, channels, pose_layers)
         for name in ("input_mean", "pose_mean"):
             self.register_buffer(name, torch.zeros(channels))
@@ -82,6 +81,13 @@ class VQPAEAligner(Aligner):
         decoder_centering: Temporal centering after the first decoder conv (authors' code).
         spectrum: Frequency-MLP input, ``"normalized"`` or ``"power"`` (authors' code);
             see :class:`~skelagnostic_vqpae.model.VQPAE`.
+        padding_mode: Padding of the encoder/decoder convolutions: ``"replicate"``
+            (default) or ``"zeros"`` (PyTorch's default); see
+            :class:`~skelagnostic_vqpae.model.VQPAE` and docs/methods/vqpae.md.
+        center_windows: Reconstruct each window's deviation from its temporal mean
+            (default) instead of the window itself (the paper's ``L_rec``); the
+            manifold, a sum of sinusoids, cannot carry the mean except by a
+            degenerate frequency near 0 (see docs/methods/vqpae.md).
         beta: Commitment weight (0.25).
         lambda_vq: Weight of the codebook loss (1).
         reinit: Re-initialise the codebook every step (``False``: ablation).
@@ -103,7 +109,7 @@ class VQPAEAligner(Aligner):
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"encode", "decode", "phase",
-                                                        "quadruped"})
+                                                        "quadruped", "transfer"})
 
     def __init__(
         self,
@@ -114,6 +120,8 @@ class VQPAEAligner(Aligner):
         amp_layers: int = 5,
         decoder_centering: bool = False,
         spectrum: str = "normalized",
+        padding_mode: str = "replicate",
+        center_windows: bool = True,
         beta: float = 0.25,
         lambda_vq: float = 1.0,
         reinit: bool = True,
@@ -144,6 +152,8 @@ class VQPAEAligner(Aligner):
         self._metrics: dict[str, ManifoldOverlap] = {}  # not a submodule: rebuilt per epoch
         #: Per dataset, the ``[K]`` code histogram of the last validation/test epoch.
         self.last_code_counts: dict[str, Tensor] = {}
+        self._predictions: dict[str, list[dict[str, Tensor]]] = {}
+        self.predictions_path: Path | None = None
         if datasets:
             self._build(datasets)
 
@@ -152,8 +162,10 @@ class VQPAEAligner(Aligner):
         hp = self.hparams
         self.dataset_names = list(datasets)
         self.characters = nn.ModuleList(
-            _Character(spec, hp.latent, hp.kernel_size, hp.freq_layers, hp.amp_layers,
-                       hp.decoder_centering, hp.spectrum, hp.pose_layers)
+            _Character(spec, hp.latent, hp.pose_layers, kernel_size=hp.kernel_size,
+                       freq_layers=hp.freq_layers, amp_layers=hp.amp_layers,
+                       decoder_centering=hp.decoder_centering, spectrum=hp.spectrum,
+                       padding_mode=hp.padding_mode)
             for spec in datasets.values()
         )
         self.codebook = SharedCodebook(hp.num_codes, 2 * hp.latent, len(datasets), hp.beta,
@@ -203,6 +215,9 @@ class VQPAEAligner(Aligner):
             k = self.dataset_names.index(name)
             x = b["features"]
             rec, params = self.forward_dataset(k, x)
+            if hp.center_windows:  # reconstruct each window's deviation from its temporal mean
+                x = x - x.mean(dim=-1, keepdim=True)
+                rec = rec - rec.mean(dim=-1, keepdim=True)
             rec_loss = nn.functional.mse_loss(rec, x)
             loss = rec_loss + hp.lambda_vq * params.vq_loss
             logs[f"rec/{name}"] = rec_loss.detach()
@@ -297,15 +312,62 @@ class VQPAEAligner(Aligner):
 
     def predict_step(self, batch: Mapping[str, Any], batch_idx: int,
                      dataloader_idx: int = 0) -> dict[str, dict[str, Tensor]]:
-        """Per dataset: pivot phase, frequency, code and manifold point of every window."""
+        """Per dataset: pivot phase, frequency, code, amplitude and manifold point of every window.
+
+        The outputs are also collected; at the end of the predict epoch they are
+        written per clip to ``<default_root_dir>/embeddings.npz`` (see
+        :meth:`on_predict_epoch_end`).
+        """
         out = {}
         for name, b in batch.items():
             _, p = self.forward_dataset(self.dataset_names.index(name), b["features"])
             pivot = p.manifold.shape[-1] // 2
             out[name] = {"phase": p.phase, "frequency": p.frequency, "code": p.code,
-                         "manifold": p.manifold[..., pivot], "clip": b["clip"],
-                         "pivot": b["pivot"]}
+                         "amplitude": p.amplitude, "manifold": p.manifold[..., pivot],
+                         "clip": b["clip"], "pivot": b["pivot"]}
+            self._predictions.setdefault(name, []).append(
+                {k: v.detach().cpu() for k, v in out[name].items()})
         return out
+
+    def on_predict_epoch_start(self) -> None:
+        """Start collecting the per-window embeddings."""
+        self._predictions = {}
+
+    def on_predict_epoch_end(self) -> None:
+        """Write the collected embeddings per clip as ``<default_root_dir>/embeddings.npz``.
+
+        Keys are ``<dataset>/<clip id>/<field>`` with fields ``frame`` (pivot frame
+        index in the clip, at the dataset frame rate), ``phase``, ``frequency``,
+        ``code``, ``amplitude`` and ``manifold``, plus ``fps``. Clip ids come from
+        the data module's predict split (``clip<k>`` without one). Only pivots whose
+        1 s window lies inside the clip are predicted; for every frame of a clip
+        use :func:`skelagnostic_vqpae.embed.embed_clip`. Under DDP the global-zero
+        rank writes the windows it predicted (predict on one device for all).
+        """
+        collected = getattr(self, "_predictions", {})
+        self._predictions = {}
+        if not collected or self.trainer is None or not self.trainer.is_global_zero:
+            return
+        dm = self.trainer.datamodule
+        split = "test" if dm is not None and dm.datasets.get("test") else "val"
+        ids = getattr(dm, "clip_ids", {}).get(split, {}) if dm is not None else {}
+        arrays: dict[str, Any] = {}
+        for name, parts in collected.items():
+            cat = {k: torch.cat([p[k] for p in parts]) for k in parts[0]}
+            names = ids.get(name, [])
+            for c in cat["clip"].unique().tolist():
+                sel = cat["clip"] == c
+                order = cat["pivot"][sel].argsort()
+                clip = names[c] if c < len(names) else f"clip{c}"
+                arrays[f"{name}/{clip}/frame"] = cat["pivot"][sel][order].numpy()
+                for key in ("phase", "frequency", "code", "amplitude", "manifold"):
+                    arrays[f"{name}/{clip}/{key}"] = cat[key][sel][order].numpy()
+        spec = next(iter(self.hparams["datasets"].values()))
+        arrays["fps"] = np.float64(spec["fps"])
+        path = Path(self.trainer.default_root_dir) / "embeddings.npz"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, **arrays)
+        self.predictions_path = path
 
     def configure_optimizers(self) -> Any:
         """AdamW + cosine annealing with warm restarts (per step); pose MLPs in their own group."""
@@ -337,6 +399,32 @@ class VQPAEAligner(Aligner):
                 char.pose_fitted.fill_(True)
 
     # ------------------------------------------------------------------ aligner
+    def transfer(self, motion: Motion, targets: Sequence[Motion]) -> Motion:
+        """Re-enact ``motion`` with the target character's clips (Sec. 4, Alg. 1, Eq. 9).
+
+        The target clips (one trained character) become a motion-matching database
+        (:func:`~skelagnostic_vqpae.transfer.build_database`); the source clip's
+        manifold points and frequencies query it with frequency-scaled motion
+        matching (``lambda1`` 0.5, ``lambda2`` 1), and the matched target windows,
+        time-warped to the source's periods, form the result.
+
+        Args:
+            motion: The source clip, on a trained skeleton.
+            targets: Clips of another trained character (the database).
+
+        Returns:
+            The motion on the targets' skeleton, at the trained frame rate.
+
+        Raises:
+            SkelagnosticError: ``targets`` is empty, mixes characters, or a skeleton
+                was not trained.
+        """
+        from skelagnostic_vqpae.transfer import build_database
+        from skelagnostic_vqpae.transfer import transfer as match_transfer
+
+        database = build_database(self, list(targets))
+        return match_transfer(self, motion, database).motion
+
     def dataset_of(self, skeleton: Skeleton) -> int:
         """Index of the dataset whose skeleton has ``skeleton``'s topology.
 

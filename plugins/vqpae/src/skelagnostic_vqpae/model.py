@@ -40,6 +40,9 @@ __all__ = [
     "relative_times",
 ]
 
+#: Padding modes of the encoder/decoder convolutions (``torch.nn.Conv1d``).
+PADDING_MODES = ("zeros", "replicate", "reflect", "circular")
+
 #: ``quantize(raw [B, 2d]) -> (quantised [B, 2d] with straight-through gradient, codes [B], loss)``
 Quantizer = Callable[[Tensor], tuple[Tensor, Tensor, Tensor]]
 
@@ -187,6 +190,15 @@ class VQPAE(nn.Module):
             authors' code); the MLP is then driven by the signal's scale too, and on
             our data the frequency diverged to thousands of Hz within a few hundred
             steps (the decoder exploits aliased high-frequency sinusoids).
+        padding_mode: Padding of the encoder and decoder convolutions ("same"
+            length; default ``"replicate"``; the paper does not say).
+            ``"zeros"`` (PyTorch's default) lets a kernel-23 convolution tell every
+            frame's distance to the window edges, so the decoder can rebuild a
+            window from its pivot manifold point without using the phase (a window
+            constant in time comes out with edge-shaped profiles); on the
+            procedural quadruped the timing branch then stopped learning (phase
+            R^2 ~ 0). ``"replicate"`` maps a constant window to a constant output,
+            so the temporal shape has to come from ``phi + f t``.
 
     Raises:
         SkelagnosticError: A size is not positive, ``window`` is even or ``kernel_size`` even.
@@ -204,8 +216,12 @@ class VQPAE(nn.Module):
         amp_layers: int = 5,
         decoder_centering: bool = False,
         spectrum: str = "normalized",
+        padding_mode: str = "replicate",
     ) -> None:
         super().__init__()
+        if padding_mode not in PADDING_MODES:
+            raise SkelagnosticError(
+                f"VQPAE: padding_mode must be one of {PADDING_MODES}, got {padding_mode!r}")
         if spectrum not in ("normalized", "power"):
             raise SkelagnosticError(
                 f"VQPAE: spectrum must be 'normalized' or 'power', got {spectrum!r}")
@@ -222,19 +238,22 @@ class VQPAE(nn.Module):
             raise SkelagnosticError(f"VQPAE: intermediate must be positive, got {mid}")
         self.channels, self.window, self.fps, self.latent = channels, window, float(fps), latent
         self.register_buffer("times", relative_times(window, fps), persistent=False)
+        def conv(c_in: int, c_out: int) -> nn.Conv1d:
+            return nn.Conv1d(c_in, c_out, kernel_size, padding="same", padding_mode=padding_mode)
+
         self.encoder = nn.Sequential(
-            nn.Conv1d(channels, mid, kernel_size, padding="same"), TemporalCentering(), nn.ELU(),
-            nn.Conv1d(mid, latent, kernel_size, padding="same"), TemporalCentering(), nn.ELU(),
+            conv(channels, mid), TemporalCentering(), nn.ELU(),
+            conv(mid, latent), TemporalCentering(), nn.ELU(),
         )
         self.phase_conv = nn.Conv1d(latent, 1, 1)
         bins = window // 2 + 1
         self.freq_mlp = _mlp([bins] * freq_layers + [1])
         self.amp_mlp = _mlp([latent] + [2 * latent] * amp_layers)
         self.decoder = nn.Sequential(
-            nn.Conv1d(latent, mid, kernel_size, padding="same"),
+            conv(latent, mid),
             *([TemporalCentering()] if decoder_centering else []),
             nn.ELU(),
-            nn.Conv1d(mid, channels, kernel_size, padding="same"),
+            conv(mid, channels),
         )
 
     def timing(self, latent: Tensor) -> tuple[Tensor, Tensor, Tensor]:

@@ -16,6 +16,8 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "amp_layers": 5,
     "decoder_centering": False,
     "spectrum": "normalized",
+    "padding_mode": "replicate",
+    "center_windows": True,
     "beta": 0.25,
     "lambda_vq": 1.0,
     "reinit": True,
@@ -34,6 +36,23 @@ DEFAULT_CONFIG: dict[str, Any] = {
 }
 
 
+#: ``data/vqpae``, the default data of ``skelagnostic fit model=vqpae`` (no ``data=``):
+#: procedural humans (LaFAN1-like, 22 joints) and quadrupeds (a dog, 21 joints), one dataset
+#: each, every gait but idle, 4 clips of 8 s per gait (one clip in five held out).
+DEFAULT_DATA: dict[str, Any] = {
+    "source": "procedural",
+    "kinds": ["biped22", "quadruped"],
+    "gaits": None,
+    "clips_per_gait": 4,
+    "seconds": 8.0,
+    "seed": 0,
+}
+
+#: Data-module keys of the authors' preprocessing (supplement 2.2), whatever the data:
+#: 60 fps, 1 s windows (61 frames) centred on every frame.
+DATA_OPTIONS: dict[str, Any] = {"fps": 60, "window_seconds": 1.0, "stride": 1}
+
+
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
     """Register ``model=vqpae``."""
@@ -46,6 +65,8 @@ def register_aligners(register: Callable[..., Any]) -> None:
         VQPAEDataModule,
         config=DEFAULT_CONFIG,
         description="WalkTheDog VQ-PAE: phase manifold shared across characters (human, dog, ...)",
+        data=DEFAULT_DATA,
+        data_options=DATA_OPTIONS,
     )
 
 
