@@ -282,7 +282,7 @@ def test_aligner_data_defaults_merge_under_the_command_line(example_plugin: Path
     assert cfg.data.source == "procedural" and cfg.data.window == 32
 
 
-def test_aligner_data_defaults_need_a_source() -> None:
+def test_aligner_data_defaults_need_a_source(example_plugin: Path) -> None:
     class Bad:
         @staticmethod
         @plugins.hookimpl
