@@ -273,6 +273,9 @@ def test_aligner_data_defaults_merge_under_the_command_line(example_plugin: Path
                        "data.kinds=[quadruped]", "trainer.max_epochs=9"], plugin_manager=pm)
     assert cfg.data.window == 7 and list(cfg.data.kinds) == ["quadruped"]
     assert cfg.trainer.max_epochs == 9
+    cfg = app.compose(["model=withdata", "run_dir=/tmp/x", "trainer.max_time=null"],
+                      plugin_manager=pm)
+    assert cfg.trainer.max_time is None
     # experiment=smoke (after model in the defaults list) still sets the trainer
     cfg = app.compose(["model=withdata", "run_dir=/tmp/x", "experiment=smoke"],
                       plugin_manager=pm)
