@@ -1,0 +1,1 @@
+"""Hydra configs of the PC-MRL plugin (``pkg://skelagnostic_pcmrl.conf``)."""

@@ -1,0 +1,696 @@
+"""PC-MRL stage 2: the CITL-style keyframe interpolation transformer (Sec. 3.4).
+
+The model fills the frames between keyframes of a motion on the *target*
+skeleton. It follows CITL (Mo et al., CVPR 2023) with PC-MRL's changes:
+
+* per-joint input (keyframes only, zeros and a 0 key flag on the other frames):
+  the joint's global position minus the mean of the keyframe positions, the unit
+  rest bone direction (:func:`~skelagnostic_pcmrl.rpa.bone_tails`) rotated by the
+  joint's first-frame global rotation, and its first-frame offset quaternion
+  (FOQ, Sec. 3.3, :class:`~skelagnostic.representations.FirstFrameOffsetQuaternions`);
+* an encoder whose self-attention only reads keyframes, an intermediate-token
+  module (zero tokens cross-attending to the keyframe encodings) and a decoder
+  over all frames (keyframe tokens from the encoder, the others from the
+  intermediate module), as in CITL;
+* Shaw-style learned relative positions (zero initialised) instead of sinusoids;
+* output: FOQ per joint plus the root position; frame 0 is always a key, so its
+  global rotations turn FOQ back into rotations;
+* loss ``L1(root) + L1(FOQ) + 0.1 (L1(FK positions) + L1(global quaternions))``,
+  the quaternion terms taken up to sign (``q`` and ``-q`` are one rotation; a
+  sign-continuous target can differ from a prediction by a global sign after a
+  fast spin), AdamW with linear warm-up.
+
+:class:`InterpolationAligner` wraps it as an :class:`~skelagnostic.aligners.Aligner`
+with ``interpolate(motion, keyframes)``. :data:`INTERP_CONFIG` holds the authors'
+settings; ``experiment=pcmrl_interp_cpu`` a smaller CPU configuration.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import torch
+from torch import Tensor, nn
+
+from skelagnostic.aligners.base import Aligner, Latent
+from skelagnostic.core import quaternion as Q
+from skelagnostic.core.motion import Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import MotionError, SkelagnosticError
+from skelagnostic_pcmrl.rpa import bone_tails
+
+__all__ = [
+    "INTERP_CONFIG",
+    "INTERP_DATA_DEFAULTS",
+    "INTERP_DATA_OPTIONS",
+    "CITLInterpolator",
+    "InterpolationAligner",
+    "fk_from_global",
+    "global_from_local",
+    "key_brackets",
+    "lerp_keys",
+    "sign_invariant_l1",
+    "slerp_keys",
+    "window_features",
+]
+
+log = logging.getLogger(__name__)
+
+#: The authors' settings (paper Sec. 3.4 / METHODS.md): the ``model/pcmrl_interp`` config.
+INTERP_CONFIG: dict[str, Any] = {
+    "dim": 512,
+    "heads": 8,
+    "layers": 6,
+    "ff_mult": 4,
+    "max_relative": 128,
+    "residual": False,
+    "lr": 1e-4,
+    "weight_decay": 0.01,
+    "warmup_steps": 10000,
+    "w_root": 1.0,
+    "w_foq": 1.0,
+    "w_fk": 0.1,
+    "w_quat": 0.1,
+}
+
+#: Default data of ``model=pcmrl_interp``: procedural CMU-31-topology bipeds (no files needed).
+INTERP_DATA_DEFAULTS: dict[str, Any] = {
+    "source": "procedural",
+    "kinds": ["biped31"],
+    "gaits": ["walk", "run"],
+    "clips_per_gait": 4,
+    "seconds": 8.0,
+}
+
+#: Data-module keys of :class:`~skelagnostic_pcmrl.interp_data.InterpolationDataModule`.
+INTERP_DATA_OPTIONS: dict[str, Any] = {
+    "fps": 30.0,
+    "window": 128,
+    "stride": 32,
+    "min_keys": 5,
+    "max_keys": 36,
+    "batch_size": 16,
+    "samples_per_epoch": 1024,
+    "val_fraction": 0.2,
+    "val_gap": 15,
+    "rpa_range": 0.1,
+    "rpa_prob": 0.5,
+    "mirror": False,
+    "procedural_kind": None,
+    "procedural_clips": 0,
+    "seed": 0,
+    "num_workers": 0,
+}
+
+
+# --------------------------------------------------------------------------- geometry helpers
+
+
+def fk_from_global(
+    global_rotations: Tensor, root: Tensor, offsets: Tensor, parents: Sequence[int]
+) -> Tensor:
+    """Global joint positions from *global* rotations (differentiable).
+
+    Args:
+        global_rotations: ``[B, T, J, 4]``.
+        root: ``[B, T, 3]`` root positions.
+        offsets: ``[B, J, 3]`` or ``[J, 3]`` rest offsets.
+        parents: Parent index per joint.
+
+    Returns:
+        ``[B, T, J, 3]`` positions.
+    """
+    if offsets.dim() == 2:
+        offsets = offsets.unsqueeze(0).expand(global_rotations.shape[0], -1, -1)
+    offsets = offsets.to(global_rotations)
+    pos: list[Tensor] = [root]
+    for j in range(1, len(parents)):
+        p = parents[j]
+        off = offsets[:, None, j].expand_as(root)
+        pos.append(pos[p] + Q.rotate(global_rotations[:, :, p], off))
+    return torch.stack(pos, dim=2)
+
+
+def global_to_local(global_rotations: Tensor, parents: Sequence[int]) -> Tensor:
+    """Local rotations ``inv(q_parent) * q`` from ``[..., J, 4]`` global rotations."""
+    idx = torch.tensor(list(parents[1:]), dtype=torch.long, device=global_rotations.device)
+    child = Q.mul(Q.inv(global_rotations[..., idx, :]), global_rotations[..., 1:, :])
+    return torch.cat([global_rotations[..., :1, :], child], dim=-2)
+
+
+def global_from_local(local_rotations: Tensor, parents: Sequence[int]) -> Tensor:
+    """Global rotations ``[..., J, 4]`` from local ones (the rotation half of FK)."""
+    out: list[Tensor] = [local_rotations[..., 0, :]]
+    for j in range(1, len(parents)):
+        out.append(Q.mul(out[parents[j]], local_rotations[..., j, :]))
+    return torch.stack(out, dim=-2)
+
+
+def sign_invariant_l1(pred: Tensor, target: Tensor) -> Tensor:
+    """Mean L1 distance of quaternions ``[..., 4]`` up to sign (``q`` and ``-q`` agree)."""
+    plus = (pred - target).abs().sum(-1)
+    minus = (pred + target).abs().sum(-1)
+    return torch.minimum(plus, minus).mean() / 4.0
+
+
+def key_brackets(keys: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """Previous key, next key and the linear weight of every frame.
+
+    Args:
+        keys: ``[B, T]`` boolean keyframe mask; frame 0 must be a key.
+
+    Returns:
+        ``(prev [B, T], next [B, T], w [B, T])``: frames after the last key use the
+        last key on both sides (weight 0).
+    """
+    num_t = keys.shape[-1]
+    frames = torch.arange(num_t, device=keys.device).expand_as(keys)
+    prev = torch.where(keys, frames, torch.full_like(frames, -1)).cummax(dim=-1).values
+    nxt_rev = torch.where(keys, frames, torch.full_like(frames, num_t)).flip(-1)
+    nxt = nxt_rev.cummin(dim=-1).values.flip(-1)
+    nxt = torch.where(nxt >= num_t, prev, nxt)
+    prev = prev.clamp_min(0)
+    span = (nxt - prev).clamp_min(1)
+    w = torch.where(nxt > prev, (frames - prev).float() / span.float(), torch.zeros_like(span,
+                    dtype=torch.float32))
+    return prev, nxt, w
+
+
+def _gather_t(x: Tensor, index: Tensor) -> Tensor:
+    """``x[b, index[b, t]]`` for ``x`` of shape ``[B, T, ...]``."""
+    shape = index.shape + x.shape[2:]
+    idx = index.reshape(*index.shape, *([1] * (x.dim() - 2))).expand(shape)
+    return torch.gather(x, 1, idx)
+
+
+def lerp_keys(x: Tensor, keys: Tensor) -> Tensor:
+    """Linear interpolation of ``[B, T, ...]`` values between keyframes."""
+    prev, nxt, w = key_brackets(keys)
+    w = w.to(x.dtype).reshape(*w.shape, *([1] * (x.dim() - 2)))
+    return torch.lerp(_gather_t(x, prev), _gather_t(x, nxt), w)
+
+
+def slerp_keys(q: Tensor, keys: Tensor) -> Tensor:
+    """Spherical linear interpolation of ``[B, T, J, 4]`` quaternions between keyframes."""
+    prev, nxt, w = key_brackets(keys)
+    return Q.slerp(_gather_t(q, prev), _gather_t(q, nxt), w.to(q.dtype)[..., None])
+
+
+def _key_continuity(q: Tensor, keys: Tensor) -> Tensor:
+    """Sign-continuous quaternions along the *keyframes* only (zeros elsewhere).
+
+    Sign flips are removed from key to key, so the result does not depend on
+    the (unknown) frames between keys.
+    """
+    num_t = keys.shape[1]
+    frames = torch.arange(num_t, device=keys.device).expand_as(keys)
+    prev_incl = torch.where(keys, frames, torch.full_like(frames, -1)).cummax(dim=1).values
+    prev = torch.cat([torch.full_like(prev_incl[:, :1], -1), prev_incl[:, :-1]], dim=1)
+    before = _gather_t(q, prev.clamp_min(0))
+    flip = keys[..., None] & (prev >= 0)[..., None] & ((q * before).sum(-1) < 0)
+    parity = torch.cumsum(flip.to(torch.int64), dim=1) % 2
+    sign = 1.0 - 2.0 * parity.to(q.dtype)
+    return q * sign[..., None] * keys[..., None, None].to(q.dtype)
+
+
+def window_features(
+    global_rotations: Tensor,
+    root: Tensor,
+    offsets: Tensor,
+    tails: Tensor,
+    keys: Tensor,
+    parents: Sequence[int],
+) -> dict[str, Tensor]:
+    """Model inputs and targets of a batch of windows.
+
+    Args:
+        global_rotations: ``[B, T, J, 4]``.
+        root: ``[B, T, 3]``.
+        offsets: ``[B, J, 3]`` rest offsets.
+        tails: ``[B, J, 3]`` rest bone tails.
+        keys: ``[B, T]`` boolean keyframe mask (frame 0 a key).
+        parents: Parent indices.
+
+    Returns:
+        ``inputs [B, T, 10J + 1]`` plus ``positions``, ``center [B, 1, 3]``, ``q0 [B, J, 4]``,
+        ``foq_keys`` (FOQ sign-continuous along the keys, zero elsewhere: what the
+        model sees), and the targets ``foq`` (sign-continuous along all frames),
+        ``global`` (``foq * q0``) and ``root`` (relative to ``center``).
+    """
+    pos = fk_from_global(global_rotations, root, offsets, parents)
+    kf = keys.to(pos.dtype)
+    weight = kf[:, :, None, None].expand_as(pos[..., :1])
+    center = (pos * weight).sum(dim=(1, 2)) / weight.sum(dim=(1, 2)).clamp_min(1.0)
+    center = center[:, None, :]
+    q0 = global_rotations[:, 0]
+    raw = Q.mul(global_rotations, Q.inv(q0)[:, None])
+    foq = Q.continuity(raw, dim=1)
+    foq_keys = _key_continuity(raw, keys)
+    local_keys = _key_continuity(global_to_local(global_rotations, parents), keys)
+    norms = tails.norm(dim=-1, keepdim=True)
+    unit = torch.where(norms > 1e-6, tails / norms.clamp_min(1e-6), torch.zeros_like(tails))
+    direction = Q.rotate(q0, unit.to(q0))  # [B, J, 3]
+    num_b, num_t, num_j = pos.shape[:3]
+    per_joint = torch.cat(
+        [pos - center[:, :, None], direction[:, None].expand(num_b, num_t, num_j, 3), foq_keys],
+        -1,
+    )
+    inputs = torch.cat([per_joint.flatten(2) * kf[..., None], kf[..., None]], dim=-1)
+    return {
+        "inputs": inputs,
+        "positions": pos,
+        "center": center,
+        "q0": q0,
+        "foq": foq,
+        "foq_keys": foq_keys,
+        "local_keys": local_keys,
+        "global": Q.mul(foq, q0[:, None]),
+        "root": root - center,
+    }
+
+
+# --------------------------------------------------------------------------- network
+
+
+class RelativeAttention(nn.Module):
+    """Multi-head attention with Shaw et al. relative position embeddings (zero initialised).
+
+    Keys and values get a learned embedding of the clipped frame distance
+    ``clip(j - i, -K, K)`` shared by all heads.
+    """
+
+    def __init__(self, dim: int, heads: int, max_relative: int) -> None:
+        super().__init__()
+        if dim % heads:
+            raise SkelagnosticError(f"model.dim ({dim}) must be divisible by model.heads ({heads})")
+        self.heads, self.head_dim, self.max_relative = heads, dim // heads, max_relative
+        self.q = nn.Linear(dim, dim)
+        self.kv = nn.Linear(dim, 2 * dim)
+        self.out = nn.Linear(dim, dim)
+        self.rel_k = nn.Parameter(torch.zeros(2 * max_relative + 1, self.head_dim))
+        self.rel_v = nn.Parameter(torch.zeros(2 * max_relative + 1, self.head_dim))
+
+    def forward(self, x: Tensor, memory: Tensor, key_mask: Tensor | None = None) -> Tensor:
+        """Attend from ``x [B, T, D]`` to ``memory [B, T, D]`` (same frames).
+
+        Args:
+            x: Queries.
+            memory: Keys/values.
+            key_mask: ``[B, T]`` True where a frame may be attended to.
+        """
+        num_b, num_t, dim = x.shape
+        h, d = self.heads, self.head_dim
+        q = self.q(x).view(num_b, num_t, h, d).transpose(1, 2)
+        k, v = self.kv(memory).view(num_b, num_t, 2, h, d).permute(2, 0, 3, 1, 4)
+        frames = torch.arange(num_t, device=x.device)
+        rel = (frames[None, :] - frames[:, None]).clamp(-self.max_relative, self.max_relative)
+        rel = rel + self.max_relative
+        rk, rv = self.rel_k[rel], self.rel_v[rel]  # [T, T, d]
+        logits = (q @ k.transpose(-1, -2) + torch.einsum("bhid,ijd->bhij", q, rk)) / math.sqrt(d)
+        if key_mask is not None:
+            logits = logits.masked_fill(~key_mask[:, None, None, :], float("-inf"))
+        attn = logits.softmax(dim=-1)
+        out = attn @ v + torch.einsum("bhij,ijd->bhid", attn, rv)
+        return self.out(out.transpose(1, 2).reshape(num_b, num_t, dim))
+
+
+class Block(nn.Module):
+    """Pre-norm (RMSNorm) transformer block: relative attention then a GELU feed-forward."""
+
+    def __init__(self, dim: int, heads: int, ff_mult: int, max_relative: int) -> None:
+        super().__init__()
+        self.norm_q = nn.RMSNorm(dim)
+        self.norm_m = nn.RMSNorm(dim)
+        self.attn = RelativeAttention(dim, heads, max_relative)
+        self.norm_ff = nn.RMSNorm(dim)
+        self.ff = nn.Sequential(nn.Linear(dim, dim * ff_mult), nn.GELU(),
+                                nn.Linear(dim * ff_mult, dim))
+
+    def forward(self, x: Tensor, memory: Tensor | None = None,
+                key_mask: Tensor | None = None) -> Tensor:
+        """Self-attention (``memory=None``) or cross-attention, then feed-forward."""
+        q = self.norm_q(x)
+        m = q if memory is None else self.norm_m(memory)
+        x = x + self.attn(q, m, key_mask)
+        return x + self.ff(self.norm_ff(x))
+
+
+class CITLInterpolator(nn.Module):
+    """CITL's keyframe encoder, intermediate-token module and decoder.
+
+    Args:
+        in_features: Per-frame input size (``10 J + 1``).
+        out_features: Per-frame output size (``4 J + 3``).
+        dim: Width.
+        heads: Attention heads.
+        layers: Blocks in each of the three stages.
+        ff_mult: Feed-forward expansion.
+        max_relative: Largest distinguished frame distance of the relative positions.
+        zero_output: Initialise the output layer to zero (for residual outputs).
+    """
+
+    def __init__(self, in_features: int, out_features: int, dim: int, heads: int, layers: int,
+                 ff_mult: int = 4, max_relative: int = 128, zero_output: bool = False) -> None:
+        super().__init__()
+        self.embed = nn.Linear(in_features, dim)
+        self.encoder = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
+                                     for _ in range(layers))
+        self.interm = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
+                                    for _ in range(layers))
+        self.key_ff = nn.Sequential(nn.Linear(dim, dim * ff_mult), nn.GELU(),
+                                    nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim))
+        self.interm_ff = nn.Sequential(nn.Linear(dim, dim * ff_mult), nn.GELU(),
+                                       nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim))
+        self.decoder = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
+                                     for _ in range(layers))
+        self.head = nn.Linear(dim, out_features)
+        if zero_output:
+            nn.init.zeros_(self.head.weight)
+            nn.init.zeros_(self.head.bias)
+
+    def forward(self, inputs: Tensor, keys: Tensor) -> Tensor:
+        """``[B, T, in] -> [B, T, out]``; ``keys`` ``[B, T]`` boolean."""
+        enc = self.embed(inputs)
+        for block in self.encoder:
+            enc = block(enc, key_mask=keys)
+        interm = torch.zeros_like(enc)
+        for block in self.interm:
+            interm = block(interm, memory=enc, key_mask=keys)
+        manifold = torch.where(keys[..., None], self.key_ff(enc), self.interm_ff(interm))
+        for block in self.decoder:
+            manifold = block(manifold)
+        return self.head(manifold)
+
+
+# --------------------------------------------------------------------------- aligner
+
+
+class InterpolationAligner(Aligner):
+    """PC-MRL's interpolation model on one target skeleton (capability ``"interpolate"``).
+
+    The network is built in :meth:`setup` from the data module's target skeleton
+    (or from ``skeleton=`` / a checkpoint). Training batches come from
+    :class:`~skelagnostic_pcmrl.interp_data.InterpolationDataModule`.
+
+    Args:
+        dim: Transformer width (paper 512).
+        heads: Attention heads (paper 8).
+        layers: Blocks per stage (paper 6).
+        ff_mult: Feed-forward expansion.
+        max_relative: Clip distance of the relative positions.
+        residual: Predict the FOQ/root as an additive correction of the LERP baseline
+            (root LERP and local-rotation SLERP between the keys, expressed as FOQ;
+            output layer zero-initialised, so the untrained model IS the baseline)
+            instead of directly (paper: direct). A CPU option: the network only has
+            to learn what interpolation misses, which a few thousand steps can do.
+        lr: AdamW learning rate (paper 1e-4).
+        weight_decay: AdamW weight decay.
+        warmup_steps: Linear warm-up steps (paper 10000).
+        w_root: Weight of L1(root).
+        w_foq: Weight of L1(FOQ).
+        w_fk: Weight of L1(FK positions) (paper 0.1).
+        w_quat: Weight of L1(global quaternions) (paper 0.1).
+        skeleton: Target skeleton as :meth:`Skeleton.to_dict` (set by :meth:`setup`).
+        fps: Frame rate of the training data (set by :meth:`setup`).
+        window: Training window length (set by :meth:`setup`; long clips are split
+            into chunks of at most this many frames by :meth:`interpolate`).
+
+    Raises:
+        SkelagnosticError: An option is out of range.
+    """
+
+    capabilities: ClassVar[frozenset[str]] = frozenset({"interpolate"})
+
+    def __init__(
+        self,
+        dim: int = 512,
+        heads: int = 8,
+        layers: int = 6,
+        ff_mult: int = 4,
+        max_relative: int = 128,
+        residual: bool = False,
+        lr: float = 1e-4,
+        weight_decay: float = 0.01,
+        warmup_steps: int = 10000,
+        w_root: float = 1.0,
+        w_foq: float = 1.0,
+        w_fk: float = 0.1,
+        w_quat: float = 0.1,
+        skeleton: Mapping[str, Any] | None = None,
+        fps: float | None = None,
+        window: int = 128,
+    ) -> None:
+        super().__init__()
+        for arg, value in (("dim", dim), ("heads", heads), ("layers", layers),
+                           ("ff_mult", ff_mult), ("max_relative", max_relative), ("lr", lr),
+                           ("window", window)):
+            if value <= 0:
+                raise SkelagnosticError(f"model.{arg} must be positive, got {value}")
+        if warmup_steps < 0:
+            raise SkelagnosticError(f"model.warmup_steps must be >= 0, got {warmup_steps}")
+        self.save_hyperparameters()
+        self.net: CITLInterpolator | None = None
+        self.skeleton: Skeleton | None = None
+        if skeleton is not None:
+            self._build(Skeleton.from_dict(dict(skeleton)))
+
+    # ------------------------------------------------------------------ building
+    def _build(self, skeleton: Skeleton) -> None:
+        hp = self.hparams
+        self.skeleton = skeleton
+        num_j = skeleton.num_joints
+        self.parents = list(skeleton.parents)
+        self.register_buffer("tails", bone_tails(skeleton).tails.float(), persistent=False)
+        self.net = CITLInterpolator(10 * num_j + 1, 4 * num_j + 3, hp.dim, hp.heads, hp.layers,
+                                    hp.ff_mult, hp.max_relative, zero_output=hp.residual)
+
+    def setup(self, stage: str) -> None:
+        """Build the network from the data module's target skeleton."""
+        if self.net is not None:
+            return
+        dm = self.trainer.datamodule
+        dm.setup(stage)
+        skeleton = dm.skeleton
+        self.hparams["skeleton"] = skeleton.to_dict()
+        self.hparams["fps"] = float(dm.fps)
+        self.hparams["window"] = int(dm.window)
+        self._build(skeleton)
+
+    def _require_net(self) -> CITLInterpolator:
+        if self.net is None:
+            raise SkelagnosticError(
+                "InterpolationAligner has no skeleton yet: train it, load a checkpoint or pass "
+                "skeleton="
+            )
+        return self.net
+
+    # ------------------------------------------------------------------ network
+    def predict_window(self, feats: Mapping[str, Tensor], keys: Tensor) -> dict[str, Tensor]:
+        """Run the network on :func:`window_features` output.
+
+        Returns:
+            ``foq [B, T, J, 4]`` (unit), ``root [B, T, 3]`` (relative to ``center``),
+            ``global [B, T, J, 4]``.
+        """
+        net = self._require_net()
+        out = net(feats["inputs"], keys)
+        num_b, num_t = keys.shape
+        foq = out[..., :-3].reshape(num_b, num_t, -1, 4)
+        root = out[..., -3:]
+        if self.hparams.residual:
+            # additive correction of the LERP baseline: local-rotation SLERP between the
+            # keys (as FOQ) and root LERP
+            base = global_from_local(slerp_keys(feats["local_keys"], keys), self.parents)
+            base = Q.mul(base, Q.inv(feats["q0"])[:, None])
+            foq = foq + base
+            root = root + lerp_keys(feats["root"], keys)
+        foq = Q.normalize(foq)
+        return {"foq": foq, "root": root, "global": Q.mul(foq, feats["q0"][:, None])}
+
+    def _losses(self, batch: Mapping[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
+        hp = self.hparams
+        keys = batch["keys"]
+        feats = window_features(batch["global_rotations"], batch["root"], batch["offsets"],
+                                batch["tails"], keys, self.parents)
+        pred = self.predict_window(feats, keys)
+        pos = fk_from_global(pred["global"], pred["root"] + feats["center"], batch["offsets"],
+                             self.parents)
+        parts = {
+            "root": (pred["root"] - feats["root"]).abs().mean(),
+            "foq": sign_invariant_l1(pred["foq"], feats["foq"]),
+            "fk": (pos - feats["positions"]).abs().mean(),
+            "quat": sign_invariant_l1(pred["global"], feats["global"]),
+        }
+        loss = (hp.w_root * parts["root"] + hp.w_foq * parts["foq"] + hp.w_fk * parts["fk"]
+                + hp.w_quat * parts["quat"])
+        return loss, parts
+
+    def on_train_epoch_start(self) -> None:
+        """New random training windows every epoch (seeded by the epoch number)."""
+        train_set = getattr(getattr(self.trainer, "datamodule", None), "train_set", None)
+        if train_set is not None:
+            train_set.epoch = self.current_epoch
+
+    def training_step(self, batch: Mapping[str, Tensor], batch_idx: int) -> Tensor:
+        """One optimisation step; logs ``train/loss`` and its parts."""
+        loss, parts = self._losses(batch)
+        size = batch["keys"].shape[0]
+        self.log("train/loss", loss, prog_bar=True, batch_size=size)
+        for name, value in parts.items():
+            self.log(f"train/{name}", value, batch_size=size)
+        return loss
+
+    def validation_step(self, batch: Mapping[str, Tensor], batch_idx: int) -> None:
+        """Logs ``val/loss`` (fixed windows and keyframes, no augmentation)."""
+        loss, parts = self._losses(batch)
+        size = batch["keys"].shape[0]
+        self.log("val/loss", loss, prog_bar=True, batch_size=size, sync_dist=True)
+        for name, value in parts.items():
+            self.log(f"val/{name}", value, batch_size=size, sync_dist=True)
+
+    def test_step(self, batch: Mapping[str, Tensor], batch_idx: int) -> None:
+        """Logs ``test/loss`` on the held-out clips' windows."""
+        loss, parts = self._losses(batch)
+        size = batch["keys"].shape[0]
+        self.log("test/loss", loss, batch_size=size, sync_dist=True)
+        for name, value in parts.items():
+            self.log(f"test/{name}", value, batch_size=size, sync_dist=True)
+
+    def configure_optimizers(self) -> Any:
+        """AdamW with a linear warm-up to ``lr`` over ``warmup_steps``, then constant."""
+        hp = self.hparams
+        opt = torch.optim.AdamW(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
+        warm = max(int(hp.warmup_steps), 1)
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: min(1.0, (s + 1) / warm))
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "step"}}
+
+    # ------------------------------------------------------------------ inference
+    def _check_motion(self, motion: Motion) -> Skeleton:
+        self._require_net()
+        skeleton = self.skeleton
+        assert skeleton is not None  # built together with the network
+        if list(motion.skeleton.parents) != list(skeleton.parents):
+            raise MotionError(
+                f"motion {motion.name or ''!r} has skeleton {motion.skeleton!r} whose hierarchy "
+                f"differs from the trained target skeleton {skeleton!r} "
+                f"({motion.skeleton.num_joints} vs {skeleton.num_joints} joints)"
+            )
+        return skeleton
+
+    def _scale_to_training(self, motion: Motion) -> float:
+        """Factor bringing ``motion``'s lengths to the training data's (metres).
+
+        ``motion.units`` when known; otherwise the known unit (:data:`UNITS`)
+        closest to the ratio of the trained and the given skeleton heights, or 1
+        when that ratio is within a factor of 2 (same units, another body size).
+        """
+        from skelagnostic.core.motion import UNITS
+
+        if motion.units is not None:
+            return UNITS[motion.units]
+        trained = self.skeleton.height() if self.skeleton is not None else 0.0
+        own = motion.skeleton.height()
+        if own <= 0 or trained <= 0 or 0.5 < trained / own < 2.0:
+            return 1.0
+        ratio = math.log(trained / own)
+        return min(UNITS.values(), key=lambda f: abs(math.log(f) - ratio))
+
+    @torch.no_grad()
+    def interpolate(self, motion: Motion, keyframes: Sequence[int]) -> Motion:
+        """Keep the keyframes of ``motion`` and generate the frames between them.
+
+        Clips longer than the training window are cut at keyframes into chained
+        chunks of at most ``window`` frames (consecutive chunks share their
+        boundary key; a gap longer than the window becomes one longer chunk, which
+        the relative positions allow). Each chunk is encoded relative to its first
+        frame (a key). Lengths are brought to the training data's units (metres)
+        and back: by ``motion.units`` when known, else by the known unit closest
+        to the ratio of the skeleton heights (1 within a factor of 2). Animated
+        non-root translations (``motion.translations``) are not interpolated: the
+        result uses the skeleton offsets.
+
+        Args:
+            motion: A motion on the target skeleton's hierarchy (joint names and
+                offsets may differ); only its keyframes are read.
+            keyframes: Strictly increasing frame indices, the first 0 and the last
+                ``motion.num_frames - 1``.
+
+        Returns:
+            A motion with the same skeleton, length, fps, name and units whose
+            keyframes equal the input's.
+
+        Raises:
+            MotionError: Bad keyframes or a different skeleton hierarchy.
+        """
+        skeleton = self._check_motion(motion)
+        keys = [int(k) for k in keyframes]
+        num_t = motion.num_frames
+        if not keys or keys[0] != 0 or keys[-1] != num_t - 1:
+            raise MotionError(
+                f"interpolate: keyframes must start at 0 and end at the last frame "
+                f"({num_t - 1}), got {keys[:3]}...{keys[-3:]}"
+            )
+        if any(b <= a for a, b in itertools.pairwise(keys)):
+            raise MotionError("interpolate: keyframes must be strictly increasing")
+        fps = self.hparams.fps
+        if fps is not None and abs(float(fps) - motion.fps) > 1e-6:
+            log.warning("interpolate: the model was trained at %.3g fps, motion %r is at %.3g fps",
+                        fps, motion.name, motion.fps)
+        scale = self._scale_to_training(motion)
+        work = motion.scaled(scale) if scale != 1.0 else motion
+        work = work.to(dtype=torch.float32, device=self.device)
+        grot = work.global_rotations()
+        root = work.root_positions
+        offsets = work.skeleton.offsets.float().to(self.device)
+        tails_info = bone_tails(work.skeleton)
+        tails = tails_info.tails.float().to(self.device)
+        out_global = grot.clone()
+        out_root = root.clone()
+        window = int(self.hparams.window)
+        start = 0
+        key_set = keys
+        ki = 0
+        while start < num_t - 1:
+            # the furthest key within the window, at least the next key
+            end_i = ki + 1
+            while end_i + 1 < len(key_set) and key_set[end_i + 1] - start + 1 <= window:
+                end_i += 1
+            end = key_set[end_i]
+            mask = torch.zeros(1, end - start + 1, dtype=torch.bool, device=self.device)
+            mask[0, [k - start for k in key_set[ki:end_i + 1]]] = True
+            feats = window_features(grot[None, start:end + 1], root[None, start:end + 1],
+                                    offsets[None], tails[None], mask, self.parents)
+            pred = self.predict_window(feats, mask)
+            inner = ~mask[0]
+            out_global[start:end + 1][inner] = pred["global"][0][inner]
+            out_root[start:end + 1][inner] = (pred["root"] + feats["center"])[0][inner]
+            start, ki = end, end_i
+        local = global_to_local(out_global, skeleton.parents)
+        local[keys] = work.rotations[keys]
+        out_root[keys] = root[keys]
+        result = Motion(work.skeleton, local.cpu(), out_root.cpu(), motion.fps,
+                        name=motion.name, units=work.units)
+        if scale != 1.0:
+            result = result.scaled(1.0 / scale)
+        return result.to(dtype=motion.dtype)
+
+    # ------------------------------------------------------------------ Aligner API
+    def encode(self, motion: Motion) -> Latent:
+        """The FOQ representation the model works in: ``z = FOQ [T, J, 4]``.
+
+        ``extras`` hold the first-frame global rotations ``q0 [J, 4]`` and the root
+        trajectory ``root [T, 3]`` needed by :meth:`decode`.
+        """
+        grot = motion.global_rotations()
+        foq = Q.continuity(Q.mul(grot, Q.inv(grot[:1])), dim=-3)
+        return Latent(foq, motion.fps, {"q0": grot[0], "root": motion.root_positions})
+
+    def decode(self, latent: Latent, skeleton: Skeleton) -> Motion:
+        """Rebuild a motion on ``skeleton`` from :meth:`encode` output (FOQ decoding)."""
+        grot = Q.mul(latent.z, latent.extras["q0"])
+        local = global_to_local(grot, skeleton.parents)
+        return Motion(skeleton, local, latent.extras["root"], latent.fps)

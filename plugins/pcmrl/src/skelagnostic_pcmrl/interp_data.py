@@ -1,0 +1,357 @@
+"""Training data of PC-MRL's interpolation model (Sec. 3.4, Sec. 4.3 protocol).
+
+:class:`InterpolationDataModule` holds motions of ONE target skeleton topology
+(for PC-MRL: the stage-1 reconstructions written by ``skelagnostic retarget``;
+any BVH files or procedural clips of that topology work, e.g.
+``data=bvh data.paths=[out/*.bvh] data.units=m``). Clips whose hierarchy (parent
+list) equals the first clip's are accepted whatever their joint names and bone
+lengths; each window keeps its own clip's offsets. Lengths must be in metres
+(the paper's convention and the unit of the RPA range): pass ``data.units``
+for files in other units.
+
+Training windows (``window`` frames, 128 in the paper) are drawn at random
+positions with a random number of keyframes in ``[min_keys, max_keys]`` (5 to
+36 in the paper), the first and last frames always keys, the others spread
+uniformly at random; rest pose augmentation (:mod:`skelagnostic_pcmrl.rpa`) is
+applied to a share ``rpa_prob`` of them with range ``rpa_range`` (metres).
+Validation/test windows are fixed (every ``stride`` frames) with a key every
+``val_gap`` frames plus the last frame.
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch.utils.data import DataLoader, Dataset
+
+from skelagnostic.core.motion import Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.data import MotionDataModule
+from skelagnostic.data.sources import ClipSource, ProceduralSource
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic_pcmrl.rpa import augment_rest_pose, bone_tails, random_tail_offsets
+
+__all__ = ["Clip", "InterpolationDataModule", "gap_keys", "random_keys"]
+
+log = logging.getLogger(__name__)
+
+#: A target skeleton taller than this (in metres) is almost certainly not in metres.
+MAX_HEIGHT_M = 3.0
+
+
+@dataclass
+class Clip:
+    """One motion of the target topology, ready for windowing (float32, metres).
+
+    Attributes:
+        name: Clip identifier.
+        skeleton: Its own skeleton (same hierarchy as the target).
+        global_rotations: ``[T, J, 4]``.
+        root: ``[T, 3]``.
+        offsets: ``[J, 3]``.
+        tails: ``[J, 3]`` bone tails (:func:`~skelagnostic_pcmrl.rpa.bone_tails`).
+    """
+
+    name: str
+    skeleton: Skeleton
+    global_rotations: torch.Tensor
+    root: torch.Tensor
+    offsets: torch.Tensor
+    tails: torch.Tensor
+
+    @classmethod
+    def from_motion(cls, motion: Motion, name: str) -> Clip:
+        """Precompute the global rotations of ``motion``."""
+        m = motion.float()
+        return cls(name, m.skeleton, m.global_rotations(), m.root_positions.clone(),
+                   m.skeleton.offsets.float(), bone_tails(m.skeleton).tails.float())
+
+    @property
+    def num_frames(self) -> int:
+        """Frames of the clip."""
+        return int(self.root.shape[0])
+
+
+def random_keys(length: int, min_keys: int, max_keys: int, rng: random.Random) -> torch.Tensor:
+    """``[length]`` boolean mask: first and last frames plus random others.
+
+    The number of keys is uniform in ``[min_keys, max_keys]`` (clipped to ``length``).
+    """
+    n = rng.randint(min(min_keys, length), min(max_keys, length))
+    mask = torch.zeros(length, dtype=torch.bool)
+    mask[0] = mask[-1] = True
+    inner = list(range(1, length - 1))
+    extra = max(n - 2, 0)
+    if extra and inner:
+        mask[rng.sample(inner, min(extra, len(inner)))] = True
+    return mask
+
+
+def gap_keys(length: int, gap: int) -> torch.Tensor:
+    """``[length]`` boolean mask with a key every ``gap`` frames and on the last frame."""
+    if gap <= 0:
+        raise SkelagnosticError(f"keyframe gap must be positive, got {gap}")
+    mask = torch.zeros(length, dtype=torch.bool)
+    mask[::gap] = True
+    mask[-1] = True
+    return mask
+
+
+def _window(clip: Clip, start: int, length: int, keys: torch.Tensor) -> dict[str, torch.Tensor]:
+    stop = start + length
+    return {"global_rotations": clip.global_rotations[start:stop], "root": clip.root[start:stop],
+            "offsets": clip.offsets, "tails": clip.tails, "keys": keys}
+
+
+class TrainWindows(Dataset):
+    """Random windows with random keyframes and RPA (map-style; DDP shards the indices)."""
+
+    def __init__(self, clips: Sequence[Clip], window: int, min_keys: int, max_keys: int,
+                 rpa_range: float, rpa_prob: float, samples: int, seed: int) -> None:
+        self.clips = [c for c in clips if c.num_frames >= window]
+        if not self.clips:
+            raise SkelagnosticError(
+                f"data: no training clip has data.window={window} frames; lower data.window or "
+                "add longer clips"
+            )
+        self.weights = [c.num_frames - window + 1 for c in self.clips]
+        self.window, self.min_keys, self.max_keys = window, min_keys, max_keys
+        self.rpa_range, self.rpa_prob = rpa_range, rpa_prob
+        self.samples, self.seed = samples, seed
+        self.epoch = 0
+
+    def __len__(self) -> int:
+        return self.samples
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        rng = random.Random(hash((self.seed, self.epoch, index)))
+        clip = rng.choices(self.clips, weights=self.weights)[0]
+        start = rng.randint(0, clip.num_frames - self.window)
+        keys = random_keys(self.window, self.min_keys, self.max_keys, rng)
+        item = _window(clip, start, self.window, keys)
+        if self.rpa_range > 0 and rng.random() < self.rpa_prob:
+            gen = torch.Generator().manual_seed(rng.getrandbits(62))
+            delta = random_tail_offsets(clip.skeleton.num_joints, self.rpa_range, gen)
+            offsets, grot, tails = augment_rest_pose(clip.skeleton, item["global_rotations"],
+                                                     delta, offsets=clip.offsets)
+            item.update(offsets=offsets, global_rotations=grot, tails=tails)
+        return item
+
+
+class FixedWindows(Dataset):
+    """Windows every ``stride`` frames with a key every ``gap`` frames (validation/test)."""
+
+    def __init__(self, clips: Sequence[Clip], window: int, stride: int, gap: int) -> None:
+        self.items = [(c, s) for c in clips if c.num_frames >= window
+                      for s in range(0, c.num_frames - window + 1, stride)]
+        self.keys = gap_keys(window, gap)
+        self.window = window
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        clip, start = self.items[index]
+        return _window(clip, start, self.window, self.keys)
+
+
+class InterpolationDataModule(MotionDataModule):
+    """Keyframe-interpolation windows on one target skeleton (see the module docstring).
+
+    Args:
+        sources: Clip sources (default: procedural ``biped31``, the CMU-31 hierarchy).
+        representation: Must be ``None`` (the model computes its own FOQ features).
+        fps: Frame rate the clips are resampled to.
+        window: Frames per window (paper 128).
+        stride: Frames between validation/test window starts.
+        min_keys: Fewest keyframes of a training window (paper 5).
+        max_keys: Most keyframes of a training window (paper 36).
+        batch_size: Windows per batch.
+        samples_per_epoch: Random training windows per epoch.
+        val_fraction: Share of the non-test clips used for validation.
+        val_gap: Keyframe gap of the validation/test windows.
+        rpa_range: RPA tail offset range in metres (paper 0.1; 0 disables RPA).
+        rpa_prob: Share of training windows that get RPA (not given by the paper).
+        mirror: Also train on the left/right mirror of every training clip (not in the paper).
+        procedural_kind: Add procedural clips of this kind (same hierarchy) to training.
+        procedural_clips: How many per gait (walk, run).
+        seed: Seed of the window/keyframe/RPA draws.
+        num_workers: Data-loader workers.
+        test_fraction: Share of the clips moved to the test split (besides the clips a
+            source marks as test, e.g. with ``data.test_pattern``).
+        split_seed: Seed of the clip split.
+        cache_dir: Unused (the clips are held in memory); accepted for the shared data keys.
+
+    Raises:
+        SkelagnosticError: On out-of-range options, clips of another hierarchy, or
+            lengths that are not in metres.
+    """
+
+    def __init__(
+        self,
+        sources: ClipSource | Sequence[ClipSource] | None = None,
+        representation: Any = None,
+        fps: float = 30.0,
+        window: int = 128,
+        stride: int = 32,
+        min_keys: int = 5,
+        max_keys: int = 36,
+        batch_size: int = 16,
+        samples_per_epoch: int = 1024,
+        val_fraction: float = 0.2,
+        val_gap: int = 15,
+        rpa_range: float = 0.1,
+        rpa_prob: float = 0.5,
+        mirror: bool = False,
+        procedural_kind: str | None = None,
+        procedural_clips: int = 0,
+        seed: int = 0,
+        num_workers: int = 0,
+        test_fraction: float = 0.0,
+        split_seed: int = 0,
+        cache_dir: str | Path | None = None,
+    ) -> None:
+        if representation is not None:
+            raise SkelagnosticError(
+                "data.representation is not used by pcmrl_interp (it computes FOQ features)"
+            )
+        checks = (("fps", fps, 0), ("window", window, 2), ("stride", stride, 0),
+                  ("batch_size", batch_size, 0), ("samples_per_epoch", samples_per_epoch, 0),
+                  ("val_gap", val_gap, 0), ("min_keys", min_keys, 1))
+        for arg, value, low in checks:
+            if value <= low:
+                raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
+        if max_keys < min_keys:
+            raise SkelagnosticError(f"data.max_keys ({max_keys}) < data.min_keys ({min_keys})")
+        if rpa_range < 0 or not 0 <= rpa_prob <= 1:
+            raise SkelagnosticError("data.rpa_range must be >= 0 and data.rpa_prob in [0, 1]")
+        if sources is None:
+            sources = [ProceduralSource(kinds=("biped31",), gaits=("walk", "run"))]
+        super().__init__(sources=sources, representation=None, fps=fps, window=window,
+                         stride=stride, batch_size=batch_size, num_workers=num_workers,
+                         val_fraction=val_fraction, test_fraction=test_fraction,
+                         split_seed=split_seed, cache_dir=cache_dir)
+        self.fps, self.window, self.stride = float(fps), int(window), int(stride)
+        self.min_keys, self.max_keys = int(min_keys), int(max_keys)
+        self.batch_size, self.samples_per_epoch = int(batch_size), int(samples_per_epoch)
+        self.val_fraction, self.val_gap = float(val_fraction), int(val_gap)
+        self.rpa_range, self.rpa_prob, self.mirror = float(rpa_range), float(rpa_prob), mirror
+        self.procedural_kind, self.procedural_clips = procedural_kind, int(procedural_clips)
+        self.seed, self.num_workers = int(seed), int(num_workers)
+        self.skeleton: Skeleton | None = None
+        self.clips: dict[str, list[Clip]] = {"train": [], "val": [], "test": []}
+        self.train_set: TrainWindows | None = None
+
+    # ------------------------------------------------------------------ loading
+    def prepare_data(self) -> None:
+        """Nothing to cache: the clips are small and loaded in :meth:`setup`."""
+
+    @property
+    def dataset_names(self) -> list[str]:
+        """One dataset: the target skeleton (after :meth:`setup`)."""
+        return ["target"] if self.skeleton is not None else []
+
+    def _prepare(self, motion: Motion, name: str) -> Motion:
+        if motion.fps != self.fps:
+            motion = motion.resample(self.fps)
+        if self.skeleton is None:
+            height = motion.skeleton.height()
+            if height > MAX_HEIGHT_M:
+                raise SkelagnosticError(
+                    f"data: clip {name!r} is {height:.3g} units tall; pcmrl_interp expects "
+                    "metres (set data.units, e.g. data.units=cmu or data.units=cm)"
+                )
+            self.skeleton = motion.skeleton
+        elif list(motion.skeleton.parents) != list(self.skeleton.parents):
+            raise SkelagnosticError(
+                f"data: clip {name!r} has {motion.skeleton.num_joints} joints with another "
+                f"hierarchy than the target skeleton {self.skeleton!r}; pcmrl_interp trains on "
+                "one target skeleton"
+            )
+        return motion
+
+    def setup(self, stage: str | None = None) -> None:
+        """Load every clip, check the hierarchy, split by clip (idempotent)."""
+        if self.skeleton is not None:
+            return
+        test: list[tuple[str, Motion]] = []
+        rest: list[tuple[str, Motion]] = []
+        for source in self.sources:
+            for ref in source.clips():
+                motion = self._prepare(source.load(ref), ref.id)
+                (test if ref.split == "test" else rest).append((ref.id, motion))
+        if self.procedural_kind and self.procedural_clips > 0:
+            extra = ProceduralSource(kinds=(self.procedural_kind,), gaits=("walk", "run"),
+                                     clips_per_gait=self.procedural_clips, seconds=8.0,
+                                     seed=self.seed + 1000, name="procedural_extra")
+            procedural = [(f"procedural:{r.id}", self._prepare(extra.load(r), r.id))
+                          for r in extra.clips()]
+        else:
+            procedural = []
+        if not rest and not procedural:
+            raise SkelagnosticError("data: no training clips (every clip is in the test split)")
+        order = list(range(len(rest)))
+        random.Random(self.split_seed).shuffle(order)
+        n_test = round(self.test_fraction * len(rest))
+        test += [rest[i] for i in sorted(order[:n_test])]
+        order = order[n_test:]
+        n_val = round(self.val_fraction * len(rest)) if len(order) > 1 else 0
+        if self.val_fraction > 0 and len(order) > 1:
+            n_val = max(n_val, 1)
+        val_idx = set(order[:n_val])
+        train = [rest[i] for i in order if i not in val_idx] + procedural
+        if self.mirror:
+            train = train + [(f"{n}:mirror", m.mirror()) for n, m in train]
+        self.clips = {
+            "train": [Clip.from_motion(m, n) for n, m in train],
+            "val": [Clip.from_motion(rest[i][1], rest[i][0]) for i in sorted(val_idx)],
+            "test": [Clip.from_motion(m, n) for n, m in test],
+        }
+        self.skeletons = {"target": self.skeleton}
+        self.train_set = TrainWindows(self.clips["train"], self.window, self.min_keys,
+                                      self.max_keys, self.rpa_range, self.rpa_prob,
+                                      self.samples_per_epoch, self.seed)
+        for split in ("val", "test"):
+            short = [c.name for c in self.clips[split] if c.num_frames < self.window]
+            if short:
+                log.warning("data: %s clips shorter than %d frames are skipped: %s", split,
+                            self.window, ", ".join(short))
+
+    # ------------------------------------------------------------------ loaders
+    def train_dataloader(self) -> DataLoader:
+        """Random windows (new draws every epoch)."""
+        if self.train_set is None:
+            self.setup("fit")
+        return DataLoader(self.train_set, batch_size=self.batch_size, shuffle=False,
+                          num_workers=self.num_workers, drop_last=True)
+
+    def _fixed(self, split: str) -> DataLoader:
+        self.setup(split)
+        windows = FixedWindows(self.clips[split], self.window, self.stride, self.val_gap)
+        return DataLoader(windows, batch_size=self.batch_size, num_workers=self.num_workers)
+
+    def val_dataloader(self) -> DataLoader | list:
+        """Fixed windows of the validation clips (empty when there are none)."""
+        self.setup("validate")
+        return self._fixed("val") if self.clips["val"] else []
+
+    def test_dataloader(self) -> DataLoader:
+        """Fixed windows of the test clips (``test_pattern`` of the source)."""
+        return self._fixed("test")
+
+    def predict_dataloader(self) -> DataLoader:
+        """Fixed windows of the test clips (as :meth:`test_dataloader`)."""
+        return self._fixed("test")
+
+    def state_dict(self) -> dict[str, Any]:
+        """No loader state to resume (training windows are re-drawn per epoch)."""
+        return {}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Nothing to restore."""

@@ -1,0 +1,117 @@
+"""Hook implementations of the PC-MRL plugin (entry point ``pcmrl`` in group ``skelagnostic``).
+
+Two aligners, one per stage of the paper (one registered name has one module
+and one data-module class, so the stages are two names):
+
+* ``model=pcmrl``: stage 1, point cloud -> target-skeleton reconstruction
+  (:class:`~skelagnostic_pcmrl.recon.PcmrlReconstruction`). ``model.stage``
+  accepts only ``reconstruction`` and points to ``pcmrl_interp`` otherwise.
+* ``model=pcmrl_interp``: stage 2, FOQ keyframe interpolation
+  (``skelagnostic_pcmrl.interp.InterpolationAligner``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from skelagnostic.plugins import hookimpl
+
+#: Default ``model/pcmrl`` config: the paper's method at a CPU-sized width (the paper's
+#: sizes are ``experiment=pcmrl_paper``): point encoder 32 -> 512 channels over 4 stages
+#: (paper 64 -> 1024), temporal transformer 128 wide (paper: 1024), 6 layers, 4 heads.
+DEFAULT_CONFIG: dict[str, Any] = {
+    "stage": "reconstruction",
+    "num_source_points": 256,
+    "num_target_points": 1024,
+    "sigma": 0.05,
+    "dim": 16,
+    "stages": 4,
+    "point_heads": 4,
+    "group_k": 8,
+    "temporal_dim": 128,
+    "temporal_layers": 6,
+    "temporal_heads": 4,
+    "dropout": 0.0,
+    "knn_k": 8,
+    "knn_variant": "paper",
+    "knn_reduction": "mean",
+    "lambda_q": 0.01,
+    "lambda_end": 0.0,
+    "lr": 1e-3,
+    "weight_decay": 0.0,
+    "centre": True,
+    "chunk": None,
+    "target": None,
+    "target_units": None,
+    "sample_seed": 0,
+}
+
+#: Default data of ``model=pcmrl`` (``skelagnostic fit model=pcmrl`` with no ``data=``):
+#: procedural biped22 clips as the source ...
+DEFAULT_DATA: dict[str, Any] = {
+    "source": "procedural",
+    "kinds": ["biped22"],
+    "gaits": ["walk", "run"],
+    "clips_per_gait": 3,
+    "seconds": 6.0,
+    "seed": 0,
+}
+#: ... and data-module keys for any data: the target skeleton (procedural biped31,
+#: unpaired: no biped31 motion is ever seen), 32-frame windows.
+DATA_OPTIONS: dict[str, Any] = {
+    "target": "biped31",
+    "target_units": None,
+    "source_units": None,
+    "window": 32,
+    "stride": 8,
+    "batch_size": 4,
+}
+
+
+#: The CPU budget of ``skelagnostic fit model=pcmrl|pcmrl_interp`` alone: stop after
+#: 4.5 minutes of training (``trainer.max_time=null`` lifts it).
+TRAINER_OPTIONS: dict[str, Any] = {"max_time": "00:00:04:30"}
+
+
+@hookimpl
+def register_aligners(register: Callable[..., Any]) -> None:
+    """Register ``model=pcmrl`` (stage 1) and ``model=pcmrl_interp`` (stage 2)."""
+    from skelagnostic_pcmrl.recon import PcmrlReconstruction
+    from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
+
+    register(
+        "pcmrl",
+        PcmrlReconstruction,
+        PcmrlReconDataModule,
+        config=DEFAULT_CONFIG,
+        description="PC-MRL stage 1: unsupervised point-cloud reconstruction onto a target "
+        "skeleton (model=pcmrl_interp: stage 2)",
+        data=DEFAULT_DATA,
+        data_options=DATA_OPTIONS,
+        trainer_options=TRAINER_OPTIONS,
+    )
+    from skelagnostic_pcmrl.interp import (
+        INTERP_CONFIG,
+        INTERP_DATA_DEFAULTS,
+        INTERP_DATA_OPTIONS,
+        InterpolationAligner,
+    )
+    from skelagnostic_pcmrl.interp_data import InterpolationDataModule
+
+    register(
+        "pcmrl_interp",
+        InterpolationAligner,
+        InterpolationDataModule,
+        config=INTERP_CONFIG,
+        description="PC-MRL stage 2: FOQ keyframe interpolation on the target skeleton",
+        data=INTERP_DATA_DEFAULTS,
+        data_options=INTERP_DATA_OPTIONS,
+        trainer_options=TRAINER_OPTIONS,
+    )
+
+
+@hookimpl
+def register_config_paths(register: Callable[..., Any]) -> None:
+    """Ship ``experiment=pcmrl_quick``, ``pcmrl_paper`` and ``pcmrl_lafan1_cmu``."""
+    register("pkg://skelagnostic_pcmrl.conf")

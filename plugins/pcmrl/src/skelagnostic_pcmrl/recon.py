@@ -1,0 +1,423 @@
+"""PC-MRL stage 1: unsupervised point cloud -> target-skeleton motion (paper Sec. 3.2, Fig. 3 I).
+
+:class:`PcmrlReconstruction` is the ``model=pcmrl`` aligner. Per training
+sequence it draws a 256-point cloud on the source motion (Eq. 3, sigma 0.05
+m), encodes every frame with a Point Transformer
+(:mod:`~skelagnostic_pcmrl.point_transformer`), runs a temporal transformer
+(:mod:`~skelagnostic_pcmrl.temporal`) to the root position and global unit
+quaternions of the target skeleton, derives the target joints with Eq. 1
+(:func:`~skelagnostic_pcmrl.points.positions_from_global`), draws a 1024-point
+cloud on the reconstruction and minimises the temporal KNN loss per body group
+(Eq. 5), plus the optional end-effector loss (Eq. 6) and ``0.01 (|q| - 1)^2``.
+
+Inference (:meth:`~PcmrlReconstruction.encode` / ``decode`` / ``retarget``)
+takes a motion on any skeleton, in any units (converted to metres), and
+returns a :class:`~skelagnostic.Motion` on the trained target skeleton in its
+own units, with local rotations (global rotations of joints that carry only
+zero-length bones are not observable and stay at their parent's, Sec. 5).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import torch
+
+from skelagnostic.aligners import Aligner
+from skelagnostic.aligners.base import Latent
+from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import forward_kinematics
+from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.representations import POINT_GROUPS
+from skelagnostic_pcmrl.losses import end_effector_loss, temporal_knn_loss, unit_norm_penalty
+from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
+from skelagnostic_pcmrl.points import (
+    ancestor_matrix,
+    effective_joints,
+    end_effector_pairs,
+    global_to_local,
+    infer_units,
+    positions_from_global,
+    sample_layout,
+    warn_zero_length_bones,
+)
+from skelagnostic_pcmrl.temporal import TemporalTransformer
+
+__all__ = ["PcmrlReconstruction", "end_effector_pairs"]
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+class PcmrlReconstruction(Aligner):
+    """PC-MRL point-cloud-to-motion reconstruction onto one target skeleton.
+
+    The target skeleton comes from the data module (``data.target``) when
+    training starts, or from the checkpoint; it is saved in every checkpoint.
+
+    Args:
+        stage: ``"reconstruction"`` (this model). Stage 2 is ``model=pcmrl_interp``.
+        num_source_points: Points of the source cloud (256).
+        num_target_points: Points of the cloud drawn on the reconstruction (1024).
+        sigma: Gaussian offset of the points, metres (0.05).
+        dim: Point-encoder width after the input MLP (64), doubled at every stage.
+        stages: Point-encoder pooling stages (4).
+        point_heads: Heads of the point self-attention.
+        group_k: Neighbours of the kNN grouping in the pooling stages (8).
+        temporal_dim: Width of the temporal transformer (``None``: the frame feature width).
+        temporal_layers: Temporal transformer blocks (6).
+        temporal_heads: Temporal attention heads (4).
+        dropout: Dropout of the temporal transformer.
+        knn_k: Neighbours of the KNN loss (8).
+        knn_variant: ``"paper"`` (Eq. 5) or ``"authors"`` (three terms / sqrt(T)).
+        knn_reduction: ``"mean"`` (per point, neighbour and frame) or ``"sum"`` (Eq. 5 as is).
+        lambda_q: Weight of the unit-norm penalty (0.01).
+        lambda_end: Weight of the end-effector loss (0: off; the paper's loss is optional).
+        lr: AdamW learning rate.
+        weight_decay: AdamW weight decay.
+        centre: Subtract the source cloud's horizontal centroid in every frame before
+            encoding and add it back to the root (horizontal translation invariance:
+            the network predicts the root relative to the cloud's centroid, so clips
+            of any length and position stay in the training distribution).
+        chunk: Frames per temporal-transformer chunk at inference (``None``: the
+            training window); chunks overlap by half and are blended.
+        target: Target skeleton (procedural kind or BVH path) when built without
+            a data module; ``None``: from the data module or the checkpoint.
+        target_units: Units of ``target`` (``None``: guessed).
+        sample_seed: Seed of the point clouds drawn at inference and validation.
+    """
+
+    capabilities: ClassVar[frozenset[str]] = frozenset({"encode", "decode", "retarget"})
+
+    def __init__(
+        self,
+        stage: str = "reconstruction",
+        num_source_points: int = 256,
+        num_target_points: int = 1024,
+        sigma: float = 0.05,
+        dim: int = 64,
+        stages: int = 4,
+        point_heads: int = 4,
+        group_k: int = 8,
+        temporal_dim: int | None = None,
+        temporal_layers: int = 6,
+        temporal_heads: int = 4,
+        dropout: float = 0.0,
+        knn_k: int = 8,
+        knn_variant: str = "paper",
+        knn_reduction: str = "mean",
+        lambda_q: float = 0.01,
+        lambda_end: float = 0.0,
+        lr: float = 1e-4,
+        weight_decay: float = 0.0,
+        centre: bool = True,
+        chunk: int | None = None,
+        target: str | None = None,
+        target_units: str | None = None,
+        sample_seed: int = 0,
+    ) -> None:
+        super().__init__()
+        if stage != "reconstruction":
+            raise SkelagnosticError(
+                f"model.stage={stage!r}: model=pcmrl is PC-MRL stage 1 (reconstruction); the "
+                "interpolation stage is model=pcmrl_interp"
+            )
+        for name, value in (("num_source_points", num_source_points),
+                            ("num_target_points", num_target_points), ("knn_k", knn_k)):
+            if value < 1:
+                raise SkelagnosticError(f"model.{name} must be positive, got {value}")
+        if num_target_points < knn_k:
+            raise SkelagnosticError(f"model.num_target_points={num_target_points} is below "
+                                    f"model.knn_k={knn_k}")
+        if sigma < 0:
+            raise SkelagnosticError(f"model.sigma must be non-negative, got {sigma}")
+        self.save_hyperparameters()
+        self.encoder = PointTransformerEncoder(len(POINT_GROUPS), dim, stages, point_heads,
+                                               group_k)
+        self.temporal: TemporalTransformer | None = None
+        self.target_skeleton: Skeleton | None = None
+        self.target_units: str | None = None
+        self.window: int | None = chunk
+        if target is not None:
+            from skelagnostic_pcmrl.recon_data import load_target_skeleton
+
+            self.set_target(*load_target_skeleton(target, target_units))
+
+    # ----------------------------------------------------------------- target
+    def set_target(self, skeleton: Skeleton, units: str) -> None:
+        """Build the output heads for ``skeleton`` (in metres), which came in ``units``."""
+        if self.target_skeleton is not None:
+            if not self.target_skeleton.same_topology(skeleton):
+                raise SkelagnosticError(
+                    f"model=pcmrl was built for target {self.target_skeleton!r}, not {skeleton!r}"
+                )
+            return
+        warn_zero_length_bones(skeleton, "target skeleton")
+        self.target_skeleton = skeleton
+        self.target_units = units
+        joints = effective_joints(skeleton)
+        self._effective = joints
+        # every joint takes the global rotation of its nearest predicted ancestor-or-self
+        slot = {j: i for i, j in enumerate(joints)}
+        source_of = []
+        for j, p in enumerate(skeleton.parents):
+            source_of.append(slot[j] if j in slot else source_of[p])
+        self.register_buffer("_source_of", torch.tensor(source_of), persistent=False)
+        self.register_buffer("_ancestors", ancestor_matrix(skeleton.parents), persistent=False)
+        self.register_buffer("_target_offsets", skeleton.offsets.float(), persistent=False)
+        hp = self.hparams
+        width = hp.temporal_dim or self.encoder.out_channels
+        self.temporal = TemporalTransformer(self.encoder.out_channels, width, hp.temporal_layers,
+                                            hp.temporal_heads, 3 + 4 * len(joints), hp.dropout)
+        last = self.temporal.out[-1]
+        with torch.no_grad():  # start from the target's rest pose at the cloud centre
+            last.weight.mul_(0.01)
+            last.bias.zero_()
+            last.bias[3::4] = 1.0
+        if self.device.type != "cpu":
+            self.to(self.device)
+
+    def _require_target(self) -> Skeleton:
+        if self.target_skeleton is None or self.temporal is None:
+            raise SkelagnosticError(
+                "model=pcmrl has no target skeleton yet: train it with a data module "
+                "(data.target=...), load a checkpoint, or pass target=..."
+            )
+        return self.target_skeleton
+
+    def setup(self, stage: str) -> None:
+        """Take the target skeleton and window from the data module (before training)."""
+        dm = getattr(self.trainer, "datamodule", None) if self._trainer is not None else None
+        if dm is not None and hasattr(dm, "target_skeleton"):
+            self.set_target(dm.target_skeleton, dm.target_units)
+            if self.window is None:
+                self.window = int(dm.window)
+            for name in getattr(dm, "skeletons", {}):
+                warn_zero_length_bones(dm.skeletons[name], f"source skeleton {name!r}")
+        self._require_target()
+
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        """Store the target skeleton, its units and the window."""
+        skeleton = self._require_target()
+        checkpoint["pcmrl"] = {"target": skeleton.to_dict(), "target_units": self.target_units,
+                               "window": self.window}
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        """Rebuild the output heads before the weights are loaded."""
+        state = checkpoint.get("pcmrl")
+        if state is None:
+            raise SkelagnosticError("checkpoint has no 'pcmrl' entry: not a model=pcmrl checkpoint")
+        self.set_target(Skeleton.from_dict(state["target"]), state["target_units"])
+        if self.window is None:
+            self.window = state["window"]
+
+    # ---------------------------------------------------------------- network
+    def _centre(self, points: torch.Tensor, up: int) -> torch.Tensor:
+        """``[B, T, 3]`` per-frame horizontal mean of ``[B, T, P, 3]`` clouds (0 on the up axis)."""
+        centre = points.detach().mean(dim=2)
+        if not self.hparams.centre:
+            return torch.zeros_like(centre)
+        centre[..., up] = 0.0
+        return centre
+
+    def encode_points(self, points: torch.Tensor, groups: torch.Tensor,
+                      frames_per_call: int | None = None) -> torch.Tensor:
+        """``[B, T, F]`` frame features of centred clouds ``[B, T, P, 3]``, groups ``[B, P]``."""
+        onehot = torch.nn.functional.one_hot(groups, len(POINT_GROUPS)).to(points.dtype)
+        x = torch.cat([points, onehot.unsqueeze(1).expand(*points.shape[:3], -1)], dim=-1)
+        if frames_per_call is None:
+            return self.encoder(x)
+        parts = [self.encoder(x[:, s:s + frames_per_call])
+                 for s in range(0, x.shape[1], frames_per_call)]
+        return torch.cat(parts, dim=1)
+
+    def heads(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(root [B, T, 3], raw quaternions [B, T, J_eff, 4])`` from frame features."""
+        self._require_target()
+        out = self.temporal(features)
+        return out[..., :3], out[..., 3:].unflatten(-1, (-1, 4))
+
+    def full_rotations(self, raw: torch.Tensor) -> torch.Tensor:
+        """``[..., J, 4]`` unit global rotations of all target joints from the predicted ones."""
+        return Q.normalize(raw)[..., self._source_of, :]
+
+    def reconstruct(self, points: torch.Tensor, groups: torch.Tensor, up: int = 1
+                    ) -> dict[str, torch.Tensor]:
+        """Run the network on source clouds ``[B, T, P, 3]`` (metres), groups ``[B, P]``.
+
+        Returns:
+            ``root`` ``[B, T, 3]``, ``raw`` ``[B, T, J_eff, 4]``, ``rotations``
+            ``[B, T, J, 4]`` (global, unit) and ``positions`` ``[B, T, J, 3]``.
+        """
+        target = self._require_target()
+        centre = self._centre(points, up)
+        feats = self.encode_points(points - centre.unsqueeze(2), groups)
+        root, raw = self.heads(feats)
+        root = root + centre
+        rot = self.full_rotations(raw)
+        pos = positions_from_global(rot, root, self._target_offsets, target.parents,
+                                    self._ancestors)
+        return {"root": root, "raw": raw, "rotations": rot, "positions": pos}
+
+    # --------------------------------------------------------------- training
+    def _step(self, batch: dict[str, Any], generator: torch.Generator | None,
+              prefix: str) -> torch.Tensor:
+        hp = self.hparams
+        target = self._require_target()
+        dm = self.trainer.datamodule
+        losses = []
+        for name, sub in batch.items():
+            if sub is None:
+                continue
+            source = dm.skeletons[name]
+            feats = sub["features"].float()
+            size = feats.shape[0]
+            rot_l, trans = Q.normalize(feats[..., :4]), feats[..., 4:]
+            grot, gpos = forward_kinematics(rot_l, trans[..., 0, :], sub["offsets"][0],
+                                            source.parents, translations=trans)
+            src_layout = sample_layout(source, hp.num_source_points, hp.sigma, (size,),
+                                       generator, self.device)
+            src_pts = src_layout.points(grot, gpos, sub["offsets"])
+            out = self.reconstruct(src_pts, src_layout.groups, _AXES[source.up_axis])
+            tgt_layout = sample_layout(target, hp.num_target_points, hp.sigma, (size,),
+                                       generator, self.device)
+            tgt_pts = tgt_layout.points(out["rotations"], out["positions"], self._target_offsets)
+            knn = temporal_knn_loss(tgt_pts, src_pts, tgt_layout.groups, src_layout.groups,
+                                    hp.knn_k, hp.knn_reduction, hp.knn_variant)
+            norm = unit_norm_penalty(out["raw"])
+            end = end_effector_loss(out["positions"], gpos, end_effector_pairs(source, target))
+            loss = knn + hp.lambda_q * norm + hp.lambda_end * end
+            sync = prefix != "train"
+            self.log(f"{prefix}/knn", knn, batch_size=size, sync_dist=sync)
+            self.log(f"{prefix}/end", end, batch_size=size, sync_dist=sync)
+            self.log(f"{prefix}/qnorm", norm, batch_size=size, sync_dist=sync)
+            losses.append(loss)
+        if not losses:
+            return torch.zeros((), device=self.device, requires_grad=prefix == "train")
+        return torch.stack(losses).mean()
+
+    def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        """KNN + unit-norm (+ end-effector) loss on fresh clouds; logs ``train/loss``."""
+        loss = self._step(batch, None, "train")
+        self.log("train/loss", loss, prog_bar=True)
+        return loss
+
+    def validation_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        """The same loss on clouds seeded by ``sample_seed`` and the batch index."""
+        gen = torch.Generator().manual_seed(self.hparams.sample_seed + batch_idx)
+        loss = self._step(batch, gen, "val")
+        self.log("val/loss", loss, prog_bar=True, sync_dist=True)
+        return loss
+
+    def test_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
+        """As :meth:`validation_step`, logged as ``test/*``."""
+        gen = torch.Generator().manual_seed(self.hparams.sample_seed + batch_idx)
+        loss = self._step(batch, gen, "test")
+        self.log("test/loss", loss, sync_dist=True)
+        return loss
+
+    def configure_optimizers(self) -> torch.optim.Optimizer:
+        """AdamW."""
+        return torch.optim.AdamW(self.parameters(), lr=self.hparams.lr,
+                                 weight_decay=self.hparams.weight_decay)
+
+    @torch.no_grad()
+    def render_sample(self, batch: dict[str, Any]) -> dict[str, Motion]:
+        """The first validation window and its reconstruction (``callbacks=render``)."""
+        dm = self.trainer.datamodule
+        name, sub = next((n, b) for n, b in batch.items() if b is not None)
+        feats = sub["features"][0].float().cpu()
+        source = dm.skeletons[name]
+        motion = Motion(source, Q.normalize(feats[..., :4]), feats[:, 0, 4:], dm.fps, units="m")
+        result = self.decode(self.encode(motion), self._require_target())
+        return {"source": motion, "pcmrl": result}
+
+    # -------------------------------------------------------------- inference
+    @staticmethod
+    def to_metres(motion: Motion) -> Motion:
+        """``motion`` in metres (units from ``motion.units`` or guessed from the height)."""
+        if motion.units == "m":
+            return motion
+        return motion.convert_units("m", from_=infer_units(motion.skeleton, motion.units))
+
+    @torch.no_grad()
+    def encode(self, motion: Motion) -> Latent:
+        """Per-frame Point Transformer features of a 256-point cloud on ``motion``.
+
+        Returns:
+            ``Latent(z=[T, F], fps, extras={"centre": [T, 3]})``: the per-frame horizontal
+            centroid of the cloud, which the predicted root is relative to.
+        """
+        metric = self.to_metres(motion).to(torch.float32, self.device)
+        warn_zero_length_bones(metric.skeleton, "source skeleton")
+        gen = torch.Generator().manual_seed(self.hparams.sample_seed)
+        layout = sample_layout(metric.skeleton, self.hparams.num_source_points,
+                               self.hparams.sigma, (), gen, self.device)
+        pts = layout.points(metric.global_rotations(), metric.global_positions(),
+                            metric.skeleton.offsets.float().to(self.device))[None]
+        up = _AXES[metric.skeleton.up_axis]
+        centre = self._centre(pts, up)
+        feats = self.encode_points(pts - centre.unsqueeze(2), layout.groups[None],
+                                   frames_per_call=256)
+        return Latent(feats[0], motion.fps, {"centre": centre[0]})
+
+    def _output_units(self, skeleton: Skeleton) -> str:
+        """Units of ``skeleton``: the target file's or metres if the offsets match, else a guess."""
+        target = self._require_target()
+        for units in dict.fromkeys((self.target_units or "m", "m")):
+            scaled = skeleton.offsets.double() * UNITS[units]
+            if torch.allclose(scaled, target.offsets.double(), rtol=1e-3, atol=1e-6):
+                return units
+        return infer_units(skeleton)
+
+    def _chunks(self, frames: int) -> list[int]:
+        chunk = int(self.hparams.chunk or self.window or frames)
+        if frames <= chunk:
+            return [0]
+        hop = max(1, chunk // 2)
+        starts = list(range(0, frames - chunk + 1, hop))
+        if starts[-1] != frames - chunk:
+            starts.append(frames - chunk)
+        return starts
+
+    @torch.no_grad()
+    def decode(self, latent: Latent, skeleton: Skeleton) -> Motion:
+        """The target-skeleton motion of ``latent`` (chunks of the training window, blended).
+
+        Args:
+            latent: Output of :meth:`encode`.
+            skeleton: The trained target skeleton, in any units (the result uses them).
+
+        Raises:
+            SkelagnosticError: ``skeleton`` is not the trained target topology.
+        """
+        target = self._require_target()
+        if not target.same_topology(skeleton):
+            raise SkelagnosticError(
+                f"model=pcmrl reconstructs onto its trained target {target!r} "
+                f"({target.num_joints} joints); got {skeleton!r}. Train another model with "
+                "data.target=<that skeleton>"
+            )
+        feats = latent.z.to(self.device)[None]
+        frames = feats.shape[1]
+        chunk = int(self.hparams.chunk or self.window or frames)
+        root = feats.new_zeros(frames, 3)
+        quat = feats.new_zeros(frames, len(self._effective), 4)
+        weight = feats.new_zeros(frames)
+        for start in self._chunks(frames):
+            stop = min(frames, start + chunk)
+            r, q = self.heads(feats[:, start:stop])
+            q = Q.normalize(q[0])
+            n = stop - start
+            ramp = torch.minimum(torch.arange(1, n + 1, device=feats.device),
+                                 torch.arange(n, 0, -1, device=feats.device)).float()
+            sign = torch.where((quat[start:stop] * q).sum(-1, keepdim=True) < 0, -1.0, 1.0)
+            root[start:stop] += ramp[:, None] * r[0]
+            quat[start:stop] += ramp[:, None, None] * sign * q
+            weight[start:stop] += ramp
+        root = root / weight[:, None] + latent.extras["centre"].to(root)
+        rot = Q.continuity(self.full_rotations(quat), dim=-3)
+        units = self._output_units(skeleton)
+        local = Q.normalize(global_to_local(rot, skeleton.parents))
+        return Motion(skeleton, local.cpu(), (root / UNITS[units]).cpu(), latent.fps, units=units)

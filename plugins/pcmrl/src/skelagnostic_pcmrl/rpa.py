@@ -1,0 +1,197 @@
+"""Rest pose augmentation (RPA, PC-MRL Sec. 3.4 and Algorithm 1) and bone tails.
+
+PC-MRL's bones (Sec. 3.1) have a head and a *tail*; a BVH joint only has a
+head (its offset from the parent). :func:`bone_tails` gives every joint the
+tail its rotation drives: the offset of its *main child* (the child joint of
+non-zero offset in the same body group, else the first child of non-zero
+offset), else its first ``End Site``, else nothing (zero tail).
+
+RPA (Sec. 3.4): each bone tail gets a random offset; the bone's rotation is
+then corrected by the quaternion of maximum real part (:func:`max_real_quaternion`,
+Algorithm 1) that turns the augmented rest tail back onto the original tail
+direction, so the animated bone keeps pointing where it pointed (only its length
+and the attachments of the other children change). The correction is a constant
+right factor of every frame's global rotation, so first-frame offset quaternions
+(FOQ, Sec. 3.3) are unchanged by RPA: it alters the skeleton the model animates
+(bone lengths, hip/shoulder attachments), the first-frame global rotations and
+therefore the forward-kinematics targets.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from skelagnostic.core import quaternion as Q
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError, SkeletonError
+
+__all__ = [
+    "BoneTails",
+    "augment_rest_pose",
+    "bone_tails",
+    "max_real_quaternion",
+    "random_tail_offsets",
+]
+
+#: Offsets shorter than this (in the data's units) count as zero-length bones.
+EPS = 1e-6
+
+
+@dataclass(frozen=True)
+class BoneTails:
+    """The tail of every joint's bone.
+
+    Attributes:
+        tails: ``[J, 3]`` rest tail in the joint's own frame (zeros: no tail).
+        child: ``[J]`` the main child joint whose offset is the tail, ``-1`` when the
+            tail is an ``End Site`` or missing.
+    """
+
+    tails: torch.Tensor
+    child: torch.Tensor
+
+
+def bone_tails(skeleton: Skeleton) -> BoneTails:
+    """Tails of the bones of ``skeleton`` (see the module docstring for the rule).
+
+    Args:
+        skeleton: Any skeleton.
+
+    Returns:
+        The tails, in the skeleton's units and dtype.
+    """
+    offsets = skeleton.offsets
+    groups = skeleton.body_groups
+    tails = torch.zeros_like(offsets)
+    child = torch.full((skeleton.num_joints,), -1, dtype=torch.long)
+    for j in range(skeleton.num_joints):
+        kids = [c for c in skeleton.children(j) if float(offsets[c].norm()) > EPS]
+        same = [c for c in kids if groups[c] == groups[j]]
+        pick = (same or kids or [None])[0]
+        if pick is not None:
+            tails[j] = offsets[pick]
+            child[j] = pick
+            continue
+        for site in skeleton.end_sites.get(j, []):
+            site_t = torch.as_tensor(site, dtype=offsets.dtype)
+            if float(site_t.norm()) > EPS:
+                tails[j] = site_t
+                break
+    return BoneTails(tails, child)
+
+
+def max_real_quaternion(rest_tail: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Algorithm 1: the rotation of maximum real part turning ``rest_tail`` onto ``target``.
+
+    With ``eta = T/|T|`` and ``omega = p_IK/|p_IK|`` the algorithm forms
+    ``q_min = (0, (eta + omega)/2)`` (a half-turn about the bisector, real part 0)
+    and ``q_max = q_min * (0, eta)`` (times a half-turn about ``eta``), which equals
+    ``-(1 + eta.omega, eta x omega) / 2``: the shortest-arc rotation from ``eta``
+    to ``omega``, scaled by ``cos(theta/2)``. The result here is normalised and
+    signed so that its real part is non-negative. Opposite directions (no unique
+    shortest arc) get a half-turn about an axis perpendicular to ``eta``;
+    zero-length inputs give the identity.
+
+    Args:
+        rest_tail: ``[..., 3]`` resting tail ``T`` of the bone.
+        target: ``[..., 3]`` IK target ``p_IK`` (broadcastable with ``rest_tail``).
+
+    Returns:
+        ``[..., 4]`` unit quaternions (w, x, y, z) with ``rotate(q, eta) = omega``.
+    """
+    rest_tail, target = torch.broadcast_tensors(rest_tail, target)
+    n_eta, n_omega = rest_tail.norm(dim=-1, keepdim=True), target.norm(dim=-1, keepdim=True)
+    valid = (n_eta > EPS) & (n_omega > EPS)
+    eta = rest_tail / n_eta.clamp_min(EPS)
+    omega = target / n_omega.clamp_min(EPS)
+    zero = torch.zeros_like(eta[..., :1])
+    q_min = torch.cat([zero, (eta + omega) / 2], dim=-1)
+    q_max = Q.mul(q_min, torch.cat([zero, eta], dim=-1))
+    norm = q_max.norm(dim=-1, keepdim=True)
+    q = q_max / norm.clamp_min(1e-12)
+    q = torch.where(q[..., :1] < 0, -q, q)
+    # opposite directions: a half-turn about any axis perpendicular to eta
+    helper = torch.zeros_like(eta)
+    helper[..., 0] = 1.0
+    parallel_x = eta[..., :1].abs() > 0.9
+    helper = torch.where(parallel_x, torch.roll(helper, 1, dims=-1), helper)
+    axis = torch.linalg.cross(eta, helper, dim=-1)
+    axis = axis / axis.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    half_turn = torch.cat([zero, axis], dim=-1)
+    q = torch.where(norm < 1e-6, half_turn, q)
+    identity = torch.zeros_like(q)
+    identity[..., 0] = 1.0
+    return torch.where(valid, q, identity)
+
+
+def random_tail_offsets(
+    num_joints: int,
+    scale: float,
+    generator: torch.Generator | None = None,
+    dtype: torch.dtype = torch.float32,
+) -> torch.Tensor:
+    """``[J, 3]`` offsets drawn uniformly from ``[-scale, scale]`` per axis (RPA range)."""
+    if scale < 0:
+        raise SkelagnosticError(f"RPA range must be non-negative, got {scale}")
+    u = torch.rand(num_joints, 3, generator=generator, dtype=dtype)
+    return (2.0 * u - 1.0) * scale
+
+
+def augment_rest_pose(
+    skeleton: Skeleton,
+    global_rotations: torch.Tensor,
+    delta: torch.Tensor,
+    offsets: torch.Tensor | None = None,
+    tails: BoneTails | None = None,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Apply RPA to one motion: move the bone tails by ``delta``, re-align the rotations.
+
+    For every joint ``c`` with a non-zero offset the new offset is
+    ``offset[c] + delta[c]`` (zero-length bones, which the paper ignores, stay
+    zero); an ``End Site`` tail moves by ``delta`` of its joint. Each joint ``j``
+    with a tail then gets the global rotation ``q_j * q_max`` where ``q_max`` =
+    :func:`max_real_quaternion` (new tail, old tail), so its bone points along
+    the original direction in every frame.
+
+    Args:
+        skeleton: The motion's skeleton (topology and default offsets/tails).
+        global_rotations: ``[..., J, 4]`` global rotations of the motion.
+        delta: ``[J, 3]`` tail offsets (e.g. :func:`random_tail_offsets`).
+        offsets: ``[J, 3]`` offsets to augment instead of ``skeleton.offsets``
+            (the clip's own offsets when several clips share a topology).
+        tails: Tails matching ``offsets`` (default: :func:`bone_tails` of ``skeleton``
+            with ``offsets`` substituted).
+
+    Returns:
+        ``(offsets [J, 3], global_rotations [..., J, 4], tails [J, 3])`` of the
+        augmented skeleton and motion.
+
+    Raises:
+        SkeletonError: ``delta`` or ``offsets`` do not have shape ``[J, 3]``.
+    """
+    num_j = skeleton.num_joints
+    base = skeleton.offsets if offsets is None else offsets
+    for name, t in (("delta", delta), ("offsets", base)):
+        if t.shape != (num_j, 3):
+            raise SkeletonError(f"RPA: {name} must have shape [{num_j}, 3], got {list(t.shape)}")
+    dtype = global_rotations.dtype
+    base = base.to(dtype)
+    delta = delta.to(dtype)
+    info = tails if tails is not None else bone_tails(skeleton)
+    child = info.child
+    old_tails = info.tails.to(dtype).clone()
+    if offsets is not None and tails is None:
+        has_child = child >= 0
+        old_tails[has_child] = base[child[has_child]]
+    nonzero = (base.norm(dim=-1) > EPS).unsqueeze(-1)
+    new_offsets = torch.where(nonzero, base + delta, base)
+    new_offsets[0] = base[0]
+    new_tails = old_tails.clone()
+    has_child = child >= 0
+    new_tails[has_child] = new_offsets[child[has_child]]
+    site = (~has_child) & (old_tails.norm(dim=-1) > EPS)
+    new_tails[site] = old_tails[site] + delta[site]
+    q_fix = max_real_quaternion(new_tails, old_tails)
+    return new_offsets, Q.mul(global_rotations, q_fix.to(global_rotations.device)), new_tails

@@ -1,0 +1,107 @@
+"""PC-MRL Table 1 protocol (interp_eval): reference values and the command line."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import lightning as L
+import pytest
+import torch
+
+PCMRL_SRC = Path(__file__).resolve().parents[2] / "plugins" / "pcmrl" / "src"
+if str(PCMRL_SRC) not in sys.path:
+    sys.path.insert(0, str(PCMRL_SRC))
+
+from skelagnostic_pcmrl.interp import InterpolationAligner  # noqa: E402
+from skelagnostic_pcmrl.interp_data import InterpolationDataModule  # noqa: E402
+from skelagnostic_pcmrl.interp_eval import (  # noqa: E402
+    evaluate,
+    format_table,
+    lerp_slerp,
+    load_motions,
+    main,
+    position_stats,
+    windows,
+)
+
+from skelagnostic import Motion, procedural  # noqa: E402
+
+
+def _clips() -> list[Motion]:
+    out = []
+    for seed, gait in ((5, "walk"), (6, "run")):
+        motion, _ = procedural.generate("biped31", gait, seconds=2.2, fps=30, seed=seed)
+        out.append(motion.convert_units("m"))
+    return out
+
+
+def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
+    clips = _clips()
+    report = evaluate({"oracle": lambda m, k: m, "LERP": lerp_slerp}, clips, window=32,
+                      stride=16, gaps=(5, 15))
+    assert report["protocol"]["windows"] == len(windows(clips, 32, 16)) == 6
+    for gap in ("5", "15"):
+        assert report["results"]["oracle"][gap] == {"l2p": 0.0, "l2q": 0.0, "npss": 0.0}
+        assert report["results"]["LERP"][gap]["l2p"] > 0
+    # L2P of LERP at gap 15 by hand: centred positions, z-scored with the windows' stats,
+    # L2 norm per non-key frame, mean over frames
+    wins = windows(clips, 32, 16)
+    mean, std = position_stats(wins)
+    keys = [0, 15, 30, 31]
+    errs = []
+    for w in wins:
+        pred = lerp_slerp(w, keys).double()
+        centre = w.double().root_positions.mean(0).clone()
+        centre[1] = 0.0
+        a = ((pred.global_positions() - centre).flatten(1) - mean) / std
+        b = ((w.double().global_positions() - centre).flatten(1) - mean) / std
+        per_frame = (a - b).norm(dim=-1)
+        errs.append(per_frame[[t for t in range(32) if t not in keys]])
+    expected = float(torch.cat(errs).mean())
+    assert report["results"]["LERP"]["15"]["l2p"] == pytest.approx(expected, rel=1e-6)
+    # longer gaps are harder for LERP
+    assert report["results"]["LERP"]["15"]["l2p"] > report["results"]["LERP"]["5"]["l2p"]
+    table = format_table(report)
+    assert table.splitlines()[0].startswith("| Method | L2P 5 | L2P 15 | L2Q 5")
+    assert "| oracle | 0.0000" in table
+
+
+def test_cli_writes_json_and_table(tmp_path: Path) -> None:
+    L.seed_everything(0)
+    dm = InterpolationDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=8)
+    model = InterpolationAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=16,
+                                 warmup_steps=1)
+    trainer = L.Trainer(max_steps=2, accelerator="cpu", logger=False, default_root_dir=tmp_path,
+                        enable_progress_bar=False, enable_model_summary=False,
+                        limit_val_batches=0)
+    trainer.fit(model, datamodule=dm)
+    ckpt = tmp_path / "tiny.ckpt"
+    trainer.save_checkpoint(ckpt)
+    out = tmp_path / "eval" / "table1.json"
+    assert main(["--ckpt", str(ckpt), "--procedural", "1", "--procedural-seconds", "2.2",
+                 "--window", "32", "--stride", "32", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    res = report["procedural"]["results"]
+    assert set(res) == {"LERP", "PC-MRL"}
+    assert set(res["PC-MRL"]) == {"5", "15", "30"}
+    for method in res.values():
+        for scores in method.values():
+            assert all(v >= 0 and v == v for v in scores.values())
+    assert report["procedural"]["protocol"]["fps"] == 30.0
+    assert "| PC-MRL |" in out.with_suffix(".md").read_text()
+
+
+def test_load_motions_converts_units(shared_data: Path) -> None:
+    clip = shared_data / "human" / "xia_cmu" / "angry_13_000.bvh"
+    (m,) = load_motions([clip], fps=60, units="cmu")
+    assert m.fps == 60 and m.name == "angry_13_000.bvh"
+    assert 1.2 < m.skeleton.height() < 2.2  # metres
+
+
+def test_evaluate_needs_long_enough_clips() -> None:
+    from skelagnostic.errors import SkelagnosticError
+
+    with pytest.raises(SkelagnosticError, match="no clip has 128 frames"):
+        evaluate({"LERP": lerp_slerp}, _clips(), window=128)

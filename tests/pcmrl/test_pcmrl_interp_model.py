@@ -1,0 +1,222 @@
+"""PC-MRL interpolation model: baselines, keyframe reproduction, training and reloading."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import lightning as L
+import pytest
+import torch
+
+PCMRL_SRC = Path(__file__).resolve().parents[2] / "plugins" / "pcmrl" / "src"
+if str(PCMRL_SRC) not in sys.path:
+    sys.path.insert(0, str(PCMRL_SRC))
+
+from skelagnostic_pcmrl.interp import (  # noqa: E402
+    INTERP_CONFIG,
+    InterpolationAligner,
+    key_brackets,
+    lerp_keys,
+    slerp_keys,
+)
+from skelagnostic_pcmrl.interp_data import (  # noqa: E402
+    InterpolationDataModule,
+    gap_keys,
+    random_keys,
+)
+from skelagnostic_pcmrl.interp_eval import lerp_slerp  # noqa: E402
+
+from skelagnostic import Motion, procedural  # noqa: E402
+from skelagnostic.core import quaternion as Q  # noqa: E402
+from skelagnostic.errors import MotionError, SkelagnosticError  # noqa: E402
+
+TINY = {"dim": 16, "heads": 2, "layers": 1, "ff_mult": 2, "max_relative": 16}
+
+
+def _motion(seconds: float = 2.0, fps: float = 30.0, seed: int = 0) -> Motion:
+    motion, _ = procedural.generate("biped31", "walk", seconds=seconds, fps=fps, seed=seed)
+    return motion.convert_units("m")
+
+
+def _tiny(residual: bool = False, window: int = 32) -> InterpolationAligner:
+    torch.manual_seed(0)
+    skel = procedural.skeleton("biped31").scaled(0.01)
+    return InterpolationAligner(**TINY, residual=residual, skeleton=skel.to_dict(), fps=30.0,
+                                window=window).eval()
+
+
+def test_paper_defaults() -> None:
+    assert INTERP_CONFIG["dim"] == 512 and INTERP_CONFIG["heads"] == 8
+    assert INTERP_CONFIG["layers"] == 6 and INTERP_CONFIG["lr"] == 1e-4
+    assert INTERP_CONFIG["warmup_steps"] == 10000 and INTERP_CONFIG["w_fk"] == 0.1
+    assert INTERP_CONFIG["w_quat"] == 0.1 and INTERP_CONFIG["residual"] is False
+
+
+def test_key_brackets_by_hand() -> None:
+    keys = torch.tensor([[True, False, False, False, True, False, True]])
+    prev, nxt, w = key_brackets(keys)
+    assert prev.tolist() == [[0, 0, 0, 0, 4, 4, 6]]
+    assert nxt.tolist() == [[0, 4, 4, 4, 4, 6, 6]]
+    assert w[0].tolist() == pytest.approx([0, 0.25, 0.5, 0.75, 0, 0.5, 0])
+    x = torch.tensor([[0.0, 9, 9, 9, 8.0, 9, 2.0]])[..., None]
+    assert lerp_keys(x, keys)[0, :, 0].tolist() == pytest.approx([0, 2, 4, 6, 8, 5, 2])
+
+
+def test_slerp_keys_by_hand() -> None:
+    keys = torch.tensor([[True, False, True]])
+    q = torch.zeros(1, 3, 1, 4)
+    q[0, 0, 0] = torch.tensor([1.0, 0, 0, 0])
+    q[0, 1, 0] = torch.tensor([0.0, 1, 0, 0])  # ignored (not a key)
+    q[0, 2, 0] = torch.tensor([math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)])  # 90 deg z
+    mid = slerp_keys(q, keys)[0, 1, 0]
+    assert mid.tolist() == pytest.approx([math.cos(math.pi / 8), 0, 0, math.sin(math.pi / 8)],
+                                         abs=1e-6)
+
+
+def test_lerp_slerp_baseline_by_hand() -> None:
+    motion = _motion(seconds=0.2)[:3]
+    rot = motion.rotations.clone()
+    rot[1] = torch.tensor([0.0, 0.0, 1.0, 0.0])  # garbage on the in-between frame
+    root = motion.root_positions.clone()
+    root[1] = torch.tensor([50.0, 50.0, 50.0])
+    noisy = Motion(motion.skeleton, rot, root, motion.fps)
+    out = lerp_slerp(noisy, [0, 2])
+    assert torch.allclose(out.root_positions[1], (root[0] + root[2]) / 2)
+    expected = Q.slerp(rot[0], rot[2], 0.5)
+    dots = (out.rotations[1] * expected).sum(-1).abs()
+    assert torch.allclose(dots, torch.ones_like(dots), atol=1e-6)
+    assert torch.allclose(out.rotations[[0, 2]], rot[[0, 2]])
+
+
+def test_random_and_gap_keys() -> None:
+    import random
+
+    rng = random.Random(0)
+    for _ in range(50):
+        mask = random_keys(128, 5, 36, rng)
+        assert mask[0] and mask[-1] and 5 <= int(mask.sum()) <= 36
+    assert gap_keys(11, 5).nonzero().squeeze(1).tolist() == [0, 5, 10]
+    assert gap_keys(12, 5).nonzero().squeeze(1).tolist() == [0, 5, 10, 11]
+
+
+@pytest.mark.parametrize("residual", [False, True])
+def test_interpolate_reproduces_keyframes(residual: bool) -> None:
+    model = _tiny(residual)
+    motion = _motion(seconds=3.0)  # 91 frames > window 32: chained chunks
+    keys = [0, 7, 20, 33, 45, 60, 61, 90]
+    out = model.interpolate(motion, keys)
+    assert out.num_frames == motion.num_frames and out.skeleton == motion.skeleton
+    assert out.fps == motion.fps
+    assert torch.allclose(out.rotations[keys], motion.rotations[keys], atol=1e-6)
+    assert torch.allclose(out.root_positions[keys], motion.root_positions[keys], atol=1e-6)
+    assert torch.allclose(out.global_positions()[keys], motion.global_positions()[keys],
+                          atol=1e-5)
+    # in-between frames are generated from the keys only: corrupting them changes nothing
+    rot = motion.rotations.clone()
+    inner = [t for t in range(motion.num_frames) if t not in keys]
+    rot[inner] = Q.normalize(torch.randn(len(inner), motion.num_joints, 4, dtype=rot.dtype))
+    corrupted = Motion(motion.skeleton, rot, motion.root_positions, motion.fps, units="m")
+    again = model.interpolate(corrupted, keys)
+    assert torch.allclose(again.global_positions(), out.global_positions(), atol=1e-5)
+    if residual:  # zero-initialised residual: exactly the LERP/SLERP baseline
+        lerp = lerp_slerp(motion, keys)
+        assert torch.allclose(out.root_positions, lerp.root_positions, atol=1e-5)
+        assert torch.allclose(out.global_positions(), lerp.global_positions(), atol=1e-4)
+
+
+def test_interpolate_rescales_unknown_units() -> None:
+    model = _tiny()
+    motion = _motion(seconds=1.0)
+    keys = [0, 10, 30]
+    in_m = model.interpolate(motion, keys)
+    cm = motion.scaled(100.0)
+    cm.units = None  # unknown: the skeleton height picks the closest unit (cm)
+    in_cm = model.interpolate(cm, keys)
+    assert torch.allclose(in_cm.global_positions(), 100.0 * in_m.global_positions(), atol=1e-3)
+    # a somewhat bigger body in unknown units is taken as metres (not shrunk)
+    big = motion.scaled(1.3)
+    big.units = None
+    assert model._scale_to_training(big) == 1.0
+
+
+def test_interpolate_rejects_bad_input() -> None:
+    model = _tiny()
+    motion = _motion(seconds=1.0)
+    with pytest.raises(MotionError, match="start at 0 and end"):
+        model.interpolate(motion, [0, 10])
+    with pytest.raises(MotionError, match="strictly increasing"):
+        model.interpolate(motion, [0, 10, 10, 30])
+    other, _ = procedural.generate("biped22", "walk", seconds=1.0, fps=30)
+    with pytest.raises(MotionError, match="hierarchy"):
+        model.interpolate(other, [0, other.num_frames - 1])
+    with pytest.raises(SkelagnosticError, match="no skeleton"):
+        InterpolationAligner(**TINY).interpolate(motion, [0, 30])
+
+
+def test_datamodule_checks_units_and_hierarchy(tmp_path: Path) -> None:
+    from skelagnostic.data.sources import ProceduralSource
+
+    class _Raw(ProceduralSource):
+        def load(self, clip):  # type: ignore[no-untyped-def]
+            return self._generate()[clip.id]  # centimetres, not converted
+
+    dm = InterpolationDataModule(sources=[_Raw(kinds=("biped31",), gaits=("walk",))],
+                                 window=32)
+    with pytest.raises(SkelagnosticError, match="metres"):
+        dm.setup("fit")
+    dm = InterpolationDataModule(sources=[ProceduralSource(kinds=("biped31", "biped22"),
+                                                           gaits=("walk",))], window=32)
+    with pytest.raises(SkelagnosticError, match="hierarchy"):
+        dm.setup("fit")
+
+
+def test_fit_a_few_steps_and_reload(tmp_path: Path) -> None:
+    L.seed_everything(0)
+    dm = InterpolationDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
+                                 min_keys=3, max_keys=8, rpa_prob=1.0, test_fraction=0.25)
+    model = InterpolationAligner(**TINY, lr=1e-3, warmup_steps=2)
+    trainer = L.Trainer(max_epochs=2, accelerator="cpu", logger=False,
+                        default_root_dir=tmp_path, enable_progress_bar=False,
+                        enable_model_summary=False)
+    trainer.fit(model, datamodule=dm)
+    assert trainer.global_step == 8
+    assert math.isfinite(float(trainer.callback_metrics["val/loss"]))
+    assert model.hparams.skeleton is not None and model.hparams.window == 32
+    ckpt = tmp_path / "model.ckpt"
+    trainer.save_checkpoint(ckpt)
+    loaded = InterpolationAligner.load_from_checkpoint(ckpt, map_location="cpu").eval()
+    model.eval()
+    motion = dm.clips["val"][0]
+    clip = Motion(dm.skeleton, _local(motion), motion.root, 30.0)[:40]
+    a = model.interpolate(clip, [0, 13, 39])
+    b = loaded.interpolate(clip, [0, 13, 39])
+    assert torch.allclose(a.global_positions(), b.global_positions(), atol=1e-6)
+    test = trainer.test(loaded, datamodule=dm, verbose=False)
+    assert len(dm.clips["test"]) == 1 and len(dm.clips["val"]) == 1
+    assert math.isfinite(test[0]["test/loss"])
+
+
+def _local(clip) -> torch.Tensor:  # type: ignore[no-untyped-def]
+    from skelagnostic_pcmrl.interp import global_to_local
+
+    return global_to_local(clip.global_rotations, clip.skeleton.parents)
+
+
+def test_training_reduces_the_loss() -> None:
+    """A few dozen steps on one batch must fit it better than the start (not a no-op)."""
+    torch.manual_seed(0)
+    dm = InterpolationDataModule(fps=30, window=32, batch_size=8, samples_per_epoch=8,
+                                 rpa_prob=0.0)
+    dm.setup("fit")
+    batch = next(iter(dm.train_dataloader()))
+    model = InterpolationAligner(**TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32)
+    opt = torch.optim.AdamW(model.parameters(), lr=3e-3)
+    first = model._losses(batch)[0].item()
+    for _ in range(40):
+        opt.zero_grad()
+        loss, _ = model._losses(batch)
+        loss.backward()
+        opt.step()
+    assert model._losses(batch)[0].item() < 0.5 * first

@@ -1,0 +1,137 @@
+"""The stage-1 aligner: shapes, unit quaternions, valid motions, zero-length bones, learning."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
+from skelagnostic_pcmrl.points import ZeroLengthBoneWarning, sample_layout
+from skelagnostic_pcmrl.recon import PcmrlReconstruction, end_effector_pairs
+
+import skelagnostic as sa
+from conftest import TINY
+from skelagnostic import procedural
+from skelagnostic.errors import SkelagnosticError
+
+
+@pytest.fixture
+def model() -> PcmrlReconstruction:
+    torch.manual_seed(0)
+    with pytest.warns(ZeroLengthBoneWarning, match="LHipJoint, RHipJoint, LowerBack"):
+        return PcmrlReconstruction(target="biped31", chunk=16, **TINY).eval()
+
+
+def test_paper_sized_encoder_pools_256_points_to_one_1024_vector() -> None:
+    enc = PointTransformerEncoder(5, dim=64, stages=4, heads=4, k=8)
+    assert enc.out_channels == 1024
+    x = torch.randn(2, 256, 8)
+    assert enc(x).shape == (2, 1024)
+    widths = [d.mlp[0].out_features for d in enc.down]
+    assert widths == [128, 256, 512, 1024]
+
+
+def test_encoder_is_permutation_invariant() -> None:
+    torch.manual_seed(0)
+    enc = PointTransformerEncoder(5, dim=8, stages=2, heads=2).eval()
+    x = torch.randn(3, 64, 8)
+    perm = torch.randperm(64)
+    # FPS starts at point 0: keep it first so both orders pick the same centres
+    perm = torch.cat([torch.tensor([0]), perm[perm != 0]])
+    assert torch.allclose(enc(x), enc(x[:, perm]), atol=1e-5)
+
+
+def test_reconstruction_outputs_unit_quaternions_and_consistent_positions(model) -> None:
+    motion = procedural.generate("biped22", "walk", seconds=1.0)[0].convert_units("m")
+    layout = sample_layout(motion.skeleton, 64, 0.05, batch=(2,))
+    pts = layout.points(motion.global_rotations().float().expand(2, -1, -1, -1),
+                        motion.global_positions().float().expand(2, -1, -1, -1),
+                        motion.skeleton.offsets)
+    out = model.reconstruct(pts, layout.groups)
+    target = model.target_skeleton
+    assert out["rotations"].shape == (2, motion.num_frames, target.num_joints, 4)
+    assert torch.allclose(out["rotations"].norm(dim=-1), torch.ones(()), atol=1e-5)
+    assert out["raw"].shape[-2] < target.num_joints  # joints without a non-zero bone skipped
+    # Eq. 1 positions agree with core forward kinematics of the derived local rotations
+    from skelagnostic_pcmrl.points import global_to_local
+
+    local = global_to_local(out["rotations"][0].detach(), target.parents)
+    ref = sa.Motion(target, local, out["root"][0].detach(), 30.0).global_positions()
+    assert torch.allclose(out["positions"][0].detach(), ref.float(), atol=1e-5)
+    # the untrained network starts at the target's rest pose, root at the cloud centroid
+    rest = target.rest_positions().float()
+    centred = out["positions"][0, 0].detach() - out["root"][0, 0].detach()
+    assert torch.allclose(centred, rest - rest[0], atol=0.1)
+
+
+def test_retarget_returns_a_valid_motion_on_the_target(model, tmp_path) -> None:
+    source = procedural.generate("biped22", "run", seconds=2.0)[0]  # cm
+    target = procedural.skeleton("biped31")  # cm
+    result = model.retarget(source, target)
+    assert result.skeleton.joint_names == target.joint_names
+    assert result.num_frames == source.num_frames and result.fps == source.fps
+    assert result.units == "cm"
+    assert torch.isfinite(result.rotations).all()
+    assert torch.allclose(result.rotations.norm(dim=-1), torch.ones(()), atol=1e-5)
+    # unpredicted joints (no non-zero bone below them) keep an identity local rotation
+    head = target.index("Head")
+    assert torch.allclose(result.rotations[:, head, 0].abs(), torch.ones(()), atol=1e-6)
+    sa.write_bvh(result, tmp_path / "out.bvh")
+    back = sa.read_bvh(tmp_path / "out.bvh")
+    assert back.num_frames == result.num_frames
+    assert torch.allclose(back.global_positions().float(), result.global_positions().float(),
+                          atol=1e-3)
+
+
+def test_retarget_between_real_skeletons(lafan_clip, shared_data) -> None:
+    cmu = shared_data / "human" / "cmu" / "131_01.bvh"
+    torch.manual_seed(0)
+    with pytest.warns(ZeroLengthBoneWarning, match="lowerback"):
+        model = PcmrlReconstruction(target=str(cmu), target_units="cmu", chunk=16,
+                                    **TINY).eval()
+    source = sa.read_bvh(lafan_clip)[:40]
+    target = sa.read_bvh(cmu).skeleton
+    result = model.retarget(source, target)
+    assert result.skeleton.joint_names == target.joint_names
+    assert result.units == "cmu" and result.num_frames == 40
+    # the root stays near the source's, in the target's units (untrained: centroid + ~0)
+    src_root_m = source.root_positions[:, [0, 2]] * 0.01
+    out_root_m = result.root_positions[:, [0, 2]] * (0.0254 / 0.45)
+    assert float((src_root_m - out_root_m).norm(dim=-1).max()) < 0.5
+    pairs = end_effector_pairs(source.skeleton, target)
+    assert {target.body_groups[b] for _, b in pairs} == {
+        "spine", "left_arm", "right_arm", "left_leg", "right_leg"}
+
+
+def test_wrong_target_and_stage_are_clear_errors(model) -> None:
+    latent = model.encode(procedural.generate("biped22", "walk", seconds=0.5)[0])
+    with pytest.raises(SkelagnosticError, match="trained target"):
+        model.decode(latent, procedural.skeleton("biped17"))
+    with pytest.raises(SkelagnosticError, match="pcmrl_interp"):
+        PcmrlReconstruction(stage="interpolation")
+    with pytest.raises(SkelagnosticError, match="no target skeleton"):
+        PcmrlReconstruction(**TINY).heads(torch.zeros(1, 2, 32))
+
+
+def test_a_few_steps_reduce_the_knn_loss(model) -> None:
+    """Unsupervised learning signal: the KNN loss of one batch drops when optimised."""
+    from skelagnostic_pcmrl.losses import temporal_knn_loss
+
+    torch.manual_seed(1)
+    motion = procedural.generate("biped22", "walk", seconds=0.4)[0].convert_units("m")
+    src = sample_layout(motion.skeleton, 64, 0.05, batch=(2,))
+    pts = src.points(motion.global_rotations().float().expand(2, -1, -1, -1),
+                     motion.global_positions().float().expand(2, -1, -1, -1),
+                     motion.skeleton.offsets)
+    tgt = sample_layout(model.target_skeleton, 128, 0.05, batch=(2,))
+    model.train()
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    losses = []
+    for _ in range(25):
+        out = model.reconstruct(pts, src.groups)
+        cloud = tgt.points(out["rotations"], out["positions"], model._target_offsets)
+        loss = temporal_knn_loss(cloud, pts, tgt.groups, src.groups, k=8)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert losses[-1] < 0.6 * losses[0], losses
