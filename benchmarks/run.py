@@ -46,6 +46,7 @@ SUITES: dict[str, str] = {
     "matching": "benchmarks.suites.matching",
     "bigdata": "benchmarks.suites.bigdata",
     "training": "benchmarks.suites.training",
+    "quality": "benchmarks.suites.quality",
 }
 
 
