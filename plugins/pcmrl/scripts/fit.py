@@ -5,7 +5,8 @@ Same overrides as the CLI, e.g.::
     OMP_NUM_THREADS=1 python plugins/pcmrl/scripts/fit.py model=pcmrl threads=1 \\
         trainer.max_time=00:00:04:30 run_dir=runs/pcmrl_procedural
 
-Once ``pip install -e plugins/pcmrl`` is done, ``skelagnostic fit model=pcmrl ...`` is the same.
+With ``skelagnostic`` installed (it ships the plugin), ``skelagnostic fit model=pcmrl ...``
+is the same; this script also works from a checkout whose package is not installed.
 """
 
 from __future__ import annotations
