@@ -3,20 +3,14 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import lightning as L
 import pytest
 import torch
-
-PCMRL_SRC = Path(__file__).resolve().parents[2] / "plugins" / "pcmrl" / "src"
-if str(PCMRL_SRC) not in sys.path:
-    sys.path.insert(0, str(PCMRL_SRC))
-
-from skelagnostic_pcmrl.interp import InterpolationAligner  # noqa: E402
-from skelagnostic_pcmrl.interp_data import InterpolationDataModule  # noqa: E402
-from skelagnostic_pcmrl.interp_eval import (  # noqa: E402
+from skelagnostic_pcmrl.interp import InterpolationAligner
+from skelagnostic_pcmrl.interp_data import InterpolationDataModule
+from skelagnostic_pcmrl.interp_eval import (
     evaluate,
     format_table,
     lerp_slerp,
@@ -26,7 +20,7 @@ from skelagnostic_pcmrl.interp_eval import (  # noqa: E402
     windows,
 )
 
-from skelagnostic import Motion, procedural  # noqa: E402
+from skelagnostic import Motion, procedural
 
 
 def _clips() -> list[Motion]:

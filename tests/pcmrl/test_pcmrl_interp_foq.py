@@ -3,22 +3,16 @@
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import pytest
 import torch
+from skelagnostic_pcmrl.interp import global_to_local, window_features
+from skelagnostic_pcmrl.rpa import bone_tails
 
-PCMRL_SRC = Path(__file__).resolve().parents[2] / "plugins" / "pcmrl" / "src"
-if str(PCMRL_SRC) not in sys.path:
-    sys.path.insert(0, str(PCMRL_SRC))
-
-from skelagnostic_pcmrl.interp import global_to_local, window_features  # noqa: E402
-from skelagnostic_pcmrl.rpa import bone_tails  # noqa: E402
-
-from skelagnostic import Motion, Skeleton, procedural, read_bvh  # noqa: E402
-from skelagnostic.core import quaternion as Q  # noqa: E402
-from skelagnostic.representations import FirstFrameOffsetQuaternions  # noqa: E402
+from skelagnostic import Motion, Skeleton, procedural, read_bvh
+from skelagnostic.core import quaternion as Q
+from skelagnostic.representations import FirstFrameOffsetQuaternions
 
 
 def _walk() -> Motion:

@@ -3,34 +3,28 @@
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import lightning as L
 import pytest
 import torch
-
-PCMRL_SRC = Path(__file__).resolve().parents[2] / "plugins" / "pcmrl" / "src"
-if str(PCMRL_SRC) not in sys.path:
-    sys.path.insert(0, str(PCMRL_SRC))
-
-from skelagnostic_pcmrl.interp import (  # noqa: E402
+from skelagnostic_pcmrl.interp import (
     INTERP_CONFIG,
     InterpolationAligner,
     key_brackets,
     lerp_keys,
     slerp_keys,
 )
-from skelagnostic_pcmrl.interp_data import (  # noqa: E402
+from skelagnostic_pcmrl.interp_data import (
     InterpolationDataModule,
     gap_keys,
     random_keys,
 )
-from skelagnostic_pcmrl.interp_eval import lerp_slerp  # noqa: E402
+from skelagnostic_pcmrl.interp_eval import lerp_slerp
 
-from skelagnostic import Motion, procedural  # noqa: E402
-from skelagnostic.core import quaternion as Q  # noqa: E402
-from skelagnostic.errors import MotionError, SkelagnosticError  # noqa: E402
+from skelagnostic import Motion, procedural
+from skelagnostic.core import quaternion as Q
+from skelagnostic.errors import MotionError, SkelagnosticError
 
 TINY = {"dim": 16, "heads": 2, "layers": 1, "ff_mult": 2, "max_relative": 16}
 

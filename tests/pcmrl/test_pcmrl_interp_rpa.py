@@ -3,27 +3,20 @@
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import pytest
 import torch
-
-PCMRL_SRC = Path(__file__).resolve().parents[2] / "plugins" / "pcmrl" / "src"
-if str(PCMRL_SRC) not in sys.path:
-    sys.path.insert(0, str(PCMRL_SRC))
-
-from skelagnostic_pcmrl.interp import global_to_local  # noqa: E402
-from skelagnostic_pcmrl.rpa import (  # noqa: E402
+from skelagnostic_pcmrl.interp import global_to_local
+from skelagnostic_pcmrl.rpa import (
     augment_rest_pose,
     bone_tails,
     max_real_quaternion,
     random_tail_offsets,
 )
 
-from skelagnostic import Motion, Skeleton, procedural  # noqa: E402
-from skelagnostic.core import quaternion as Q  # noqa: E402
-from skelagnostic.representations import FirstFrameOffsetQuaternions  # noqa: E402
+from skelagnostic import Motion, Skeleton, procedural
+from skelagnostic.core import quaternion as Q
+from skelagnostic.representations import FirstFrameOffsetQuaternions
 
 
 def _hamilton(a: list[float], b: list[float]) -> list[float]:
