@@ -13,7 +13,7 @@ The plugins are not installed in the development environment: each run gets
 the plugin's ``src`` on ``PYTHONPATH`` and a fake distribution declaring its
 entry point (``reliability_env.plugin_env``).
 
-To add a method (e.g. ``pcmrl`` once its plugin lands), append a
+To add a method, append a
 :class:`Method` to :data:`METHODS` with model options small enough for a run of
 well under a minute, and the names of the state entries that must be shared
 (``shared``; every other entry is compared too).
@@ -61,6 +61,12 @@ METHODS = [
            ("model.num_codes=8", "model.kernel_size=7", "model.pose_layers=2",
             "data.seconds=2.0", "data.clips_per_gait=1"),
            shared=("codebook.",)),
+    Method("pcmrl", "skelagnostic_pcmrl.plugin",
+           ("model.dim=8", "model.stages=2", "model.point_heads=2", "model.temporal_dim=16",
+            "model.temporal_layers=1", "model.temporal_heads=2", "model.num_source_points=64",
+            "model.num_target_points=128", "data.gaits=[walk]", "data.clips_per_gait=2",
+            "data.seconds=1.5", "data.window=12", "data.stride=12", "data.batch_size=2",
+            "data.val_fraction=0.5")),
 ]
 
 
