@@ -6,7 +6,9 @@ themselves) and concatenates their results:
 * ``benchmarks.suites.training_vqpae``: VQ-PAE windows/s with and without the
   average-pose MLPs, against the authors' trainer's figures from the issue;
 * ``benchmarks.suites.training_humot``: HuMoT steps/s, windows/s and the
-  data-loading share of the paper-size network.
+  data-loading share of the paper-size network;
+* ``benchmarks.suites.training_pcmrl``: PC-MRL steps/s, windows/s and the
+  data-loading share of both stages at the paper's sizes.
 
 Each part documents its settings, sizes and baselines in its own docstring.
 """
@@ -21,6 +23,7 @@ from benchmarks.harness import Result
 PARTS: dict[str, str] = {
     "vqpae": "benchmarks.suites.training_vqpae",
     "humot": "benchmarks.suites.training_humot",
+    "pcmrl": "benchmarks.suites.training_pcmrl",
 }
 
 

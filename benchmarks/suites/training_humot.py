@@ -23,14 +23,13 @@ threads on a nearly idle one; the paper trained on an A100.
 from __future__ import annotations
 
 import os
-import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 from benchmarks.harness import REPO_ROOT, Result, run_child
+from benchmarks.suites.steptime import time_fit
 
 #: Timed steps per size (after one warm-up step); a step takes ~10 s on one core.
 STEPS = {"smoke": 2, "default": 6, "large": 20}
@@ -49,7 +48,6 @@ def _data_root() -> Path | None:
 def measure(steps: int) -> dict[str, Any]:
     """Median step time, median data-fetch time and their share over ``steps`` steps."""
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "humot" / "src"))
-    import lightning as L
     import torch
     from skelagnostic_humot import HumotAligner, HumotDataModule
 
@@ -69,35 +67,10 @@ def measure(steps: int) -> dict[str, Any]:
         data = "procedural biped31 + biped22"
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
     dm = HumotDataModule(sources, batch_size=32, val_fraction=0.0, cache_dir=cache)
-    compute: list[float] = []
-    fetch: list[float] = []
-
-    class Timer(L.Callback):
-        end: float | None = None
-
-        def on_train_batch_start(self, *args: Any) -> None:
-            self.start = time.perf_counter()
-            if self.end is not None:
-                fetch.append(self.start - self.end)
-
-        def on_train_batch_end(self, *args: Any) -> None:
-            self.end = time.perf_counter()
-            compute.append(self.end - self.start)
-
     torch.manual_seed(0)
     model = HumotAligner()
-    with tempfile.TemporaryDirectory() as run_dir:  # the aligner writes its renders here
-        trainer = L.Trainer(max_steps=steps + 1, accelerator="cpu", devices=1, logger=False,
-                            enable_checkpointing=False, enable_progress_bar=False,
-                            enable_model_summary=False, limit_val_batches=0,
-                            num_sanity_val_steps=0, callbacks=[Timer()],
-                            default_root_dir=run_dir)
-        trainer.fit(model, datamodule=dm)
-    # the first step is a warm-up; fetch[i] precedes compute[i + 1]
-    steps_s = [c + f for c, f in zip(compute[1:], fetch, strict=True)]
-    return {"median_step_s": statistics.median(steps_s),
-            "data_share": sum(fetch) / (sum(fetch) + sum(compute[1:])),
-            "data": data, "threads": torch.get_num_threads(),
+    timing = time_fit(model, dm, steps)
+    return {**timing, "data": data, "threads": torch.get_num_threads(),
             "parameters": sum(p.numel() for p in model.parameters())}
 
 

@@ -10,7 +10,9 @@ scheduler) on CPU:
   (``pose_mlp="joint"``, as the authors' trainer does);
 * ``vqpae_windows_per_s_nopose``: without them (``pose_mlp="none"``).
 
-Windows/s = 64 windows per step / median step time. There is no baseline
+plus ``vqpae_data_share_pose`` / ``_nopose``, the share of the step time spent
+fetching batches. Windows/s = 64 windows per step / median step time (compute
+and the data fetch before it, :mod:`benchmarks.suites.steptime`). There is no baseline
 column: the authors' trainer cannot be run here, and the harness only compares
 against baselines measured in the same run. For orientation, issue 10 reports
 the authors' trainer on this class of 2-core machine at a median 5.0 it/s
@@ -20,14 +22,13 @@ the authors' trainer on this class of 2-core machine at a median 5.0 it/s
 from __future__ import annotations
 
 import os
-import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 from benchmarks.harness import REPO_ROOT, Result, run_child
+from benchmarks.suites.steptime import time_fit
 
 STEPS = {"smoke": 15, "default": 60, "large": 200}
 
@@ -41,7 +42,6 @@ def _data_root() -> Path | None:
 def measure(pose_mlp: str, steps: int) -> dict[str, Any]:
     """Median training-step time (seconds) of ``steps`` steps after 5 warm-up steps."""
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
-    import lightning as L
     from skelagnostic_vqpae.aligner import VQPAEAligner
     from skelagnostic_vqpae.data import MultiSource, VQPAEDataModule
 
@@ -60,24 +60,9 @@ def measure(pose_mlp: str, steps: int) -> dict[str, Any]:
         data = "procedural biped22 + quadruped"
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
     dm = VQPAEDataModule(source, fps=60, stride=1, batch_size=32, cache_dir=cache)
-    times: list[float] = []
-
-    class Timer(L.Callback):
-        def on_train_batch_start(self, *args: Any) -> None:
-            self.start = time.perf_counter()
-
-        def on_train_batch_end(self, *args: Any) -> None:
-            times.append(time.perf_counter() - self.start)
-
     model = VQPAEAligner(num_codes=32, pose_mlp=pose_mlp)
-    trainer = L.Trainer(max_steps=steps + 5, accelerator="cpu", devices=1, logger=False,
-                        enable_checkpointing=False, enable_progress_bar=False,
-                        enable_model_summary=False, limit_val_batches=0,
-                        num_sanity_val_steps=0, callbacks=[Timer()])
-    trainer.fit(model, datamodule=dm)
-    median = statistics.median(times[5:])
-    return {"median_step_s": median, "data": data,
-            "threads": __import__("torch").get_num_threads()}
+    timing = time_fit(model, dm, steps, warmup=5)
+    return {**timing, "data": data, "threads": __import__("torch").get_num_threads()}
 
 
 def run(size: str) -> list[Result]:
@@ -90,4 +75,5 @@ def run(size: str) -> list[Result]:
         results.append(Result(
             f"vqpae_windows_per_s_{label}", "windows/s", 64.0 / out["median_step_s"],
             higher_is_better=True))
+        results.append(Result(f"vqpae_data_share_{label}", "fraction", out["data_share"]))
     return results

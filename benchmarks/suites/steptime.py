@@ -1,0 +1,67 @@
+"""Timing of real Lightning training steps, shared by the ``training`` suite's parts.
+
+:func:`time_fit` runs ``Trainer.fit`` for ``warmup + steps`` steps on CPU and
+records, for every step after the warm-up, the compute time
+(``on_train_batch_start`` -> ``on_train_batch_end``: forward, backward,
+optimiser, the module's own per-step work) and the data-fetch time before it
+(the gap between the end of one step and the start of the next: the
+DataLoader, collation, transfers).
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from typing import Any
+
+
+def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1) -> dict[str, float]:
+    """Median step time and data-loading share of ``steps`` timed training steps.
+
+    Args:
+        model: A LightningModule.
+        datamodule: Its LightningDataModule.
+        steps: Timed steps.
+        warmup: Untimed steps first (allocator, caches, lazy builds).
+
+    Returns:
+        ``median_step_s`` (compute + fetch of a step, median), ``median_compute_s``,
+        ``median_fetch_s`` and ``data_share`` (total fetch time over total time of the
+        timed steps).
+    """
+    import lightning as L
+
+    compute: list[float] = []
+    fetch: list[float] = []
+
+    class Timer(L.Callback):
+        end: float | None = None
+        start = 0.0
+
+        def on_train_batch_start(self, *args: Any) -> None:
+            self.start = time.perf_counter()
+            if self.end is not None:
+                fetch.append(self.start - self.end)
+
+        def on_train_batch_end(self, *args: Any) -> None:
+            self.end = time.perf_counter()
+            compute.append(self.end - self.start)
+
+    with tempfile.TemporaryDirectory() as run_dir:  # aligners may write renders here
+        trainer = L.Trainer(max_steps=warmup + steps, accelerator="cpu", devices=1,
+                            logger=False, enable_checkpointing=False,
+                            enable_progress_bar=False, enable_model_summary=False,
+                            limit_val_batches=0, num_sanity_val_steps=0,
+                            callbacks=[Timer()], default_root_dir=run_dir)
+        trainer.fit(model, datamodule=datamodule)
+    # fetch[i] is the gap before compute[i + 1]
+    timed_compute = compute[warmup:]
+    timed_fetch = fetch[warmup - 1:] if warmup else [0.0, *fetch]
+    totals = [c + f for c, f in zip(timed_compute, timed_fetch, strict=True)]
+    return {
+        "median_step_s": statistics.median(totals),
+        "median_compute_s": statistics.median(timed_compute),
+        "median_fetch_s": statistics.median(timed_fetch),
+        "data_share": sum(timed_fetch) / sum(totals),
+    }
