@@ -33,6 +33,8 @@ def render(reports: list[dict[str, Any]]) -> str:
             f"**Suite `{report['suite']}`**: {machine['cpu_count']} CPUs "
             f"({machine['processor']}), {machine['ram_gib']} GiB RAM"
             + (f", {threads} torch thread(s)" if threads else "")
+            + (f", load average {machine['load_average_start']:g} -> "
+               f"{machine['load_average_end']:g}" if "load_average_start" in machine else "")
             + "; "
             + ", ".join(f"{name} {version}" for name, version in versions.items() if version)
             + "\n"

@@ -13,7 +13,10 @@ The JSON (read by external tooling; keep the format stable) is::
                   "speedup", "higher_is_better"}, ...]}
 
 With ``--suite all`` the suite is ``"all"`` and every result name is prefixed
-with ``"<suite>/"``.
+with ``"<suite>/"``. Every suite's last result is ``wall_time``: the wall time
+of the whole suite (seconds), and ``machine`` records the 1-minute load average
+before and after the run (``load_average_start``, ``load_average_end``), so a
+reader can tell a quiet run from a contended one.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import importlib
 import json
 import os
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -89,7 +93,9 @@ def run_suites(
     baselines: tuple[str, ...] = ()
     for name in names:
         module = importlib.import_module(SUITES[name])
+        start = time.perf_counter()
         suite_results = module.run(size)
+        suite_results.append(Result("wall_time", "s", time.perf_counter() - start))
         if prefix:
             for r in suite_results:
                 r.name = f"{name}/{r.name}"
@@ -115,11 +121,15 @@ def main(argv: list[str] | None = None) -> int:
         os.environ[THREADS_ENV] = str(args.threads)
     apply_threads()
     names = list(SUITES) if args.suite == "all" else [args.suite]
+    load_start = os.getloadavg()[0]
     results, baselines = run_suites(names, args.size, prefix=args.suite == "all")
     print_table(args.suite, args.size, results)
+    machine = machine_info()
+    machine["load_average_start"] = round(load_start, 2)
+    machine["load_average_end"] = round(os.getloadavg()[0], 2)
     report: dict[str, Any] = {
         "suite": args.suite,
-        "machine": machine_info(),
+        "machine": machine,
         "versions": versions(baselines),
         "results": [r.to_dict() for r in results],
     }

@@ -28,6 +28,9 @@ def check_report(report: dict, suite: str) -> None:
     assert {"python", "torch", "numpy", "skelagnostic"} <= set(versions)
     assert all(isinstance(v, str) for k, v in versions.items() if k != "skelagnostic")
     assert report["results"], "a suite must report at least one figure"
+    assert machine["load_average_start"] >= 0 and machine["load_average_end"] >= 0
+    wall = report["results"][-1]
+    assert wall["name"] == "wall_time" and wall["unit"] == "s" and wall["value"] > 0
     names = [r["name"] for r in report["results"]]
     assert len(names) == len(set(names)), "result names must be unique"
     for r in report["results"]:
