@@ -378,7 +378,10 @@ class VQPAEAligner(Aligner):
         if hp.pose_mlp != "none":
             groups.append({"params": [p for c in self.characters for p in c.pose.parameters()],
                            "lr": hp.pose_lr, "weight_decay": 0.0})
-        optimizer = torch.optim.AdamW(groups, foreach=True)
+        # the fused kernel is 3-4x faster than foreach on this model's ~60 small tensors
+        # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
+        fused = all(p.device.type in ("cpu", "cuda") for p in main)
+        optimizer = torch.optim.AdamW(groups, fused=fused, foreach=None if fused else True)
         steps = self._steps_per_epoch()
         scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
             optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult)
