@@ -79,6 +79,21 @@ def timeit_median(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -
     return statistics.median(times)
 
 
+def shared_data(*required: str) -> Path | None:
+    """The real clips' root (``$SKELAGNOSTIC_TEST_DATA``, else ``../shared/data``).
+
+    Args:
+        *required: Sub-directories that must exist (e.g. ``"human/cmu"``).
+
+    Returns:
+        The root, or ``None`` when it or one of ``required`` is missing (the
+        suites then fall back to procedural data).
+    """
+    env = os.environ.get("SKELAGNOSTIC_TEST_DATA")
+    root = Path(env) if env else REPO_ROOT.parent / "shared" / "data"
+    return root if all((root / sub).is_dir() for sub in required) else None
+
+
 def peak_rss() -> float:
     """Peak resident set size of this process so far, in MiB."""
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

@@ -110,27 +110,34 @@ def vqpae(steps: int) -> dict[str, Any]:
     return check_procedural(steps, lr=1e-3, fps=30.0, options={})
 
 
-def pcmrl_interp(steps: int) -> dict[str, Any]:
-    """Train ``experiment=pcmrl_interp_cpu`` for ``steps`` steps; Table 1 on held-out clips."""
-    _one_thread()
-    _plugin("pcmrl")
+def _fit_pcmrl(overrides: list[str], steps: int, aligner: Any) -> Any:
+    """``skelagnostic fit`` a PC-MRL stage for ``steps`` steps; the trained model (eval mode)."""
     import skelagnostic_pcmrl.plugin as plugin
-    from skelagnostic_pcmrl.interp import InterpolationAligner
-    from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, lerp_slerp
 
-    from skelagnostic import procedural
     from skelagnostic.cli.app import compose, run
     from skelagnostic.plugins import PluginManager
 
     pm = PluginManager(load_entrypoints=False)
     pm.register(plugin, "pcmrl")
     with tempfile.TemporaryDirectory() as tmp:
-        run(compose(["model=pcmrl_interp", "experiment=pcmrl_interp_cpu", f"run_dir={tmp}",
-                     f"trainer.max_steps={steps}", "trainer.max_time=null",
-                     "trainer.limit_val_batches=0", "logger=none",
+        run(compose([*overrides, f"run_dir={tmp}", f"trainer.max_steps={steps}",
+                     "trainer.max_time=null", "trainer.limit_val_batches=0", "logger=none",
                      f"data.cache_dir={Path(tmp) / 'cache'}"], plugin_manager=pm), pm)
-        model = InterpolationAligner.load_from_checkpoint(
-            Path(tmp) / "checkpoints" / "last.ckpt", map_location="cpu").eval()
+        return aligner.load_from_checkpoint(Path(tmp) / "checkpoints" / "last.ckpt",
+                                            map_location="cpu").eval()
+
+
+def pcmrl_interp(steps: int) -> dict[str, Any]:
+    """Train ``experiment=pcmrl_interp_cpu`` for ``steps`` steps; Table 1 on held-out clips."""
+    _one_thread()
+    _plugin("pcmrl")
+    from skelagnostic_pcmrl.interp import InterpolationAligner
+    from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, lerp_slerp
+
+    from skelagnostic import procedural
+
+    model = _fit_pcmrl(["model=pcmrl_interp", "experiment=pcmrl_interp_cpu"], steps,
+                       InterpolationAligner)
     clips = [procedural.generate("biped31", gait, seconds=8.0, fps=30, seed=777 + k)[0]
              for gait in ("walk", "run") for k in range(2)]
     return evaluate({"model": model.interpolate, "lerp": lerp_slerp}, clips, gaps=GAPS)
@@ -140,22 +147,12 @@ def pcmrl_recon(steps: int) -> dict[str, Any]:
     """Train the default ``model=pcmrl`` for ``steps`` steps; Table 2 on held-out clips."""
     _one_thread()
     _plugin("pcmrl")
-    import skelagnostic_pcmrl.plugin as plugin
     from skelagnostic_pcmrl.evaluate import evaluate_clips
     from skelagnostic_pcmrl.recon import PcmrlReconstruction
 
     from skelagnostic import procedural
-    from skelagnostic.cli.app import compose, run
-    from skelagnostic.plugins import PluginManager
 
-    pm = PluginManager(load_entrypoints=False)
-    pm.register(plugin, "pcmrl")
-    with tempfile.TemporaryDirectory() as tmp:
-        run(compose(["model=pcmrl", f"run_dir={tmp}", f"trainer.max_steps={steps}",
-                     "trainer.max_time=null", "trainer.limit_val_batches=0", "logger=none",
-                     f"data.cache_dir={Path(tmp) / 'cache'}"], plugin_manager=pm), pm)
-        model = PcmrlReconstruction.load_from_checkpoint(
-            Path(tmp) / "checkpoints" / "last.ckpt", map_location="cpu").eval()
+    model = _fit_pcmrl(["model=pcmrl"], steps, PcmrlReconstruction)
     clips = [procedural.generate("biped22", gait, seconds=4.0, seed=100 + i)[0]
              for i, gait in enumerate(["walk", "run"])]
     return evaluate_clips(clips, procedural.skeleton("biped31"), model, sigmas=(0.0, 0.05))

@@ -22,13 +22,12 @@ threads on a nearly idle one; the paper trained on an A100.
 
 from __future__ import annotations
 
-import os
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT, Result, run_child
+from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
 from benchmarks.suites.steptime import time_fit
 
 #: Timed steps per size (after one warm-up step); a step takes ~10 s on one core.
@@ -36,13 +35,6 @@ STEPS = {"smoke": 2, "default": 6, "large": 20}
 
 #: Chunks per step: batch 32 (the paper's) x two topologies.
 WINDOWS_PER_STEP = 64
-
-
-def _data_root() -> Path | None:
-    env = os.environ.get("SKELAGNOSTIC_TEST_DATA")
-    root = Path(env) if env else REPO_ROOT.parent / "shared" / "data"
-    ok = (root / "human" / "cmu").is_dir() and (root / "human" / "lafan1").is_dir()
-    return root if ok else None
 
 
 def measure(steps: int) -> dict[str, Any]:
@@ -53,7 +45,7 @@ def measure(steps: int) -> dict[str, Any]:
 
     from skelagnostic.data import BVHSource, ProceduralSource
 
-    root = _data_root()
+    root = shared_data("human/cmu", "human/lafan1")
     if root is not None:
         human = root / "human"
         sources: list[Any] = [

@@ -21,13 +21,12 @@ No baseline column: the authors' code is not public.
 
 from __future__ import annotations
 
-import os
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT, Result, run_child
+from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
 from benchmarks.suites.steptime import time_fit
 
 #: Timed steps per size (after one warm-up step) for (reconstruction, interpolation). One
@@ -35,13 +34,6 @@ from benchmarks.suites.steptime import time_fit
 STEPS = {"smoke": (1, 1), "default": (3, 3), "large": (10, 20)}
 #: Windows per step (the batch size) of both stages.
 BATCH = 16
-
-
-def _data_root() -> Path | None:
-    env = os.environ.get("SKELAGNOSTIC_TEST_DATA")
-    root = Path(env) if env else REPO_ROOT.parent / "shared" / "data"
-    ok = (root / "human" / "cmu").is_dir() and (root / "human" / "lafan1").is_dir()
-    return root if ok else None
 
 
 def measure(stage: str, steps: int) -> dict[str, Any]:
@@ -55,7 +47,7 @@ def measure(stage: str, steps: int) -> dict[str, Any]:
 
     from skelagnostic.data import BVHSource, ProceduralSource
 
-    root = _data_root()
+    root = shared_data("human/cmu", "human/lafan1")
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
     torch.manual_seed(0)
     dm: Any

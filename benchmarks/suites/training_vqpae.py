@@ -21,22 +21,15 @@ the authors' trainer on this class of 2-core machine at a median 5.0 it/s
 
 from __future__ import annotations
 
-import os
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT, Result, run_child
+from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
 from benchmarks.suites.steptime import time_fit
 
 STEPS = {"smoke": 15, "default": 60, "large": 200}
-
-
-def _data_root() -> Path | None:
-    env = os.environ.get("SKELAGNOSTIC_TEST_DATA")
-    root = Path(env) if env else REPO_ROOT.parent / "shared" / "data"
-    return root if (root / "dog" / "mann").is_dir() else None
 
 
 def measure(pose_mlp: str, steps: int) -> dict[str, Any]:
@@ -47,7 +40,7 @@ def measure(pose_mlp: str, steps: int) -> dict[str, Any]:
 
     from skelagnostic.data import BVHSource, ProceduralSource
 
-    root = _data_root()
+    root = shared_data("dog/mann")
     if root is not None:
         human = BVHSource([root / "human" / "lafan1" / "Lafan1_example.bvh",
                            root / "human" / "lafan1" / "walk4_subject1.bvh"], units="cm",
