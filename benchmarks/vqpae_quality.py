@@ -3,7 +3,9 @@
 Usage (from the repository root)::
 
     .venv/bin/python benchmarks/vqpae_quality.py procedural [--steps 1500]
-    .venv/bin/python benchmarks/vqpae_quality.py human_dog [--steps 3000] [--no-reinit]
+    .venv/bin/python benchmarks/vqpae_quality.py human_dog [--steps 20000] [--no-reinit]
+                     [--eval-every 1000] [--num-codes 32]
+    .venv/bin/python benchmarks/vqpae_quality.py sweep --codes 8 16 32 64 128 [--steps 5000]
 
 ``procedural``: trains on procedural biped22 + quadruped clips (every gait, 30 fps,
 1 s windows), then embeds held-out clips (new seeds) whose gait frequency is
@@ -44,12 +46,13 @@ from skelagnostic.data import BVHSource, ProceduralSource  # noqa: E402
 from skelagnostic.metrics.functional import manifold_overlap  # noqa: E402
 
 
-def _train(dm: VQPAEDataModule, model: VQPAEAligner, steps: int) -> float:
+def _train(dm: VQPAEDataModule, model: VQPAEAligner, steps: int,
+           callbacks: list[L.Callback] | None = None) -> float:
     start = time.perf_counter()
     trainer = L.Trainer(max_steps=steps, accelerator="cpu", devices=1, logger=False,
                         enable_checkpointing=False, enable_progress_bar=False,
                         enable_model_summary=False, limit_val_batches=0,
-                        num_sanity_val_steps=0)
+                        num_sanity_val_steps=0, callbacks=callbacks)
     trainer.fit(model, datamodule=dm)
     return time.perf_counter() - start
 
@@ -100,35 +103,111 @@ def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any]
             "train_seconds": round(seconds, 1), "clips": clips}
 
 
-def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
-                    options: dict[str, Any]) -> dict[str, object]:
-    """Codebook usage and manifold overlap of the per-frame embeddings (Table 2)."""
+def _human_dog_sources() -> tuple[BVHSource, BVHSource]:
     env = os.environ.get("SKELAGNOSTIC_TEST_DATA")
     root = Path(env) if env else REPO_ROOT.parent / "shared" / "data"
-    human = BVHSource([root / "human" / "lafan1"], units="cm", name="human")
-    dog = BVHSource([root / "dog" / "mann"], units="cm", name="dog")
-    L.seed_everything(0, verbose=False)
+    return (BVHSource([root / "human" / "lafan1"], units="cm", name="human"),
+            BVHSource([root / "dog" / "mann"], units="cm", name="dog"))
+
+
+def _human_dog_module() -> VQPAEDataModule:
     cache = Path(tempfile.gettempdir()) / "skelagnostic-quality-cache"
-    dm = VQPAEDataModule(MultiSource([human, dog]), fps=60, stride=1, batch_size=32,
-                         cache_dir=cache, val_fraction=0.0)
+    return VQPAEDataModule(MultiSource(list(_human_dog_sources())), fps=60, stride=1,
+                           batch_size=32, cache_dir=cache, val_fraction=0.0)
+
+
+def overlap_of_clips(model: VQPAEAligner, num_codes: int) -> dict[str, Any]:
+    """Usage and overlap (Table 2) of the per-frame codes of every human and dog clip."""
+    codes = []
+    with torch.no_grad():
+        for src in _human_dog_sources():
+            codes.append(torch.cat([embed_clip(model, src.load(c)).code for c in src.clips()]))
+    overlap = manifold_overlap(codes, num_codes)
+    return {**{k: (v.tolist() if torch.is_tensor(v) else v) for k, v in overlap.items()},
+            "codes_used": [int(c.unique().numel()) for c in codes]}
+
+
+class OverlapCurve(L.Callback):
+    """Print :func:`overlap_of_clips` as a JSON line every ``every`` steps."""
+
+    def __init__(self, every: int, num_codes: int) -> None:
+        self.every, self.num_codes, self.start = every, num_codes, time.perf_counter()
+        self.points: list[dict[str, Any]] = []
+
+    def on_train_batch_end(self, trainer: L.Trainer, module: Any, *args: Any) -> None:
+        if trainer.global_step % self.every:
+            return
+        module.eval()
+        point = {"step": trainer.global_step,
+                 "seconds": round(time.perf_counter() - self.start, 1),
+                 **overlap_of_clips(module, self.num_codes)}
+        module.train()
+        self.points.append(point)
+        print(json.dumps(point), flush=True)
+
+
+def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
+                    options: dict[str, Any], eval_every: int | None = None
+                    ) -> dict[str, object]:
+    """Codebook usage and manifold overlap of the per-frame embeddings (Table 2)."""
+    L.seed_everything(0, verbose=False)
+    dm = _human_dog_module()
     model = VQPAEAligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
                          restart_period=10_000, **options)
-    seconds = _train(dm, model, steps)
-    codes = []
-    for src in (human, dog):
-        codes.append(torch.cat([embed_clip(model, src.load(c)).code for c in src.clips()]))
-    overlap = manifold_overlap(codes, num_codes)
+    curve = [OverlapCurve(eval_every, num_codes)] if eval_every else []
+    seconds = _train(dm, model, steps, curve)
+    model.eval()
     return {"setting": "human_dog", "reinit": reinit, "num_codes": num_codes, "steps": steps,
-            "lr": lr, **options, "train_seconds": round(seconds, 1), **overlap,
-            "codes_used": [int(c.unique().numel()) for c in codes]}
+            "lr": lr, **options, "train_seconds": round(seconds, 1),
+            **overlap_of_clips(model, num_codes),
+            "curve": curve[0].points if curve else []}
+
+
+def pose_mpjpe_cm(model: VQPAEAligner, dm: VQPAEDataModule) -> dict[str, float]:
+    """Per-frame pose MPJPE (cm) of the average-pose MLPs over every training window."""
+    sums = dict.fromkeys(model.dataset_names, 0.0)
+    counts = dict.fromkeys(model.dataset_names, 0)
+    with torch.no_grad():
+        for name, dataset in dm.datasets["train"].items():
+            k = model.dataset_names.index(name)
+            for start in range(0, len(dataset), 256):  # the windows gather batches in one go
+                b = dataset.__getitems__(range(start, min(start + 256, len(dataset))))
+                _, params = model.forward_dataset(k, b["features"])
+                err = model._pivot_mpjpe(k, params, b["poses"])
+                sums[name] += float(err) * len(b["features"])
+                counts[name] += len(b["features"])
+    return {name: round(100.0 * sums[name] / max(counts[name], 1), 3) for name in sums}
+
+
+def check_sweep(codes: list[int], steps: int, lr: float, options: dict[str, Any]
+                ) -> dict[str, object]:
+    """Tables 1-2 shape: overlap and pose MPJPE for every codebook size in ``codes``."""
+    rows = []
+    for num_codes in codes:
+        L.seed_everything(0, verbose=False)
+        dm = _human_dog_module()
+        model = VQPAEAligner(num_codes=num_codes, lr=lr, pose_mlp="detached",
+                             restart_period=10_000, **options)
+        seconds = _train(dm, model, steps)
+        model.eval()
+        row = {"num_codes": num_codes, "train_seconds": round(seconds, 1),
+               **overlap_of_clips(model, num_codes), "pose_mpjpe_cm": pose_mpjpe_cm(model, dm)}
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    return {"setting": "sweep", "steps": steps, "lr": lr, **options, "rows": rows}
 
 
 def main() -> None:
     """Command-line entry point."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("setting", choices=["procedural", "human_dog"])
+    parser.add_argument("setting", choices=["procedural", "human_dog", "sweep"])
     parser.add_argument("--steps", type=int, default=None)
-    parser.add_argument("--lr", type=float, default=1e-3)
+    parser.add_argument("--lr", type=float, default=None,
+                        help="learning rate (procedural: 1e-3, human_dog and sweep: 1e-4)")
+    parser.add_argument("--eval-every", type=int, default=None,
+                        help="human_dog: also report the overlap every N steps")
+    parser.add_argument("--codes", type=int, nargs="+", default=[8, 16, 32, 64, 128],
+                        help="sweep: codebook sizes")
     parser.add_argument("--num-codes", type=int, default=32)
     parser.add_argument("--no-reinit", action="store_true")
     parser.add_argument("--fps", type=float, default=30.0, help="procedural frame rate")
@@ -142,10 +221,12 @@ def main() -> None:
     options = {"padding_mode": args.padding_mode, "center_windows": not args.no_center,
                "kernel_size": args.kernel_size}
     if args.setting == "procedural":
-        out = check_procedural(args.steps or 1500, args.lr, args.fps, options)
+        out = check_procedural(args.steps or 1500, args.lr or 1e-3, args.fps, options)
+    elif args.setting == "human_dog":
+        out = check_human_dog(args.steps or 20000, not args.no_reinit, args.lr or 1e-4,
+                              args.num_codes, options, args.eval_every)
     else:
-        out = check_human_dog(args.steps or 3000, not args.no_reinit, args.lr, args.num_codes,
-                              options)
+        out = check_sweep(args.codes, args.steps or 5000, args.lr or 1e-4, options)
     print(json.dumps(out, indent=1))
 
 
