@@ -187,3 +187,13 @@ def test_lafan1_preset_puts_subject5_in_test(shared_data: Path) -> None:
     split = {c.id.rsplit("/", 1)[-1]: c.split for c in src.clips()}
     assert split["obstacles1_subject5.bvh"] == "test"
     assert split["walk4_subject1.bvh"] is None
+
+
+def test_skeleton_with_only_test_clips_is_reported(tmp_path: Path) -> None:
+    for seed in range(2):
+        motion, _ = sa.procedural.generate("biped22", "walk", seconds=3.0, fps=30, seed=seed)
+        sa.write_bvh(motion, tmp_path / f"held_out_{seed}.bvh")
+    src = BVHSource([tmp_path], units="m", test_pattern="held_out")
+    dm = MotionDataModule(src, window=16, stride=16, fps=30, cache_dir=tmp_path / "cache")
+    with pytest.raises(SkelagnosticError, match=r"no training clip.*data\.test_pattern"):
+        dm.setup()

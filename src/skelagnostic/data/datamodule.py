@@ -407,6 +407,14 @@ class MotionDataModule(L.LightningDataModule):
         entries = {clip.id: entry for clip, entry in members}
         split = _split_clips([c for c, _ in members], self.val_fraction, self.test_fraction,
                              self.split_seed)
+        if not split["train"]:
+            shown = ", ".join(c.id for c in split["test"][:3])
+            more = f" and {len(split['test']) - 3} more" if len(split["test"]) > 3 else ""
+            raise SkelagnosticError(
+                f"dataset {name!r}: no training clip; all {len(members)} clip(s) of this "
+                f"skeleton are in the test split ({shown}{more}). Loosen data.test_pattern, or "
+                "add training clips of this skeleton"
+            )
         for part, clips in split.items():
             if clips:
                 self.datasets[part][name] = WindowDataset([entries[c.id] for c in clips])
