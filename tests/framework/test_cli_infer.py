@@ -197,3 +197,17 @@ def test_help_lists_options(capsys) -> None:
     text = capsys.readouterr().out
     assert "\n  every " in text and "\n  keys " in text and "\n  render " in text
     assert cli.main(["retarget"]) == 2
+
+
+def test_units_option_sets_the_input_units(clips, tmp_path: Path, capsys) -> None:
+    from skelagnostic.cli.infer import _read
+
+    clip = clips("biped22", "walk")
+    assert _read(clip, {}).units is None
+    assert _read(clip, {"units": "cm"}).units == "cm"
+    with pytest.raises(SkelagnosticError, match=r"units='furlong'.*cmu"):
+        _read(clip, {"units": "furlong"})
+    ckpt = tmp_path / "missing.ckpt"
+    code = cli.main(["interpolate", str(clip), f"ckpt={ckpt}", "every=15", "units=cm",
+                     f"out={tmp_path / 'o.bvh'}"])
+    assert code == 2 and "missing.ckpt" in capsys.readouterr().err  # units= is a known option

@@ -38,6 +38,8 @@ _COMMON = {
     "model": "registered aligner name; default: model.name of the run's config.yaml",
     "out": "output BVH path (required); written atomically",
     "render": "also draw input and result side by side (.gif, .mp4 or .png)",
+    "units": "length unit of the input BVH files (m, cm, mm, inch, ft, cmu); "
+             "default: the aligner guesses",
 }
 
 _USAGE = {
@@ -168,6 +170,20 @@ def keyframes_from_options(num_frames: int, every: str | None, keys: str | None)
     return sorted(chosen | {0, num_frames - 1})
 
 
+def _read(path: Path, options: dict[str, str]) -> Motion:
+    """``read_bvh(path)`` with the ``units=`` option applied."""
+    from skelagnostic import read_bvh
+    from skelagnostic.core.motion import UNITS
+
+    motion = read_bvh(path)
+    units = options.get("units")
+    if units is not None:
+        if units not in UNITS:
+            raise SkelagnosticError(f"option units={units!r}: known units are {', '.join(UNITS)}")
+        motion.units = units
+    return motion
+
+
 def _bvh_paths(items: Sequence[str]) -> list[Path]:
     paths: list[Path] = []
     for item in items:
@@ -237,9 +253,7 @@ def retarget(argv: list[str]) -> int:
 
     def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
               ) -> tuple[Motion, Motion]:
-        from skelagnostic import read_bvh
-
-        source, target = read_bvh(paths[0]), read_bvh(paths[1])
+        source, target = _read(paths[0], options), _read(paths[1], options)
         aligner.require("retarget")
         return source, aligner.retarget(source, target.skeleton)
 
@@ -251,9 +265,7 @@ def interpolate(argv: list[str]) -> int:
 
     def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
               ) -> tuple[Motion, Motion]:
-        from skelagnostic import read_bvh
-
-        motion = read_bvh(paths[0])
+        motion = _read(paths[0], options)
         keys = keyframes_from_options(motion.num_frames, options.get("every"),
                                       options.get("keys"))
         aligner.require("interpolate")
@@ -267,10 +279,8 @@ def transfer(argv: list[str]) -> int:
 
     def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
               ) -> tuple[Motion, Motion]:
-        from skelagnostic import read_bvh
-
-        source = read_bvh(paths[0])
-        targets = [read_bvh(p) for p in _bvh_paths([str(p) for p in paths[1:]])]
+        source = _read(paths[0], options)
+        targets = [_read(p, options) for p in _bvh_paths([str(p) for p in paths[1:]])]
         skeletons = {tuple(t.skeleton.joint_names) for t in targets}
         if len(skeletons) > 1:
             raise SkelagnosticError(
