@@ -48,11 +48,18 @@ class Result:
 
     @property
     def speedup(self) -> float | None:
-        if self.baseline_value is None or self.value == 0 or self.baseline_value == 0:
+        """``value / baseline`` (higher is better) or ``baseline / value``; ``None`` if undefined.
+
+        Undefined means no baseline, or a zero denominator (e.g. an overlap of 0
+        on both sides): a ratio with a zero numerator is a real 0.
+        """
+        if self.baseline_value is None:
             return None
         if self.higher_is_better:
-            return self.value / self.baseline_value
-        return self.baseline_value / self.value
+            num, den = self.value, self.baseline_value
+        else:
+            num, den = self.baseline_value, self.value
+        return None if den == 0 else num / den
 
     def to_dict(self) -> dict[str, Any]:
         return {

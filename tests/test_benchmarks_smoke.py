@@ -42,12 +42,15 @@ def check_report(report: dict, suite: str) -> None:
             assert r["speedup"] is None
             continue
         assert isinstance(r["baseline"], str) and r["baseline"]
-        ratio = (
-            r["value"] / r["baseline_value"]
+        num, den = (
+            (r["value"], r["baseline_value"])
             if r["higher_is_better"]
-            else r["baseline_value"] / r["value"]
+            else (r["baseline_value"], r["value"])
         )
-        assert r["speedup"] == pytest.approx(ratio)
+        if den == 0:
+            assert r["speedup"] is None
+        else:
+            assert r["speedup"] == pytest.approx(num / den)
 
 
 @pytest.mark.slow
@@ -75,3 +78,7 @@ def test_speedup_is_above_one_when_we_are_better() -> None:
     better = Result("r", "fraction", 0.5, "naive", 0.25, higher_is_better=True)
     assert better.speedup == 2.0
     assert Result("x", "ms", 1.0).to_dict()["speedup"] is None
+    # a zero numerator is a real ratio; a zero denominator has none
+    assert Result("o", "share", 0.0, "ablation", 0.5, higher_is_better=True).speedup == 0.0
+    assert Result("o", "share", 0.5, "ablation", 0.0, higher_is_better=True).speedup is None
+    assert Result("t", "ms", 0.0, "naive", 1.0).speedup is None
