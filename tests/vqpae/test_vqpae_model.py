@@ -169,3 +169,63 @@ def test_average_pose_mlp_has_eight_layers() -> None:
     assert all(isinstance(m, torch.nn.LeakyReLU) and m.negative_slope == 0.2
                for m in mlp.net if not isinstance(m, torch.nn.Linear))
     assert mlp(torch.randn(5, 7, 10)).shape == (5, 7, 63)
+
+
+class TestFrequencyHead:
+    """``frequency_head``: the paper's MLP, or an MLP correcting PAE's spectral centroid."""
+
+    @staticmethod
+    def _latent_for(net: VQPAE, y: torch.Tensor) -> torch.Tensor:
+        # a latent whose timing signal is exactly ``y``: channel 0 carries it, the conv reads it
+        with torch.no_grad():
+            net.phase_conv.weight.zero_()
+            net.phase_conv.weight[0, 0, 0] = 1.0
+            net.phase_conv.bias.zero_()
+        latent = torch.zeros(len(y), net.latent, net.window)
+        latent[:, 0] = y
+        return latent
+
+    def test_centroid_matches_a_numpy_reference(self) -> None:
+        import numpy as np
+
+        net = VQPAE(9, 61, 60.0, latent=4, kernel_size=5, frequency_head="centroid_residual")
+        power = torch.rand(3, 31, dtype=torch.float64).float()
+        hz = np.fft.rfftfreq(61, d=1 / 60.0)  # independent bin frequencies
+        p = power.double().numpy()[:, 1:]
+        want = (p * hz[1:]).sum(1) / p.sum(1)
+        assert np.allclose(net.spectral_centroid(power).double().numpy(), want, rtol=1e-5)
+
+    @pytest.mark.parametrize("cycles", [2, 3, 5])
+    def test_untrained_head_reads_an_on_bin_sinusoid_exactly(self, cycles: int) -> None:
+        # a whole number of cycles in the window puts all power in one bin: centroid = its Hz
+        net = VQPAE(9, 61, 60.0, latent=4, kernel_size=5, frequency_head="centroid_residual")
+        t = torch.arange(61) / 60.0
+        freq = cycles * 60.0 / 61
+        y = torch.stack([torch.cos(2 * math.pi * (freq * t + phi)) for phi in (0.0, 0.3)])
+        _, f, _ = net.timing(self._latent_for(net, y))
+        assert torch.allclose(f, torch.full((2,), freq), rtol=1e-4)
+
+    def test_paper_head_starts_near_one_hertz_whatever_the_signal(self) -> None:
+        torch.manual_seed(0)
+        net = VQPAE(9, 61, 60.0, latent=4, kernel_size=5, frequency_head="mlp")
+        t = torch.arange(61) / 60.0
+        y = torch.stack([torch.cos(2 * math.pi * c * 60.0 / 61 * t) for c in (2, 5)])
+        _, f, _ = net.timing(self._latent_for(net, y))
+        # an untrained MLP barely tells 2 Hz from 5 Hz: the reason for the residual head
+        assert float((f[1] - f[0]).abs()) < 0.5
+
+    def test_residual_is_trainable_and_frequency_stays_positive(self) -> None:
+        net = VQPAE(9, 61, 60.0, latent=4, kernel_size=5, frequency_head="centroid_residual")
+        y = torch.randn(4, 61)
+        _, f, _ = net.timing(self._latent_for(net, y))
+        f.sum().backward()
+        assert float(net.freq_mlp[-1].weight.grad.abs().sum()) > 0
+        centroid = f.detach()
+        with torch.no_grad():
+            net.freq_mlp[-1].bias.fill_(-8.0)  # a correction far below the centroid
+        _, f, _ = net.timing(self._latent_for(net, y))
+        assert bool((f > 0).all()) and bool((f < centroid).all())
+
+    def test_rejects_unknown_head(self) -> None:
+        with pytest.raises(SkelagnosticError, match="frequency_head"):
+            VQPAE(9, 61, 60.0, frequency_head="peak")

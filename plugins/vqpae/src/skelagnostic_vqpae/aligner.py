@@ -81,6 +81,10 @@ class VQPAEAligner(Aligner):
         decoder_centering: Temporal centering after the first decoder conv (authors' code).
         spectrum: Frequency-MLP input, ``"normalized"`` or ``"power"`` (authors' code);
             see :class:`~skelagnostic_vqpae.model.VQPAE`.
+        frequency_head: ``"centroid_residual"`` (default: the MLP corrects PAE's
+            spectral centroid) or ``"mlp"`` (the paper); see
+            :class:`~skelagnostic_vqpae.model.VQPAE`. Checkpoints saved before this
+            option existed load with ``"mlp"``.
         padding_mode: Padding of the encoder/decoder convolutions: ``"replicate"``
             (default) or ``"zeros"`` (PyTorch's default); see
             :class:`~skelagnostic_vqpae.model.VQPAE` and docs/methods/vqpae.md.
@@ -121,6 +125,7 @@ class VQPAEAligner(Aligner):
         decoder_centering: bool = False,
         spectrum: str = "normalized",
         padding_mode: str = "replicate",
+        frequency_head: str = "centroid_residual",
         center_windows: bool = True,
         beta: float = 0.25,
         lambda_vq: float = 1.0,
@@ -165,7 +170,8 @@ class VQPAEAligner(Aligner):
             _Character(spec, hp.latent, hp.pose_layers, kernel_size=hp.kernel_size,
                        freq_layers=hp.freq_layers, amp_layers=hp.amp_layers,
                        decoder_centering=hp.decoder_centering, spectrum=hp.spectrum,
-                       padding_mode=hp.padding_mode)
+                       padding_mode=hp.padding_mode,
+                       frequency_head=hp.frequency_head)
             for spec in datasets.values()
         )
         self.codebook = SharedCodebook(hp.num_codes, 2 * hp.latent, len(datasets), hp.beta,
@@ -191,6 +197,13 @@ class VQPAEAligner(Aligner):
             char.input_std.copy_(rep.std.reshape(-1))
             char.pose_mean.copy_(pose.mean.reshape(-1))
             char.pose_std.copy_(pose.std.reshape(-1))
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        """Checkpoints from before ``frequency_head`` existed were trained with the paper's head."""
+        if "frequency_head" not in checkpoint.get("hyper_parameters", {}):
+            self.hparams["frequency_head"] = "mlp"
+            for char in self.characters:
+                char.pae.frequency_head = "mlp"
 
     def _require_built(self) -> SharedCodebook:
         if self.codebook is None:

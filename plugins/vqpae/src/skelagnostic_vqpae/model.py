@@ -43,6 +43,9 @@ __all__ = [
 #: Padding modes of the encoder/decoder convolutions (``torch.nn.Conv1d``).
 PADDING_MODES = ("zeros", "replicate", "reflect", "circular")
 
+#: How :meth:`VQPAE.timing` turns the spectrum into a frequency.
+FREQUENCY_HEADS = ("mlp", "centroid_residual")
+
 #: ``quantize(raw [B, 2d]) -> (quantised [B, 2d] with straight-through gradient, codes [B], loss)``
 Quantizer = Callable[[Tensor], tuple[Tensor, Tensor, Tensor]]
 
@@ -199,6 +202,19 @@ class VQPAE(nn.Module):
             procedural quadruped the timing branch then stopped learning (phase
             R^2 ~ 0). ``"replicate"`` maps a constant window to a constant output,
             so the temporal shape has to come from ``phi + f t``.
+        frequency_head: How the frequency is read from the spectrum. ``"mlp"``
+            (the paper, Fig. 3): ``f = ELU(MLP(power)) + 1``. ``"centroid_residual"``
+            (default):
+            the MLP (last layer zero-initialised) adds a correction to PAE's
+            power-weighted mean frequency of the non-DC bins (Starke et al. 2022),
+            ``f = ELU(centroid + MLP(power) - 1) + 1`` (equal to
+            ``centroid + MLP(power)`` above 1 Hz). Trained by reconstruction only,
+            the paper's head starts at 1 Hz for every window and can settle on a
+            local optimum far from the gait's rate (a gallop at about half its
+            frequency) although the phase advances at the true rate; starting
+            from the spectral centroid puts it near the right optimum, and the
+            MLP then removes the centroid's phase-dependent bias that the paper
+            criticises. See docs/methods/vqpae.md.
 
     Raises:
         SkelagnosticError: A size is not positive, ``window`` is even or ``kernel_size`` even.
@@ -217,8 +233,13 @@ class VQPAE(nn.Module):
         decoder_centering: bool = False,
         spectrum: str = "normalized",
         padding_mode: str = "replicate",
+        frequency_head: str = "centroid_residual",
     ) -> None:
         super().__init__()
+        if frequency_head not in FREQUENCY_HEADS:
+            raise SkelagnosticError(
+                f"VQPAE: frequency_head must be one of {FREQUENCY_HEADS}, got {frequency_head!r}")
+        self.frequency_head = frequency_head
         if padding_mode not in PADDING_MODES:
             raise SkelagnosticError(
                 f"VQPAE: padding_mode must be one of {PADDING_MODES}, got {padding_mode!r}")
@@ -248,6 +269,13 @@ class VQPAE(nn.Module):
         self.phase_conv = nn.Conv1d(latent, 1, 1)
         bins = window // 2 + 1
         self.freq_mlp = _mlp([bins] * freq_layers + [1])
+        # frequency of every rfft bin (Hz): k / (T dt)
+        self.register_buffer("bin_hz", torch.arange(bins, dtype=torch.float32) * self.fps / window,
+                             persistent=False)
+        if frequency_head == "centroid_residual":  # the untrained head is the centroid
+            last = self.freq_mlp[-1]
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
         self.amp_mlp = _mlp([latent] + [2 * latent] * amp_layers)
         self.decoder = nn.Sequential(
             conv(latent, mid),
@@ -261,7 +289,9 @@ class VQPAE(nn.Module):
 
         The frequency is ``ELU(MLP(power)) + 1`` (positive), with ``power`` the
         squared magnitudes of ``rfft(y) * 2 / T`` (``T // 2 + 1`` bins), of the
-        centred ``y`` and summing to one with ``spectrum="normalized"``.
+        centred ``y`` and summing to one with ``spectrum="normalized"``; with
+        ``frequency_head="centroid_residual"`` the MLP's output is added to the
+        spectral centroid first (:meth:`spectral_centroid`).
         """
         y = self.phase_conv(latent).squeeze(1)
         if self.spectrum == "normalized":
@@ -270,8 +300,23 @@ class VQPAE(nn.Module):
             power = power / power.sum(dim=-1, keepdim=True).clamp_min(1e-12)
         else:
             power = (torch.fft.rfft(y, dim=-1) * (2.0 / y.shape[-1])).abs().square()
-        frequency = nn.functional.elu(self.freq_mlp(power).squeeze(-1)) + 1.0
+        raw = self.freq_mlp(power).squeeze(-1)
+        if self.frequency_head == "centroid_residual":
+            raw = raw + self.spectral_centroid(power) - 1.0
+        frequency = nn.functional.elu(raw) + 1.0
         return mason_phase(y, frequency, self.times), frequency, y
+
+    def spectral_centroid(self, power: Tensor) -> Tensor:
+        r"""PAE's frequency: $\sum_{k \ge 1} f_k p_k / \sum_{k \ge 1} p_k$ over the non-DC bins.
+
+        Args:
+            power: ``[B, T // 2 + 1]`` powers of the rfft bins (any scale).
+
+        Returns:
+            ``[B]`` frequency in Hz (0 for a signal without power).
+        """
+        p = power[..., 1:]
+        return (p * self.bin_hz[1:]).sum(-1) / p.sum(-1).clamp_min(1e-12)
 
     def encode(self, x: Tensor, quantize: Quantizer) -> PhaseParameters:
         """Encoder, timing and amplitude branches and the manifold of ``x [B, C_in, T]``."""
