@@ -141,7 +141,7 @@ def fit_average_pose(aligner: VQPAEAligner, datamodule: Any, epochs: int = 1,
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
-                losses.append(float(loss))
+                losses.append(float(loss.detach()))
             last[name] = sum(losses) / len(losses)
         aligner.characters[k].pose_fitted.fill_(True)
     return last
