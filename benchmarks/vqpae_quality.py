@@ -71,17 +71,18 @@ def _phase_line(phase: torch.Tensor) -> tuple[float, float]:
     return float(1 - residual.var() / max(unwrapped.var(), 1e-12)), float(slope)
 
 
-def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any]
-                     ) -> dict[str, object]:
+def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any],
+                     window_seconds: float = 1.0) -> dict[str, object]:
     """Frequency and phase linearity on held-out procedural gaits."""
     L.seed_everything(0, verbose=False)
     cache = Path(tempfile.gettempdir()) / "skelagnostic-quality-cache"
     source = ProceduralSource(kinds=["biped22", "quadruped"], clips_per_gait=4, seconds=8.0)
-    dm = VQPAEDataModule(source, fps=fps, stride=1, batch_size=32, cache_dir=cache)
+    dm = VQPAEDataModule(source, fps=fps, stride=1, batch_size=32, cache_dir=cache,
+                         window_seconds=window_seconds)
     model = VQPAEAligner(num_codes=16, lr=lr, restart_period=10_000, pose_mlp="none",
                          **options)
     seconds = _train(dm, model, steps)
-    half = int(fps) // 2
+    half = round(fps * window_seconds) // 2
     clips = []
     for kind, gaits in (("biped22", ("walk", "run")), ("quadruped", ("walk", "trot", "gallop"))):
         for gait in gaits:
@@ -99,7 +100,8 @@ def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any]
                           "phase_hz": round(abs(slope) * fps, 4),
                           "pass_frequency": abs(freq - truth) <= 0.05 * truth,
                           "pass_phase": r2 >= 0.98})
-    return {"setting": "procedural", "steps": steps, "lr": lr, "fps": fps, **options,
+    return {"setting": "procedural", "steps": steps, "lr": lr, "fps": fps,
+            "window_seconds": window_seconds, **options,
             "train_seconds": round(seconds, 1), "clips": clips}
 
 
@@ -211,17 +213,26 @@ def main() -> None:
     parser.add_argument("--num-codes", type=int, default=32)
     parser.add_argument("--no-reinit", action="store_true")
     parser.add_argument("--fps", type=float, default=30.0, help="procedural frame rate")
+    parser.add_argument("--window-seconds", type=float, default=1.0,
+                        help="procedural: window length (the paper: 1 s)")
     parser.add_argument("--padding-mode", default="replicate",
                         help="model.padding_mode (zeros: the authors' convolutions)")
     parser.add_argument("--no-center", action="store_true",
                         help="model.center_windows=false (reconstruct the window means too)")
     parser.add_argument("--kernel-size", type=int, default=23)
+    parser.add_argument("--freq-layers", type=int, default=5,
+                        help="model.freq_layers (5 in the paper, 7 in the authors' code)")
+    parser.add_argument("--frequency-head", default="centroid_residual",
+                        choices=["mlp", "centroid_residual"],
+                        help="model.frequency_head (mlp: the paper's head)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     options = {"padding_mode": args.padding_mode, "center_windows": not args.no_center,
-               "kernel_size": args.kernel_size}
+               "kernel_size": args.kernel_size, "freq_layers": args.freq_layers,
+               "frequency_head": args.frequency_head}
     if args.setting == "procedural":
-        out = check_procedural(args.steps or 1500, args.lr or 1e-3, args.fps, options)
+        out = check_procedural(args.steps or 1500, args.lr or 1e-3, args.fps, options,
+                               args.window_seconds)
     elif args.setting == "human_dog":
         out = check_human_dog(args.steps or 20000, not args.no_reinit, args.lr or 1e-4,
                               args.num_codes, options, args.eval_every)
