@@ -76,4 +76,5 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     after = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
     ckpt = root / "final.ckpt"
     trainer.save_checkpoint(ckpt)
-    return {"model": model, "dm": dm, "before": before, "after": after, "ckpt": ckpt}
+    return {"model": model, "dm": dm, "before": before, "after": after, "ckpt": ckpt,
+            "root": root}

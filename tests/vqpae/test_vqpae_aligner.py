@@ -37,6 +37,31 @@ def test_networks_per_dataset_and_one_codebook(trained: dict) -> None:
     assert float(model.codebook.usage.sum()) > 0  # re-initialisation ran and tracked usage
 
 
+def test_fit_writes_metrics_and_the_manifold_pictures(trained: dict) -> None:
+    import json
+
+    from PIL import Image
+
+    root: Path = trained["root"]
+    metrics = json.loads((root / "vqpae_metrics.json").read_text())
+    names = trained["dm"].dataset_names
+    assert metrics["split"] == "val"
+    assert set(metrics["per_dataset"]) == set(metrics["codes_used"]) == set(names)
+    assert 0.0 < metrics["usage"] <= 1.0 and 0.0 <= metrics["overlap"] <= metrics["usage"]
+    # the written overlap is the metric of the validation clips' codes, recomputed here
+    model: VQPAEAligner = trained["model"]
+    embeddings = model.embed_windows(trained["dm"].datasets["val"], FPS)
+    for name in names:
+        codes = torch.cat([e.code for e in embeddings[name]])
+        assert metrics["codes_used"][name] == int(codes.unique().numel())
+        assert all(len(e) > 0 and e.fps == FPS and e.dataset == name for e in embeddings[name])
+        pivots_sorted = embeddings[name][0]
+        assert pivots_sorted.manifold.shape == (len(pivots_sorted), 10)
+    for picture in ("vqpae_manifold.png", "vqpae_timing.png"):
+        with Image.open(root / picture) as image:
+            assert image.width > 200 and image.height > 100
+
+
 def test_checkpoint_round_trip_encodes_identically(trained: dict) -> None:
     model: VQPAEAligner = trained["model"]
     loaded = VQPAEAligner.load_from_checkpoint(trained["ckpt"])

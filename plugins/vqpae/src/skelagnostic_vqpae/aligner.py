@@ -24,6 +24,7 @@ and, with a pose MLP, ``val/pose_mpjpe/<dataset>`` in metres at the pivot frames
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -31,6 +32,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
+from lightning.pytorch.utilities import rank_zero_only
 from torch import Tensor, nn
 
 from skelagnostic.aligners import Aligner, Latent
@@ -38,6 +40,7 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.metrics import ManifoldOverlap
+from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
 from skelagnostic_vqpae.model import VQPAE, AveragePoseMLP, PhaseParameters
@@ -407,6 +410,103 @@ class VQPAEAligner(Aligner):
             return 1
         longest = max(len(ds) for ds in dm.datasets["train"].values())
         return max(1, math.ceil(longest / dm.batch_size))
+
+    def on_fit_end(self) -> None:
+        """Write what a person looks at after training, into the run directory.
+
+        * ``vqpae_metrics.json``: the last logged metrics, and the manifold
+          overlap (usage, overlap, per-dataset share, codes used per dataset) of
+          the per-frame codes of the validation clips (training clips without a
+          validation split);
+        * ``vqpae_manifold.png``: the phase manifold (PCA of the codebook
+          ellipses, one panel per character, its frames' points; paper Fig. 1);
+        * ``vqpae_timing.png``: phase, frequency and code over time for the
+          first clip of every character.
+        """
+        self._write_fit_outputs()
+
+    @rank_zero_only
+    def _write_fit_outputs(self) -> None:
+        trainer = self.trainer
+        dm = trainer.datamodule
+        if dm is None or self.codebook is None:
+            return
+        split = "val" if any(len(d) for d in dm.datasets.get("val", {}).values()) else "train"
+        was_training = self.training
+        self.eval()
+        try:
+            embeddings = self.embed_windows(dm.datasets[split], dm.fps)
+        finally:
+            self.train(was_training)
+        run_dir = Path(trainer.default_root_dir)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        codes = [torch.cat([e.code for e in embeddings.get(n, [])] or
+                           [torch.zeros(0, dtype=torch.long)]) for n in self.dataset_names]
+        overlap = manifold_overlap(codes, self.codebook.num_codes)
+        metrics = {
+            "split": split,
+            "usage": overlap["usage"],
+            "overlap": overlap["overlap"],
+            "per_dataset": {n: None if math.isnan(v) else v for n, v in
+                            zip(self.dataset_names, overlap["per_dataset"], strict=True)},
+            "codes_used": {n: int(c.unique().numel()) for n, c in
+                           zip(self.dataset_names, codes, strict=True)},
+            "logged": {k: float(v) for k, v in trainer.callback_metrics.items()},
+        }
+        (run_dir / "vqpae_metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        shown = {n: embs for n, embs in embeddings.items() if embs}
+        if not shown:
+            return
+        import matplotlib.pyplot as plt
+
+        from skelagnostic_vqpae.embed import plot_clip_timing, plot_manifold
+
+        plt.close(plot_manifold(self, shown, run_dir / "vqpae_manifold.png"))
+        plt.close(plot_clip_timing({n: embs[0] for n, embs in shown.items()},
+                                   run_dir / "vqpae_timing.png"))
+
+    @torch.no_grad()
+    def embed_windows(self, datasets: Mapping[str, Any], fps: float,
+                      batch_size: int = 1024) -> dict[str, list[Any]]:
+        """Embed every window of a data-module split, grouped into per-clip embeddings.
+
+        Args:
+            datasets: Dataset name -> windows (``VQPAEDataModule.datasets[split]``).
+            fps: Frame rate of the windows.
+            batch_size: Windows per forward pass.
+
+        Returns:
+            Dataset name -> one :class:`~skelagnostic_vqpae.embed.ClipEmbedding` per clip
+            (pivots in frame order; only pivots whose window lies inside the clip).
+        """
+        from skelagnostic_vqpae.embed import ClipEmbedding
+
+        out: dict[str, list[Any]] = {}
+        for name, windows in datasets.items():
+            k = self.dataset_names.index(name)
+            parts: dict[str, list[Tensor]] = {}
+            for start in range(0, len(windows), batch_size):
+                b = windows.__getitems__(range(start, min(start + batch_size, len(windows))))
+                _, p = self.forward_dataset(k, b["features"].to(self.device))
+                pivot = p.manifold.shape[-1] // 2
+                for key, value in (("phase", p.phase), ("frequency", p.frequency),
+                                   ("code", p.code), ("amplitude", p.amplitude),
+                                   ("manifold", p.manifold[..., pivot]), ("clip", b["clip"]),
+                                   ("pivot", b["pivot"])):
+                    parts.setdefault(key, []).append(value.detach().cpu())
+            if not parts:
+                out[name] = []
+                continue
+            cat = {key: torch.cat(v) for key, v in parts.items()}
+            clips = []
+            for c in cat["clip"].unique().tolist():
+                sel = (cat["clip"] == c).nonzero().squeeze(1)
+                sel = sel[cat["pivot"][sel].argsort()]
+                clips.append(ClipEmbedding(*(cat[key][sel] for key in
+                                             ("phase", "frequency", "code", "amplitude",
+                                              "manifold")), float(fps), name))
+            out[name] = clips
+        return out
 
     def on_train_epoch_end(self) -> None:
         """Mark the pose MLPs as trained (they learn alongside, unless ``pose_mlp="none"``)."""
