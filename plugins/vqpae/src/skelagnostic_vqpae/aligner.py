@@ -84,8 +84,8 @@ class VQPAEAligner(Aligner):
         decoder_centering: Temporal centering after the first decoder conv (authors' code).
         spectrum: Frequency-MLP input, ``"normalized"`` or ``"power"`` (authors' code);
             see :class:`~skelagnostic_vqpae.model.VQPAE`.
-        frequency_head: ``"centroid_residual"`` (default: the MLP corrects PAE's
-            spectral centroid) or ``"mlp"`` (the paper); see
+        frequency_head: ``"mlp"`` (default, the paper) or ``"centroid_residual"``
+            (the MLP corrects PAE's spectral centroid); see
             :class:`~skelagnostic_vqpae.model.VQPAE`. Checkpoints saved before this
             option existed load with ``"mlp"``.
         padding_mode: Padding of the encoder/decoder convolutions: ``"replicate"``
@@ -128,7 +128,7 @@ class VQPAEAligner(Aligner):
         decoder_centering: bool = False,
         spectrum: str = "normalized",
         padding_mode: str = "replicate",
-        frequency_head: str = "centroid_residual",
+        frequency_head: str = "mlp",
         center_windows: bool = True,
         beta: float = 0.25,
         lambda_vq: float = 1.0,

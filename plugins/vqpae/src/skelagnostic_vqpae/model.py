@@ -203,18 +203,17 @@ class VQPAE(nn.Module):
             R^2 ~ 0). ``"replicate"`` maps a constant window to a constant output,
             so the temporal shape has to come from ``phi + f t``.
         frequency_head: How the frequency is read from the spectrum. ``"mlp"``
-            (the paper, Fig. 3): ``f = ELU(MLP(power)) + 1``. ``"centroid_residual"``
-            (default):
-            the MLP (last layer zero-initialised) adds a correction to PAE's
-            power-weighted mean frequency of the non-DC bins (Starke et al. 2022),
-            ``f = ELU(centroid + MLP(power) - 1) + 1`` (equal to
-            ``centroid + MLP(power)`` above 1 Hz). Trained by reconstruction only,
-            the paper's head starts at 1 Hz for every window and can settle on a
-            local optimum far from the gait's rate (a gallop at about half its
-            frequency) although the phase advances at the true rate; starting
-            from the spectral centroid puts it near the right optimum, and the
-            MLP then removes the centroid's phase-dependent bias that the paper
-            criticises. See docs/methods/vqpae.md.
+            (default, the paper, Fig. 3): ``f = ELU(MLP(power)) + 1``.
+            ``"centroid_residual"``: the MLP (last layer zero-initialised) adds a
+            correction to PAE's power-weighted mean frequency of the non-DC bins
+            (Starke et al. 2022), ``f = ELU(centroid + MLP(power) - 1) + 1`` (equal
+            to ``centroid + MLP(power)`` above 1 Hz). The paper's head starts at
+            about 1 Hz for every window; trained by reconstruction only it can
+            settle on a local optimum (the procedural gallop at half its rate) or,
+            on a single quadruped, lose the phase. Starting from the centroid
+            avoids both, but in our human + dog runs it slowed the sharing of
+            codes between the characters (see docs/methods/vqpae.md), so it is
+            not the default.
 
     Raises:
         SkelagnosticError: A size is not positive, ``window`` is even or ``kernel_size`` even.
@@ -233,7 +232,7 @@ class VQPAE(nn.Module):
         decoder_centering: bool = False,
         spectrum: str = "normalized",
         padding_mode: str = "replicate",
-        frequency_head: str = "centroid_residual",
+        frequency_head: str = "mlp",
     ) -> None:
         super().__init__()
         if frequency_head not in FREQUENCY_HEADS:

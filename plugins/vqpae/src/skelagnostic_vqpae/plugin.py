@@ -17,7 +17,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "decoder_centering": False,
     "spectrum": "normalized",
     "padding_mode": "replicate",
-    "frequency_head": "centroid_residual",
+    "frequency_head": "mlp",
     "center_windows": True,
     "beta": 0.25,
     "lambda_vq": 1.0,
