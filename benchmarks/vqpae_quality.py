@@ -47,14 +47,20 @@ from skelagnostic.metrics.functional import manifold_overlap  # noqa: E402
 
 
 def _train(dm: VQPAEDataModule, model: VQPAEAligner, steps: int,
-           callbacks: list[L.Callback] | None = None) -> float:
+           callbacks: list[L.Callback] | None = None, save: Path | None = None) -> float:
     start = time.perf_counter()
-    trainer = L.Trainer(max_steps=steps, accelerator="cpu", devices=1, logger=False,
-                        enable_checkpointing=False, enable_progress_bar=False,
-                        enable_model_summary=False, limit_val_batches=0,
-                        num_sanity_val_steps=0, callbacks=callbacks)
-    trainer.fit(model, datamodule=dm)
-    return time.perf_counter() - start
+    with tempfile.TemporaryDirectory() as run_dir:
+        trainer = L.Trainer(max_steps=steps, accelerator="cpu", devices=1, logger=False,
+                            enable_checkpointing=False, enable_progress_bar=False,
+                            enable_model_summary=False, limit_val_batches=0,
+                            num_sanity_val_steps=0, callbacks=callbacks,
+                            default_root_dir=run_dir)
+        trainer.fit(model, datamodule=dm)
+        seconds = time.perf_counter() - start
+        if save is not None:  # a Lightning checkpoint: skelagnostic transfer ckpt=...
+            save.parent.mkdir(parents=True, exist_ok=True)
+            trainer.save_checkpoint(save)
+    return seconds
 
 
 def phase_linearity(phase: torch.Tensor) -> float:
@@ -149,15 +155,15 @@ class OverlapCurve(L.Callback):
 
 
 def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
-                    options: dict[str, Any], eval_every: int | None = None
-                    ) -> dict[str, object]:
+                    options: dict[str, Any], eval_every: int | None = None,
+                    save: Path | None = None) -> dict[str, object]:
     """Codebook usage and manifold overlap of the per-frame embeddings (Table 2)."""
     L.seed_everything(0, verbose=False)
     dm = _human_dog_module()
     model = VQPAEAligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
                          restart_period=10_000, **options)
     curve = [OverlapCurve(eval_every, num_codes)] if eval_every else []
-    seconds = _train(dm, model, steps, curve)
+    seconds = _train(dm, model, steps, curve, save)
     model.eval()
     return {"setting": "human_dog", "reinit": reinit, "num_codes": num_codes, "steps": steps,
             "lr": lr, **options, "train_seconds": round(seconds, 1),
@@ -212,6 +218,8 @@ def main() -> None:
                         help="sweep: codebook sizes")
     parser.add_argument("--num-codes", type=int, default=32)
     parser.add_argument("--no-reinit", action="store_true")
+    parser.add_argument("--save", type=Path, default=None,
+                        help="human_dog: write the trained model as a Lightning checkpoint")
     parser.add_argument("--fps", type=float, default=30.0, help="procedural frame rate")
     parser.add_argument("--window-seconds", type=float, default=1.0,
                         help="procedural: window length (the paper: 1 s)")
@@ -222,7 +230,7 @@ def main() -> None:
     parser.add_argument("--kernel-size", type=int, default=23)
     parser.add_argument("--freq-layers", type=int, default=5,
                         help="model.freq_layers (5 in the paper, 7 in the authors' code)")
-    parser.add_argument("--frequency-head", default="centroid_residual",
+    parser.add_argument("--frequency-head", default="mlp",
                         choices=["mlp", "centroid_residual"],
                         help="model.frequency_head (mlp: the paper's head)")
     args = parser.parse_args()
@@ -235,7 +243,7 @@ def main() -> None:
                                args.window_seconds)
     elif args.setting == "human_dog":
         out = check_human_dog(args.steps or 20000, not args.no_reinit, args.lr or 1e-4,
-                              args.num_codes, options, args.eval_every)
+                              args.num_codes, options, args.eval_every, args.save)
     else:
         out = check_sweep(args.codes, args.steps or 5000, args.lr or 1e-4, options)
     print(json.dumps(out, indent=1))
