@@ -82,3 +82,19 @@ def test_speedup_is_above_one_when_we_are_better() -> None:
     assert Result("o", "share", 0.0, "ablation", 0.5, higher_is_better=True).speedup == 0.0
     assert Result("o", "share", 0.5, "ablation", 0.0, higher_is_better=True).speedup is None
     assert Result("t", "ms", 0.0, "naive", 1.0).speedup is None
+
+
+def test_training_parts_add_a_gpu_when_torch_sees_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    import torch
+
+    sys.path.insert(0, str(REPO_ROOT))
+    try:
+        from benchmarks.suites.steptime import accelerators, suffix
+    finally:
+        sys.path.remove(str(REPO_ROOT))
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert accelerators() == ["cpu"]
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    assert accelerators() == ["cpu", "gpu"]
+    # CPU figures keep their names (external tooling reads them); GPU ones get a suffix
+    assert suffix("cpu") == "" and suffix("gpu") == "_gpu"

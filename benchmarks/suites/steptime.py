@@ -1,7 +1,7 @@
 """Timing of real Lightning training steps, shared by the ``training`` suite's parts.
 
-:func:`time_fit` runs ``Trainer.fit`` for ``warmup + steps`` steps on CPU and
-records, for every step after the warm-up, the compute time
+:func:`time_fit` runs ``Trainer.fit`` for ``warmup + steps`` steps on CPU (or a
+GPU) and records, for every step after the warm-up, the compute time
 (``on_train_batch_start`` -> ``on_train_batch_end``: forward, backward,
 optimiser, the module's own per-step work) and the data-fetch time before it
 (the gap between the end of one step and the start of the next: the
@@ -16,7 +16,20 @@ import time
 from typing import Any
 
 
-def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1) -> dict[str, float]:
+def accelerators() -> list[str]:
+    """``["cpu"]``, plus ``"gpu"`` when torch sees a CUDA device."""
+    import torch
+
+    return ["cpu", "gpu"] if torch.cuda.is_available() else ["cpu"]
+
+
+def suffix(accelerator: str) -> str:
+    """Result-name suffix of a device: ``""`` for ``"cpu"``, ``"_gpu"`` for ``"gpu"``."""
+    return "" if accelerator == "cpu" else f"_{accelerator}"
+
+
+def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
+             accelerator: str = "cpu") -> dict[str, float]:
     """Median step time and data-loading share of ``steps`` timed training steps.
 
     Args:
@@ -24,6 +37,7 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1) -> dict[s
         datamodule: Its LightningDataModule.
         steps: Timed steps.
         warmup: Untimed steps first (allocator, caches, lazy builds).
+        accelerator: Lightning accelerator, ``"cpu"`` or ``"gpu"`` (one device).
 
     Returns:
         ``median_step_s`` (compute + fetch of a step, median), ``median_compute_s``,
@@ -31,8 +45,10 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1) -> dict[s
         timed steps).
     """
     import lightning as L
+    import torch
 
     compute: list[float] = []
+    sync = torch.cuda.synchronize if accelerator == "gpu" else (lambda: None)
     fetch: list[float] = []
 
     class Timer(L.Callback):
@@ -40,16 +56,18 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1) -> dict[s
         start = 0.0
 
         def on_train_batch_start(self, *args: Any) -> None:
+            sync()
             self.start = time.perf_counter()
             if self.end is not None:
                 fetch.append(self.start - self.end)
 
         def on_train_batch_end(self, *args: Any) -> None:
+            sync()
             self.end = time.perf_counter()
             compute.append(self.end - self.start)
 
     with tempfile.TemporaryDirectory() as run_dir:  # aligners may write renders here
-        trainer = L.Trainer(max_steps=warmup + steps, accelerator="cpu", devices=1,
+        trainer = L.Trainer(max_steps=warmup + steps, accelerator=accelerator, devices=1,
                             logger=False, enable_checkpointing=False,
                             enable_progress_bar=False, enable_model_summary=False,
                             limit_val_batches=0, num_sanity_val_steps=0,

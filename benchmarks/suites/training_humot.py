@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
-from benchmarks.suites.steptime import time_fit
+from benchmarks.suites.steptime import accelerators, suffix, time_fit
 
 #: Timed steps per size (after one warm-up step); a step takes ~10 s on one core.
 STEPS = {"smoke": 2, "default": 6, "large": 20}
@@ -37,7 +37,7 @@ STEPS = {"smoke": 2, "default": 6, "large": 20}
 WINDOWS_PER_STEP = 64
 
 
-def measure(steps: int) -> dict[str, Any]:
+def measure(steps: int, accelerator: str = "cpu") -> dict[str, Any]:
     """Median step time, median data-fetch time and their share over ``steps`` steps."""
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "humot" / "src"))
     import torch
@@ -61,18 +61,22 @@ def measure(steps: int) -> dict[str, Any]:
     dm = HumotDataModule(sources, batch_size=32, val_fraction=0.0, cache_dir=cache)
     torch.manual_seed(0)
     model = HumotAligner()
-    timing = time_fit(model, dm, steps)
+    timing = time_fit(model, dm, steps, accelerator=accelerator)
     return {**timing, "data": data, "threads": torch.get_num_threads(),
             "parameters": sum(p.numel() for p in model.parameters())}
 
 
 def run(size: str) -> list[Result]:
     """Steps/s, windows/s and the data-loading share of the paper-size training step."""
-    out, _ = run_child("benchmarks.suites.training_humot:measure", steps=STEPS[size])
-    step = out["median_step_s"]
-    return [
-        Result("humot_steps_per_s", "steps/s", 1.0 / step, higher_is_better=True),
-        Result("humot_windows_per_s", "windows/s", WINDOWS_PER_STEP / step,
-               higher_is_better=True),
-        Result("humot_data_share", "fraction", out["data_share"]),
-    ]
+    results = []
+    for device in accelerators():
+        out, _ = run_child("benchmarks.suites.training_humot:measure", steps=STEPS[size],
+                           accelerator=device)
+        step, tag = out["median_step_s"], suffix(device)
+        results += [
+            Result(f"humot_steps_per_s{tag}", "steps/s", 1.0 / step, higher_is_better=True),
+            Result(f"humot_windows_per_s{tag}", "windows/s", WINDOWS_PER_STEP / step,
+                   higher_is_better=True),
+            Result(f"humot_data_share{tag}", "fraction", out["data_share"]),
+        ]
+    return results

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
-from benchmarks.suites.steptime import time_fit
+from benchmarks.suites.steptime import accelerators, suffix, time_fit
 
 #: Timed steps per size (after one warm-up step) for (reconstruction, interpolation). One
 #: thread takes about 32 s and 13 s per step at these sizes (94.6 M and 61.8 M parameters).
@@ -36,7 +36,7 @@ STEPS = {"smoke": (1, 1), "default": (3, 3), "large": (10, 20)}
 BATCH = 16
 
 
-def measure(stage: str, steps: int) -> dict[str, Any]:
+def measure(stage: str, steps: int, accelerator: str = "cpu") -> dict[str, Any]:
     """Median step time and data share of ``steps`` steps of ``stage`` (recon or interp)."""
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "pcmrl" / "src"))
     import torch
@@ -74,7 +74,7 @@ def measure(stage: str, steps: int) -> dict[str, Any]:
             data = "procedural biped31"
         dm = InterpolationDataModule(source, fps=30.0, batch_size=BATCH, val_fraction=0.0)
         model = InterpolationAligner()
-    timing = time_fit(model, dm, steps)
+    timing = time_fit(model, dm, steps, accelerator=accelerator)
     return {**timing, "data": data, "threads": torch.get_num_threads(),
             "parameters": sum(p.numel() for p in model.parameters())}
 
@@ -82,14 +82,16 @@ def measure(stage: str, steps: int) -> dict[str, Any]:
 def run(size: str) -> list[Result]:
     """Steps/s, windows/s and data-loading share of both stages."""
     results = []
-    for stage, steps in zip(("recon", "interp"), STEPS[size], strict=True):
-        out, _ = run_child("benchmarks.suites.training_pcmrl:measure", stage=stage,
-                           steps=steps)
-        step = out["median_step_s"]
-        results += [
-            Result(f"pcmrl_{stage}_steps_per_s", "steps/s", 1.0 / step, higher_is_better=True),
-            Result(f"pcmrl_{stage}_windows_per_s", "windows/s", BATCH / step,
-                   higher_is_better=True),
-            Result(f"pcmrl_{stage}_data_share", "fraction", out["data_share"]),
-        ]
+    for device in accelerators():
+        for stage, steps in zip(("recon", "interp"), STEPS[size], strict=True):
+            out, _ = run_child("benchmarks.suites.training_pcmrl:measure", stage=stage,
+                               steps=steps, accelerator=device)
+            step, tag = out["median_step_s"], f"{stage}{suffix(device)}"
+            results += [
+                Result(f"pcmrl_{tag}_steps_per_s", "steps/s", 1.0 / step,
+                       higher_is_better=True),
+                Result(f"pcmrl_{tag}_windows_per_s", "windows/s", BATCH / step,
+                       higher_is_better=True),
+                Result(f"pcmrl_{tag}_data_share", "fraction", out["data_share"]),
+            ]
     return results

@@ -27,12 +27,12 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
-from benchmarks.suites.steptime import time_fit
+from benchmarks.suites.steptime import accelerators, suffix, time_fit
 
 STEPS = {"smoke": 15, "default": 60, "large": 200}
 
 
-def measure(pose_mlp: str, steps: int) -> dict[str, Any]:
+def measure(pose_mlp: str, steps: int, accelerator: str = "cpu") -> dict[str, Any]:
     """Median training-step time (seconds) of ``steps`` steps after 5 warm-up steps."""
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
     from skelagnostic_vqpae.aligner import VQPAEAligner
@@ -54,19 +54,21 @@ def measure(pose_mlp: str, steps: int) -> dict[str, Any]:
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
     dm = VQPAEDataModule(source, fps=60, stride=1, batch_size=32, cache_dir=cache)
     model = VQPAEAligner(num_codes=32, pose_mlp=pose_mlp)
-    timing = time_fit(model, dm, steps, warmup=5)
+    timing = time_fit(model, dm, steps, warmup=5, accelerator=accelerator)
     return {**timing, "data": data, "threads": __import__("torch").get_num_threads()}
 
 
 def run(size: str) -> list[Result]:
-    """Windows/s with and without the pose MLPs."""
+    """Windows/s with and without the pose MLPs (on the CPU, and a GPU when present)."""
     steps = STEPS[size]
     results = []
-    for mode, label in (("joint", "pose"), ("none", "nopose")):
-        out, _ = run_child("benchmarks.suites.training_vqpae:measure", pose_mlp=mode,
-                           steps=steps)
-        results.append(Result(
-            f"vqpae_windows_per_s_{label}", "windows/s", 64.0 / out["median_step_s"],
-            higher_is_better=True))
-        results.append(Result(f"vqpae_data_share_{label}", "fraction", out["data_share"]))
+    for device in accelerators():
+        for mode, label in (("joint", "pose"), ("none", "nopose")):
+            out, _ = run_child("benchmarks.suites.training_vqpae:measure", pose_mlp=mode,
+                               steps=steps, accelerator=device)
+            tag = f"{label}{suffix(device)}"
+            results.append(Result(
+                f"vqpae_windows_per_s_{tag}", "windows/s", 64.0 / out["median_step_s"],
+                higher_is_better=True))
+            results.append(Result(f"vqpae_data_share_{tag}", "fraction", out["data_share"]))
     return results
