@@ -11,9 +11,14 @@ reports, each next to a baseline measured in the same run:
   error between topologies against paired procedural ground truth,
   normalised by the target's height, against the nearest-joint-name copy.
   The network is the reduced CPU configuration of ``experiment=humot_quick``.
-* VQ-PAE (``quality_vqpae``): predicted gait frequency (relative error) and
-  phase linearity (R^2 of the unwrapped phase) on held-out procedural gaits of
-  a biped and a quadruped (``benchmarks/vqpae_quality.py procedural``).
+* VQ-PAE (``quality_vqpae``): predicted gait frequency (relative error), the
+  rate at which the pivot phase advances (relative error) and phase linearity
+  (R^2 of the unwrapped phase) on held-out procedural gaits of a biped and a
+  quadruped (``benchmarks/vqpae_quality.py procedural``).
+* VQ-PAE overlap (``quality_vqpae_overlap``): code usage, overlap of codes and
+  per-dataset share on shared codes (Table 2) for LaFAN1 + MANN dog at K = 32,
+  against the same training without codebook re-initialisation (the paper's
+  ablation); skipped without the shared clips.
 * PC-MRL interpolation (``quality_pcmrl_interp``): L2P at keyframe gaps 5, 15
   and 30 on 128-frame windows of held-out procedural biped31 clips (the
   paper's Table 1 protocol, ``skelagnostic_pcmrl.interp_eval``; L2P normalised
@@ -48,13 +53,15 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT, Result, run_child
+from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
 
 #: Training steps per size and method.
 STEPS: dict[str, dict[str, int]] = {
-    "smoke": {"humot": 3, "vqpae": 5, "pcmrl_interp": 3, "pcmrl_recon": 2},
-    "default": {"humot": 120, "vqpae": 400, "pcmrl_interp": 300, "pcmrl_recon": 40},
-    "large": {"humot": 600, "vqpae": 2000, "pcmrl_interp": 2000, "pcmrl_recon": 300},
+    "smoke": {"humot": 3, "vqpae": 5, "vqpae_overlap": 3, "pcmrl_interp": 3, "pcmrl_recon": 2},
+    "default": {"humot": 120, "vqpae": 2000, "vqpae_overlap": 2500, "pcmrl_interp": 300,
+                "pcmrl_recon": 40},
+    "large": {"humot": 600, "vqpae": 5000, "vqpae_overlap": 25000, "pcmrl_interp": 2000,
+              "pcmrl_recon": 300},
 }
 
 
@@ -108,6 +115,21 @@ def vqpae(steps: int) -> dict[str, Any]:
     from benchmarks.vqpae_quality import check_procedural
 
     return check_procedural(steps, lr=1e-3, fps=30.0, options={})
+
+
+def vqpae_overlap(steps: int) -> dict[str, Any] | None:
+    """``vqpae_quality.py human_dog`` at ``steps`` steps, with and without re-initialisation.
+
+    ``None`` when the shared LaFAN1 and MANN dog clips are missing.
+    """
+    if shared_data("human/lafan1", "dog/mann") is None:
+        return None
+    _one_thread()
+    _plugin("vqpae")
+    from benchmarks.vqpae_quality import check_human_dog
+
+    return {"reinit": check_human_dog(steps, True, 1e-4, 32, {}),
+            "no_reinit": check_human_dog(steps, False, 1e-4, 32, {})}
 
 
 def _fit_pcmrl(overrides: list[str], steps: int, aligner: Any) -> Any:
@@ -180,16 +202,37 @@ def _vqpae_results(out: dict[str, Any], steps: int) -> list[Result]:
                               float(clip["rel_error"])))
         results.append(Result(f"vqpae_phase_r2 {clip['clip']}{tag}", "R^2",
                               float(clip["phase_r2"]), higher_is_better=True))
+        # how fast the pivot phase advances, against the truth (the frequency head's target)
+        results.append(Result(f"vqpae_phase_rate_rel_error {clip['clip']}{tag}", "ratio",
+                              abs(clip["phase_hz"] - clip["true_hz"]) / clip["true_hz"]))
+    return results
+
+
+def _vqpae_overlap_results(out: dict[str, Any] | None, steps: int) -> list[Result]:
+    if out is None:  # no shared clips: nothing to report (the part says so in the table)
+        return []
+    tag = f" ({steps} steps)"
+    ours, ablation = out["reinit"], out["no_reinit"]
+    results = [
+        Result(f"vqpae_overlap_{key} lafan1+dog K=32{tag}", "share", float(ours[key]),
+               "no re-initialisation", float(ablation[key]), higher_is_better=True)
+        for key in ("usage", "overlap")
+    ]
+    for k, name in enumerate(("human", "dog")):
+        results.append(Result(f"vqpae_overlap_per_dataset {name} K=32{tag}", "share",
+                              float(ours["per_dataset"][k]), "no re-initialisation",
+                              float(ablation["per_dataset"][k]), higher_is_better=True))
     return results
 
 
 def _pcmrl_interp_results(out: dict[str, Any], steps: int) -> list[Result]:
     results = []
     model, lerp = out["results"]["model"], out["results"]["lerp"]
-    for gap, figures in model.items():
-        results.append(Result(f"pcmrl_interp_l2p gap {gap} ({steps} steps)", "L2P",
-                              float(figures["l2p"]), "LERP/SLERP",
-                              float(lerp[gap]["l2p"])))
+    for metric in ("l2p", "l2q", "npss"):
+        for gap, figures in model.items():
+            results.append(Result(f"pcmrl_interp_{metric} gap {gap} ({steps} steps)",
+                                  metric.upper(), float(figures[metric]), "LERP/SLERP",
+                                  float(lerp[gap][metric])))
     return results
 
 
@@ -209,9 +252,10 @@ def _pcmrl_recon_results(out: dict[str, Any], steps: int) -> list[Result]:
 #: Parts in submission order (longest first, so that the pool finishes early):
 #: name -> (child function, figures from its output).
 PARTS: dict[str, tuple[str, Callable[[dict[str, Any], int], list[Result]]]] = {
-    "pcmrl_interp": ("benchmarks.suites.quality:pcmrl_interp", _pcmrl_interp_results),
+    "vqpae_overlap": ("benchmarks.suites.quality:vqpae_overlap", _vqpae_overlap_results),
     "humot": ("benchmarks.suites.quality:humot", _humot_results),
     "vqpae": ("benchmarks.suites.quality:vqpae", _vqpae_results),
+    "pcmrl_interp": ("benchmarks.suites.quality:pcmrl_interp", _pcmrl_interp_results),
     "pcmrl_recon": ("benchmarks.suites.quality:pcmrl_recon", _pcmrl_recon_results),
 }
 
@@ -235,7 +279,7 @@ def run(size: str) -> list[Result]:
         futures = {name: pool.submit(_timed_child, target, steps[name])
                    for name, (target, _) in PARTS.items()}
     results: list[Result] = []
-    for name in ("humot", "vqpae", "pcmrl_interp", "pcmrl_recon"):
+    for name in ("humot", "vqpae", "vqpae_overlap", "pcmrl_interp", "pcmrl_recon"):
         out, seconds = futures[name].result()
         results += PARTS[name][1](out, steps[name])
         results.append(Result(f"{name} part wall time ({workers} at a time)", "s", seconds))
