@@ -48,6 +48,9 @@ def test_fit_writes_metrics_and_the_manifold_pictures(trained: dict) -> None:
     assert metrics["split"] == "val"
     assert set(metrics["per_dataset"]) == set(metrics["codes_used"]) == set(names)
     assert 0.0 < metrics["usage"] <= 1.0 and 0.0 <= metrics["overlap"] <= metrics["usage"]
+    train = metrics["train"]  # the same figures on the training clips
+    assert set(train) == {"usage", "overlap", "per_dataset", "codes_used"}
+    assert 0.0 < train["usage"] <= 1.0
     # the written overlap is the metric of the validation clips' codes, recomputed here
     model: VQPAEAligner = trained["model"]
     embeddings = model.embed_windows(trained["dm"].datasets["val"], FPS)

@@ -416,8 +416,10 @@ class VQPAEAligner(Aligner):
 
         * ``vqpae_metrics.json``: the last logged metrics, and the manifold
           overlap (usage, overlap, per-dataset share, codes used per dataset) of
-          the per-frame codes of the validation clips (training clips without a
-          validation split);
+          the per-frame codes of the validation clips (``"split": "val"``; the
+          training clips without a validation split), and under ``"train"`` the
+          same figures for the training clips (the paper's Table 2 measures the
+          training data);
         * ``vqpae_manifold.png``: the phase manifold (PCA of the codebook
           ellipses, one panel per character, its frames' points; paper Fig. 1);
         * ``vqpae_timing.png``: phase, frequency and code over time for the
@@ -431,30 +433,24 @@ class VQPAEAligner(Aligner):
         dm = trainer.datamodule
         if dm is None or self.codebook is None:
             return
-        split = "val" if any(len(d) for d in dm.datasets.get("val", {}).values()) else "train"
+        splits = [name for name in ("val", "train")
+                  if any(len(d) for d in dm.datasets.get(name, {}).values())]
+        if not splits:
+            return
         was_training = self.training
         self.eval()
         try:
-            embeddings = self.embed_windows(dm.datasets[split], dm.fps)
+            embeddings = {name: self.embed_windows(dm.datasets[name], dm.fps) for name in splits}
         finally:
             self.train(was_training)
         run_dir = Path(trainer.default_root_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
-        codes = [torch.cat([e.code for e in embeddings.get(n, [])] or
-                           [torch.zeros(0, dtype=torch.long)]) for n in self.dataset_names]
-        overlap = manifold_overlap(codes, self.codebook.num_codes)
-        metrics = {
-            "split": split,
-            "usage": overlap["usage"],
-            "overlap": overlap["overlap"],
-            "per_dataset": {n: None if math.isnan(v) else v for n, v in
-                            zip(self.dataset_names, overlap["per_dataset"], strict=True)},
-            "codes_used": {n: int(c.unique().numel()) for n, c in
-                           zip(self.dataset_names, codes, strict=True)},
-            "logged": {k: float(v) for k, v in trainer.callback_metrics.items()},
-        }
+        figures = {name: self._overlap_figures(embeddings[name]) for name in splits}
+        metrics = {"split": splits[0], **figures[splits[0]],
+                   **({"train": figures["train"]} if splits[0] != "train" else {}),
+                   "logged": {k: float(v) for k, v in trainer.callback_metrics.items()}}
         (run_dir / "vqpae_metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-        shown = {n: embs for n, embs in embeddings.items() if embs}
+        shown = {n: embs for n, embs in embeddings[splits[0]].items() if embs}
         if not shown:
             return
         import matplotlib.pyplot as plt
@@ -464,6 +460,20 @@ class VQPAEAligner(Aligner):
         plt.close(plot_manifold(self, shown, run_dir / "vqpae_manifold.png"))
         plt.close(plot_clip_timing({n: embs[0] for n, embs in shown.items()},
                                    run_dir / "vqpae_timing.png"))
+
+    def _overlap_figures(self, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
+        """Manifold overlap (Table 2) of per-clip embeddings of every dataset."""
+        codes = [torch.cat([e.code for e in embeddings.get(n, [])] or
+                           [torch.zeros(0, dtype=torch.long)]) for n in self.dataset_names]
+        overlap = manifold_overlap(codes, self._require_built().num_codes)
+        return {
+            "usage": overlap["usage"],
+            "overlap": overlap["overlap"],
+            "per_dataset": {n: None if math.isnan(v) else v for n, v in
+                            zip(self.dataset_names, overlap["per_dataset"], strict=True)},
+            "codes_used": {n: int(c.unique().numel()) for n, c in
+                           zip(self.dataset_names, codes, strict=True)},
+        }
 
     @torch.no_grad()
     def embed_windows(self, datasets: Mapping[str, Any], fps: float,
