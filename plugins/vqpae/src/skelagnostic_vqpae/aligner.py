@@ -53,6 +53,19 @@ POSE_MODES = ("none", "detached", "joint")
 DatasetSpec = Mapping[str, Any]
 
 
+#: Per-pivot fields of an embedding, in :class:`~skelagnostic_vqpae.embed.ClipEmbedding` order.
+EMBEDDING_FIELDS = ("phase", "frequency", "code", "amplitude", "manifold")
+
+
+def _clips_in_frame_order(cat: Mapping[str, Tensor]) -> list[tuple[int, Tensor]]:
+    """``(clip index, indices of its windows sorted by pivot frame)`` for every clip in ``cat``."""
+    out = []
+    for c in cat["clip"].unique().tolist():
+        sel = (cat["clip"] == c).nonzero().squeeze(1)
+        out.append((c, sel[cat["pivot"][sel].argsort()]))
+    return out
+
+
 class _Character(nn.Module):
     """One dataset's VQ-PAE, average-pose MLP and normalisation statistics."""
 
@@ -336,11 +349,7 @@ class VQPAEAligner(Aligner):
         """
         out = {}
         for name, b in batch.items():
-            _, p = self.forward_dataset(self.dataset_names.index(name), b["features"])
-            pivot = p.manifold.shape[-1] // 2
-            out[name] = {"phase": p.phase, "frequency": p.frequency, "code": p.code,
-                         "amplitude": p.amplitude, "manifold": p.manifold[..., pivot],
-                         "clip": b["clip"], "pivot": b["pivot"]}
+            out[name] = self._pivot_embedding(self.dataset_names.index(name), b)
             self._predictions.setdefault(name, []).append(
                 {k: v.detach().cpu() for k, v in out[name].items()})
         return out
@@ -371,13 +380,11 @@ class VQPAEAligner(Aligner):
         for name, parts in collected.items():
             cat = {k: torch.cat([p[k] for p in parts]) for k in parts[0]}
             names = ids.get(name, [])
-            for c in cat["clip"].unique().tolist():
-                sel = cat["clip"] == c
-                order = cat["pivot"][sel].argsort()
+            for c, sel in _clips_in_frame_order(cat):
                 clip = names[c] if c < len(names) else f"clip{c}"
-                arrays[f"{name}/{clip}/frame"] = cat["pivot"][sel][order].numpy()
-                for key in ("phase", "frequency", "code", "amplitude", "manifold"):
-                    arrays[f"{name}/{clip}/{key}"] = cat[key][sel][order].numpy()
+                arrays[f"{name}/{clip}/frame"] = cat["pivot"][sel].numpy()
+                for key in EMBEDDING_FIELDS:
+                    arrays[f"{name}/{clip}/{key}"] = cat[key][sel].numpy()
         spec = next(iter(self.hparams["datasets"].values()))
         arrays["fps"] = np.float64(spec["fps"])
         path = Path(self.trainer.default_root_dir) / "embeddings.npz"
@@ -497,26 +504,21 @@ class VQPAEAligner(Aligner):
             parts: dict[str, list[Tensor]] = {}
             for start in range(0, len(windows), batch_size):
                 b = windows.__getitems__(range(start, min(start + batch_size, len(windows))))
-                _, p = self.forward_dataset(k, b["features"].to(self.device))
-                pivot = p.manifold.shape[-1] // 2
-                for key, value in (("phase", p.phase), ("frequency", p.frequency),
-                                   ("code", p.code), ("amplitude", p.amplitude),
-                                   ("manifold", p.manifold[..., pivot]), ("clip", b["clip"]),
-                                   ("pivot", b["pivot"])):
+                b["features"] = b["features"].to(self.device)
+                for key, value in self._pivot_embedding(k, b).items():
                     parts.setdefault(key, []).append(value.detach().cpu())
-            if not parts:
-                out[name] = []
-                continue
             cat = {key: torch.cat(v) for key, v in parts.items()}
-            clips = []
-            for c in cat["clip"].unique().tolist():
-                sel = (cat["clip"] == c).nonzero().squeeze(1)
-                sel = sel[cat["pivot"][sel].argsort()]
-                clips.append(ClipEmbedding(*(cat[key][sel] for key in
-                                             ("phase", "frequency", "code", "amplitude",
-                                              "manifold")), float(fps), name))
-            out[name] = clips
+            out[name] = [ClipEmbedding(*(cat[key][sel] for key in EMBEDDING_FIELDS),
+                                       float(fps), name)
+                         for _, sel in _clips_in_frame_order(cat)] if cat else []
         return out
+
+    def _pivot_embedding(self, k: int, batch: Mapping[str, Tensor]) -> dict[str, Tensor]:
+        """Dataset ``k``'s embedding of each window's pivot, with its ``clip`` and ``pivot``."""
+        _, p = self.forward_dataset(k, batch["features"])
+        return {"phase": p.phase, "frequency": p.frequency, "code": p.code,
+                "amplitude": p.amplitude, "manifold": p.manifold[..., p.manifold.shape[-1] // 2],
+                "clip": batch["clip"], "pivot": batch["pivot"]}
 
     def on_train_epoch_end(self) -> None:
         """Mark the pose MLPs as trained (they learn alongside, unless ``pose_mlp="none"``)."""
