@@ -74,7 +74,7 @@ def test_checkpoint_round_trip_encodes_identically(trained: dict) -> None:
     assert torch.equal(a.extras["code"], b.extras["code"])
 
 
-def test_checkpoint_without_frequency_head_loads_with_the_papers_head(
+def test_checkpoint_without_new_options_loads_with_the_papers_settings(
         trained: dict, tmp_path: Path) -> None:
     # checkpoints written before model.frequency_head existed were trained with "mlp"
     ckpt = torch.load(trained["ckpt"], map_location="cpu", weights_only=False)
@@ -83,12 +83,15 @@ def test_checkpoint_without_frequency_head_loads_with_the_papers_head(
     torch.save(ckpt, newer)
     loaded = VQPAEAligner.load_from_checkpoint(newer)  # a saved option wins
     assert all(char.pae.frequency_head == "centroid_residual" for char in loaded.characters)
+    assert loaded.hparams["lambda_phase_rate"] == ckpt["hyper_parameters"]["lambda_phase_rate"]
     del ckpt["hyper_parameters"]["frequency_head"]
+    del ckpt["hyper_parameters"]["lambda_phase_rate"]
     old = tmp_path / "old.ckpt"
     torch.save(ckpt, old)
     loaded = VQPAEAligner.load_from_checkpoint(old)
     assert loaded.hparams["frequency_head"] == "mlp"
     assert all(char.pae.frequency_head == "mlp" for char in loaded.characters)
+    assert loaded.hparams["lambda_phase_rate"] == 0.0  # trained without the phase-rate loss
 
 
 def test_encode_gives_one_embedding_per_frame(trained: dict) -> None:
@@ -137,7 +140,75 @@ def test_reinit_switch_off_keeps_codebook_usage_untracked(cache_dir: Path, tmp_p
     assert float(model.codebook.usage.abs().sum()) == 0.0
 
 
+def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
+        cache_dir: Path, tmp_path: Path, helpers: dict) -> None:
+    import numpy as np
+
+    L.seed_everything(0, verbose=False)
+    model = VQPAEAligner(num_codes=8, kernel_size=7, pose_mlp="none", lambda_phase_rate=1.0)
+    dm = helpers["datamodule"](cache_dir)
+    trainer = helpers["trainer"](tmp_path, 2, validate=False)
+    trainer.fit(model, datamodule=dm)
+    assert "train/phase_rate/procedural/biped22" in trainer.callback_metrics
+    batch = next(iter(dm.train_dataloader()))[0]["procedural/quadruped"]
+    k = model.dataset_names.index("procedural/quadruped")
+    model.train()
+    _, params = model.forward_dataset(k, batch["features"])
+    loss = model._phase_rate_loss(k, "procedural/quadruped", batch, params)
+    # the same figure computed here from the two windows' phases and frequencies
+    _, partner = model.forward_dataset(k, batch["shifted"])
+    p1, p2 = params.phase.detach().double().numpy(), partner.phase.detach().double().numpy()
+    f1 = params.frequency.detach().double().numpy()
+    f2 = partner.frequency.detach().double().numpy()
+    shift = batch["shift"].double().numpy()
+    ok = shift != 0
+    assert ok.mean() > 0.5
+    advance = np.angle(np.exp(2j * np.pi * (p2 - p1))) / (2 * np.pi)  # wrapped, in cycles
+    rate = advance[ok] * FPS / shift[ok]
+    expected = 0.5 * (np.abs(f1[ok] - rate).mean() + np.abs(f2[ok] - rate).mean())
+    assert float(loss.detach()) == pytest.approx(expected, rel=1e-4)
+    # it trains the frequency, not the phase: the phase difference is the detached target
+    pae = model.characters[k].pae
+
+    def grads(mode: str) -> tuple[float, ...]:
+        model.hparams["phase_rate_grad"] = mode
+        model.zero_grad()
+        _, fresh = model.forward_dataset(k, batch["features"])
+        model._phase_rate_loss(k, "procedural/quadruped", batch, fresh).backward()
+        return tuple(float(0 if w.grad is None else w.grad.abs().sum()) for w in
+                     (pae.freq_mlp[0].weight, pae.phase_conv.weight, pae.encoder[0].weight,
+                      pae.amp_mlp[0].weight))
+
+    freq, timing, encoder, amplitude = grads("network")
+    assert freq > 0 and timing > 0 and encoder > 0 and amplitude == 0
+    freq, timing, encoder, amplitude = grads("timing")  # the timing branch, not the latent
+    assert freq > 0 and timing > 0 and encoder == 0 and amplitude == 0
+    freq, timing, encoder, amplitude = grads("head")  # the frequency MLP alone
+    assert freq > 0 and timing == 0 and encoder == 0 and amplitude == 0
+    # every mode computes the same loss value
+    values = []
+    for mode in ("network", "timing", "head"):
+        model.hparams["phase_rate_grad"] = mode
+        with torch.no_grad():
+            _, fresh = model.forward_dataset(k, batch["features"])
+            values.append(float(model._phase_rate_loss(k, "procedural/quadruped", batch, fresh)))
+    assert values == pytest.approx([values[0]] * 3, rel=1e-5)
+
+
+def test_phase_rate_loss_without_partner_windows_is_a_clear_error(
+        cache_dir: Path, tmp_path: Path, helpers: dict) -> None:
+    model = VQPAEAligner(num_codes=8, kernel_size=7, pose_mlp="none", lambda_phase_rate=1.0)
+    dm = helpers["datamodule"](cache_dir)
+    dm.pair_seconds, dm.pair_shift = 0.0, 0
+    with pytest.raises(SkelagnosticError, match=r"data\.pair_seconds > 0"):
+        helpers["trainer"](tmp_path, 1, validate=False).fit(model, datamodule=dm)
+
+
 def test_bad_options_are_rejected() -> None:
+    with pytest.raises(SkelagnosticError, match="lambda_phase_rate"):
+        VQPAEAligner(lambda_phase_rate=-1.0)
+    with pytest.raises(SkelagnosticError, match="phase_rate_grad"):
+        VQPAEAligner(phase_rate_grad="decoder")
     with pytest.raises(SkelagnosticError, match="pose_mlp"):
         VQPAEAligner(pose_mlp="sometimes")
     with pytest.raises(SkelagnosticError, match="num_codes"):
@@ -168,6 +239,10 @@ def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, sourc
     assert cfg.data.source == source
     assert cfg.data.fps == 60 and cfg.data.stride == 1 and cfg.data.batch_size == 32
     assert cfg.model.lr == 1e-4 and cfg.model.weight_decay == 1e-4
+    # the paper's objective: the phase-rate loss (on by default) slows code sharing
+    assert cfg.model.lambda_phase_rate == 0.0
+    assert compose(["model=vqpae", "run_dir=/tmp/unused"],
+                   plugin_manager=vqpae_pm).model.lambda_phase_rate == 1.0
     if Path(str(cfg.data.get("root", cfg.data.get("human_root")))).exists():
         dm = build_datamodule(cfg, vqpae_pm)
         assert isinstance(dm, VQPAEDataModule) and dm.window == 61

@@ -40,6 +40,35 @@ def test_windows_are_centred_on_their_pivot() -> None:
     assert torch.equal(single["features"], batch["features"][1])
 
 
+def test_partner_windows_stay_inside_their_clip() -> None:
+    feats = torch.arange(46.0).view(23, 2)
+    poses = torch.arange(23.0).view(23, 1)
+    # 9 frames (5 windows), 6 (2 windows), 5 (1 window), 3 (too short for a window)
+    ds = FrameWindows(feats, poses, [(0, 9), (9, 15), (15, 20), (20, 23)], window=5,
+                      stride=1, pair_shift=2)
+    batch = ds.__getitems__(list(range(len(ds))))
+    # later partner while it fits in the clip, else the earlier one
+    assert batch["shift"].tolist() == [2, 2, 2, -2, -2, 0, 0, 0]
+    starts = batch["features"][:, 0, 0] / 2  # feature (f, 0) = 2 f: the first frame
+    partner = batch["shifted"][:, 0, 0] / 2
+    assert (partner - starts).tolist() == [2, 2, 2, -2, -2, 0, 0, 0]
+    assert "shifted" not in FrameWindows(feats, poses, [(0, 9)], 5, 1).__getitems__([0])
+    with pytest.raises(SkelagnosticError, match="pair_shift"):
+        FrameWindows(feats, poses, [(0, 9)], 5, 1, pair_shift=-1)
+
+
+def test_only_training_windows_carry_partners(cache_dir: Path) -> None:
+    dm = _dm(cache_dir)
+    assert dm.pair_shift == 2  # 0.1 s at 20 fps
+    train = next(iter(dm.train_dataloader()))[0]
+    assert all(b["shifted"].shape == b["features"].shape for b in train.values())
+    val = next(iter(dm.val_dataloader()))[0]
+    assert all("shifted" not in b for b in val.values() if b is not None)
+    assert _dm(cache_dir, pair_seconds=0.0).pair_shift == 0
+    with pytest.raises(SkelagnosticError, match="pair_seconds"):
+        VQPAEDataModule(pair_seconds=-1.0, cache_dir=cache_dir)
+
+
 def test_one_second_windows_and_channels(cache_dir: Path) -> None:
     dm = _dm(cache_dir)
     assert dm.window == 21

@@ -140,27 +140,44 @@ class FrameWindows(Dataset):
     ``[T, P]`` normalised root-local positions (``P = J * 3``), ``clip`` and
     ``pivot`` (frame index of the window centre within its clip).
 
+    With ``pair_shift = s > 0`` every item also carries the window ``s`` frames
+    later in the same clip (``s`` frames earlier where the clip ends first) as
+    ``shifted`` ``[C, T]`` and the signed offset as ``shift`` (0 where the clip is
+    shorter than ``T + s`` frames and neither fits), for the phase-rate loss of
+    :class:`~skelagnostic_vqpae.aligner.VQPAEAligner`.
+
     Args:
         features: ``[F, C]`` normalised features of all clips, concatenated.
         poses: ``[F, P]`` normalised poses.
         bounds: ``[(first, end)]`` frame range of every clip in the concatenation.
         window: ``T`` (odd).
         stride: Frames between pivots.
+        pair_shift: Frames between a window and its partner (0: no partner).
     """
 
     def __init__(self, features: Tensor, poses: Tensor, bounds: Sequence[tuple[int, int]],
-                 window: int, stride: int) -> None:
+                 window: int, stride: int, pair_shift: int = 0) -> None:
+        if pair_shift < 0:
+            raise SkelagnosticError(f"data.pair_shift must be >= 0 frames, got {pair_shift}")
         self.features, self.poses, self.window = features, poses, window
+        self.pair_shift = int(pair_shift)
         half = window // 2
-        starts, clips, pivots = [], [], []
+        starts, clips, pivots, shifts = [], [], [], []
         for c, (first, end) in enumerate(bounds):
-            local = torch.arange(half, end - first - half, stride)
-            starts.append(first + local - half)
+            local = torch.arange(half, max(half, end - first - half), stride)  # none if too short
+            start = first + local - half
+            starts.append(start)
             pivots.append(local)
             clips.append(torch.full_like(local, c))
-        self.starts = torch.cat(starts) if starts else torch.zeros(0, dtype=torch.long)
-        self.pivots = torch.cat(pivots) if pivots else torch.zeros(0, dtype=torch.long)
-        self.clips = torch.cat(clips) if clips else torch.zeros(0, dtype=torch.long)
+            later = start + pair_shift + window <= end
+            earlier = start - pair_shift >= first
+            shift = torch.where(later, pair_shift, torch.where(earlier, -pair_shift, 0))
+            shifts.append(shift.long())
+        empty = torch.zeros(0, dtype=torch.long)
+        self.starts = torch.cat(starts) if starts else empty
+        self.pivots = torch.cat(pivots) if pivots else empty
+        self.clips = torch.cat(clips) if clips else empty
+        self.shifts = torch.cat(shifts) if shifts else empty
         self._offsets = torch.arange(window)
 
     def __len__(self) -> int:
@@ -169,12 +186,17 @@ class FrameWindows(Dataset):
     def __getitems__(self, indices: Sequence[int]) -> dict[str, Tensor]:
         idx = torch.as_tensor(indices, dtype=torch.long)
         frames = self.starts[idx, None] + self._offsets
-        return {
+        item = {
             "features": self.features[frames].transpose(1, 2).contiguous(),
             "poses": self.poses[frames],
             "clip": self.clips[idx],
             "pivot": self.pivots[idx],
         }
+        if self.pair_shift:
+            shift = self.shifts[idx]
+            item["shifted"] = self.features[frames + shift[:, None]].transpose(1, 2).contiguous()
+            item["shift"] = shift
+        return item
 
     def __getitem__(self, index: int) -> dict[str, Tensor]:
         if not 0 <= index < len(self):
@@ -217,6 +239,10 @@ class VQPAEDataModule(MotionDataModule):
             plus one if that is even.
         std_floor: Lower bound of every channel's standard deviation, as a fraction of
             the dataset's mean channel standard deviation (0 turns the floor off).
+        pair_seconds: Offset of the partner window every training window carries
+            (``max(1, round(fps * pair_seconds))`` frames; 0: none), which the
+            aligner's phase-rate loss needs (``model.lambda_phase_rate``). 0.1 s
+            keeps the phase advance between the two windows unambiguous up to 5 Hz.
 
     Raises:
         SkelagnosticError: The window length is even or not positive, or another argument is
@@ -238,7 +264,10 @@ class VQPAEDataModule(MotionDataModule):
         cache_dir: str | Path | None = None,
         window_seconds: float | None = 1.0,
         std_floor: float = 0.01,
+        pair_seconds: float = 0.1,
     ) -> None:
+        if not pair_seconds >= 0:
+            raise SkelagnosticError(f"data.pair_seconds must be >= 0, got {pair_seconds}")
         if not 0 <= std_floor < 1:
             raise SkelagnosticError(f"data.std_floor must be in [0, 1), got {std_floor}")
         if window_seconds is not None:
@@ -260,6 +289,9 @@ class VQPAEDataModule(MotionDataModule):
                          per_element_stats=True)
         self.window_seconds = window_seconds
         self.std_floor = float(std_floor)
+        self.pair_seconds = float(pair_seconds)
+        #: Frames between a training window and its partner (0: no partner).
+        self.pair_shift = max(1, round(float(fps) * pair_seconds)) if pair_seconds > 0 else 0
         self._poses = GlobalPositions(frame="root")
         #: Per dataset, the root-local position representation with its normalisation.
         self.pose_representations: dict[str, MotionRepresentation] = {}
@@ -321,7 +353,8 @@ class VQPAEDataModule(MotionDataModule):
             feats = torch.cat([rep.normalize(a[..., :n_in]).flatten(1) for a in chunks])
             pos = torch.cat([poses.normalize(a[..., n_in:]).flatten(1) for a in chunks])
             bounds = list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True))
-            ds = FrameWindows(feats, pos, bounds, self.window, self.stride)
+            ds = FrameWindows(feats, pos, bounds, self.window, self.stride,
+                              self.pair_shift if part == "train" else 0)
             if len(ds):
                 self.datasets[part][name] = ds  # type: ignore[assignment]
                 self.clip_ids[part][name] = [c.id for c in clips]

@@ -36,6 +36,7 @@ __all__ = [
     "PhaseParameters",
     "TemporalCentering",
     "mason_phase",
+    "phase_advance_rate",
     "phase_manifold",
     "relative_times",
 ]
@@ -105,6 +106,32 @@ def mason_phase(signal: Tensor, frequency: Tensor, times: Tensor) -> Tensor:
     sx = (y * torch.cos(angle)).sum(-1)
     sy = (y * torch.sin(angle)).sum(-1)
     return torch.atan2(-sy, sx) / (2 * math.pi)
+
+
+def phase_advance_rate(phase: Tensor, later_phase: Tensor, shift: Tensor, fps: float) -> Tensor:
+    """Rate (Hz) at which the pivot phase advances from one window to one ``shift`` frames on.
+
+    The difference is wrapped to ``[-1/2, 1/2]`` cycles, so it is unambiguous while
+    ``|f| * |shift| / fps < 1/2``.
+
+    Args:
+        phase: ``[B]`` pivot phase of the windows, in cycles.
+        later_phase: ``[B]`` pivot phase of the partner windows.
+        shift: ``[B]`` signed frames from a window's pivot to its partner's (non-zero).
+        fps: Frame rate.
+
+    Returns:
+        ``[B]`` rate in Hz.
+
+    Example:
+        >>> rate = phase_advance_rate(torch.tensor([0.45, 0.45]), torch.tensor([-0.45, 0.35]),
+        ...                           torch.tensor([2, -2]), 20.0)  # across the wrap; backwards
+        >>> [round(r, 4) for r in rate.tolist()]
+        [1.0, 1.0]
+    """
+    advance = later_phase - phase
+    advance = advance - torch.round(advance)
+    return advance * fps / shift.to(advance)
 
 
 def phase_manifold(amplitude: Tensor, phase: Tensor) -> Tensor:
@@ -293,6 +320,11 @@ class VQPAE(nn.Module):
         spectral centroid first (:meth:`spectral_centroid`).
         """
         y = self.phase_conv(latent).squeeze(1)
+        frequency = self.frequency_of(y)
+        return mason_phase(y, frequency, self.times), frequency, y
+
+    def frequency_of(self, y: Tensor) -> Tensor:
+        """The frequency head alone: timing-branch signal ``y [B, T]`` -> ``f [B]`` in Hz."""
         if self.spectrum == "normalized":
             centred = y - y.mean(dim=-1, keepdim=True)
             power = torch.fft.rfft(centred, dim=-1).abs().square()
@@ -302,8 +334,7 @@ class VQPAE(nn.Module):
         raw = self.freq_mlp(power).squeeze(-1)
         if self.frequency_head == "centroid_residual":
             raw = raw + self.spectral_centroid(power) - 1.0
-        frequency = nn.functional.elu(raw) + 1.0
-        return mason_phase(y, frequency, self.times), frequency, y
+        return nn.functional.elu(raw) + 1.0
 
     def spectral_centroid(self, power: Tensor) -> Tensor:
         r"""PAE's frequency: $\sum_{k \ge 1} f_k p_k / \sum_{k \ge 1} p_k$ over the non-DC bins.
@@ -317,12 +348,20 @@ class VQPAE(nn.Module):
         p = power[..., 1:]
         return (p * self.bin_hz[1:]).sum(-1) / p.sum(-1).clamp_min(1e-12)
 
-    def encode(self, x: Tensor, quantize: Quantizer) -> PhaseParameters:
-        """Encoder, timing and amplitude branches and the manifold of ``x [B, C_in, T]``."""
+    def _check(self, x: Tensor) -> None:
         if x.dim() != 3 or x.shape[1] != self.channels or x.shape[2] != self.window:
             raise SkelagnosticError(
                 f"VQPAE: input must be [B, {self.channels}, {self.window}], got {list(x.shape)}"
             )
+
+    def phase_and_frequency(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Encoder and timing branch only: ``x [B, C_in, T] -> (phase, frequency, signal)``."""
+        self._check(x)
+        return self.timing(self.encoder(x))
+
+    def encode(self, x: Tensor, quantize: Quantizer) -> PhaseParameters:
+        """Encoder, timing and amplitude branches and the manifold of ``x [B, C_in, T]``."""
+        self._check(x)
         latent = self.encoder(x)
         phase, frequency, signal = self.timing(latent)
         raw = self.amp_mlp(latent.mean(dim=-1))

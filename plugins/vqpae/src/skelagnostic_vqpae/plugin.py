@@ -7,7 +7,8 @@ from typing import Any
 
 from skelagnostic.plugins import hookimpl
 
-#: Default ``model=vqpae`` config: the authors' settings (METHODS.md "VQ-PAE").
+#: Default ``model=vqpae`` config: the authors' settings (METHODS.md "VQ-PAE"), plus the
+#: phase-rate loss (``lambda_phase_rate``, not in the paper; docs/methods/vqpae.md).
 DEFAULT_CONFIG: dict[str, Any] = {
     "latent": 10,
     "num_codes": 32,
@@ -21,6 +22,8 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "center_windows": True,
     "beta": 0.25,
     "lambda_vq": 1.0,
+    "lambda_phase_rate": 1.0,
+    "phase_rate_grad": "network",
     "reinit": True,
     "reinit_decay": 0.99,
     "reinit_eps": 1e-3,
