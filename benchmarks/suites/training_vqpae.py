@@ -8,7 +8,12 @@ scheduler) on CPU:
 
 * ``vqpae_windows_per_s_pose``: with the average-pose MLPs trained alongside
   (``pose_mlp="joint"``, as the authors' trainer does);
-* ``vqpae_windows_per_s_nopose``: without them (``pose_mlp="none"``).
+* ``vqpae_windows_per_s_nopose``: without them (``pose_mlp="none"``);
+* ``vqpae_windows_per_s_pose_phase_rate`` / ``_nopose_phase_rate``: the same with
+  the phase-rate loss (``lambda_phase_rate=1``, not in the paper), which also
+  encodes every window's partner.
+
+The first two run with ``lambda_phase_rate=0``, the authors' objective.
 
 plus ``vqpae_data_share_pose`` / ``_nopose``, the share of the step time spent
 fetching batches. Windows/s = 64 windows per step / median step time (compute
@@ -32,7 +37,8 @@ from benchmarks.suites.steptime import accelerators, suffix, time_fit
 STEPS = {"smoke": 15, "default": 60, "large": 200}
 
 
-def measure(pose_mlp: str, steps: int, accelerator: str = "cpu") -> dict[str, Any]:
+def measure(pose_mlp: str, steps: int, accelerator: str = "cpu",
+            lambda_phase_rate: float = 0.0) -> dict[str, Any]:
     """Median training-step time (seconds) of ``steps`` steps after 5 warm-up steps."""
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
     from skelagnostic_vqpae.aligner import VQPAEAligner
@@ -53,7 +59,7 @@ def measure(pose_mlp: str, steps: int, accelerator: str = "cpu") -> dict[str, An
         data = "procedural biped22 + quadruped"
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
     dm = VQPAEDataModule(source, fps=60, stride=1, batch_size=32, cache_dir=cache)
-    model = VQPAEAligner(num_codes=32, pose_mlp=pose_mlp)
+    model = VQPAEAligner(num_codes=32, pose_mlp=pose_mlp, lambda_phase_rate=lambda_phase_rate)
     timing = time_fit(model, dm, steps, warmup=5, accelerator=accelerator)
     return {**timing, "data": data, "threads": __import__("torch").get_num_threads()}
 
@@ -63,9 +69,11 @@ def run(size: str) -> list[Result]:
     steps = STEPS[size]
     results = []
     for device in accelerators():
-        for mode, label in (("joint", "pose"), ("none", "nopose")):
+        for mode, label, rate in (("joint", "pose", 0.0), ("none", "nopose", 0.0),
+                                  ("joint", "pose_phase_rate", 1.0),
+                                  ("none", "nopose_phase_rate", 1.0)):
             out, _ = run_child("benchmarks.suites.training_vqpae:measure", pose_mlp=mode,
-                               steps=steps, accelerator=device)
+                               steps=steps, accelerator=device, lambda_phase_rate=rate)
             tag = f"{label}{suffix(device)}"
             results.append(Result(
                 f"vqpae_windows_per_s_{tag}", "windows/s", 64.0 / out["median_step_s"],
