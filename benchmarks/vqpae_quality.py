@@ -125,24 +125,28 @@ def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any],
             "min_phase_r2": min(c["phase_r2"] for c in clips), "clips": clips}
 
 
-def _human_dog_sources() -> tuple[BVHSource, BVHSource]:
+def _human_dog_sources(human_files: list[str] | None = None) -> tuple[BVHSource, BVHSource]:
+    """LaFAN1 (``human_files`` of ``human/lafan1``, default every file) and the MANN dog."""
     env = os.environ.get("SKELAGNOSTIC_TEST_DATA")
     root = Path(env) if env else REPO_ROOT.parent / "shared" / "data"
-    return (BVHSource([root / "human" / "lafan1"], units="cm", name="human"),
+    lafan = root / "human" / "lafan1"
+    human = [lafan] if human_files is None else [lafan / name for name in human_files]
+    return (BVHSource(human, units="cm", name="human"),
             BVHSource([root / "dog" / "mann"], units="cm", name="dog"))
 
 
-def _human_dog_module() -> VQPAEDataModule:
+def _human_dog_module(human_files: list[str] | None = None) -> VQPAEDataModule:
     cache = Path(tempfile.gettempdir()) / "skelagnostic-quality-cache"
-    return VQPAEDataModule(MultiSource(list(_human_dog_sources())), fps=60, stride=1,
+    return VQPAEDataModule(MultiSource(list(_human_dog_sources(human_files))), fps=60, stride=1,
                            batch_size=32, cache_dir=cache, val_fraction=0.0)
 
 
-def overlap_of_clips(model: VQPAEAligner, num_codes: int) -> dict[str, Any]:
+def overlap_of_clips(model: VQPAEAligner, num_codes: int,
+                     human_files: list[str] | None = None) -> dict[str, Any]:
     """Usage and overlap (Table 2) of the per-frame codes of every human and dog clip."""
     codes = []
     with torch.no_grad():
-        for src in _human_dog_sources():
+        for src in _human_dog_sources(human_files):
             codes.append(torch.cat([embed_clip(model, src.load(c)).code for c in src.clips()]))
     overlap = manifold_overlap(codes, num_codes)
     return {**{k: (v.tolist() if torch.is_tensor(v) else v) for k, v in overlap.items()},
@@ -152,8 +156,9 @@ def overlap_of_clips(model: VQPAEAligner, num_codes: int) -> dict[str, Any]:
 class OverlapCurve(L.Callback):
     """Print :func:`overlap_of_clips` as a JSON line every ``every`` steps."""
 
-    def __init__(self, every: int, num_codes: int) -> None:
+    def __init__(self, every: int, num_codes: int, human_files: list[str] | None = None) -> None:
         self.every, self.num_codes, self.start = every, num_codes, time.perf_counter()
+        self.human_files = human_files
         self.points: list[dict[str, Any]] = []
 
     def on_train_batch_end(self, trainer: L.Trainer, module: Any, *args: Any) -> None:
@@ -162,7 +167,7 @@ class OverlapCurve(L.Callback):
         module.eval()
         point = {"step": trainer.global_step,
                  "seconds": round(time.perf_counter() - self.start, 1),
-                 **overlap_of_clips(module, self.num_codes)}
+                 **overlap_of_clips(module, self.num_codes, self.human_files)}
         module.train()
         self.points.append(point)
         print(json.dumps(point), flush=True)
@@ -170,20 +175,21 @@ class OverlapCurve(L.Callback):
 
 def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
                     options: dict[str, Any], eval_every: int | None = None,
-                    save: Path | None = None) -> dict[str, object]:
+                    save: Path | None = None, human_files: list[str] | None = None
+                    ) -> dict[str, object]:
     """Codebook usage and manifold overlap of the per-frame embeddings (Table 2)."""
     L.seed_everything(0, verbose=False)
-    dm = _human_dog_module()
+    dm = _human_dog_module(human_files)
     options = {"lambda_phase_rate": 0.0, **options}  # experiment=human_dog's objective
     model = VQPAEAligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
                          restart_period=10_000, **options)
-    curve = [OverlapCurve(eval_every, num_codes)] if eval_every else []
+    curve = [OverlapCurve(eval_every, num_codes, human_files)] if eval_every else []
     seconds = _train(dm, model, steps, curve, save)
     model.eval()
     return {"setting": "human_dog", "reinit": reinit, "num_codes": num_codes, "steps": steps,
             "lr": lr, **options, "train_seconds": round(seconds, 1),
-            **overlap_of_clips(model, num_codes),
-            "curve": curve[0].points if curve else []}
+            **overlap_of_clips(model, num_codes, human_files),
+            "human_files": human_files, "curve": curve[0].points if curve else []}
 
 
 def pose_mpjpe_cm(model: VQPAEAligner, dm: VQPAEDataModule) -> dict[str, float]:
@@ -202,23 +208,25 @@ def pose_mpjpe_cm(model: VQPAEAligner, dm: VQPAEDataModule) -> dict[str, float]:
     return {name: round(100.0 * sums[name] / max(counts[name], 1), 3) for name in sums}
 
 
-def check_sweep(codes: list[int], steps: int, lr: float, options: dict[str, Any]
-                ) -> dict[str, object]:
+def check_sweep(codes: list[int], steps: int, lr: float, options: dict[str, Any],
+                human_files: list[str] | None = None) -> dict[str, object]:
     """Tables 1-2 shape: overlap and pose MPJPE for every codebook size in ``codes``."""
     rows = []
     options = {"lambda_phase_rate": 0.0, **options}  # experiment=human_dog's objective
     for num_codes in codes:
         L.seed_everything(0, verbose=False)
-        dm = _human_dog_module()
+        dm = _human_dog_module(human_files)
         model = VQPAEAligner(num_codes=num_codes, lr=lr, pose_mlp="detached",
                              restart_period=10_000, **options)
         seconds = _train(dm, model, steps)
         model.eval()
         row = {"num_codes": num_codes, "train_seconds": round(seconds, 1),
-               **overlap_of_clips(model, num_codes), "pose_mpjpe_cm": pose_mpjpe_cm(model, dm)}
+               **overlap_of_clips(model, num_codes, human_files),
+               "pose_mpjpe_cm": pose_mpjpe_cm(model, dm)}
         print(json.dumps(row), flush=True)
         rows.append(row)
-    return {"setting": "sweep", "steps": steps, "lr": lr, **options, "rows": rows}
+    return {"setting": "sweep", "steps": steps, "lr": lr, **options,
+            "human_files": human_files, "rows": rows}
 
 
 def main() -> None:
@@ -263,6 +271,9 @@ def main() -> None:
     parser.add_argument("--phase-rate-grad", default="network",
                         choices=["network", "timing", "head"],
                         help="model.phase_rate_grad (what the phase-rate loss trains)")
+    parser.add_argument("--human-files", nargs="+", default=None,
+                        help="human_dog and sweep: LaFAN1 file names to train on "
+                             "(default: every file of human/lafan1)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     options = {"padding_mode": args.padding_mode, "center_windows": not args.no_center,
@@ -277,9 +288,11 @@ def main() -> None:
                                args.clips_per_gait)
     elif args.setting == "human_dog":
         out = check_human_dog(args.steps or 20000, not args.no_reinit, args.lr or 1e-4,
-                              args.num_codes, options, args.eval_every, args.save)
+                              args.num_codes, options, args.eval_every, args.save,
+                              args.human_files)
     else:
-        out = check_sweep(args.codes, args.steps or 5000, args.lr or 1e-4, options)
+        out = check_sweep(args.codes, args.steps or 5000, args.lr or 1e-4, options,
+                          args.human_files)
     print(json.dumps(out, indent=1))
 
 
