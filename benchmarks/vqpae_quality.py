@@ -200,7 +200,7 @@ def pose_mpjpe_cm(model: VQPAEAligner, dm: VQPAEDataModule) -> dict[str, float]:
         for name, dataset in dm.datasets["train"].items():
             k = model.dataset_names.index(name)
             for start in range(0, len(dataset), 256):  # the windows gather batches in one go
-                b = dataset.__getitems__(range(start, min(start + 256, len(dataset))))
+                b = dataset.gather(range(start, min(start + 256, len(dataset))))
                 _, params = model.forward_dataset(k, b["features"])
                 err = model._pivot_mpjpe(k, params, b["poses"])
                 sums[name] += float(err) * len(b["features"])

@@ -58,7 +58,9 @@ def measure(pose_mlp: str, steps: int, accelerator: str = "cpu",
         source = ProceduralSource(kinds=["biped22", "quadruped"], seconds=20.0)
         data = "procedural biped22 + quadruped"
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
-    dm = VQPAEDataModule(source, fps=60, stride=1, batch_size=32, cache_dir=cache)
+    # partner windows only where the loss uses them (the presets without it set 0 too)
+    dm = VQPAEDataModule(source, fps=60, stride=1, batch_size=32, cache_dir=cache,
+                         pair_seconds=0.1 if lambda_phase_rate > 0 else 0.0)
     model = VQPAEAligner(num_codes=32, pose_mlp=pose_mlp, lambda_phase_rate=lambda_phase_rate)
     timing = time_fit(model, dm, steps, warmup=5, accelerator=accelerator)
     return {**timing, "data": data, "threads": __import__("torch").get_num_threads()}

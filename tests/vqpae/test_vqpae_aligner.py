@@ -241,11 +241,12 @@ def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, sourc
     assert cfg.model.lr == 1e-4 and cfg.model.weight_decay == 1e-4
     # the paper's objective: the phase-rate loss (on by default) slows code sharing
     assert cfg.model.lambda_phase_rate == 0.0
+    assert cfg.data.pair_seconds == 0.0  # so no partner windows are gathered
     assert compose(["model=vqpae", "run_dir=/tmp/unused"],
                    plugin_manager=vqpae_pm).model.lambda_phase_rate == 1.0
     if Path(str(cfg.data.get("root", cfg.data.get("human_root")))).exists():
         dm = build_datamodule(cfg, vqpae_pm)
-        assert isinstance(dm, VQPAEDataModule) and dm.window == 61
+        assert isinstance(dm, VQPAEDataModule) and dm.window == 61 and dm.pair_shift == 0
 
 
 def test_fit_without_data_uses_procedural_biped_and_quadruped(vqpae_pm) -> None:

@@ -53,6 +53,9 @@ def test_partner_windows_stay_inside_their_clip() -> None:
     partner = batch["shifted"][:, 0, 0] / 2
     assert (partner - starts).tolist() == [2, 2, 2, -2, -2, 0, 0, 0]
     assert "shifted" not in FrameWindows(feats, poses, [(0, 9)], 5, 1).__getitems__([0])
+    plain = ds.gather([0, 1])  # what embedding and evaluation read: no partner gathered
+    assert "shifted" not in plain and "shift" not in plain
+    assert torch.equal(plain["features"], batch["features"][:2])
     with pytest.raises(SkelagnosticError, match="pair_shift"):
         FrameWindows(feats, poses, [(0, 9)], 5, 1, pair_shift=-1)
 

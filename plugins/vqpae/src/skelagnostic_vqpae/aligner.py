@@ -43,13 +43,7 @@ from skelagnostic.metrics import ManifoldOverlap
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
-from skelagnostic_vqpae.model import (
-    VQPAE,
-    AveragePoseMLP,
-    PhaseParameters,
-    mason_phase,
-    phase_advance_rate,
-)
+from skelagnostic_vqpae.model import VQPAE, AveragePoseMLP, PhaseParameters, phase_advance_rate
 
 __all__ = ["DatasetSpec", "VQPAEAligner"]
 
@@ -287,7 +281,7 @@ class VQPAEAligner(Aligner):
             loss = rec_loss + hp.lambda_vq * params.vq_loss
             logs[f"rec/{name}"] = rec_loss.detach()
             logs[f"vq/{name}"] = params.vq_loss.detach()
-            if self.training and hp.get("lambda_phase_rate", 0.0) > 0:
+            if self.training and hp.lambda_phase_rate > 0:
                 rate_loss = self._phase_rate_loss(k, name, b, params)
                 loss = loss + hp.lambda_phase_rate * rate_loss
                 logs[f"phase_rate/{name}"] = rate_loss.detach()
@@ -318,7 +312,7 @@ class VQPAEAligner(Aligner):
         if not bool(valid.any()):
             return params.phase.new_zeros(())
         freq1 = params.frequency
-        mode = self.hparams.get("phase_rate_grad", "network")
+        mode = self.hparams.phase_rate_grad
         if mode == "head":
             # only the frequency MLP learns from it: the encoder's signal is detached
             freq1 = pae.frequency_of(params.signal.detach())
@@ -329,11 +323,9 @@ class VQPAEAligner(Aligner):
             # the timing branch (kernel-1 conv + frequency MLP) learns, the shared latent not
             with torch.no_grad():
                 latents = pae.encoder(torch.cat([batch["features"], batch["shifted"]]))
-            signals = pae.phase_conv(latents).squeeze(1)
-            freqs = pae.frequency_of(signals)
+            phases, freqs, _ = pae.timing(latents)
             freq1, freq2 = freqs.chunk(2)
-            with torch.no_grad():
-                phase2 = mason_phase(signals.chunk(2)[1], freq2, pae.times)
+            phase2 = phases.chunk(2)[1]
         else:
             phase2, freq2, _ = pae.phase_and_frequency(batch["shifted"])
         rate = phase_advance_rate(params.phase[valid], phase2[valid], shift[valid],
@@ -579,7 +571,7 @@ class VQPAEAligner(Aligner):
             k = self.dataset_names.index(name)
             parts: dict[str, list[Tensor]] = {}
             for start in range(0, len(windows), batch_size):
-                b = windows.__getitems__(range(start, min(start + batch_size, len(windows))))
+                b = windows.gather(range(start, min(start + batch_size, len(windows))))
                 b["features"] = b["features"].to(self.device)
                 for key, value in self._pivot_embedding(k, b).items():
                     parts.setdefault(key, []).append(value.detach().cpu())

@@ -184,6 +184,11 @@ class FrameWindows(Dataset):
         return int(self.starts.numel())
 
     def __getitems__(self, indices: Sequence[int]) -> dict[str, Tensor]:
+        """A stacked batch (what the data loaders fetch), with partners if ``pair_shift``."""
+        return self.gather(indices, partners=bool(self.pair_shift))
+
+    def gather(self, indices: Sequence[int], partners: bool = False) -> dict[str, Tensor]:
+        """The windows ``indices`` stacked; ``partners`` adds ``shifted`` and ``shift``."""
         idx = torch.as_tensor(indices, dtype=torch.long)
         frames = self.starts[idx, None] + self._offsets
         item = {
@@ -192,7 +197,7 @@ class FrameWindows(Dataset):
             "clip": self.clips[idx],
             "pivot": self.pivots[idx],
         }
-        if self.pair_shift:
+        if partners:
             shift = self.shifts[idx]
             item["shifted"] = self.features[frames + shift[:, None]].transpose(1, 2).contiguous()
             item["shift"] = shift
@@ -201,7 +206,7 @@ class FrameWindows(Dataset):
     def __getitem__(self, index: int) -> dict[str, Tensor]:
         if not 0 <= index < len(self):
             raise IndexError(f"window index {index} out of range [0, {len(self)})")
-        return {k: v[0] for k, v in self.__getitems__([index]).items()}
+        return {k: v[0] for k, v in self.gather([index]).items()}
 
 
 def _passthrough(batch: dict[str, Tensor]) -> dict[str, Tensor]:
