@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import pytest
@@ -10,7 +11,9 @@ from skelagnostic_pcmrl.points import (
     ZeroLengthBoneWarning,
     effective_joints,
     global_to_local,
+    heading_frames,
     infer_units,
+    lateral_direction,
     positions_from_global,
     sample_layout,
     warn_zero_length_bones,
@@ -19,7 +22,7 @@ from skelagnostic_pcmrl.points import (
 import skelagnostic as sa
 from skelagnostic import procedural
 from skelagnostic.core import quaternion as Q
-from skelagnostic.errors import SkeletonError
+from skelagnostic.errors import SkelagnosticError, SkeletonError
 from skelagnostic.representations import POINT_GROUPS, PointCloud
 
 
@@ -146,3 +149,48 @@ def test_infer_units_of_real_skeletons(shared_data) -> None:
     assert infer_units(lafan.skeleton) == "cm"
     assert infer_units(cmu.skeleton, "cmu") == "cmu"
     assert infer_units(procedural.skeleton("biped22").scaled(0.01)) == "m"
+
+
+def _walk_cloud(walk: sa.Motion, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    layout = sample_layout(walk.skeleton, 256, 0.05, (1,), torch.Generator().manual_seed(seed))
+    pts = layout.points(walk.global_rotations().float()[None],
+                        walk.global_positions().float()[None], walk.skeleton.offsets)
+    return pts - pts.mean(dim=2, keepdim=True), layout.groups
+
+
+def test_heading_follows_a_turn_of_the_cloud_exactly(walk) -> None:
+    pts, groups = _walk_cloud(walk)
+    angle = 2.5
+    turn = torch.tensor([math.cos(angle / 2), 0.0, math.sin(angle / 2), 0.0])
+    before = heading_frames(pts, groups, up=1)
+    after = heading_frames(Q.rotate(turn, pts), groups, up=1)
+    expected = Q.mul(turn, before)
+    # same rotation up to the quaternion sign
+    assert torch.allclose((after * expected).sum(-1).abs(), torch.ones(()), atol=1e-5)
+    # headings are rotations about the up axis only
+    assert torch.allclose(after[..., [1, 3]], torch.zeros(()), atol=1e-6)
+
+
+def test_heading_is_the_left_minus_right_direction(walk) -> None:
+    """The procedural walk heads along +z with its left side at +x."""
+    pts, groups = _walk_cloud(walk)
+    lateral = lateral_direction(pts, groups, up=1)
+    assert (lateral[..., 0] > 0.2).all() and torch.allclose(lateral[..., 1], torch.zeros(()))
+    canonical = torch.tensor([0.0, 0.0, 1.0])  # (up + 1) % 3 = z for y-up
+    mapped = Q.rotate(heading_frames(pts, groups, up=1, width=1), canonical)
+    cos = torch.nn.functional.cosine_similarity(mapped, lateral, dim=-1)
+    assert torch.allclose(cos, torch.ones(()), atol=1e-5)
+    # the moving average removes most of the gait's side-to-side swing
+    per_frame = Q.yaw(heading_frames(pts, groups, width=1), forward=2)
+    smooth = Q.yaw(heading_frames(pts, groups, width=15), forward=2)
+    def spread(q: torch.Tensor) -> float:
+        return float(2 * torch.atan2(q[..., 2], q[..., 0]).std())
+    assert spread(smooth) < spread(per_frame)
+
+
+def test_heading_without_left_and_right_points_is_the_identity(walk) -> None:
+    pts, groups = _walk_cloud(walk)
+    spine = torch.zeros_like(groups)  # every point on the spine: no side to tell
+    assert torch.equal(heading_frames(pts, spine), Q.identity(1, walk.num_frames))
+    with pytest.raises(SkelagnosticError, match="at least 1 frame"):
+        heading_frames(pts, groups, width=0)

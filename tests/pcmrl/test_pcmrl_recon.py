@@ -11,6 +11,7 @@ from skelagnostic_pcmrl.recon import PcmrlReconstruction, end_effector_pairs
 import skelagnostic as sa
 from conftest import TINY
 from skelagnostic import procedural
+from skelagnostic.core import quaternion as Q
 from skelagnostic.errors import SkelagnosticError
 
 
@@ -57,10 +58,76 @@ def test_reconstruction_outputs_unit_quaternions_and_consistent_positions(model)
     local = global_to_local(out["rotations"][0].detach(), target.parents)
     ref = sa.Motion(target, local, out["root"][0].detach(), 30.0).global_positions()
     assert torch.allclose(out["positions"][0].detach(), ref.float(), atol=1e-5)
-    # the untrained network starts at the target's rest pose, root at the cloud centroid
+    # the untrained network starts at the target's rest pose, root at the cloud centroid,
+    # turned about the up axis only (canonical_yaw): heights and ground radii are kept
     rest = target.rest_positions().float()
+    rest = rest - rest[0]
+    centred = out["positions"][0, 0].detach() - out["root"][0, 0].detach()
+    assert torch.allclose(centred[:, 1], rest[:, 1], atol=0.1)
+    assert torch.allclose(centred[:, [0, 2]].norm(dim=-1), rest[:, [0, 2]].norm(dim=-1),
+                          atol=0.1)
+    # ... facing the way the source faces: the same left-minus-right direction
+    left = [target.index(n) for n in ("LeftShoulder", "LeftUpLeg")]
+    right = [target.index(n) for n in ("RightShoulder", "RightUpLeg")]
+    lateral = (centred[left] - centred[right]).sum(0)[[0, 2]]
+    src = motion.skeleton
+    src_pos = motion.global_positions()[0].float()
+    src_lat = (src_pos[[src.index("LeftArm"), src.index("LeftUpLeg")]]
+               - src_pos[[src.index("RightArm"), src.index("RightUpLeg")]]).sum(0)[[0, 2]]
+    cos = torch.nn.functional.cosine_similarity(lateral, src_lat, dim=0)
+    assert cos > 0.9  # 64 points, limbs mid-swing: within ~25 degrees
+
+
+def test_without_canonical_yaw_the_untrained_network_stands_in_the_rest_pose() -> None:
+    torch.manual_seed(0)
+    with pytest.warns(ZeroLengthBoneWarning):
+        model = PcmrlReconstruction(target="biped31", canonical_yaw=False, **TINY).eval()
+    motion = procedural.generate("biped22", "walk", seconds=0.5)[0].convert_units("m")
+    layout = sample_layout(motion.skeleton, 64, 0.05, batch=(1,))
+    pts = layout.points(motion.global_rotations().float()[None],
+                        motion.global_positions().float()[None], motion.skeleton.offsets)
+    out = model.reconstruct(pts, layout.groups)
+    rest = model.target_skeleton.rest_positions().float()
     centred = out["positions"][0, 0].detach() - out["root"][0, 0].detach()
     assert torch.allclose(centred, rest - rest[0], atol=0.1)
+
+
+def test_canonical_yaw_makes_the_reconstruction_heading_equivariant(model) -> None:
+    """Turning the source about the up axis turns the reconstruction by the same angle."""
+    motion = procedural.generate("biped22", "walk", seconds=1.0)[0].convert_units("m")
+    angle = torch.tensor(1.1)
+    turn = torch.tensor([torch.cos(angle / 2), 0.0, torch.sin(angle / 2), 0.0])
+    rot = motion.rotations.clone()
+    rot[:, 0] = Q.mul(turn.to(rot), rot[:, 0])
+    turned = sa.Motion(motion.skeleton, rot, Q.rotate(turn.to(rot),
+                       motion.root_positions), motion.fps, units="m")
+    a = model.retarget(motion, model.target_skeleton).global_positions().float()
+    b = model.retarget(turned, model.target_skeleton).global_positions().float()
+    expected = Q.rotate(turn, a)
+    assert torch.allclose(b, expected, atol=1e-3)
+    # without it the untrained network is not equivariant
+    with pytest.warns(ZeroLengthBoneWarning):
+        plain = PcmrlReconstruction(target="biped31", canonical_yaw=False, chunk=16,
+                                    **TINY).eval()
+    plain.load_state_dict(model.state_dict())
+    a = plain.retarget(motion, model.target_skeleton).global_positions().float()
+    b = plain.retarget(turned, model.target_skeleton).global_positions().float()
+    assert not torch.allclose(b, Q.rotate(turn, a), atol=1e-2)
+
+
+def test_checkpoints_from_before_canonical_yaw_load_without_it(model, tmp_path) -> None:
+    import lightning as L
+
+    trainer = L.Trainer(logger=False, enable_checkpointing=False, enable_progress_bar=False)
+    trainer.strategy.connect(model)
+    path = tmp_path / "old.ckpt"
+    trainer.save_checkpoint(path)
+    ckpt = torch.load(path, weights_only=False)
+    del ckpt["hyper_parameters"]["canonical_yaw"]
+    torch.save(ckpt, path)
+    with pytest.warns(ZeroLengthBoneWarning):
+        old = PcmrlReconstruction.load_from_checkpoint(path)
+    assert old.hparams.canonical_yaw is False
 
 
 def test_retarget_returns_a_valid_motion_on_the_target(model, tmp_path) -> None:

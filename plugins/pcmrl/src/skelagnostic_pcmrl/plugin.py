@@ -41,6 +41,8 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "lr": 1e-3,
     "weight_decay": 0.0,
     "centre": True,
+    "canonical_yaw": True,
+    "yaw_window": 15,
     "chunk": None,
     "target": None,
     "target_units": None,

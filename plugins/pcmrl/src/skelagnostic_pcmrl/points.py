@@ -19,7 +19,11 @@ This module adds what training needs on top of it:
   the reconstruction network's output goes through, and the global-to-local
   conversion for writing a :class:`~skelagnostic.Motion`;
 * length units: the paper works in metres (Sec. 4.2); :func:`infer_units`
-  guesses a human skeleton's units from its height.
+  guesses a human skeleton's units from its height;
+* facing: :func:`lateral_direction` / :func:`heading_frames` estimate a body's
+  heading from the body groups of its points alone (left minus right), which
+  the reconstruction uses to encode every cloud in a heading-free frame
+  (``model.canonical_yaw``; not in the paper).
 """
 
 from __future__ import annotations
@@ -45,7 +49,9 @@ __all__ = [
     "end_effector_pairs",
     "global_to_local",
     "group_of_joints",
+    "heading_frames",
     "infer_units",
+    "lateral_direction",
     "positions_from_global",
     "sample_layout",
     "warn_zero_length_bones",
@@ -322,3 +328,61 @@ def end_effector_pairs(source: Skeleton, target: Skeleton) -> list[tuple[int, in
     by_group = {source.body_groups[j]: j for j in source.end_effectors()}
     return [(by_group[target.body_groups[j]], j) for j in target.end_effectors()
             if target.body_groups[j] in by_group]
+
+
+def lateral_direction(points: torch.Tensor, groups: torch.Tensor, up: int = 1) -> torch.Tensor:
+    """``[B, T, 3]`` ground-projected left-minus-right direction of clouds ``[B, T, P, 3]``.
+
+    The centroids of the left arm and left leg minus those of the right arm and
+    right leg (body groups ``groups`` ``[B, P]``), with the ``up`` component set to
+    zero. Only the group labels are used, so it works on any skeleton's cloud. A
+    cloud without points on both sides gives a zero vector (see :func:`heading_frames`).
+    """
+    index = {g: i for i, g in enumerate(POINT_GROUPS)}
+    onehot = torch.nn.functional.one_hot(groups, len(POINT_GROUPS)).to(points.dtype)
+    count = onehot.sum(-2)  # [B, G]
+    scale = count.clamp_min(1.0)[:, None, :, None]
+    centroid = torch.einsum("btpc,bpg->btgc", points, onehot) / scale
+    lateral = points.new_zeros((*points.shape[:2], 3))
+    for left, right in (("left_arm", "right_arm"), ("left_leg", "right_leg")):
+        a, b = index[left], index[right]
+        both = ((count[:, a] > 0) & (count[:, b] > 0)).to(points.dtype)[:, None, None]
+        lateral = lateral + both * (centroid[:, :, a] - centroid[:, :, b])
+    lateral[..., up] = 0.0
+    return lateral
+
+
+def heading_frames(points: torch.Tensor, groups: torch.Tensor, up: int = 1, width: int = 15
+                   ) -> torch.Tensor:
+    """``[B, T, 4]`` rotations about ``up`` that map the canonical axis onto each frame's heading.
+
+    The canonical axis is ``(up + 1) % 3``; a frame's heading is its
+    :func:`lateral_direction` averaged over a centred window of ``width`` frames
+    (cut at the ends of the sequence), so the left/right swing of the limbs in a
+    gait cycle averages out. Frames whose averaged direction is (numerically)
+    zero get the identity, which is what a cloud without left and right groups
+    gets everywhere.
+
+    Args:
+        points: ``[B, T, P, 3]`` clouds.
+        groups: ``[B, P]`` body-group ids (:data:`POINT_GROUPS`).
+        up: Up axis index.
+        width: Frames of the moving average (1: per frame).
+    """
+    if width < 1:
+        raise SkelagnosticError(f"heading window must be at least 1 frame, got {width}")
+    lateral = lateral_direction(points, groups, up)
+    frames = lateral.shape[1]
+    if width > 1 and frames > 1:
+        half = width // 2
+        padded = torch.nn.functional.pad(lateral.transpose(1, 2), (half, width - 1 - half))
+        ones = torch.nn.functional.pad(lateral.new_ones(1, 1, frames), (half, width - 1 - half))
+        kernel = lateral.new_ones(1, 1, width)
+        total = torch.nn.functional.conv1d(padded.reshape(-1, 1, padded.shape[-1]), kernel)
+        count = torch.nn.functional.conv1d(ones, kernel)
+        lateral = (total / count).reshape(lateral.shape[0], 3, frames).transpose(1, 2)
+    forward = (up + 1) % 3
+    heading = Q.heading_from_direction(lateral, up=up, forward=forward)
+    degenerate = lateral.norm(dim=-1, keepdim=True) < 1e-6
+    return torch.where(degenerate, Q.identity(*heading.shape[:-1], dtype=heading.dtype,
+                                              device=heading.device), heading)

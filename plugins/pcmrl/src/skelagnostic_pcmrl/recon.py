@@ -38,6 +38,8 @@ from skelagnostic_pcmrl.points import (
     effective_joints,
     end_effector_pairs,
     global_to_local,
+    group_of_joints,
+    heading_frames,
     infer_units,
     positions_from_global,
     sample_layout,
@@ -80,6 +82,15 @@ class PcmrlReconstruction(Aligner):
             encoding and add it back to the root (horizontal translation invariance:
             the network predicts the root relative to the cloud's centroid, so clips
             of any length and position stay in the training distribution).
+        canonical_yaw: Also remove the heading: rotate every centred cloud about the
+            up axis so that its left-minus-right direction
+            (:func:`~skelagnostic_pcmrl.points.heading_frames`, from the body groups)
+            points along one fixed axis, predict the root and the global rotations in
+            that frame, and rotate them back. The network then never has to learn
+            the heading equivariance of global quaternions from data (not in the
+            paper; docs/methods/pcmrl.md gives the measurements). Checkpoints saved
+            before this option existed load with it off.
+        yaw_window: Frames of the moving average of the heading estimate (15).
         chunk: Frames per temporal-transformer chunk at inference (``None``: the
             training window); chunks overlap by half and are blended.
         target: Target skeleton (procedural kind or BVH path) when built without
@@ -112,6 +123,8 @@ class PcmrlReconstruction(Aligner):
         lr: float = 1e-4,
         weight_decay: float = 0.0,
         centre: bool = True,
+        canonical_yaw: bool = True,
+        yaw_window: int = 15,
         chunk: int | None = None,
         target: str | None = None,
         target_units: str | None = None,
@@ -132,6 +145,8 @@ class PcmrlReconstruction(Aligner):
                                     f"model.knn_k={knn_k}")
         if sigma < 0:
             raise SkelagnosticError(f"model.sigma must be non-negative, got {sigma}")
+        if yaw_window < 1:
+            raise SkelagnosticError(f"model.yaw_window must be at least 1 frame, got {yaw_window}")
         self.save_hyperparameters()
         self.encoder = PointTransformerEncoder(len(POINT_GROUPS), dim, stages, point_heads,
                                                group_k)
@@ -166,6 +181,11 @@ class PcmrlReconstruction(Aligner):
         self.register_buffer("_source_of", torch.tensor(source_of), persistent=False)
         self.register_buffer("_ancestors", ancestor_matrix(skeleton.parents), persistent=False)
         self.register_buffer("_target_offsets", skeleton.offsets.float(), persistent=False)
+        rest = positions_from_global(Q.identity(skeleton.num_joints), torch.zeros(3),
+                                     skeleton.offsets.float(), skeleton.parents)
+        rest_heading = heading_frames(rest[None, None], group_of_joints(skeleton)[None],
+                                      _AXES[skeleton.up_axis], 1)[0, 0]
+        self.register_buffer("_rest_heading_inv", Q.inv(rest_heading), persistent=False)
         hp = self.hparams
         width = hp.temporal_dim or self.encoder.out_channels
         self.temporal = TemporalTransformer(self.encoder.out_channels, width, hp.temporal_layers,
@@ -208,6 +228,8 @@ class PcmrlReconstruction(Aligner):
         state = checkpoint.get("pcmrl")
         if state is None:
             raise SkelagnosticError("checkpoint has no 'pcmrl' entry: not a model=pcmrl checkpoint")
+        if "canonical_yaw" not in checkpoint.get("hyper_parameters", {"canonical_yaw": None}):
+            self.hparams.canonical_yaw = False  # saved before the option existed
         self.set_target(Skeleton.from_dict(state["target"]), state["target_units"])
         if self.window is None:
             self.window = state["window"]
@@ -242,6 +264,29 @@ class PcmrlReconstruction(Aligner):
         """``[..., J, 4]`` unit global rotations of all target joints from the predicted ones."""
         return Q.normalize(raw)[..., self._source_of, :]
 
+    def heading(self, centred: torch.Tensor, groups: torch.Tensor, up: int) -> torch.Tensor:
+        """``[B, T, 4]`` heading of centred clouds ``[B, T, P, 3]``.
+
+        Identity when ``canonical_yaw`` is off.
+        """
+        if not self.hparams.canonical_yaw:
+            return Q.identity(*centred.shape[:2], dtype=centred.dtype, device=centred.device)
+        return heading_frames(centred.detach(), groups.expand(centred.shape[0], -1), up,
+                              int(self.hparams.yaw_window))
+
+    def to_world(self, root: torch.Tensor, rotations: torch.Tensor, centre: torch.Tensor,
+                 heading: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Root ``[B, T, 3]`` and global rotations ``[B, T, J, 4]`` from the heading-free frame.
+
+        The target's rest pose faces the canonical axis at identity rotations, so the
+        untrained network stands in the rest pose facing the way the source faces.
+        """
+        if not self.hparams.canonical_yaw:
+            return root + centre, rotations
+        root = Q.rotate(heading, root) + centre
+        turn = Q.mul(heading, self._rest_heading_inv.to(heading))
+        return root, Q.mul(turn.unsqueeze(-2), rotations)
+
     def reconstruct(self, points: torch.Tensor, groups: torch.Tensor, up: int = 1
                     ) -> dict[str, torch.Tensor]:
         """Run the network on source clouds ``[B, T, P, 3]`` (metres), groups ``[B, P]``.
@@ -252,10 +297,13 @@ class PcmrlReconstruction(Aligner):
         """
         target = self._require_target()
         centre = self._centre(points, up)
-        feats = self.encode_points(points - centre.unsqueeze(2), groups)
+        centred = points - centre.unsqueeze(2)
+        heading = self.heading(centred, groups, up)
+        if self.hparams.canonical_yaw:
+            centred = Q.rotate(Q.inv(heading).unsqueeze(2), centred)
+        feats = self.encode_points(centred, groups)
         root, raw = self.heads(feats)
-        root = root + centre
-        rot = self.full_rotations(raw)
+        root, rot = self.to_world(root, self.full_rotations(raw), centre, heading)
         pos = positions_from_global(rot, root, self._target_offsets, target.parents,
                                     self._ancestors)
         return {"root": root, "raw": raw, "rotations": rot, "positions": pos}
@@ -346,8 +394,10 @@ class PcmrlReconstruction(Aligner):
         """Per-frame Point Transformer features of a 256-point cloud on ``motion``.
 
         Returns:
-            ``Latent(z=[T, F], fps, extras={"centre": [T, 3]})``: the per-frame horizontal
-            centroid of the cloud, which the predicted root is relative to.
+            ``Latent(z=[T, F], fps, extras={"centre": [T, 3], "heading": [T, 4]})``: the
+            per-frame horizontal centroid of the cloud, which the predicted root is
+            relative to, and the heading the cloud was encoded without
+            (identity if ``canonical_yaw`` is off).
         """
         metric = self.to_metres(motion).to(torch.float32, self.device)
         warn_zero_length_bones(metric.skeleton, "source skeleton")
@@ -358,9 +408,12 @@ class PcmrlReconstruction(Aligner):
                             metric.skeleton.offsets.float().to(self.device))[None]
         up = _AXES[metric.skeleton.up_axis]
         centre = self._centre(pts, up)
-        feats = self.encode_points(pts - centre.unsqueeze(2), layout.groups[None],
-                                   frames_per_call=256)
-        return Latent(feats[0], motion.fps, {"centre": centre[0]})
+        centred = pts - centre.unsqueeze(2)
+        heading = self.heading(centred, layout.groups[None], up)
+        if self.hparams.canonical_yaw:
+            centred = Q.rotate(Q.inv(heading).unsqueeze(2), centred)
+        feats = self.encode_points(centred, layout.groups[None], frames_per_call=256)
+        return Latent(feats[0], motion.fps, {"centre": centre[0], "heading": heading[0]})
 
     def _output_units(self, skeleton: Skeleton) -> str:
         """Units of ``skeleton``: the target file's or metres if the offsets match, else a guess."""
@@ -416,8 +469,12 @@ class PcmrlReconstruction(Aligner):
             root[start:stop] += ramp[:, None] * r[0]
             quat[start:stop] += ramp[:, None, None] * sign * q
             weight[start:stop] += ramp
-        root = root / weight[:, None] + latent.extras["centre"].to(root)
-        rot = Q.continuity(self.full_rotations(quat), dim=-3)
+        heading = latent.extras.get("heading")
+        if heading is None:  # a latent of a model without canonical_yaw
+            heading = Q.identity(frames, dtype=root.dtype, device=root.device)
+        root, rot = self.to_world(root / weight[:, None], self.full_rotations(quat),
+                                  latent.extras["centre"].to(root), heading.to(root))
+        rot = Q.continuity(rot, dim=-3)
         units = self._output_units(skeleton)
         local = Q.normalize(global_to_local(rot, skeleton.parents))
         return Motion(skeleton, local.cpu(), (root / UNITS[units]).cpu(), latent.fps, units=units)
