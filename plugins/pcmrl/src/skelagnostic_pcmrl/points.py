@@ -374,13 +374,10 @@ def heading_frames(points: torch.Tensor, groups: torch.Tensor, up: int = 1, widt
     lateral = lateral_direction(points, groups, up)
     frames = lateral.shape[1]
     if width > 1 and frames > 1:
-        half = width // 2
-        padded = torch.nn.functional.pad(lateral.transpose(1, 2), (half, width - 1 - half))
-        ones = torch.nn.functional.pad(lateral.new_ones(1, 1, frames), (half, width - 1 - half))
-        kernel = lateral.new_ones(1, 1, width)
-        total = torch.nn.functional.conv1d(padded.reshape(-1, 1, padded.shape[-1]), kernel)
-        count = torch.nn.functional.conv1d(ones, kernel)
-        lateral = (total / count).reshape(lateral.shape[0], 3, frames).transpose(1, 2)
+        # mean over the frames of the window that exist (padding not counted)
+        mean = torch.nn.functional.avg_pool1d(lateral.transpose(1, 2), width, stride=1,
+                                              padding=width // 2, count_include_pad=False)
+        lateral = mean[..., :frames].transpose(1, 2)
     forward = (up + 1) % 3
     heading = Q.heading_from_direction(lateral, up=up, forward=forward)
     degenerate = lateral.norm(dim=-1, keepdim=True) < 1e-6

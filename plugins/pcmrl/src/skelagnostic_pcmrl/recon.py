@@ -181,9 +181,8 @@ class PcmrlReconstruction(Aligner):
         self.register_buffer("_source_of", torch.tensor(source_of), persistent=False)
         self.register_buffer("_ancestors", ancestor_matrix(skeleton.parents), persistent=False)
         self.register_buffer("_target_offsets", skeleton.offsets.float(), persistent=False)
-        rest = positions_from_global(Q.identity(skeleton.num_joints), torch.zeros(3),
-                                     skeleton.offsets.float(), skeleton.parents)
-        rest_heading = heading_frames(rest[None, None], group_of_joints(skeleton)[None],
+        rest_heading = heading_frames(skeleton.rest_positions().float()[None, None],
+                                      group_of_joints(skeleton)[None],
                                       _AXES[skeleton.up_axis], 1)[0, 0]
         self.register_buffer("_rest_heading_inv", Q.inv(rest_heading), persistent=False)
         hp = self.hparams
@@ -228,7 +227,8 @@ class PcmrlReconstruction(Aligner):
         state = checkpoint.get("pcmrl")
         if state is None:
             raise SkelagnosticError("checkpoint has no 'pcmrl' entry: not a model=pcmrl checkpoint")
-        if "canonical_yaw" not in checkpoint.get("hyper_parameters", {"canonical_yaw": None}):
+        saved = checkpoint.get("hyper_parameters")
+        if saved is not None and "canonical_yaw" not in saved:
             self.hparams.canonical_yaw = False  # saved before the option existed
         self.set_target(Skeleton.from_dict(state["target"]), state["target_units"])
         if self.window is None:
@@ -264,15 +264,23 @@ class PcmrlReconstruction(Aligner):
         """``[..., J, 4]`` unit global rotations of all target joints from the predicted ones."""
         return Q.normalize(raw)[..., self._source_of, :]
 
-    def heading(self, centred: torch.Tensor, groups: torch.Tensor, up: int) -> torch.Tensor:
-        """``[B, T, 4]`` heading of centred clouds ``[B, T, P, 3]``.
+    def canonical(self, points: torch.Tensor, groups: torch.Tensor, up: int
+                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The clouds ``[B, T, P, 3]`` as the encoder sees them, and how to undo that.
 
-        Identity when ``canonical_yaw`` is off.
+        Returns:
+            ``(cloud, centre [B, T, 3], heading [B, T, 4])``: the cloud minus its
+            horizontal centroid (``centre``), turned by the inverse of its
+            ``heading`` (identity when ``canonical_yaw`` is off).
         """
+        centre = self._centre(points, up)
+        cloud = points - centre.unsqueeze(2)
         if not self.hparams.canonical_yaw:
-            return Q.identity(*centred.shape[:2], dtype=centred.dtype, device=centred.device)
-        return heading_frames(centred.detach(), groups.expand(centred.shape[0], -1), up,
-                              int(self.hparams.yaw_window))
+            return cloud, centre, Q.identity(*cloud.shape[:2], dtype=cloud.dtype,
+                                             device=cloud.device)
+        heading = heading_frames(cloud.detach(), groups.expand(cloud.shape[0], -1), up,
+                                 int(self.hparams.yaw_window))
+        return Q.rotate(Q.inv(heading).unsqueeze(2), cloud), centre, heading
 
     def to_world(self, root: torch.Tensor, rotations: torch.Tensor, centre: torch.Tensor,
                  heading: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -296,13 +304,8 @@ class PcmrlReconstruction(Aligner):
             ``[B, T, J, 4]`` (global, unit) and ``positions`` ``[B, T, J, 3]``.
         """
         target = self._require_target()
-        centre = self._centre(points, up)
-        centred = points - centre.unsqueeze(2)
-        heading = self.heading(centred, groups, up)
-        if self.hparams.canonical_yaw:
-            centred = Q.rotate(Q.inv(heading).unsqueeze(2), centred)
-        feats = self.encode_points(centred, groups)
-        root, raw = self.heads(feats)
+        cloud, centre, heading = self.canonical(points, groups, up)
+        root, raw = self.heads(self.encode_points(cloud, groups))
         root, rot = self.to_world(root, self.full_rotations(raw), centre, heading)
         pos = positions_from_global(rot, root, self._target_offsets, target.parents,
                                     self._ancestors)
@@ -407,12 +410,8 @@ class PcmrlReconstruction(Aligner):
         pts = layout.points(metric.global_rotations(), metric.global_positions(),
                             metric.skeleton.offsets.float().to(self.device))[None]
         up = _AXES[metric.skeleton.up_axis]
-        centre = self._centre(pts, up)
-        centred = pts - centre.unsqueeze(2)
-        heading = self.heading(centred, layout.groups[None], up)
-        if self.hparams.canonical_yaw:
-            centred = Q.rotate(Q.inv(heading).unsqueeze(2), centred)
-        feats = self.encode_points(centred, layout.groups[None], frames_per_call=256)
+        cloud, centre, heading = self.canonical(pts, layout.groups[None], up)
+        feats = self.encode_points(cloud, layout.groups[None], frames_per_call=256)
         return Latent(feats[0], motion.fps, {"centre": centre[0], "heading": heading[0]})
 
     def _output_units(self, skeleton: Skeleton) -> str:
