@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
+from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder, VectorAttention
 from skelagnostic_pcmrl.points import ZeroLengthBoneWarning, sample_layout
 from skelagnostic_pcmrl.recon import PcmrlReconstruction, end_effector_pairs
 
@@ -39,6 +39,64 @@ def test_encoder_is_permutation_invariant() -> None:
     # FPS starts at point 0: keep it first so both orders pick the same centres
     perm = torch.cat([torch.tensor([0]), perm[perm != 0]])
     assert torch.allclose(enc(x), enc(x[:, perm]), atol=1e-5)
+
+
+def test_vector_attention_matches_a_loop_over_each_points_neighbours() -> None:
+    """Zhao et al. Eq. 3-4, computed point by point with brute-force nearest neighbours."""
+    torch.manual_seed(0)
+    layer = VectorAttention(6, k=3).double().eval()
+    xyz = torch.randn(1, 7, 3, dtype=torch.float64)
+    x = torch.randn(1, 7, 6, dtype=torch.float64)
+    q, k, v = layer.qkv(layer.norm1(x)).chunk(3, dim=-1)
+    expected = torch.empty_like(x)
+    for i in range(7):
+        dist = [(float((xyz[0, i] - xyz[0, j]).norm()), j) for j in range(7)]
+        nbrs = [j for _, j in sorted(dist)[:3]]
+        assert nbrs[0] == i  # a point is its own nearest neighbour
+        acc = torch.zeros(6, dtype=torch.float64)
+        logits, values = [], []
+        for j in nbrs:
+            delta = layer.theta(xyz[0, i] - xyz[0, j])
+            logits.append(layer.gamma(q[0, i] - k[0, j] + delta))
+            values.append(v[0, j] + delta)
+        weights = torch.stack(logits).softmax(dim=0)  # per channel, over the neighbours
+        for w, val in zip(weights, values, strict=True):
+            acc = acc + w * val
+        h = x[0, i] + layer.proj(acc)
+        expected[0, i] = h + layer.ff(layer.norm2(h))
+    assert torch.allclose(layer(x, xyz), expected, atol=1e-10)
+
+
+@pytest.mark.parametrize("attention", ["vector", "none"])
+def test_encoder_attention_options_keep_shapes_and_permutation_invariance(attention) -> None:
+    torch.manual_seed(0)
+    enc = PointTransformerEncoder(5, dim=8, stages=2, heads=2, attention=attention,
+                                  attention_k=4).eval()
+    x = torch.randn(3, 64, 8)
+    assert enc(x).shape == (3, 32)
+    perm = torch.randperm(63) + 1
+    perm = torch.cat([torch.tensor([0]), perm])  # FPS starts at point 0
+    assert torch.allclose(enc(x), enc(x[:, perm]), atol=1e-5)
+    if attention == "none":
+        assert enc.attn0 is None and not any(p.numel() for p in enc.attn.parameters())
+
+
+def test_encoder_rejects_unknown_attention() -> None:
+    with pytest.raises(SkelagnosticError, match="attention='knn' is not one of full, vector"):
+        PointTransformerEncoder(5, dim=8, stages=1, attention="knn")
+
+
+@pytest.mark.parametrize("attention", ["full", "vector"])
+def test_zero_layer_scale_starts_attention_blocks_as_the_identity(attention) -> None:
+    torch.manual_seed(0)
+    scaled = PointTransformerEncoder(5, dim=8, stages=2, heads=2, attention=attention,
+                                     layer_scale=0.0).eval()
+    plain = PointTransformerEncoder(5, dim=8, stages=2, heads=2, attention="none").eval()
+    plain.load_state_dict(scaled.state_dict(), strict=False)
+    x = torch.randn(2, 64, 8)
+    assert torch.allclose(scaled(x), plain(x), atol=1e-6)
+    scaled.attn0.scale1.gamma.data.fill_(0.5)
+    assert not torch.allclose(scaled(x), plain(x), atol=1e-4)
 
 
 def test_reconstruction_outputs_unit_quaternions_and_consistent_positions(model) -> None:

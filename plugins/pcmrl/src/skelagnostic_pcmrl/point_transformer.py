@@ -4,8 +4,14 @@ Layout, following the paper and the authors' encoder (METHODS.md "PC-MRL"):
 
 1. every point's input is its position and one-hot body group, lifted to
    ``dim`` channels (64 in the paper) by a point-wise MLP;
-2. full self-attention over all the points of the frame (no kNN attention),
-   with a learned encoding of the positions added to the queries and keys;
+2. self-attention over the points of the frame, one of (``attention``):
+   ``"full"``, multi-head attention over all points with a learned encoding of
+   the positions added to the queries and keys (the authors' encoder);
+   ``"vector"``, the Point Transformer layer of Zhao et al. [52]: vector
+   attention over each point's ``attention_k`` nearest points,
+   ``sum_j softmax_j(gamma(phi(x_i) - psi(x_j) + delta)) * (alpha(x_j) + delta)``
+   with ``delta = theta(p_i - p_j)``; or ``"none"`` (a PointNet++-style
+   hierarchy, for ablations);
 3. ``stages`` pooling stages (4 in the paper): farthest point sampling down
    to a quarter of the points, each kept point grouped with its ``k <= 8``
    nearest points (features and relative positions), a point-wise MLP that
@@ -23,19 +29,51 @@ from torch import nn
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic_pcmrl.fps import farthest_point_sampling, gather_points, knn_indices
 
-__all__ = ["PointAttention", "PointTransformerEncoder", "TransitionDown"]
+__all__ = ["ATTENTIONS", "PointAttention", "PointTransformerEncoder", "TransitionDown",
+           "VectorAttention"]
+
+#: Values of the encoder's ``attention`` option.
+ATTENTIONS = ("full", "vector", "none")
 
 
-class PointAttention(nn.Module):
+class _Scale(nn.Module):
+    """Learned per-channel residual scale (LayerScale, Touvron et al. 2021); ``None``: identity."""
+
+    def __init__(self, channels: int, init: float | None) -> None:
+        super().__init__()
+        self.gamma = None if init is None else nn.Parameter(torch.full((channels,), float(init)))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x if self.gamma is None else x * self.gamma
+
+
+class _AttentionBlock(nn.Module):
+    """The parts both point attentions share: residual scales and the feed-forward block."""
+
+    def __init__(self, channels: int, layer_scale: float | None) -> None:
+        super().__init__()
+        self.norm2 = nn.LayerNorm(channels)
+        self.ff = nn.Sequential(nn.Linear(channels, 2 * channels), nn.ReLU(),
+                                nn.Linear(2 * channels, channels))
+        self.scale1 = _Scale(channels, layer_scale)
+        self.scale2 = _Scale(channels, layer_scale)
+
+    def feed_forward(self, features: torch.Tensor) -> torch.Tensor:
+        """``features`` plus the pre-norm feed-forward block."""
+        return features + self.scale2(self.ff(self.norm2(features)))
+
+
+class PointAttention(_AttentionBlock):
     """Pre-norm multi-head self-attention over the points of a frame, plus a feed-forward block.
 
     Args:
         channels: Feature width.
         heads: Attention heads.
+        layer_scale: Initial residual scale of both blocks (``None``: no scale).
     """
 
-    def __init__(self, channels: int, heads: int) -> None:
-        super().__init__()
+    def __init__(self, channels: int, heads: int, layer_scale: float | None = None) -> None:
+        super().__init__(channels, layer_scale)
         if channels % heads:
             raise SkelagnosticError(f"point attention: {channels} channels are not divisible "
                                     f"by {heads} heads")
@@ -43,16 +81,53 @@ class PointAttention(nn.Module):
                                                                                   channels))
         self.norm1 = nn.LayerNorm(channels)
         self.attn = nn.MultiheadAttention(channels, heads, batch_first=True)
-        self.norm2 = nn.LayerNorm(channels)
-        self.ff = nn.Sequential(nn.Linear(channels, 2 * channels), nn.ReLU(),
-                                nn.Linear(2 * channels, channels))
 
     def forward(self, features: torch.Tensor, xyz: torch.Tensor) -> torch.Tensor:
         """``[B, N, C]`` features updated from all points (positions ``[B, N, 3]``)."""
         h = self.norm1(features)
         qk = h + self.position(xyz)
-        features = features + self.attn(qk, qk, h, need_weights=False)[0]
-        return features + self.ff(self.norm2(features))
+        features = features + self.scale1(self.attn(qk, qk, h, need_weights=False)[0])
+        return self.feed_forward(features)
+
+
+class VectorAttention(_AttentionBlock):
+    """Point Transformer layer (Zhao et al. 2021, Eq. 3-4) in a pre-norm residual block.
+
+    Every point attends to its ``k`` nearest points (itself included) with
+    channel-wise (vector) attention weights
+    ``softmax_j(gamma(phi(x_i) - psi(x_j) + delta_ij))`` on the values
+    ``alpha(x_j) + delta_ij``, where ``delta_ij = theta(p_i - p_j)`` is a learned
+    encoding of the relative position (two linear layers with a ReLU, as are
+    ``gamma`` and ``theta``). A feed-forward block follows.
+
+    Args:
+        channels: Feature width.
+        k: Neighbours per point (16 in [52]; at most the number of points is used).
+        layer_scale: Initial residual scale of both blocks (``None``: no scale).
+    """
+
+    def __init__(self, channels: int, k: int = 16, layer_scale: float | None = None) -> None:
+        super().__init__(channels, layer_scale)
+        if k < 1:
+            raise SkelagnosticError(f"vector attention: k={k} must be positive")
+        self.k = int(k)
+        self.norm1 = nn.LayerNorm(channels)
+        self.qkv = nn.Linear(channels, 3 * channels)
+        self.theta = nn.Sequential(nn.Linear(3, channels), nn.ReLU(), nn.Linear(channels,
+                                                                               channels))
+        self.gamma = nn.Sequential(nn.Linear(channels, channels), nn.ReLU(),
+                                   nn.Linear(channels, channels))
+        self.proj = nn.Linear(channels, channels)
+
+    def forward(self, features: torch.Tensor, xyz: torch.Tensor) -> torch.Tensor:
+        """``[B, N, C]`` features updated from each point's neighbours (positions ``[B, N, 3]``)."""
+        q, k, v = self.qkv(self.norm1(features)).chunk(3, dim=-1)
+        nbr = knn_indices(xyz, xyz, min(self.k, xyz.shape[-2]))  # [B, N, k]
+        delta = self.theta(xyz.unsqueeze(-2) - gather_points(xyz, nbr))  # [B, N, k, C]
+        weights = self.gamma(q.unsqueeze(-2) - gather_points(k, nbr) + delta).softmax(dim=-2)
+        out = (weights * (gather_points(v, nbr) + delta)).sum(dim=-2)
+        features = features + self.scale1(self.proj(out))
+        return self.feed_forward(features)
 
 
 class TransitionDown(nn.Module):
@@ -96,20 +171,40 @@ class PointTransformerEncoder(nn.Module):
         heads: Attention heads of the point self-attention.
         k: Neighbours of the kNN grouping (8).
         ratio: Down-sampling factor per stage (4).
+        attention: ``"full"`` (the authors'), ``"vector"`` ([52]) or ``"none"``
+            (:data:`ATTENTIONS`).
+        attention_k: Neighbours of the ``"vector"`` attention (16, as in [52]).
+        layer_scale: Initial residual scale of the attention blocks (``None``: no scale).
+
+    Raises:
+        SkelagnosticError: A size is not positive or ``attention`` is unknown.
     """
 
     def __init__(self, in_channels: int = 5, dim: int = 64, stages: int = 4, heads: int = 4,
-                 k: int = 8, ratio: int = 4) -> None:
+                 k: int = 8, ratio: int = 4, attention: str = "full", attention_k: int = 16,
+                 layer_scale: float | None = None) -> None:
         super().__init__()
         if dim < 1 or stages < 0:
             raise SkelagnosticError(f"point encoder: dim={dim} and stages={stages} must be "
                                     "positive / non-negative")
+        if attention not in ATTENTIONS:
+            raise SkelagnosticError(f"point encoder: attention={attention!r} is not one of "
+                                    f"{', '.join(ATTENTIONS)}")
         self.embed = nn.Sequential(nn.Linear(3 + in_channels, dim), nn.ReLU(), nn.Linear(dim, dim))
-        self.attn0 = PointAttention(dim, heads)
         widths = [dim * 2**i for i in range(stages + 1)]
+
+        def block(channels: int) -> nn.Module | None:
+            if attention == "full":
+                return PointAttention(channels, heads, layer_scale)
+            if attention == "vector":
+                return VectorAttention(channels, attention_k, layer_scale)
+            return None
+
+        self.attn0 = block(dim)
         self.down = nn.ModuleList(TransitionDown(widths[i], widths[i + 1], ratio, k)
                                   for i in range(stages))
-        self.attn = nn.ModuleList(PointAttention(widths[i + 1], heads) for i in range(stages))
+        self.attn = nn.ModuleList(block(widths[i + 1]) or nn.Identity() for i in range(stages))
+        self._attend = attention != "none"
         self.out_channels = widths[-1]
         self.head = nn.Sequential(nn.LayerNorm(widths[-1]), nn.Linear(widths[-1], widths[-1]),
                                   nn.ReLU(), nn.Linear(widths[-1], widths[-1]))
@@ -119,10 +214,13 @@ class PointTransformerEncoder(nn.Module):
         lead = points.shape[:-2]
         x = points.reshape(-1, *points.shape[-2:])
         xyz = x[..., :3].contiguous()
-        h = self.attn0(self.embed(x), xyz)
+        h = self.embed(x)
+        if self.attn0 is not None:
+            h = self.attn0(h, xyz)
         for down, attn in zip(self.down, self.attn, strict=True):
             h, xyz = down(h, xyz)
-            h = attn(h, xyz)
+            if self._attend:
+                h = attn(h, xyz)
         h = h.amax(dim=-2)
         h = h + self.head(h)
         return h.reshape(*lead, -1)

@@ -67,6 +67,13 @@ class PcmrlReconstruction(Aligner):
         stages: Point-encoder pooling stages (4).
         point_heads: Heads of the point self-attention.
         group_k: Neighbours of the kNN grouping in the pooling stages (8).
+        point_attention: Self-attention of the point encoder: ``"full"`` (over all the
+            points of a frame, the authors' encoder), ``"vector"`` (the Point
+            Transformer layer of [52] over each point's ``attention_k`` nearest
+            points) or ``"none"`` (ablation).
+        attention_k: Neighbours of ``point_attention="vector"`` (16, as in [52]).
+        layer_scale: Initial residual scale of the point attention blocks
+            (LayerScale; ``None``: none).
         temporal_dim: Width of the temporal transformer (``None``: the frame feature width).
         temporal_layers: Temporal transformer blocks (6).
         temporal_heads: Temporal attention heads (4).
@@ -111,6 +118,9 @@ class PcmrlReconstruction(Aligner):
         stages: int = 4,
         point_heads: int = 4,
         group_k: int = 8,
+        point_attention: str = "full",
+        attention_k: int = 16,
+        layer_scale: float | None = None,
         temporal_dim: int | None = None,
         temporal_layers: int = 6,
         temporal_heads: int = 4,
@@ -149,7 +159,8 @@ class PcmrlReconstruction(Aligner):
             raise SkelagnosticError(f"model.yaw_window must be at least 1 frame, got {yaw_window}")
         self.save_hyperparameters()
         self.encoder = PointTransformerEncoder(len(POINT_GROUPS), dim, stages, point_heads,
-                                               group_k)
+                                               group_k, attention=point_attention,
+                                               attention_k=attention_k, layer_scale=layer_scale)
         self.temporal: TemporalTransformer | None = None
         self.target_skeleton: Skeleton | None = None
         self.target_units: str | None = None
