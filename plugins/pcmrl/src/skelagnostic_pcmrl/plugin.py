@@ -44,6 +44,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "lr": 1e-3,
     "weight_decay": 0.0,
     "centre": True,
+    "centre_up": True,
     "canonical_yaw": True,
     "yaw_window": 15,
     "chunk": None,

@@ -85,7 +85,7 @@ class PcmrlReconstruction(Aligner):
         lambda_end: Weight of the end-effector loss (0: off; the paper's loss is optional).
         lr: AdamW learning rate.
         weight_decay: AdamW weight decay.
-        centre: Subtract the source cloud's horizontal centroid in every frame before
+        centre: Subtract the source cloud's (horizontal) centroid in every frame before
             encoding and add it back to the root (horizontal translation invariance:
             the network predicts the root relative to the cloud's centroid, so clips
             of any length and position stay in the training distribution).
@@ -133,6 +133,7 @@ class PcmrlReconstruction(Aligner):
         lr: float = 1e-4,
         weight_decay: float = 0.0,
         centre: bool = True,
+        centre_up: bool = True,
         canonical_yaw: bool = True,
         yaw_window: int = 15,
         chunk: int | None = None,
@@ -239,19 +240,24 @@ class PcmrlReconstruction(Aligner):
         if state is None:
             raise SkelagnosticError("checkpoint has no 'pcmrl' entry: not a model=pcmrl checkpoint")
         saved = checkpoint.get("hyper_parameters")
-        if saved is not None and "canonical_yaw" not in saved:
-            self.hparams.canonical_yaw = False  # saved before the option existed
+        for option in ("canonical_yaw", "centre_up"):  # saved before the option existed
+            if saved is not None and option not in saved:
+                self.hparams[option] = False
         self.set_target(Skeleton.from_dict(state["target"]), state["target_units"])
         if self.window is None:
             self.window = state["window"]
 
     # ---------------------------------------------------------------- network
     def _centre(self, points: torch.Tensor, up: int) -> torch.Tensor:
-        """``[B, T, 3]`` per-frame horizontal mean of ``[B, T, P, 3]`` clouds (0 on the up axis)."""
+        """``[B, T, 3]`` per-frame mean of ``[B, T, P, 3]`` clouds.
+
+        Horizontal only without ``centre_up``, zero without ``centre``.
+        """
         centre = points.detach().mean(dim=2)
         if not self.hparams.centre:
             return torch.zeros_like(centre)
-        centre[..., up] = 0.0
+        if not self.hparams.centre_up:
+            centre[..., up] = 0.0
         return centre
 
     def encode_points(self, points: torch.Tensor, groups: torch.Tensor,
@@ -281,7 +287,7 @@ class PcmrlReconstruction(Aligner):
 
         Returns:
             ``(cloud, centre [B, T, 3], heading [B, T, 4])``: the cloud minus its
-            horizontal centroid (``centre``), turned by the inverse of its
+            centroid (``centre``; see ``centre_up``), turned by the inverse of its
             ``heading`` (identity when ``canonical_yaw`` is off).
         """
         centre = self._centre(points, up)
@@ -409,8 +415,8 @@ class PcmrlReconstruction(Aligner):
 
         Returns:
             ``Latent(z=[T, F], fps, extras={"centre": [T, 3], "heading": [T, 4]})``: the
-            per-frame horizontal centroid of the cloud, which the predicted root is
-            relative to, and the heading the cloud was encoded without
+            per-frame centroid of the cloud (see ``centre`` and ``centre_up``), which
+            the predicted root is relative to, and the heading the cloud was encoded without
             (identity if ``canonical_yaw`` is off).
         """
         metric = self.to_metres(motion).to(torch.float32, self.device)
