@@ -18,7 +18,7 @@ from typing import Any
 from skelagnostic.plugins import hookimpl
 
 #: Default ``model/pcmrl`` config: the paper's method at a CPU-sized width (the paper's
-#: sizes are ``experiment=pcmrl_paper``): point encoder 32 -> 512 channels over 4 stages
+#: sizes are ``experiment=pcmrl_paper``): point encoder 16 -> 256 channels over 4 stages
 #: (paper 64 -> 1024), temporal transformer 128 wide (paper: 1024), 6 layers, 4 heads.
 DEFAULT_CONFIG: dict[str, Any] = {
     "stage": "reconstruction",
