@@ -47,6 +47,13 @@ class _Scale(nn.Module):
         return x if self.gamma is None else x * self.gamma
 
 
+class _NoAttention(nn.Module):
+    """``attention="none"``: the features pass unchanged."""
+
+    def forward(self, features: torch.Tensor, xyz: torch.Tensor) -> torch.Tensor:
+        return features
+
+
 class _AttentionBlock(nn.Module):
     """The parts both point attentions share: residual scales and the feed-forward block."""
 
@@ -193,18 +200,17 @@ class PointTransformerEncoder(nn.Module):
         self.embed = nn.Sequential(nn.Linear(3 + in_channels, dim), nn.ReLU(), nn.Linear(dim, dim))
         widths = [dim * 2**i for i in range(stages + 1)]
 
-        def block(channels: int) -> nn.Module | None:
+        def block(channels: int) -> nn.Module:
             if attention == "full":
                 return PointAttention(channels, heads, layer_scale)
             if attention == "vector":
                 return VectorAttention(channels, attention_k, layer_scale)
-            return None
+            return _NoAttention()
 
         self.attn0 = block(dim)
         self.down = nn.ModuleList(TransitionDown(widths[i], widths[i + 1], ratio, k)
                                   for i in range(stages))
-        self.attn = nn.ModuleList(block(widths[i + 1]) or nn.Identity() for i in range(stages))
-        self._attend = attention != "none"
+        self.attn = nn.ModuleList(block(widths[i + 1]) for i in range(stages))
         self.out_channels = widths[-1]
         self.head = nn.Sequential(nn.LayerNorm(widths[-1]), nn.Linear(widths[-1], widths[-1]),
                                   nn.ReLU(), nn.Linear(widths[-1], widths[-1]))
@@ -214,13 +220,10 @@ class PointTransformerEncoder(nn.Module):
         lead = points.shape[:-2]
         x = points.reshape(-1, *points.shape[-2:])
         xyz = x[..., :3].contiguous()
-        h = self.embed(x)
-        if self.attn0 is not None:
-            h = self.attn0(h, xyz)
+        h = self.attn0(self.embed(x), xyz)
         for down, attn in zip(self.down, self.attn, strict=True):
             h, xyz = down(h, xyz)
-            if self._attend:
-                h = attn(h, xyz)
+            h = attn(h, xyz)
         h = h.amax(dim=-2)
         h = h + self.head(h)
         return h.reshape(*lead, -1)
