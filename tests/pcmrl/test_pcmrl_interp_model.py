@@ -214,3 +214,67 @@ def test_training_reduces_the_loss() -> None:
         loss.backward()
         opt.step()
     assert model._losses(batch)[0].item() < 0.5 * first
+
+
+def _turned(motion: Motion, angle: float) -> Motion:
+    """``motion`` turned by ``angle`` about its up axis (around the origin)."""
+    axis = torch.zeros(4, dtype=motion.rotations.dtype)
+    axis[0], axis[1 + motion.skeleton.up_index] = math.cos(angle / 2), math.sin(angle / 2)
+    rot = motion.rotations.clone()
+    rot[:, 0] = Q.mul(axis.expand_as(rot[:, 0]), rot[:, 0])
+    root = Q.rotate(axis.expand(motion.num_frames, 4), motion.root_positions)
+    return Motion(motion.skeleton, rot, root, motion.fps, units=motion.units)
+
+
+@pytest.mark.parametrize("canonical", [True, False])
+def test_canonical_heading_makes_interpolation_turn_with_the_input(canonical: bool) -> None:
+    model = _tiny()  # direct output, random weights: far from the baseline
+    model.hparams.canonical_heading = canonical
+    motion = _motion(seconds=2.0)
+    keys = [0, 15, 30, 45, motion.num_frames - 1]
+    out = model.interpolate(motion, keys)
+    turned = model.interpolate(_turned(motion, 1.1), keys)
+    expected = _turned(out, 1.1).global_positions()
+    if canonical:  # the prediction turns with the input, exactly
+        assert torch.allclose(turned.global_positions(), expected, atol=1e-4)
+    else:  # without it the network sees another input and predicts something else
+        assert (turned.global_positions() - expected).abs().max() > 1e-2
+
+
+def test_window_heading_is_equivariant_and_needs_left_and_right() -> None:
+    from skelagnostic_pcmrl.interp import window_heading
+    from skelagnostic_pcmrl.points import group_of_joints
+
+    motion = _motion(seconds=1.0)
+    skel = motion.skeleton
+    grot = motion.global_rotations()[None]
+    heading = window_heading(grot, motion.root_positions[None], skel.offsets, group_of_joints(skel),
+                             skel.parents, skel.up_index)
+    turned = _turned(motion, -0.7)
+    again = window_heading(turned.global_rotations()[None], turned.root_positions[None],
+                           skel.offsets, group_of_joints(skel), skel.parents, skel.up_index)
+    turn = torch.tensor([math.cos(-0.35), 0.0, math.sin(-0.35), 0.0], dtype=heading.dtype)
+    assert torch.allclose(Q.mul(turn, heading[0]).abs(), again[0].abs(), atol=1e-5)
+    no_sides = torch.zeros(skel.num_joints, dtype=torch.long)  # every joint on the spine
+    same = window_heading(grot, motion.root_positions[None], skel.offsets, no_sides,
+                          skel.parents, skel.up_index)
+    assert torch.allclose(same, Q.identity(1, dtype=same.dtype))
+
+
+def test_canonical_heading_is_saved_with_the_checkpoint(tmp_path: Path) -> None:
+    assert _tiny().hparams.canonical_heading is False  # the default (paper)
+    torch.manual_seed(0)
+    skel = procedural.skeleton("biped31").scaled(0.01)
+    model = InterpolationAligner(**TINY, canonical_heading=True, skeleton=skel.to_dict(),
+                                 fps=30.0, window=32).eval()
+    trainer = L.Trainer(accelerator="cpu", logger=False, default_root_dir=tmp_path,
+                        enable_progress_bar=False, enable_model_summary=False)
+    trainer.strategy.connect(model)
+    ckpt = tmp_path / "model.ckpt"
+    trainer.save_checkpoint(ckpt)
+    loaded = InterpolationAligner.load_from_checkpoint(ckpt).eval()
+    assert loaded.hparams.canonical_heading is True
+    motion = _turned(_motion(seconds=1.0), 0.4)
+    keys = [0, 12, motion.num_frames - 1]
+    assert torch.allclose(loaded.interpolate(motion, keys).global_positions(),
+                          model.interpolate(motion, keys).global_positions(), atol=1e-6)
