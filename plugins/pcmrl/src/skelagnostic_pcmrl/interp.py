@@ -537,7 +537,7 @@ class InterpolationAligner(Aligner):
             rotation that turns it back (the identity when the option is off).
         """
         self._require_net()
-        if not self.hparams.get("canonical_heading", False):
+        if not self.hparams.canonical_heading:
             turn = Q.identity(root.shape[0], dtype=root.dtype, device=root.device)
             return global_rotations, root, turn
         assert self.skeleton is not None  # built together with the network
