@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from skelagnostic_pcmrl.interp_data import (
     InterpolationDataModule,
     gap_keys,
     random_keys,
+    regular_keys,
 )
 from skelagnostic_pcmrl.interp_eval import lerp_slerp
 
@@ -34,11 +36,11 @@ def _motion(seconds: float = 2.0, fps: float = 30.0, seed: int = 0) -> Motion:
     return motion.convert_units("m")
 
 
-def _tiny(residual: bool = False, window: int = 32) -> InterpolationAligner:
+def _tiny(residual: bool = False, window: int = 32, **options: object) -> InterpolationAligner:
     torch.manual_seed(0)
     skel = procedural.skeleton("biped31").scaled(0.01)
     return InterpolationAligner(**TINY, residual=residual, skeleton=skel.to_dict(), fps=30.0,
-                                window=window).eval()
+                                window=window, **options).eval()
 
 
 def test_paper_defaults() -> None:
@@ -95,9 +97,46 @@ def test_random_and_gap_keys() -> None:
     assert gap_keys(12, 5).nonzero().squeeze(1).tolist() == [0, 5, 10, 11]
 
 
-@pytest.mark.parametrize("residual", [False, True])
-def test_interpolate_reproduces_keyframes(residual: bool) -> None:
-    model = _tiny(residual)
+def test_regular_keys_have_one_gap_per_window_and_a_random_phase() -> None:
+    import random
+
+    rng = random.Random(1)
+    gaps, phases = set(), set()
+    for _ in range(200):
+        mask = regular_keys(128, 5, 30, rng)
+        frames = mask.nonzero().squeeze(1).tolist()
+        assert frames[0] == 0 and frames[-1] == 127
+        inner = frames[1:-1]
+        steps = {b - a for a, b in itertools.pairwise(inner)}
+        assert len(steps) == 1  # one gap g between the inner keys
+        gap = steps.pop()
+        assert 5 <= gap <= 30 and frames[1] <= gap  # first inner key within one gap
+        assert 127 - frames[-2] <= gap
+        gaps.add(gap)
+        phases.add(frames[1] % gap)
+    assert len(gaps) > 15 and len(phases) > 10  # both drawn, not fixed
+    assert regular_keys(10, 3, 3, random.Random(0)).sum() >= 4
+
+
+def test_key_mode_is_checked_and_used_by_the_training_windows() -> None:
+    with pytest.raises(SkelagnosticError, match="key_mode"):
+        InterpolationDataModule(key_mode="every")
+    with pytest.raises(SkelagnosticError, match="min_gap"):
+        InterpolationDataModule(key_mode="regular", min_gap=10, max_gap=5)
+    dm = InterpolationDataModule(fps=30, window=64, batch_size=4, samples_per_epoch=16,
+                                 key_mode="regular", min_gap=7, max_gap=7, rpa_prob=0.0)
+    dm.setup("fit")
+    for item in (dm.train_set[i] for i in range(16)):
+        frames = item["keys"].nonzero().squeeze(1).tolist()
+        inner = frames[1:-1]
+        assert all(b - a == 7 for a, b in itertools.pairwise(inner))
+
+
+@pytest.mark.parametrize(("residual", "interm", "space"),
+                         [(False, "zero", "foq"), (True, "zero", "foq"), (False, "lerp", "foq"),
+                          (True, "lerp", "foq"), (True, "zero", "local")])
+def test_interpolate_reproduces_keyframes(residual: bool, interm: str, space: str) -> None:
+    model = _tiny(residual, interm_tokens=interm, residual_space=space)
     motion = _motion(seconds=3.0)  # 91 frames > window 32: chained chunks
     keys = [0, 7, 20, 33, 45, 60, 61, 90]
     out = model.interpolate(motion, keys)
@@ -261,20 +300,73 @@ def test_window_heading_is_equivariant_and_needs_left_and_right() -> None:
     assert torch.allclose(same, Q.identity(1, dtype=same.dtype))
 
 
+def _reloaded(model: InterpolationAligner, tmp_path: Path) -> InterpolationAligner:
+    """``model`` saved as a Lightning checkpoint and loaded back."""
+    trainer = L.Trainer(accelerator="cpu", logger=False, default_root_dir=tmp_path,
+                        enable_progress_bar=False, enable_model_summary=False)
+    trainer.strategy.connect(model)
+    ckpt = tmp_path / "model.ckpt"
+    trainer.save_checkpoint(ckpt)
+    return InterpolationAligner.load_from_checkpoint(ckpt).eval()
+
+
 def test_canonical_heading_is_saved_with_the_checkpoint(tmp_path: Path) -> None:
     assert _tiny().hparams.canonical_heading is False  # the default (paper)
     torch.manual_seed(0)
     skel = procedural.skeleton("biped31").scaled(0.01)
     model = InterpolationAligner(**TINY, canonical_heading=True, skeleton=skel.to_dict(),
                                  fps=30.0, window=32).eval()
-    trainer = L.Trainer(accelerator="cpu", logger=False, default_root_dir=tmp_path,
-                        enable_progress_bar=False, enable_model_summary=False)
-    trainer.strategy.connect(model)
-    ckpt = tmp_path / "model.ckpt"
-    trainer.save_checkpoint(ckpt)
-    loaded = InterpolationAligner.load_from_checkpoint(ckpt).eval()
+    loaded = _reloaded(model, tmp_path)
     assert loaded.hparams.canonical_heading is True
     motion = _turned(_motion(seconds=1.0), 0.4)
+    keys = [0, 12, motion.num_frames - 1]
+    assert torch.allclose(loaded.interpolate(motion, keys).global_positions(),
+                          model.interpolate(motion, keys).global_positions(), atol=1e-6)
+
+
+def test_lerp_tokens_see_the_baseline_pose_and_the_place_in_the_gap() -> None:
+    """``interm_inputs`` = FK of the LERP/SLERP baseline (as :func:`lerp_slerp` computes it
+    on its own) in the model's frame, plus ``w``, ``sin(pi w)`` and the gap length."""
+    from skelagnostic_pcmrl.interp import window_features
+    from skelagnostic_pcmrl.rpa import bone_tails
+
+    motion = _motion(seconds=1.0)
+    skel = motion.skeleton
+    keys = [0, 4, 19, motion.num_frames - 1]
+    mask = torch.zeros(1, motion.num_frames, dtype=torch.bool)
+    mask[0, keys] = True
+    feats = window_features(motion.global_rotations()[None], motion.root_positions[None],
+                            skel.offsets[None], bone_tails(skel).tails[None], mask, skel.parents,
+                            baseline=True, max_relative=16)
+    num_j = skel.num_joints
+    inputs = feats["interm_inputs"][0]
+    assert inputs.shape == (motion.num_frames, 10 * num_j + 3)
+    base = lerp_slerp(motion, keys).global_positions() - feats["center"][0]
+    got = inputs[:, :10 * num_j].reshape(motion.num_frames, num_j, 10)[..., :3]
+    assert torch.allclose(got, base, atol=1e-5)
+    # frame 10 lies 6/15 into the gap 4..19; frame 2 half-way into 0..4
+    assert inputs[10, -3:].tolist() == pytest.approx([0.4, math.sin(0.4 * math.pi), 15 / 16])
+    assert inputs[2, -3:].tolist() == pytest.approx([0.5, 1.0, 4 / 16])
+    assert inputs[19, -3:].tolist() == pytest.approx([0.0, 0.0, 0.0])  # a key
+    # the baseline FOQ is the FOQ of the baseline pose
+    lerp_global = lerp_slerp(motion, keys).global_rotations()
+    foq = Q.mul(lerp_global, Q.inv(lerp_global[:1]))
+    got_foq = inputs[:, :10 * num_j].reshape(motion.num_frames, num_j, 10)[..., 6:]
+    dots = (got_foq * foq).sum(-1).abs()
+    assert torch.allclose(dots, torch.ones_like(dots), atol=1e-5)
+
+
+def test_interm_tokens_option_is_checked_and_saved(tmp_path: Path) -> None:
+    assert _tiny().hparams.interm_tokens == "zero"  # the default (CITL, paper)
+    with pytest.raises(SkelagnosticError, match="interm_tokens"):
+        _tiny(interm_tokens="mean")
+    with pytest.raises(SkelagnosticError, match="residual_space"):
+        _tiny(residual_space="global")
+    model = _tiny(interm_tokens="lerp")
+    assert model.net is not None and model.net.interm_embed is not None
+    loaded = _reloaded(model, tmp_path)
+    assert loaded.hparams.interm_tokens == "lerp"
+    motion = _motion(seconds=1.0)
     keys = [0, 12, motion.num_frames - 1]
     assert torch.allclose(loaded.interpolate(motion, keys).global_positions(),
                           model.interpolate(motion, keys).global_positions(), atol=1e-6)

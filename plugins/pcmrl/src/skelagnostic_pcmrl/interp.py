@@ -13,6 +13,10 @@ skeleton. It follows CITL (Mo et al., CVPR 2023) with PC-MRL's changes:
   over all frames (keyframe tokens from the encoder, the others from the
   intermediate module), as in CITL;
 * Shaw-style learned relative positions (zero initialised) instead of sinusoids;
+* optionally (``interm_tokens="lerp"``, off by default; not in the paper), the
+  intermediate tokens start from an embedding of the frame's LERP/SLERP pose and
+  its place in its gap instead of zeros, and (``residual_space="local"``) the
+  residual correction is added to the SLERPed local rotations instead of the FOQ;
 * optionally (``canonical_heading``, off by default; not in the paper), each
   window is turned about the up axis so that its first frame faces a fixed
   direction (:func:`window_heading`), and the prediction is turned back;
@@ -56,6 +60,7 @@ __all__ = [
     "fk_from_global",
     "global_from_local",
     "key_brackets",
+    "lerp_baseline",
     "lerp_keys",
     "sign_invariant_l1",
     "slerp_keys",
@@ -73,6 +78,8 @@ INTERP_CONFIG: dict[str, Any] = {
     "ff_mult": 4,
     "max_relative": 128,
     "residual": False,
+    "residual_space": "foq",
+    "interm_tokens": "zero",
     "canonical_heading": False,
     "lr": 1e-4,
     "weight_decay": 0.01,
@@ -99,6 +106,9 @@ INTERP_DATA_OPTIONS: dict[str, Any] = {
     "stride": 32,
     "min_keys": 5,
     "max_keys": 36,
+    "key_mode": "random",
+    "min_gap": 5,
+    "max_gap": 30,
     "batch_size": 16,
     "samples_per_epoch": 1024,
     "val_fraction": 0.2,
@@ -260,6 +270,8 @@ def window_features(
     tails: Tensor,
     keys: Tensor,
     parents: Sequence[int],
+    baseline: bool = False,
+    max_relative: int = 128,
 ) -> dict[str, Tensor]:
     """Model inputs and targets of a batch of windows.
 
@@ -270,6 +282,12 @@ def window_features(
         tails: ``[B, J, 3]`` rest bone tails.
         keys: ``[B, T]`` boolean keyframe mask (frame 0 a key).
         parents: Parent indices.
+        baseline: Also compute the LERP/SLERP baseline from the keys (:func:`lerp_baseline`):
+            ``base_foq``, ``base_root`` and ``interm_inputs [B, T, 10J + 3]``, the
+            baseline pose in the layout of ``inputs`` (position minus ``center``, rest
+            direction, FOQ) plus the frame's place in its gap (``w``, ``sin(pi w)``
+            and the gap length over ``max_relative``).
+        max_relative: Gap-length scale of ``interm_inputs``.
 
     Returns:
         ``inputs [B, T, 10J + 1]`` plus ``positions``, ``center [B, 1, 3]``, ``q0 [B, J, 4]``,
@@ -296,7 +314,7 @@ def window_features(
         -1,
     )
     inputs = torch.cat([per_joint.flatten(2) * kf[..., None], kf[..., None]], dim=-1)
-    return {
+    feats = {
         "inputs": inputs,
         "positions": pos,
         "center": center,
@@ -307,6 +325,40 @@ def window_features(
         "global": Q.mul(foq, q0[:, None]),
         "root": root - center,
     }
+    if baseline:
+        base_foq, base_root = lerp_baseline(local_keys, feats["root"], q0, keys, parents)
+        base_pos = fk_from_global(Q.mul(base_foq, q0[:, None]), base_root, offsets, parents)
+        base_joint = torch.cat(
+            [base_pos, direction[:, None].expand(num_b, num_t, num_j, 3),
+             Q.continuity(base_foq, dim=1)], -1)
+        prev, nxt, w = key_brackets(keys)
+        span = (nxt - prev).to(pos.dtype) / float(max_relative)
+        w = w.to(pos.dtype)
+        place = torch.stack([w, torch.sin(math.pi * w), span], dim=-1)
+        feats.update(base_foq=base_foq, base_root=base_root,
+                     interm_inputs=torch.cat([base_joint.flatten(2), place], dim=-1))
+    return feats
+
+
+def lerp_baseline(local_keys: Tensor, root: Tensor, q0: Tensor, keys: Tensor,
+                  parents: Sequence[int]) -> tuple[Tensor, Tensor]:
+    """The LERP baseline of a window from its keys, as FOQ and root.
+
+    Local rotations are SLERPed between the surrounding keys (global rotations by
+    FK), the root is LERPed; only keyframe values are read.
+
+    Args:
+        local_keys: ``[B, T, J, 4]`` local rotations, sign-continuous along the keys.
+        root: ``[B, T, 3]`` root positions.
+        q0: ``[B, J, 4]`` first-frame global rotations.
+        keys: ``[B, T]`` boolean keyframe mask.
+        parents: Parent indices.
+
+    Returns:
+        ``(foq [B, T, J, 4], root [B, T, 3])``.
+    """
+    base = global_from_local(slerp_keys(local_keys, keys), parents)
+    return Q.mul(base, Q.inv(q0)[:, None]), lerp_keys(root, keys)
 
 
 # --------------------------------------------------------------------------- network
@@ -387,12 +439,16 @@ class CITLInterpolator(nn.Module):
         ff_mult: Feed-forward expansion.
         max_relative: Largest distinguished frame distance of the relative positions.
         zero_output: Initialise the output layer to zero (for residual outputs).
+        interm_features: Size of the per-frame input of the intermediate tokens
+            (``interm_tokens="lerp"``); 0: the tokens start at zero, as in CITL.
     """
 
     def __init__(self, in_features: int, out_features: int, dim: int, heads: int, layers: int,
-                 ff_mult: int = 4, max_relative: int = 128, zero_output: bool = False) -> None:
+                 ff_mult: int = 4, max_relative: int = 128, zero_output: bool = False,
+                 interm_features: int = 0) -> None:
         super().__init__()
         self.embed = nn.Linear(in_features, dim)
+        self.interm_embed = nn.Linear(interm_features, dim) if interm_features > 0 else None
         self.encoder = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
                                      for _ in range(layers))
         self.interm = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
@@ -408,12 +464,24 @@ class CITLInterpolator(nn.Module):
             nn.init.zeros_(self.head.weight)
             nn.init.zeros_(self.head.bias)
 
-    def forward(self, inputs: Tensor, keys: Tensor) -> Tensor:
-        """``[B, T, in] -> [B, T, out]``; ``keys`` ``[B, T]`` boolean."""
+    def forward(self, inputs: Tensor, keys: Tensor, interm_inputs: Tensor | None = None) -> Tensor:
+        """``[B, T, in] -> [B, T, out]``.
+
+        Args:
+            inputs: Keyframe features (zeros on the other frames).
+            keys: ``[B, T]`` boolean keyframe mask.
+            interm_inputs: ``[B, T, interm_features]`` start of the intermediate tokens
+                (required when the network was built with ``interm_features``).
+        """
         enc = self.embed(inputs)
         for block in self.encoder:
             enc = block(enc, key_mask=keys)
-        interm = torch.zeros_like(enc)
+        if self.interm_embed is None:
+            interm = torch.zeros_like(enc)
+        else:
+            if interm_inputs is None:
+                raise SkelagnosticError("CITLInterpolator: interm_inputs are required")
+            interm = self.interm_embed(interm_inputs)
         for block in self.interm:
             interm = block(interm, memory=enc, key_mask=keys)
         manifold = torch.where(keys[..., None], self.key_ff(enc), self.interm_ff(interm))
@@ -443,6 +511,17 @@ class InterpolationAligner(Aligner):
             output layer zero-initialised, so the untrained model IS the baseline)
             instead of directly (paper: direct). A CPU option: the network only has
             to learn what interpolation misses, which a few thousand steps can do.
+        residual_space: Where the ``residual`` correction is added: ``"foq"`` (to the
+            baseline's FOQ, i.e. global rotations) or ``"local"`` (not in the paper: to
+            the SLERPed local rotations, turned into FOQ by FK, so that a correction such
+            as a knee bend does not depend on the heading or on the parents' pose). The
+            output and the loss stay FOQ.
+        interm_tokens: How CITL's intermediate tokens start: ``"zero"`` (CITL and the
+            paper: zero tokens that learn where they are only through the relative
+            positions) or ``"lerp"`` (not in the paper): an embedding of the
+            LERP/SLERP baseline pose of the frame and its place in its gap
+            (:func:`window_features` with ``baseline=True``), as the two-stage
+            transformers of Qin et al. 2022 start from interpolated frames.
         canonical_heading: Turn every window about the up axis so that its first
             frame faces a fixed direction (:func:`window_heading`), predict there and
             turn the result back (not in the paper; off by default). Makes the
@@ -474,6 +553,8 @@ class InterpolationAligner(Aligner):
         ff_mult: int = 4,
         max_relative: int = 128,
         residual: bool = False,
+        residual_space: str = "foq",
+        interm_tokens: str = "zero",
         canonical_heading: bool = False,
         lr: float = 1e-4,
         weight_decay: float = 0.01,
@@ -494,6 +575,14 @@ class InterpolationAligner(Aligner):
                 raise SkelagnosticError(f"model.{arg} must be positive, got {value}")
         if warmup_steps < 0:
             raise SkelagnosticError(f"model.warmup_steps must be >= 0, got {warmup_steps}")
+        if residual_space not in ("foq", "local"):
+            raise SkelagnosticError(
+                f"model.residual_space must be 'foq' or 'local', got {residual_space!r}"
+            )
+        if interm_tokens not in ("zero", "lerp"):
+            raise SkelagnosticError(
+                f"model.interm_tokens must be 'zero' or 'lerp', got {interm_tokens!r}"
+            )
         self.save_hyperparameters()
         self.net: CITLInterpolator | None = None
         self.skeleton: Skeleton | None = None
@@ -508,8 +597,25 @@ class InterpolationAligner(Aligner):
         self.parents = list(skeleton.parents)
         self.register_buffer("tails", bone_tails(skeleton).tails.float(), persistent=False)
         self.register_buffer("groups", group_of_joints(skeleton), persistent=False)
+        interm = 10 * num_j + 3 if self._interm_lerp else 0
         self.net = CITLInterpolator(10 * num_j + 1, 4 * num_j + 3, hp.dim, hp.heads, hp.layers,
-                                    hp.ff_mult, hp.max_relative, zero_output=hp.residual)
+                                    hp.ff_mult, hp.max_relative, zero_output=hp.residual,
+                                    interm_features=interm)
+
+    @property
+    def _interm_lerp(self) -> bool:
+        return self.hparams.interm_tokens == "lerp"
+
+    @property
+    def _needs_baseline(self) -> bool:
+        return bool(self.hparams.residual) or self._interm_lerp
+
+    def features(self, global_rotations: Tensor, root: Tensor, offsets: Tensor, tails: Tensor,
+                 keys: Tensor) -> dict[str, Tensor]:
+        """:func:`window_features` with the baseline this model's options need."""
+        return window_features(global_rotations, root, offsets, tails, keys, self.parents,
+                               baseline=self._needs_baseline,
+                               max_relative=int(self.hparams.max_relative))
 
     def setup(self, stage: str) -> None:
         """Build the network from the data module's target skeleton."""
@@ -563,28 +669,49 @@ class InterpolationAligner(Aligner):
             ``global [B, T, J, 4]``.
         """
         net = self._require_net()
-        out = net(feats["inputs"], keys)
+        out = net(feats["inputs"], keys, feats.get("interm_inputs"))
         num_b, num_t = keys.shape
         foq = out[..., :-3].reshape(num_b, num_t, -1, 4)
         root = out[..., -3:]
-        if self.hparams.residual:
+        if self.hparams.residual and self.hparams.residual_space == "local":
+            # additive correction of the SLERPed *local* rotations, then FK to FOQ
+            local = Q.normalize(foq + slerp_keys(feats["local_keys"], keys))
+            glob = global_from_local(local, self.parents)
+            foq = Q.mul(glob, Q.inv(feats["q0"])[:, None])
+            root = root + feats["base_root"]
+        elif self.hparams.residual:
             # additive correction of the LERP baseline: local-rotation SLERP between the
             # keys (as FOQ) and root LERP
-            base = global_from_local(slerp_keys(feats["local_keys"], keys), self.parents)
-            base = Q.mul(base, Q.inv(feats["q0"])[:, None])
-            foq = foq + base
-            root = root + lerp_keys(feats["root"], keys)
+            foq = foq + feats["base_foq"]
+            root = root + feats["base_root"]
         foq = Q.normalize(foq)
         return {"foq": foq, "root": root, "global": Q.mul(foq, feats["q0"][:, None])}
 
-    def _losses(self, batch: Mapping[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
-        hp = self.hparams
+    def predict_batch(
+        self, batch: Mapping[str, Tensor]
+    ) -> tuple[dict[str, Tensor], dict[str, Tensor], Tensor]:
+        """Features, prediction and predicted positions of a batch of training windows.
+
+        Args:
+            batch: ``global_rotations``, ``root``, ``offsets``, ``tails`` and ``keys``
+                as :class:`~skelagnostic_pcmrl.interp_data.InterpolationDataModule` yields.
+
+        Returns:
+            ``(feats, pred, positions)``: :meth:`features` (targets included), the
+            output of :meth:`predict_window`, and the predicted global positions
+            ``[B, T, J, 3]`` (in the frame of ``feats["positions"]``).
+        """
         keys = batch["keys"]
         grot, root, _ = self.canonical(batch["global_rotations"], batch["root"], batch["offsets"])
-        feats = window_features(grot, root, batch["offsets"], batch["tails"], keys, self.parents)
+        feats = self.features(grot, root, batch["offsets"], batch["tails"], keys)
         pred = self.predict_window(feats, keys)
         pos = fk_from_global(pred["global"], pred["root"] + feats["center"], batch["offsets"],
                              self.parents)
+        return feats, pred, pos
+
+    def _losses(self, batch: Mapping[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
+        hp = self.hparams
+        feats, pred, pos = self.predict_batch(batch)
         parts = {
             "root": (pred["root"] - feats["root"]).abs().mean(),
             "foq": sign_invariant_l1(pred["foq"], feats["foq"]),
@@ -732,8 +859,7 @@ class InterpolationAligner(Aligner):
             mask[0, [k - start for k in key_set[ki:end_i + 1]]] = True
             chunk_rot, chunk_root, turn = self.canonical(grot[None, start:end + 1],
                                                          root[None, start:end + 1], offsets[None])
-            feats = window_features(chunk_rot, chunk_root, offsets[None], tails[None], mask,
-                                    self.parents)
+            feats = self.features(chunk_rot, chunk_root, offsets[None], tails[None], mask)
             pred = self.predict_window(feats, mask)
             pred_global = Q.mul(turn[:, None, None], pred["global"])
             pred_root = Q.rotate(turn[:, None], pred["root"] + feats["center"])

@@ -12,7 +12,8 @@ for files in other units.
 Training windows (``window`` frames, 128 in the paper) are drawn at random
 positions with a random number of keyframes in ``[min_keys, max_keys]`` (5 to
 36 in the paper), the first and last frames always keys, the others spread
-uniformly at random; rest pose augmentation (:mod:`skelagnostic_pcmrl.rpa`) is
+uniformly at random (or, with ``key_mode="regular"``, a key every ``g`` frames
+with ``g`` drawn per window); rest pose augmentation (:mod:`skelagnostic_pcmrl.rpa`) is
 applied to a share ``rpa_prob`` of them with range ``rpa_range`` (metres).
 Validation/test windows are fixed (every ``stride`` frames) with a key every
 ``val_gap`` frames plus the last frame.
@@ -37,7 +38,7 @@ from skelagnostic.data.sources import ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic_pcmrl.rpa import augment_rest_pose, bone_tails, random_tail_offsets
 
-__all__ = ["Clip", "InterpolationDataModule", "gap_keys", "random_keys"]
+__all__ = ["Clip", "InterpolationDataModule", "gap_keys", "random_keys", "regular_keys"]
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +94,19 @@ def random_keys(length: int, min_keys: int, max_keys: int, rng: random.Random) -
     return mask
 
 
+def regular_keys(length: int, min_gap: int, max_gap: int, rng: random.Random) -> torch.Tensor:
+    """``[length]`` boolean mask: a key every ``g`` frames from a random phase, plus both ends.
+
+    ``g`` is uniform in ``[min_gap, max_gap]`` and the first inner key at a uniform
+    offset in ``[0, g)``, so every frame is equally likely to be a key.
+    """
+    gap = rng.randint(min_gap, max_gap)
+    mask = torch.zeros(length, dtype=torch.bool)
+    mask[rng.randrange(gap)::gap] = True
+    mask[0] = mask[-1] = True
+    return mask
+
+
 def gap_keys(length: int, gap: int) -> torch.Tensor:
     """``[length]`` boolean mask with a key every ``gap`` frames and on the last frame."""
     if gap <= 0:
@@ -113,7 +127,8 @@ class TrainWindows(Dataset):
     """Random windows with random keyframes and RPA (map-style; DDP shards the indices)."""
 
     def __init__(self, clips: Sequence[Clip], window: int, min_keys: int, max_keys: int,
-                 rpa_range: float, rpa_prob: float, samples: int, seed: int) -> None:
+                 rpa_range: float, rpa_prob: float, samples: int, seed: int,
+                 key_mode: str = "random", min_gap: int = 5, max_gap: int = 30) -> None:
         self.clips = [c for c in clips if c.num_frames >= window]
         if not self.clips:
             raise SkelagnosticError(
@@ -124,6 +139,7 @@ class TrainWindows(Dataset):
         self.window, self.min_keys, self.max_keys = window, min_keys, max_keys
         self.rpa_range, self.rpa_prob = rpa_range, rpa_prob
         self.samples, self.seed = samples, seed
+        self.key_mode, self.min_gap, self.max_gap = key_mode, min_gap, max_gap
         self.epoch = 0
 
     def __len__(self) -> int:
@@ -133,7 +149,10 @@ class TrainWindows(Dataset):
         rng = random.Random(hash((self.seed, self.epoch, index)))
         clip = rng.choices(self.clips, weights=self.weights)[0]
         start = rng.randint(0, clip.num_frames - self.window)
-        keys = random_keys(self.window, self.min_keys, self.max_keys, rng)
+        if self.key_mode == "regular":
+            keys = regular_keys(self.window, self.min_gap, self.max_gap, rng)
+        else:
+            keys = random_keys(self.window, self.min_keys, self.max_keys, rng)
         item = _window(clip, start, self.window, keys)
         if self.rpa_range > 0 and rng.random() < self.rpa_prob:
             gen = torch.Generator().manual_seed(rng.getrandbits(62))
@@ -175,6 +194,12 @@ class InterpolationDataModule(MotionDataModule):
         batch_size: Windows per batch.
         samples_per_epoch: Random training windows per epoch.
         val_fraction: Share of the non-test clips used for validation.
+        key_mode: Keyframes of the training windows: ``"random"`` (the paper: ``min_keys``
+            to ``max_keys`` keys at random frames) or ``"regular"`` (not in the paper: a
+            key every ``g`` frames, ``g`` uniform in ``[min_gap, max_gap]``, from a random
+            phase; the layout of the Table 1 protocol and of ``interpolate every=N``).
+        min_gap: Shortest key gap of ``key_mode="regular"``.
+        max_gap: Longest key gap of ``key_mode="regular"``.
         val_gap: Keyframe gap of the validation/test windows.
         rpa_range: RPA tail offset range in metres (paper 0.1; 0 disables RPA).
         rpa_prob: Share of training windows that get RPA (not given by the paper).
@@ -202,6 +227,9 @@ class InterpolationDataModule(MotionDataModule):
         stride: int = 32,
         min_keys: int = 5,
         max_keys: int = 36,
+        key_mode: str = "random",
+        min_gap: int = 5,
+        max_gap: int = 30,
         batch_size: int = 16,
         samples_per_epoch: int = 1024,
         val_fraction: float = 0.2,
@@ -229,6 +257,15 @@ class InterpolationDataModule(MotionDataModule):
                 raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
         if max_keys < min_keys:
             raise SkelagnosticError(f"data.max_keys ({max_keys}) < data.min_keys ({min_keys})")
+        if key_mode not in ("random", "regular"):
+            raise SkelagnosticError(
+                f"data.key_mode must be 'random' or 'regular', got {key_mode!r}"
+            )
+        if not 1 <= min_gap <= max_gap:
+            raise SkelagnosticError(
+                f"data.min_gap ({min_gap}) and data.max_gap ({max_gap}) must satisfy "
+                "1 <= min_gap <= max_gap"
+            )
         if rpa_range < 0 or not 0 <= rpa_prob <= 1:
             raise SkelagnosticError("data.rpa_range must be >= 0 and data.rpa_prob in [0, 1]")
         if sources is None:
@@ -239,6 +276,7 @@ class InterpolationDataModule(MotionDataModule):
                          split_seed=split_seed, cache_dir=cache_dir)
         self.fps, self.window, self.stride = float(fps), int(window), int(stride)
         self.min_keys, self.max_keys = int(min_keys), int(max_keys)
+        self.key_mode, self.min_gap, self.max_gap = key_mode, int(min_gap), int(max_gap)
         self.batch_size, self.samples_per_epoch = int(batch_size), int(samples_per_epoch)
         self.val_fraction, self.val_gap = float(val_fraction), int(val_gap)
         self.rpa_range, self.rpa_prob, self.mirror = float(rpa_range), float(rpa_prob), mirror
@@ -316,7 +354,8 @@ class InterpolationDataModule(MotionDataModule):
         self.skeletons = {"target": self.skeleton}
         self.train_set = TrainWindows(self.clips["train"], self.window, self.min_keys,
                                       self.max_keys, self.rpa_range, self.rpa_prob,
-                                      self.samples_per_epoch, self.seed)
+                                      self.samples_per_epoch, self.seed, self.key_mode,
+                                      self.min_gap, self.max_gap)
         for split in ("val", "test"):
             short = [c.name for c in self.clips[split] if c.num_frames < self.window]
             if short:
