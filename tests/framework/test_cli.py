@@ -106,6 +106,19 @@ def test_run_fit_resume_validate_predict(example_plugin: Path, tmp_path: Path) -
     assert model.hparams.hidden == 16
 
 
+def test_fit_without_validation_still_checkpoints_every_epoch(example_plugin: Path,
+                                                             tmp_path: Path) -> None:
+    """No validation batch: the ``val/loss`` checkpoint keeps the latest epoch (not nothing)."""
+    run_dir = tmp_path / "run"
+    app.run(app.compose(["model=example", f"data.cache_dir={tmp_path / 'cache'}", *FAST,
+                         f"run_dir={run_dir}", "trainer.limit_val_batches=0",
+                         "trainer.max_epochs=1"]))
+    for name in ("best.ckpt", "last.ckpt"):
+        ckpt = torch.load(run_dir / "checkpoints" / name, weights_only=False)
+        assert ckpt["epoch"] == 0, name
+        assert not any("val/" in str(k) for k in ckpt["callbacks"]), name  # monitor switched off
+
+
 def test_run_rejects_unknown_task(example_plugin: Path) -> None:
     cfg = app.compose(["model=example", "run_dir=/tmp/x"], task="dance")
     with pytest.raises(app.ConfigError, match="task must be one of"):

@@ -210,6 +210,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
+    if task == "fit":
+        from skelagnostic.callbacks import LatestWithoutValidation
+
+        callbacks.append(LatestWithoutValidation())
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
     _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")

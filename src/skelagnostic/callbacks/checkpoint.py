@@ -1,0 +1,51 @@
+"""Checkpoints of runs that have no validation data.
+
+Lightning's :class:`~lightning.pytorch.callbacks.ModelCheckpoint` writes
+``last.ckpt`` only after it saved a top-k checkpoint in the same step. When it
+monitors a validation metric (the default callbacks monitor ``val/loss``) and
+the run has no validation batches (``data.val_fraction=0``,
+``trainer.limit_val_batches=0``), the metric never appears: it warns every
+epoch and writes nothing until training ends, so a killed run loses all its
+epochs. :class:`LatestWithoutValidation` turns such callbacks into "keep the
+latest epoch" at the start of training.
+"""
+
+from __future__ import annotations
+
+import lightning as L
+from lightning.pytorch.utilities import rank_zero_info
+
+__all__ = ["LatestWithoutValidation"]
+
+
+class LatestWithoutValidation(L.Callback):
+    """Without validation batches, checkpoints that monitor ``val/...`` keep the latest epoch.
+
+    At ``on_train_start`` (after Lightning has counted the validation batches),
+    every checkpoint callback whose ``monitor`` starts with ``prefix`` gets
+    ``monitor=None`` when the run has no validation batch: its top-k file then
+    holds the latest epoch, and ``last.ckpt`` is written every epoch as usual.
+    Runs with validation data are left alone. ``skelagnostic fit`` adds this
+    callback to every run.
+
+    Args:
+        prefix: Monitored metric names this applies to.
+    """
+
+    def __init__(self, prefix: str = "val/") -> None:
+        self.prefix = prefix
+
+    def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        """Switch the monitoring checkpoints off when there is no validation batch."""
+        batches = trainer.num_val_batches
+        total = sum(batches) if isinstance(batches, list) else batches
+        if total:
+            return
+        for callback in trainer.checkpoint_callbacks:
+            monitor = getattr(callback, "monitor", None)
+            if isinstance(monitor, str) and monitor.startswith(self.prefix):
+                rank_zero_info(
+                    f"no validation batches: the checkpoint callback monitoring {monitor!r} "
+                    f"keeps the latest epoch instead (files in {callback.dirpath})"
+                )
+                callback.monitor = None
