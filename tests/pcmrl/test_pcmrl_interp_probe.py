@@ -43,6 +43,10 @@ def test_probe_compares_with_lerp_and_learns(lafan_clip: Path, tmp_path: Path) -
     assert all(math.isfinite(f["ratio"]) and f["ratio"] != 1.0 for f in last["probe"].values())
 
 
-def test_probe_rejects_malformed_options() -> None:
+def test_probe_reads_options_as_yaml_values() -> None:
+    probe = _probe()
+    assert probe._options(["lr=3e-3", "dim=16", "residual=false", "interm_tokens=lerp"],
+                          "--model") == {"lr": 0.003, "dim": 16, "residual": False,
+                                         "interm_tokens": "lerp"}
     with pytest.raises(SystemExit, match="key=value"):
-        _probe()._options(["lr"], "--model")
+        probe._options(["lr"], "--model")
