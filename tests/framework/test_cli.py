@@ -119,6 +119,18 @@ def test_fit_without_validation_still_checkpoints_every_epoch(example_plugin: Pa
         assert not any("val/" in str(k) for k in ckpt["callbacks"]), name  # monitor switched off
 
 
+def test_fit_with_late_validation_keeps_monitoring(example_plugin: Path, tmp_path: Path) -> None:
+    """Validation data that is not loaded at the start (every 2nd epoch) is not "none"."""
+    run_dir = tmp_path / "run"
+    app.run(app.compose(["model=example", f"data.cache_dir={tmp_path / 'cache'}", *FAST,
+                         f"run_dir={run_dir}", "trainer.max_epochs=2",
+                         "trainer.check_val_every_n_epoch=2",
+                         "+trainer.num_sanity_val_steps=0"]))
+    ckpt = torch.load(run_dir / "checkpoints" / "best.ckpt", weights_only=False)
+    assert ckpt["epoch"] == 1
+    assert any("val/loss" in str(k) for k in ckpt["callbacks"])  # still monitored
+
+
 def test_run_rejects_unknown_task(example_plugin: Path) -> None:
     cfg = app.compose(["model=example", "run_dir=/tmp/x"], task="dance")
     with pytest.raises(app.ConfigError, match="task must be one of"):

@@ -21,12 +21,14 @@ __all__ = ["LatestWithoutValidation"]
 class LatestWithoutValidation(L.Callback):
     """Without validation batches, checkpoints that monitor ``val/...`` keep the latest epoch.
 
-    At ``on_train_start`` (after Lightning has counted the validation batches),
-    every checkpoint callback whose ``monitor`` starts with ``prefix`` gets
-    ``monitor=None`` when the run has no validation batch: its top-k file then
+    At ``on_train_start`` (after Lightning has loaded and counted the validation
+    batches), every checkpoint callback whose ``monitor`` starts with ``prefix``
+    gets ``monitor=None`` when the run has no validation batch
+    (``limit_val_batches=0``, or loaded validation data without a batch): its top-k file then
     holds the latest epoch, and ``last.ckpt`` is written every epoch as usual.
-    Runs with validation data are left alone. ``skelagnostic fit`` adds this
-    callback to every run.
+    Runs with validation data, or whose validation data is not loaded before
+    the first validation epoch (``check_val_every_n_epoch > 1``), are left
+    alone. ``skelagnostic fit`` adds this callback to every run.
 
     Args:
         prefix: Monitored metric names this applies to.
@@ -37,10 +39,12 @@ class LatestWithoutValidation(L.Callback):
 
     def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         """Switch the monitoring checkpoints off when there is no validation batch."""
-        batches = trainer.num_val_batches
-        total = sum(batches) if isinstance(batches, list) else batches
-        if total:
-            return
+        if trainer.limit_val_batches != 0:
+            if trainer.val_dataloaders is None:
+                return  # not loaded yet (e.g. check_val_every_n_epoch > 1): unknown, keep
+            batches = trainer.num_val_batches
+            if sum(batches) if isinstance(batches, list) else batches:
+                return
         for callback in trainer.checkpoint_callbacks:
             monitor = getattr(callback, "monitor", None)
             if isinstance(monitor, str) and monitor.startswith(self.prefix):
