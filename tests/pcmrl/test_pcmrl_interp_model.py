@@ -337,7 +337,7 @@ def test_lerp_tokens_see_the_baseline_pose_and_the_place_in_the_gap() -> None:
     mask[0, keys] = True
     feats = window_features(motion.global_rotations()[None], motion.root_positions[None],
                             skel.offsets[None], bone_tails(skel).tails[None], mask, skel.parents,
-                            baseline=True, max_relative=16)
+                            interm=True, max_relative=16)
     num_j = skel.num_joints
     inputs = feats["interm_inputs"][0]
     assert inputs.shape == (motion.num_frames, 10 * num_j + 3)

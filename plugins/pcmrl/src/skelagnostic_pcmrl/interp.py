@@ -271,6 +271,7 @@ def window_features(
     keys: Tensor,
     parents: Sequence[int],
     baseline: bool = False,
+    interm: bool = False,
     max_relative: int = 128,
 ) -> dict[str, Tensor]:
     """Model inputs and targets of a batch of windows.
@@ -283,7 +284,8 @@ def window_features(
         keys: ``[B, T]`` boolean keyframe mask (frame 0 a key).
         parents: Parent indices.
         baseline: Also compute the LERP/SLERP baseline from the keys (:func:`lerp_baseline`):
-            ``base_foq``, ``base_root`` and ``interm_inputs [B, T, 10J + 3]``, the
+            ``base_local`` (SLERPed local rotations), ``base_foq`` and ``base_root``.
+        interm: Also compute (with the baseline) ``interm_inputs [B, T, 10J + 3]``, the
             baseline pose in the layout of ``inputs`` (position minus ``center``, rest
             direction, FOQ) plus the frame's place in its gap (``w``, ``sin(pi w)``
             and the gap length over ``max_relative``).
@@ -325,8 +327,11 @@ def window_features(
         "global": Q.mul(foq, q0[:, None]),
         "root": root - center,
     }
-    if baseline:
-        base_foq, base_root = lerp_baseline(local_keys, feats["root"], q0, keys, parents)
+    if baseline or interm:
+        base_local, base_foq, base_root = lerp_baseline(local_keys, feats["root"], q0, keys,
+                                                        parents)
+        feats.update(base_local=base_local, base_foq=base_foq, base_root=base_root)
+    if interm:
         base_pos = fk_from_global(Q.mul(base_foq, q0[:, None]), base_root, offsets, parents)
         base_joint = torch.cat(
             [base_pos, direction[:, None].expand(num_b, num_t, num_j, 3),
@@ -335,14 +340,13 @@ def window_features(
         span = (nxt - prev).to(pos.dtype) / float(max_relative)
         w = w.to(pos.dtype)
         place = torch.stack([w, torch.sin(math.pi * w), span], dim=-1)
-        feats.update(base_foq=base_foq, base_root=base_root,
-                     interm_inputs=torch.cat([base_joint.flatten(2), place], dim=-1))
+        feats["interm_inputs"] = torch.cat([base_joint.flatten(2), place], dim=-1)
     return feats
 
 
 def lerp_baseline(local_keys: Tensor, root: Tensor, q0: Tensor, keys: Tensor,
-                  parents: Sequence[int]) -> tuple[Tensor, Tensor]:
-    """The LERP baseline of a window from its keys, as FOQ and root.
+                  parents: Sequence[int]) -> tuple[Tensor, Tensor, Tensor]:
+    """The LERP baseline of a window from its keys: local rotations, FOQ and root.
 
     Local rotations are SLERPed between the surrounding keys (global rotations by
     FK), the root is LERPed; only keyframe values are read.
@@ -355,10 +359,11 @@ def lerp_baseline(local_keys: Tensor, root: Tensor, q0: Tensor, keys: Tensor,
         parents: Parent indices.
 
     Returns:
-        ``(foq [B, T, J, 4], root [B, T, 3])``.
+        ``(local [B, T, J, 4], foq [B, T, J, 4], root [B, T, 3])``.
     """
-    base = global_from_local(slerp_keys(local_keys, keys), parents)
-    return Q.mul(base, Q.inv(q0)[:, None]), lerp_keys(root, keys)
+    local = slerp_keys(local_keys, keys)
+    base = global_from_local(local, parents)
+    return local, Q.mul(base, Q.inv(q0)[:, None]), lerp_keys(root, keys)
 
 
 # --------------------------------------------------------------------------- network
@@ -520,7 +525,7 @@ class InterpolationAligner(Aligner):
             paper: zero tokens that learn where they are only through the relative
             positions) or ``"lerp"`` (not in the paper): an embedding of the
             LERP/SLERP baseline pose of the frame and its place in its gap
-            (:func:`window_features` with ``baseline=True``), as the two-stage
+            (:func:`window_features` with ``interm=True``), as the two-stage
             transformers of Qin et al. 2022 start from interpolated frames.
         canonical_heading: Turn every window about the up axis so that its first
             frame faces a fixed direction (:func:`window_heading`), predict there and
@@ -597,25 +602,18 @@ class InterpolationAligner(Aligner):
         self.parents = list(skeleton.parents)
         self.register_buffer("tails", bone_tails(skeleton).tails.float(), persistent=False)
         self.register_buffer("groups", group_of_joints(skeleton), persistent=False)
-        interm = 10 * num_j + 3 if self._interm_lerp else 0
+        interm = 10 * num_j + 3 if hp.interm_tokens == "lerp" else 0
         self.net = CITLInterpolator(10 * num_j + 1, 4 * num_j + 3, hp.dim, hp.heads, hp.layers,
                                     hp.ff_mult, hp.max_relative, zero_output=hp.residual,
                                     interm_features=interm)
 
-    @property
-    def _interm_lerp(self) -> bool:
-        return self.hparams.interm_tokens == "lerp"
-
-    @property
-    def _needs_baseline(self) -> bool:
-        return bool(self.hparams.residual) or self._interm_lerp
-
     def features(self, global_rotations: Tensor, root: Tensor, offsets: Tensor, tails: Tensor,
                  keys: Tensor) -> dict[str, Tensor]:
-        """:func:`window_features` with the baseline this model's options need."""
+        """:func:`window_features` with what this model's options need (nothing more)."""
+        hp = self.hparams
         return window_features(global_rotations, root, offsets, tails, keys, self.parents,
-                               baseline=self._needs_baseline,
-                               max_relative=int(self.hparams.max_relative))
+                               baseline=bool(hp.residual), interm=hp.interm_tokens == "lerp",
+                               max_relative=int(hp.max_relative))
 
     def setup(self, stage: str) -> None:
         """Build the network from the data module's target skeleton."""
@@ -675,9 +673,8 @@ class InterpolationAligner(Aligner):
         root = out[..., -3:]
         if self.hparams.residual and self.hparams.residual_space == "local":
             # additive correction of the SLERPed *local* rotations, then FK to FOQ
-            local = Q.normalize(foq + slerp_keys(feats["local_keys"], keys))
-            glob = global_from_local(local, self.parents)
-            foq = Q.mul(glob, Q.inv(feats["q0"])[:, None])
+            local = Q.normalize(foq + feats["base_local"])
+            foq = Q.mul(global_from_local(local, self.parents), Q.inv(feats["q0"])[:, None])
             root = root + feats["base_root"]
         elif self.hparams.residual:
             # additive correction of the LERP baseline: local-rotation SLERP between the
