@@ -265,6 +265,40 @@ def test_fit_with_render_callback_writes_renders(example_plugin: Path, tmp_path:
     assert min(pixels.getextrema()) < 128  # something is drawn, not a blank image
 
 
+def test_fit_with_ema_checkpoints_the_averaged_weights(example_plugin: Path,
+                                                      tmp_path: Path) -> None:
+    """``callbacks=ema``: the checkpoint's weights are the EMA, the raw ones ride along."""
+    common = ["model=example", f"data.cache_dir={tmp_path / 'cache'}", *FAST]
+    run_dir = tmp_path / "run"
+    app.run(app.compose([*common, f"run_dir={run_dir}", "callbacks=[render,ema]",
+                         "callbacks.ema.decay=0.9", "trainer.max_epochs=1"]))
+    assert (run_dir / "renders").is_dir()  # combines with another option
+    ckpt = torch.load(run_dir / "checkpoints" / "last.ckpt", weights_only=False)
+    averaged, raw = ckpt["state_dict"], ckpt["current_model_state"]
+    assert averaged.keys() == raw.keys()
+    assert any(not torch.equal(averaged[k], raw[k]) for k in raw)
+    model = plugins.load_aligner("example", checkpoint=run_dir / "checkpoints" / "last.ckpt")
+    for name, value in model.state_dict().items():
+        assert torch.equal(value, averaged[name]), name  # a loaded model gets the average
+
+    # decay 0: the average is the latest weights
+    zero = tmp_path / "zero"
+    app.run(app.compose([*common, f"run_dir={zero}", "callbacks=ema", "callbacks.ema.decay=0",
+                         "trainer.max_epochs=1"]))
+    ckpt0 = torch.load(zero / "checkpoints" / "last.ckpt", weights_only=False)
+    assert all(torch.equal(ckpt0["state_dict"][k], v)
+               for k, v in ckpt0["current_model_state"].items())
+
+    # resuming continues from the raw weights and the average
+    resumed = tmp_path / "resumed"
+    app.run(app.compose([*common, f"run_dir={resumed}", "callbacks=ema",
+                         "callbacks.ema.decay=0.9", "trainer.max_epochs=2",
+                         f"ckpt_path={run_dir / 'checkpoints' / 'last.ckpt'}"]))
+    assert {row["epoch"] for row in read_metrics(resumed)} == {"1"}
+    after = torch.load(resumed / "checkpoints" / "last.ckpt", weights_only=False)
+    assert after["epoch"] == 1 and "current_model_state" in after
+
+
 class _DataDefaultsPlugin:
     """A plugin whose aligner brings its own default data and data-module keys."""
 
