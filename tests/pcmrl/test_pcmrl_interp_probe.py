@@ -34,13 +34,19 @@ def test_probe_compares_with_lerp_and_learns(lafan_clip: Path, tmp_path: Path) -
         assert 0.01 < figures["lerp_m"] < 1.0  # metres: centimetres of LERP error
     # a few steps later the model is not the baseline any more
     assert probe.main([*common, *tiny, "interm_tokens=lerp", "--minutes", "0.05", "--every", "3",
-                       "--json", str(tmp_path / "b.json")]) == 0
+                       "--ema", "0.5", "--json", str(tmp_path / "b.json")]) == 0
     trained = json.loads((tmp_path / "b.json").read_text())
     assert trained["model"]["interm_tokens"] == "lerp" and trained["model"]["dim"] == 16
     assert trained["data"]["key_mode"] == "regular"
     last = trained["trajectory"][-1]
     assert last["step"] >= 1
     assert all(math.isfinite(f["ratio"]) and f["ratio"] != 1.0 for f in last["probe"].values())
+    # the EMA of the weights is probed beside them, and is neither them nor the start
+    for gap, figures in last["probe_ema"].items():
+        assert figures["lerp_m"] == last["probe"][gap]["lerp_m"]
+        assert figures["ratio"] not in (1.0, last["probe"][gap]["ratio"])
+    with pytest.raises(SystemExit, match="decay"):
+        probe.main([*common, *tiny, "--minutes", "0", "--ema", "1.5"])
 
 
 def test_probe_reads_options_as_yaml_values() -> None:

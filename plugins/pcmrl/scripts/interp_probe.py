@@ -31,6 +31,7 @@ from typing import Any
 
 import torch
 import yaml
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
@@ -84,6 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", nargs="*", default=[], help="model options key=value")
     parser.add_argument("--data", nargs="*", default=[], help="data options key=value")
     parser.add_argument("--json", default=None, help="write the trajectory here")
+    parser.add_argument("--ema", type=float, default=None,
+                        help="also probe an EMA of the weights with this decay (e.g. 0.999)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     torch.manual_seed(args.seed)
@@ -103,6 +106,12 @@ def main(argv: list[str] | None = None) -> int:
     model = InterpolationAligner(**model_opts, **common)
     baseline_opts = {**model_opts, "residual": True, "interm_tokens": "zero"}
     baseline = InterpolationAligner(**baseline_opts, **common).eval()  # zero residual = LERP
+    averaged = None
+    if args.ema is not None:
+        if not 0.0 < args.ema < 1.0:
+            raise SystemExit(f"--ema: the decay must lie in (0, 1), got {args.ema}")
+        averaged = AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(args.ema),
+                                 use_buffers=True)
     optimisers = model.configure_optimizers()
     opt, sched = optimisers["optimizer"], optimisers["lr_scheduler"]["scheduler"]
     probe = {gap: list(torch.utils.data.DataLoader(
@@ -111,20 +120,26 @@ def main(argv: list[str] | None = None) -> int:
     if not any(probe.values()):
         raise SystemExit(f"--test: no clip has {data_opts['window']} frames at {args.fps} fps")
 
-    def evaluate() -> dict[str, dict[str, float]]:
-        model.eval()
+    def evaluate(net: Any) -> dict[str, dict[str, float]]:
+        net.eval()
         out = {}
         with torch.no_grad():
             for gap, batches in probe.items():
                 err = base = count = 0.0
                 for batch in batches:
-                    e, n = _position_error(model, batch)
+                    e, n = _position_error(net, batch)
                     b, _ = _position_error(baseline, batch)
                     err, base, count = err + e, base + b, count + n
                 out[str(gap)] = {"model_m": err / count, "lerp_m": base / count,
                                  "ratio": err / base}
-        model.train()
+        net.train()
         return out
+
+    def evaluate_all() -> dict[str, Any]:
+        figures: dict[str, Any] = {"probe": evaluate(model)}
+        if averaged is not None:
+            figures["probe_ema"] = evaluate(averaged.module)
+        return figures
 
     trajectory = []
     start, step, epoch = time.perf_counter(), 0, 0
@@ -143,23 +158,30 @@ def main(argv: list[str] | None = None) -> int:
         loss.backward()
         opt.step()
         sched.step()
+        if averaged is not None:
+            averaged.update_parameters(model)
         step += 1
         with torch.no_grad():
             base_loss = baseline._losses(batch)[0].item()
         loss_avg = loss.item() if loss_avg is None else 0.98 * loss_avg + 0.02 * loss.item()
         base_avg = base_loss if base_avg is None else 0.98 * base_avg + 0.02 * base_loss
         if step % args.every == 0:
-            figures = evaluate()
+            figures = evaluate_all()
             trajectory.append({"step": step, "seconds": time.perf_counter() - start,
-                               "train_ratio": loss_avg / base_avg, "probe": figures})
+                               "train_ratio": loss_avg / base_avg, **figures})
             cells = " | ".join(f"gap {g}: {f['model_m'] * 100:.2f} cm vs LERP "
                                f"{f['lerp_m'] * 100:.2f} cm ({f['ratio']:.3f})"
-                               for g, f in figures.items())
+                               for g, f in figures["probe"].items())
+            if averaged is not None:
+                cells += " | EMA " + " ".join(f"gap {g}: {f['ratio']:.3f}"
+                                              for g, f in figures["probe_ema"].items())
             print(f"step {step} ({time.perf_counter() - start:.0f} s) train loss / LERP "
                   f"{loss_avg / base_avg:.3f} | {cells}", flush=True)
-    final = evaluate()
-    trajectory.append({"step": step, "seconds": time.perf_counter() - start, "probe": final})
-    print("final step", step, " ".join(f"gap {g}: {f['ratio']:.4f}" for g, f in final.items()))
+    final = evaluate_all()
+    trajectory.append({"step": step, "seconds": time.perf_counter() - start, **final})
+    for key, figures in final.items():
+        print("final", "EMA" if key == "probe_ema" else "model", "step", step,
+              " ".join(f"gap {g}: {f['ratio']:.4f}" for g, f in figures.items()))
     if args.json:
         Path(args.json).write_text(json.dumps({"model": model_opts, "data": data_opts,
                                                "trajectory": trajectory}, indent=2))
