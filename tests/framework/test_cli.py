@@ -16,7 +16,9 @@ import torch
 
 import skelagnostic.plugins as plugins
 from skelagnostic import cli
+from skelagnostic.callbacks import EMAWeights
 from skelagnostic.cli import app
+from skelagnostic.errors import SkelagnosticError
 
 REPO = Path(__file__).resolve().parents[2]
 FAST = ["experiment=smoke", "data.seconds=2.0", "data.clips_per_gait=1", "data.window=16",
@@ -297,6 +299,34 @@ def test_fit_with_ema_checkpoints_the_averaged_weights(example_plugin: Path,
     assert {row["epoch"] for row in read_metrics(resumed)} == {"1"}
     after = torch.load(resumed / "checkpoints" / "last.ckpt", weights_only=False)
     assert after["epoch"] == 1 and "current_model_state" in after
+
+
+class _LateLayerPlugin:
+    """An aligner that creates a layer in setup(), after callbacks=ema copied it."""
+
+    @staticmethod
+    @plugins.hookimpl
+    def register_aligners(register) -> None:
+        from skelagnostic_example.aligner import ExampleAligner
+
+        class LateLayer(ExampleAligner):
+            def setup(self, stage: str) -> None:
+                self.late = torch.nn.Linear(2, 2)
+
+        register("latelayer", LateLayer, config={"hidden": 8})
+
+
+def test_ema_names_the_layers_an_aligner_builds_too_late(example_plugin: Path,
+                                                        tmp_path: Path) -> None:
+    pm = plugins.PluginManager(load_entrypoints=False)
+    pm.register(_LateLayerPlugin(), "latelayer")
+    cfg = app.compose(["model=latelayer", f"data.cache_dir={tmp_path / 'cache'}", *FAST[:-2],
+                       f"run_dir={tmp_path / 'run'}", "callbacks=ema"], plugin_manager=pm)
+    with pytest.raises(SkelagnosticError, match=r"LateLayer created 2 parameters \(late\.weight, "
+                                                r"late\.bias\).*configure_model"):
+        app.run(cfg, pm)
+    with pytest.raises(SkelagnosticError, match=r"decay must lie in \[0, 1\)"):
+        EMAWeights(decay=1.0)
 
 
 class _DataDefaultsPlugin:

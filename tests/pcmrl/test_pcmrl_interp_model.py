@@ -231,6 +231,32 @@ def test_fit_a_few_steps_and_reload(tmp_path: Path) -> None:
     assert math.isfinite(test[0]["test/loss"])
 
 
+def test_ema_averages_the_network_built_from_the_data(tmp_path: Path) -> None:
+    """callbacks=ema copies the model before setup(): configure_model builds the network first."""
+    from lightning.pytorch.callbacks import ModelCheckpoint
+
+    from skelagnostic.callbacks import EMAWeights
+
+    L.seed_everything(0)
+    dm = InterpolationDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
+                                 min_keys=3, max_keys=8, val_fraction=0.0)
+    model = InterpolationAligner(**TINY, residual=True, lr=1e-2, warmup_steps=1)
+    trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, limit_val_batches=0,
+                        default_root_dir=tmp_path, enable_progress_bar=False,
+                        enable_model_summary=False,
+                        callbacks=[EMAWeights(decay=0.5),
+                                   ModelCheckpoint(dirpath=tmp_path, save_last=True)])
+    trainer.fit(model, datamodule=dm)
+    ckpt_path = tmp_path / "last.ckpt"  # written during training (at the end both agree)
+    ckpt = torch.load(ckpt_path, weights_only=False)
+    averaged, raw = ckpt["state_dict"], ckpt["current_model_state"]
+    net_keys = [k for k in raw if k.startswith("net.")]
+    assert net_keys and set(net_keys) <= set(averaged)
+    assert any(not torch.equal(averaged[k], raw[k]) for k in net_keys)
+    loaded = InterpolationAligner.load_from_checkpoint(ckpt_path, map_location="cpu")
+    assert torch.equal(loaded.state_dict()["net.head.weight"], averaged["net.head.weight"])
+
+
 def _local(clip) -> torch.Tensor:  # type: ignore[no-untyped-def]
     from skelagnostic_pcmrl.interp import global_to_local
 

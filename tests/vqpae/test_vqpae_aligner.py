@@ -228,6 +228,20 @@ def test_cli_run_with_the_registered_plugin(vqpae_pm, tmp_path: Path, cache_dir:
     assert (tmp_path / "config.yaml").exists()
 
 
+def test_cli_run_with_ema_averages_every_network(vqpae_pm, tmp_path: Path,
+                                                cache_dir: Path) -> None:
+    """The networks are built from the data before callbacks=ema copies the model."""
+    from skelagnostic.cli.app import compose, run
+
+    cfg = compose(["model=vqpae", f"run_dir={tmp_path}", "experiment=smoke", "callbacks=ema",
+                   "logger=none", "model.num_codes=8", "model.kernel_size=7",
+                   f"data.cache_dir={cache_dir}", "data.seconds=2.0"], plugin_manager=vqpae_pm)
+    run(cfg, vqpae_pm)
+    ckpt = torch.load(tmp_path / "checkpoints" / "last.ckpt", weights_only=False)
+    assert set(ckpt["current_model_state"]) <= set(ckpt["state_dict"])
+    assert len(ckpt["state_dict"]) > 10
+
+
 @pytest.mark.parametrize(("experiment", "codes", "source"), [("human_dog", 32, "human_dog"),
                                                              ("stylized", 64, "styles")])
 def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, source: str) -> None:

@@ -615,12 +615,18 @@ class InterpolationAligner(Aligner):
                                baseline=bool(hp.residual), interm=hp.interm_tokens == "lerp",
                                max_relative=int(hp.max_relative))
 
-    def setup(self, stage: str) -> None:
-        """Build the network from the data module's target skeleton."""
-        if self.net is not None:
+    def configure_model(self) -> None:
+        """Build the network from the data module's target skeleton.
+
+        Lightning calls this hook before every stage (after the data module's
+        ``setup``), and callbacks that copy the model (``callbacks=ema``) call it
+        before their copy, which is earlier than the module's ``setup``.
+        """
+        if self.net is not None:  # built already, or from a checkpoint's hyperparameters
             return
         dm = self.trainer.datamodule
-        dm.setup(stage)
+        fn = self.trainer.state.fn
+        dm.setup(fn.value if fn is not None else "fit")
         skeleton = dm.skeleton
         self.hparams["skeleton"] = skeleton.to_dict()
         self.hparams["fps"] = float(dm.fps)

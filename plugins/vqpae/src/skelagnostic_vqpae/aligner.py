@@ -217,12 +217,18 @@ class VQPAEAligner(Aligner):
                                        hp.reinit_decay, hp.reinit_eps, hp.reinit,
                                        hp.reinit_squared_distance, hp.seed)
 
-    def setup(self, stage: str) -> None:
-        """Build the networks from the data module's datasets and copy its statistics."""
-        if self.codebook is not None:
+    def configure_model(self) -> None:
+        """Build the networks from the data module's datasets and copy its statistics.
+
+        Lightning calls this hook before every stage (after the data module's
+        ``setup``), and callbacks that copy the model (``callbacks=ema``) call it
+        before their copy, which is earlier than the module's ``setup``.
+        """
+        if self.codebook is not None:  # built already, or from a checkpoint's hyperparameters
             return
         dm = self.trainer.datamodule
-        dm.setup(stage)
+        fn = self.trainer.state.fn
+        dm.setup(fn.value if fn is not None else "fit")
         specs = {
             name: {"channels": dm.channels(name), "window": dm.window, "fps": dm.fps,
                    "skeleton": dm.skeletons[name].to_dict()}
