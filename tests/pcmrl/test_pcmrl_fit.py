@@ -63,3 +63,35 @@ def test_tiny_fit_writes_a_checkpoint_that_reloads(pcmrl_pm, tmp_path) -> None:
 
 # The 2-process DDP fit (rank-zero writes, identical weights on both ranks) is
 # tests/reliability/test_ddp_methods.py::test_fit_ddp_two_cpu_processes[pcmrl].
+
+
+def test_stage1_output_preset_trains_with_averaged_weights(pcmrl_pm, tmp_path) -> None:
+    """experiment=pcmrl_interp_stage1 on BVH files: its options arrive, checkpoints hold the EMA."""
+    import pytest
+    from omegaconf.errors import MissingMandatoryValue
+
+    from skelagnostic import write_bvh
+
+    clips = tmp_path / "stage1_out"
+    clips.mkdir()
+    for seed in (1, 2):
+        motion, _ = procedural.generate("biped31", "walk", seconds=5.0, fps=30.0, seed=seed)
+        write_bvh(motion, clips / f"walk{seed}.bvh")
+    preset = ["model=pcmrl_interp", "experiment=pcmrl_interp_stage1", f"run_dir={tmp_path / 'run'}"]
+    cfg = app.compose(preset, plugin_manager=pcmrl_pm)
+    with pytest.raises(MissingMandatoryValue):
+        _ = cfg.data.paths  # the user names the stage-1 output
+    cfg = app.compose([*preset, f"data.paths=[{clips}]", "data.units=cm", "threads=1",
+                       "model.dim=16", "model.heads=2", "model.layers=1",
+                       "data.samples_per_epoch=16", "trainer.max_steps=4"],
+                      plugin_manager=pcmrl_pm)
+    assert cfg.model.interm_tokens == "lerp" and cfg.model.canonical_heading
+    assert cfg.data.key_mode == "regular" and cfg.data.rpa_prob == 0 and not cfg.data.mirror
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        app.run(cfg, plugin_manager=pcmrl_pm)
+    ckpt = torch.load(tmp_path / "run" / "checkpoints" / "last.ckpt", weights_only=False)
+    assert ckpt["global_step"] == 4
+    raw, averaged = ckpt["current_model_state"], ckpt["state_dict"]
+    assert "net.head.weight" in averaged
+    assert not torch.equal(raw["net.head.weight"], averaged["net.head.weight"])
