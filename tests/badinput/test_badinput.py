@@ -206,7 +206,7 @@ def test_cli_data_dirs(site: Path, tmp_path: Path, case: str, args: list[str], m
      (["+data.windw=8"], "data.windw is not an option of data.source='procedural' nor of "
       "ExampleDataModule; accepted: "),
      (["callbacks=nope"], "In 'config': Could not find 'callbacks/nope' Available options in "
-      "'callbacks': default none render resumable"),
+      "'callbacks': default ema none render resumable"),
      (["+callbacks.model_checkpoint.every=1"], "Error in call to target "
       "'lightning.pytorch.callbacks.model_checkpoint.ModelCheckpoint': TypeError"
       "(\"ModelCheckpoint.__init__() got an unexpected keyword argument 'every'\") "
