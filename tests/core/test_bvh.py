@@ -282,3 +282,37 @@ def test_header_encodings_blank_lines_and_bad_bytes_in_the_data(tmp_path, encodi
     line = text.splitlines().index("2 92 4 10 -10 20 20 30 40 7 8 9") + 1
     with pytest.raises(sa.BVHError, match=rf"enc.bvh:{line}: motion value '.' is not a number"):
         sa.read_bvh(path)
+
+
+def deep_chain(levels: int, frames: int = 2) -> str:
+    """A BVH text whose joints form one chain ``levels`` deep (no indentation)."""
+    lines = ["HIERARCHY", "ROOT J0", "{", "OFFSET 0 0 0",
+             "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation"]
+    for k in range(1, levels):
+        lines += [f"JOINT J{k}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Yrotation Xrotation"]
+    lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * levels
+    lines += ["MOTION", f"Frames: {frames}", "Frame Time: 0.0333333"]
+    for f in range(frames):
+        lines.append(" ".join(["0", "0", str(f)] + ["0.5"] * (3 * levels)))
+    return "\n".join(lines) + "\n"
+
+
+def test_10000_level_hierarchy_reads_and_round_trips(tmp_path):
+    # depth is limited by memory only: no recursion in the parser, the skeleton, body
+    # groups, forward kinematics, the height or the writer
+    levels = 10_000
+    path = write(tmp_path, deep_chain(levels), name="deep.bvh")
+    motion = sa.read_bvh(path)
+    sk = motion.skeleton
+    assert sk.num_joints == levels and sk.parents[-1] == levels - 2
+    assert sk.end_sites == {levels - 1: [[0.0, 1.0, 0.0]]}
+    assert sk.height() > 0 and len(sk.body_groups) == levels
+    positions = motion.global_positions()
+    assert positions.shape == (2, levels, 3) and torch.isfinite(positions).all()
+    out = tmp_path / "deep_out.bvh"
+    sa.write_bvh(motion, out)
+    back = sa.read_bvh(out)
+    assert back.skeleton == sk and back.skeleton.end_sites == sk.end_sites
+    torch.testing.assert_close(back.rotations, motion.rotations, atol=1e-6, rtol=0)
+    # the indentation stops growing, so the file stays proportional to the joint count
+    assert out.stat().st_size < 5 * path.stat().st_size

@@ -37,6 +37,9 @@ _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 _DEFAULT_ROOT = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
 _DEFAULT_JOINT = ["Zrotation", "Yrotation", "Xrotation"]
+#: Indentation stops growing at this depth (a 10,000-level chain would otherwise
+#: write 50 million tabs).
+_MAX_INDENT = 32
 _MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 _MOTION_BYTES = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 
@@ -115,6 +118,11 @@ class _Tokens:
 
 
 def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
+    """The joints of the hierarchy, parents before children.
+
+    The nesting is followed with an explicit stack of open joints (no recursion), so
+    the depth of the hierarchy is limited only by memory.
+    """
     tok, line = tokens.next("'HIERARCHY'")
     if tok.upper() != "HIERARCHY":
         raise tokens.error(f"a BVH file starts with 'HIERARCHY', found {tok!r}", line)
@@ -124,7 +132,8 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
     joints: list[_Joint] = []
     names: dict[str, int] = {}
 
-    def parse_joint(parent: int) -> None:
+    def open_joint(parent: int) -> int:
+        """Read a joint's name, '{', OFFSET and CHANNELS; returns its index."""
         name, line = tokens.next("a joint name")
         if name in {"{", "}"}:
             raise tokens.error("missing joint name", line)
@@ -163,26 +172,29 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
                 if ch in joint.channels:
                     raise tokens.error(f"channel {ch!r} repeated on joint {name!r}", chl)
                 joint.channels.append(ch)
-        while True:
-            tok, tline = tokens.next(f"'JOINT', 'End Site' or '}}' in joint {name!r}")
-            if tok == "}":
-                return
-            if tok == "JOINT":
-                parse_joint(index)
-            elif tok == "End":
-                site, sline = tokens.next("'Site'")
-                if site != "Site":
-                    raise tokens.error(f"expected 'End Site', found 'End {site}'", sline)
-                tokens.expect("{")
-                tokens.expect("OFFSET")
-                joint.end_sites.append(tokens.floats(3, f"End Site OFFSET of joint {name!r}"))
-                tokens.expect("}")
-            elif tok == "CHANNELS":
-                raise tokens.error(f"CHANNELS of joint {name!r} must follow its OFFSET", tline)
-            else:
-                raise tokens.error(f"unexpected {tok!r} in joint {name!r}", tline)
+        return index
 
-    parse_joint(-1)
+    open_joints = [open_joint(-1)]  # the joints whose closing '}' is still to come
+    while open_joints:
+        joint = joints[open_joints[-1]]
+        name = joint.name
+        tok, tline = tokens.next(f"'JOINT', 'End Site' or '}}' in joint {name!r}")
+        if tok == "}":
+            open_joints.pop()
+        elif tok == "JOINT":
+            open_joints.append(open_joint(open_joints[-1]))
+        elif tok == "End":
+            site, sline = tokens.next("'Site'")
+            if site != "Site":
+                raise tokens.error(f"expected 'End Site', found 'End {site}'", sline)
+            tokens.expect("{")
+            tokens.expect("OFFSET")
+            joint.end_sites.append(tokens.floats(3, f"End Site OFFSET of joint {name!r}"))
+            tokens.expect("}")
+        elif tok == "CHANNELS":
+            raise tokens.error(f"CHANNELS of joint {name!r} must follow its OFFSET", tline)
+        else:
+            raise tokens.error(f"unexpected {tok!r} in joint {name!r}", tline)
     if tokens.pos < len(tokens.items):
         tok, line = tokens.items[tokens.pos]
         raise tokens.error(f"unexpected {tok!r} after the root joint (a second ROOT?)", line)
@@ -507,22 +519,26 @@ def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
     for c, p in enumerate(sk.parents):
         children.setdefault(p, []).append(c)
 
-    def emit(j: int, depth: int) -> None:
-        pad = "\t" * depth
+    # depth-first with an explicit stack (no recursion: any depth can be written);
+    # an entry (joint, depth, False) opens the joint, (joint, depth, True) closes it
+    stack: list[tuple[int, int, bool]] = [(0, 0, False)]
+    while stack:
+        j, depth, closing = stack.pop()
+        pad = "\t" * min(depth, _MAX_INDENT)
+        if closing:
+            for site in sk.end_sites.get(j, []):
+                out.append(f"{pad}\tEnd Site")
+                out.append(f"{pad}\t{{")
+                out.append(f"{pad}\t\tOFFSET " + " ".join(fmt % v for v in site))
+                out.append(f"{pad}\t}}")
+            out.append(f"{pad}}}")
+            continue
         out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.joint_names[j]}")
         out.append(f"{pad}{{")
         out.append(f"{pad}\tOFFSET " + " ".join(fmt % v for v in offsets[j]))
         out.append(f"{pad}\tCHANNELS {len(channels[j])} " + " ".join(channels[j]))
-        for c in children.get(j, []):
-            emit(c, depth + 1)
-        for site in sk.end_sites.get(j, []):
-            out.append(f"{pad}\tEnd Site")
-            out.append(f"{pad}\t{{")
-            out.append(f"{pad}\t\tOFFSET " + " ".join(fmt % v for v in site))
-            out.append(f"{pad}\t}}")
-        out.append(f"{pad}}}")
-
-    emit(0, 0)
+        stack.append((j, depth, True))
+        stack.extend((c, depth + 1, False) for c in reversed(children.get(j, [])))
     num_frames = m.num_frames
     out.append("MOTION")
     out.append(f"Frames: {num_frames}")
