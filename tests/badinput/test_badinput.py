@@ -48,6 +48,10 @@ MALFORMED = {
     "no_motion_section.bvh": (29, "no MOTION section (truncated file?)"),
     "zero_frames.bvh": (31, "the file declares 0 frames; a motion needs at least one"),
     "zero_frame_time.bvh": (32, "Frame Time must be positive, got 0.0"),
+    "tiny_frame_time.bvh": (32, "Frame Time 1e-320 is too small: the frame rate 1 / Frame Time "
+                                "is not a finite number"),
+    "inf_frame_time.bvh": (32, "Frame Time must be a finite number of seconds, got inf"),
+    "nan_frame_time.bvh": (32, "Frame Time must be a finite number of seconds, got nan"),
     "truncated_frames.bvh": (35, "the file declares 5 frames but has 3 motion lines (truncated?)"),
     "short_row.bvh": (35, "motion line has 13 values, the hierarchy declares 15 channels"),
     "not_a_number.bvh": (34, "motion value 'x' is not a number"),

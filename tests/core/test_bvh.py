@@ -316,3 +316,16 @@ def test_10000_level_hierarchy_reads_and_round_trips(tmp_path):
     torch.testing.assert_close(back.rotations, motion.rotations, atol=1e-6, rtol=0)
     # the indentation stops growing, so the file stays proportional to the joint count
     assert out.stat().st_size < 5 * path.stat().st_size
+
+
+def test_extreme_but_finite_frame_times_read_and_round_trip(tmp_path):
+    # 1e-9 s was written back as "Frame Time: 0.00000000", which does not read
+    for frame_time in (1e-9, 1e300):
+        text = TINY.replace("Frame Time: 0.0333333", f"Frame Time: {frame_time}")
+        motion = sa.read_bvh(write(tmp_path, text))
+        assert motion.fps == pytest.approx(1 / frame_time, rel=1e-12)
+        sa.write_bvh(motion, tmp_path / "out.bvh")
+        assert sa.read_bvh(tmp_path / "out.bvh").fps == pytest.approx(motion.fps, rel=1e-12)
+    # the usual rates keep their 8-decimal Frame Time line
+    sa.write_bvh(sa.parse_bvh(TINY), tmp_path / "30.bvh")
+    assert "\nFrame Time: 0.03333333\n" in (tmp_path / "30.bvh").read_text()

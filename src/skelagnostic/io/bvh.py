@@ -243,6 +243,12 @@ def _snap_fps(frame_time: float) -> float:
     return float(nearest) if nearest > 0 and abs(fps - nearest) <= 1e-3 * fps else fps
 
 
+def _format_frame_time(seconds: float) -> str:
+    """8 decimals (``0.03333333``), or all digits when those would lose the value."""
+    text = f"{seconds:.8f}"
+    return text if abs(float(text) - seconds) <= 1e-6 * seconds else repr(seconds)
+
+
 def parse_bvh(
     data: bytes | str,
     path: str | Path | None = None,
@@ -321,9 +327,22 @@ def parse_bvh(
             path,
             header["frame time"][1],
         ) from None
-    if not math.isfinite(frame_time) or frame_time <= 0:
+    if not math.isfinite(frame_time):
+        raise BVHError(
+            f"Frame Time must be a finite number of seconds, got {frame_time}",
+            path,
+            header["frame time"][1],
+        )
+    if frame_time <= 0:
         raise BVHError(
             f"Frame Time must be positive, got {frame_time}", path, header["frame time"][1]
+        )
+    if not math.isfinite(1.0 / frame_time):
+        raise BVHError(
+            f"Frame Time {header['frame time'][0]} is too small: the frame rate "
+            "1 / Frame Time is not a finite number",
+            path,
+            header["frame time"][1],
         )
     num_channels = sum(len(j.channels) for j in joints)
     first_data_line = line_no + 1
@@ -542,7 +561,7 @@ def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
     num_frames = m.num_frames
     out.append("MOTION")
     out.append(f"Frames: {num_frames}")
-    out.append(f"Frame Time: {1.0 / m.fps:.8f}")
+    out.append(f"Frame Time: {_format_frame_time(1.0 / m.fps)}")
     columns: list[np.ndarray] = []
     root = m.root_positions.numpy()
     trans = None if m.translations is None else m.translations.numpy()
