@@ -19,12 +19,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 import skelagnostic as sa
 from skelagnostic import cli
 from skelagnostic.data import MotionDataModule, ProceduralSource, WindowCache
 from skelagnostic.data.cache import CacheWarning
 from skelagnostic.errors import BVHError, MotionError, SkelagnosticError
+from skelagnostic.io.bvh import BVHWarning
 from skelagnostic.metrics import MPJPE, BoneLengthConsistency
 
 HERE = Path(__file__).resolve().parent
@@ -37,7 +39,10 @@ SMOKE = ["model=example", "experiment=smoke", "data.window=2", "data.stride=1",
 #: Malformed BVH file -> (1-based line, reason) of the BVHError.
 MALFORMED = {
     "empty.bvh": (1, "the file is empty"),
-    "binary_garbage.bvh": (1, "a BVH file starts with 'HIERARCHY', found 'PK\\x03\\x04\\x00ÿþ'"),
+    "binary_garbage.bvh": (1, "a BVH file starts with 'HIERARCHY', found "
+                              "'PK\\x03\\x04\\x00\ufffd\ufffd'"),
+    "non_utf8_name.bvh": (19, "invalid UTF-8 at byte offset 364 (0xe9); BVH files are read as "
+                              "UTF-8, re-save this one in that encoding"),
     "not_bvh_text.bvh": (1, "a BVH file starts with 'HIERARCHY', found '{\"not\":'"),
     "cut_in_hierarchy.bvh": (17, "unexpected end of the hierarchy, expected 'JOINT', "
                                  "'End Site' or '}' in joint 'LeftUpLeg'"),
@@ -59,6 +64,9 @@ MALFORMED = {
     "inf_value.bvh": (34, "motion value 'inf' is not finite (NaN/inf)"),
 }
 HEIGHT_ZERO = {"single_joint.bvh": 1, "all_bones_zero.bvh": 4}
+#: Variants of valid_small.bvh that read as the same motion.
+READABLE = {"utf8_bom.bvh": "a UTF-8 byte order mark", "cr_only.bvh": "CR-only line ends",
+            "cut_last_number.bvh": "no line end after the last (cut) value"}
 
 
 #: Set to a file path to collect the error lines there (to update the page) instead of checking.
@@ -117,8 +125,26 @@ def test_read_bvh_names_file_and_line(name: str) -> None:
 
 
 def test_corpus_is_complete() -> None:
-    known = {*MALFORMED, *HEIGHT_ZERO, "valid_small.bvh", "zero_length_bone.bvh"}
+    known = {*MALFORMED, *HEIGHT_ZERO, *READABLE, "valid_small.bvh", "zero_length_bone.bvh"}
     assert {p.name for p in CORPUS.iterdir()} == known
+
+
+@pytest.mark.parametrize("name", sorted(READABLE))
+def test_readable_variants(name: str) -> None:
+    valid = sa.read_bvh(CORPUS / "valid_small.bvh")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        motion = sa.read_bvh(CORPUS / name)
+    assert motion.skeleton == valid.skeleton and motion.num_frames == valid.num_frames
+    assert np.array_equal(motion.root_positions.numpy(), valid.root_positions.numpy())
+    messages = [str(w.message) for w in caught]
+    if name == "cut_last_number.bvh":  # read, but the cut is reported with its line
+        assert [w.category for w in caught] == [BVHWarning]
+        assert messages == [f"{CORPUS / name}:35: the last motion line has no line end, so "
+                            "the file may be truncated (its last value read as '1.')"]
+    else:
+        assert messages == []
+        assert torch.equal(motion.rotations, valid.rotations)
 
 
 # ------------------------------------------------------------------------ BVH, CLI

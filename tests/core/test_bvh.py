@@ -1,4 +1,5 @@
 import itertools
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -7,6 +8,7 @@ import torch
 
 import skelagnostic as sa
 from skelagnostic.core import quaternion as Q
+from skelagnostic.io.bvh import BVHWarning
 
 TINY = """HIERARCHY
 ROOT Hips
@@ -52,7 +54,7 @@ def max_angle_deg(a: torch.Tensor, b: torch.Tensor) -> float:
     return float(torch.rad2deg(2 * torch.acos(dots)).max())
 
 
-@pytest.mark.parametrize("newline", ["\n", "\r\n"])
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
 def test_read_tiny_file(tmp_path, newline):
     m = sa.read_bvh(write(tmp_path, TINY, newline=newline))
     s = m.skeleton
@@ -200,6 +202,11 @@ BAD_CASES = {
     "bad offset": (TINY.replace("OFFSET 0 10 0", "OFFSET 0 x 0"), "'x' is not a number", 8),
     "nan offset": (TINY.replace("OFFSET 0 10 0", "OFFSET 0 nan 0"), "not finite", 8),
     "not a bvh": ("hello world\n", "starts with 'HIERARCHY'", 1),
+    "motion not alone on its line": (
+        TINY.replace("}\nMOTION", "} MOTION"),
+        "'MOTION' must stand alone on its line",
+        24,
+    ),
     "empty": ("", "empty", 1),
 }
 
@@ -267,21 +274,65 @@ def test_rotations_are_converted_once_on_first_use(tmp_path):
     assert sa.read_bvh(path, dtype=torch.float32).rotations.dtype == torch.float32
 
 
-@pytest.mark.parametrize("encoding", ["utf-8", "latin-1"])
-def test_header_encodings_blank_lines_and_bad_bytes_in_the_data(tmp_path, encoding):
+def test_header_encodings_blank_lines_and_bad_bytes_in_the_data(tmp_path):
     # Only the hierarchy and the two header lines are decoded; blank lines may sit
     # between MOTION, Frames: and Frame Time:, and stray bytes in the data are reported
     # with their line.
     text = TINY.replace("Spine", "Spíne").replace("Frames: 3\n", "\n\nFrames: 3\n\n")
     path = tmp_path / "enc.bvh"
-    path.write_bytes(text.encode(encoding))
+    path.write_bytes(text.encode("utf-8"))
     m = sa.read_bvh(path)
     assert m.skeleton.joint_names[1] == "Spíne" and m.num_frames == 3
-    bad = text.encode(encoding).replace(b"\n2 92", b"\n\xff 92")
+    bad = text.encode("utf-8").replace(b"\n2 92", b"\n\xff 92")
     path.write_bytes(bad)
     line = text.splitlines().index("2 92 4 10 -10 20 20 30 40 7 8 9") + 1
     with pytest.raises(sa.BVHError, match=rf"enc.bvh:{line}: motion value '.' is not a number"):
         sa.read_bvh(path)
+
+
+def test_a_name_that_is_not_utf8_is_an_error_naming_the_byte(tmp_path):
+    # no guessing at latin-1: the first byte that is not UTF-8 is named
+    path = tmp_path / "latin1.bvh"
+    path.write_bytes(TINY.replace("Spine", "Spíne").encode("latin-1"))
+    offset = TINY.encode().index(b"Spine") + 2
+    with pytest.raises(sa.BVHError) as info:
+        sa.read_bvh(path)
+    assert (info.value.line, info.value.reason) == (
+        6,
+        f"invalid UTF-8 at byte offset {offset} (0xed); BVH files are read as UTF-8, re-save "
+        "this one in that encoding",
+    )
+    # after a byte order mark the offset still counts from the start of the file
+    path.write_bytes(b"\xef\xbb\xbf" + TINY.replace("Spine", "Spíne").encode("latin-1"))
+    with pytest.raises(sa.BVHError, match=f"byte offset {offset + 3} "):
+        sa.read_bvh(path)
+
+
+def test_byte_order_mark_and_unterminated_last_line(tmp_path):
+    reference = sa.parse_bvh(TINY)
+    for data in ("\ufeff" + TINY, b"\xef\xbb\xbf" + TINY.encode()):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            motion = sa.parse_bvh(data)
+        assert motion.skeleton == reference.skeleton
+        assert torch.equal(motion.rotations, reference.rotations)
+    # "...7 8 9.25" cut to "...7 8 9." reads as 9.0: warned, naming the line
+    cut = TINY.removesuffix("9\n") + "9."
+    path = write(tmp_path, cut, name="cut.bvh")
+    with pytest.warns(BVHWarning) as record:
+        motion = sa.read_bvh(path)
+    assert [str(w.message) for w in record] == [
+        f"{path}:30: the last motion line has no line end, so the file may be truncated (its "
+        "last value read as '9.')"
+    ]
+    assert motion.num_frames == 3
+    # the value count of that line is still checked
+    with pytest.raises(sa.BVHError, match=r"cut\.bvh:30: motion line has 11 values"):
+        sa.read_bvh(write(tmp_path, TINY.removesuffix(" 9\n"), name="cut.bvh"))
+    # trailing blanks after the last line end are no cut
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sa.parse_bvh(TINY + "  \t")
 
 
 def deep_chain(levels: int, frames: int = 2) -> str:

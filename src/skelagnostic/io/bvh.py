@@ -1,15 +1,18 @@
 """BVH reading and writing.
 
 Supported: any rotation channel order per joint, position channels on any
-joint (Bandai-style files translate non-root joints), End Sites, CRLF or LF
-line endings, and tabs or spaces. Local quaternions are made sign-continuous
+joint (Bandai-style files translate non-root joints), End Sites, CRLF, LF or
+CR-only line endings, tabs or spaces, and UTF-8 text with or without a byte
+order mark (other encodings are an error naming the first byte that is not
+UTF-8). Local quaternions are made sign-continuous
 along time (``q`` and ``-q`` are the same rotation). Position channels
 *replace* the joint's OFFSET for that frame (the convention of the CMU, LaFAN1
 and Bandai tools); a root without position channels stays at its OFFSET.
 
 Every problem raises :class:`~skelagnostic.BVHError` with the file and the
-1-based line at fault; nothing half-built is returned. Writing goes to a
-temporary file that replaces the target only when complete.
+1-based line at fault; nothing half-built is returned. A last motion line
+without a line end is read with a :class:`BVHWarning` (the file may be cut).
+Writing goes to a temporary file that replaces the target only when complete.
 """
 
 from __future__ import annotations
@@ -31,7 +34,11 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import BVHError, SkeletonError
 
-__all__ = ["parse_bvh", "read_bvh", "write_bvh"]
+__all__ = ["BVHWarning", "parse_bvh", "read_bvh", "write_bvh"]
+
+
+class BVHWarning(UserWarning):
+    """A BVH file that reads but looks damaged (its last motion line has no line end)."""
 
 _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
@@ -40,6 +47,7 @@ _DEFAULT_JOINT = ["Zrotation", "Yrotation", "Xrotation"]
 #: Indentation stops growing at this depth (a 10,000-level chain would otherwise
 #: write 50 million tabs).
 _MAX_INDENT = 32
+_BOM = b"\xef\xbb\xbf"
 _MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 _MOTION_BYTES = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 
@@ -197,6 +205,10 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
             raise tokens.error(f"unexpected {tok!r} in joint {name!r}", tline)
     if tokens.pos < len(tokens.items):
         tok, line = tokens.items[tokens.pos]
+        if tok.upper() == "MOTION":  # e.g. "} MOTION", or a lone CR before MOTION
+            raise tokens.error(
+                "'MOTION' must stand alone on its line (a line ending in LF or CR LF)", line
+            )
         raise tokens.error(f"unexpected {tok!r} after the root joint (a second ROOT?)", line)
     return joints
 
@@ -270,16 +282,25 @@ def parse_bvh(
         BVHError: On any malformed input, naming the line.
     """
     path = None if path is None else Path(path)
-    if isinstance(data, bytes):
-        raw = data
-        head = _head(raw)
-        try:
-            text, encoding = head.decode("utf-8"), "utf-8"
-        except UnicodeDecodeError:
-            text, encoding = head.decode("latin-1"), "latin-1"
-    else:
-        text, encoding = data, "utf-8"
-        raw = data.encode("utf-8")
+    raw = data if isinstance(data, bytes) else data.encode("utf-8")
+    skipped = 0  # bytes of a UTF-8 byte order mark, for the offsets in messages
+    if raw.startswith(_BOM):
+        raw, skipped = raw[len(_BOM) :], len(_BOM)
+    if b"\n" not in raw and b"\r" in raw:  # CR-only line ends (classic Mac OS)
+        raw = raw.replace(b"\r", b"\n")
+    head = _head(raw)
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        text = head.decode("utf-8", errors="replace")
+        if text.split(None, 1)[0].upper() == "HIERARCHY":  # else: not BVH, said below
+            raise BVHError(
+                f"invalid UTF-8 at byte offset {exc.start + skipped} "
+                f"(0x{head[exc.start]:02x}); BVH files are read as UTF-8, re-save this "
+                "one in that encoding",
+                path,
+                head.count(b"\n", 0, exc.start) + 1,
+            ) from None
     match = _MOTION.search(text)
     lines = (text if match is None else text[: match.start()]).splitlines()
     if match is None and not any(line.strip() for line in lines):
@@ -346,7 +367,7 @@ def parse_bvh(
         )
     num_channels = sum(len(j.channels) for j in joints)
     first_data_line = line_no + 1
-    offset = pos + 1 if encoding == "latin-1" else len(text[: pos + 1].encode("utf-8"))
+    offset = len(text[: pos + 1].encode("utf-8"))
     body = raw[offset:]
     values = None
     if num_channels:
@@ -362,14 +383,34 @@ def parse_bvh(
         or not np.isfinite(values).all()
     ):
         raise _diagnose_rows(
-            body.decode(encoding, errors="replace").splitlines(),
+            body.decode("utf-8", errors="replace").splitlines(),
             first_data_line,
             num_frames,
             num_channels,
             header["frames"][1],
             path,
         )
+    _warn_if_cut(body, first_data_line, path)
     return _build_motion(joints, values, frame_time, path, dtype, name)
+
+
+def _warn_if_cut(body: bytes, first_line: int, path: Path | None) -> None:
+    """Warn when the last motion line has no line end (its last number may be cut)."""
+    end = len(body)
+    while end and body[end - 1] in b" \t":
+        end -= 1
+    if not end or body[end - 1] in b"\r\n":
+        return
+    start = body.rfind(b"\n", 0, end) + 1
+    last = body[start:end].split()[-1].decode("utf-8", errors="replace")
+    line = first_line + body.count(b"\n", 0, end)
+    where = f"{path if path is not None else '<bvh text>'}:{line}"
+    warnings.warn(
+        f"{where}: the last motion line has no line end, so the file may be truncated "
+        f"(its last value read as {last!r})",
+        BVHWarning,
+        stacklevel=3,
+    )
 
 
 def _build_motion(
