@@ -10,11 +10,14 @@ written as ``<corpus>`` and ``<tmp>``), so that page cannot drift.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import stat
 import subprocess
 import sys
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -337,3 +340,68 @@ def test_exit_code_and_traceback_only_when_asked(site: Path, tmp_path: Path) -> 
                           text=True, timeout=120)
     assert loud.returncode != 0 and "Traceback (most recent call last)" in loud.stderr
     assert files(tmp_path / "runs") == []
+
+
+# ------------------------------------------------------------------- permissions
+@pytest.fixture
+def umask_022() -> Iterator[None]:
+    old = os.umask(0o022)
+    yield
+    os.umask(old)
+
+
+def modes(root: Path) -> dict[str, int]:
+    """Permission bits of every file and directory below ``root``."""
+    return {str(p.relative_to(root)): stat.S_IMODE(p.stat().st_mode) for p in root.rglob("*")}
+
+
+def test_cache_files_get_the_permissions_the_umask_allows(tmp_path: Path, umask_022: None) -> None:
+    cache = WindowCache(tmp_path)
+    entry = cache.put("ab" + "0" * 62, np.zeros((2, 4, 3, 2)), {"starts": [0, 4]})
+    written = modes(tmp_path)
+    assert written[str(entry.array.relative_to(tmp_path))] == 0o644
+    assert set(written.values()) == {0o755, 0o644}
+
+
+def test_full_disk_while_writing_the_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_space(fd: int) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", no_space)
+    with pytest.raises(SkelagnosticError) as info:
+        WindowCache(tmp_path).put("ab" + "0" * 62, np.zeros((2, 4, 3, 2)), {"starts": [0, 4]})
+    assert str(info.value) == (
+        f"data.cache_dir: cannot write the window cache in '{tmp_path}/windows/ab' (No space "
+        "left on device); set data.cache_dir or $SKELAGNOSTIC_CACHE to a writable directory")
+    assert files(tmp_path) == []  # no temporary file, no half entry
+
+
+def test_cli_fit_outputs_get_the_permissions_the_umask_allows(
+        site: Path, tmp_path: Path, umask_022: None) -> None:
+    assert fit(tmp_path) == 0
+    written = {**modes(tmp_path / "runs"), **modes(tmp_path / "cache")}
+    assert any(name.endswith(".npy") for name in written)
+    assert any(name.endswith(".ckpt") for name in written)
+    wrong = {name: oct(mode) for name, mode in written.items() if mode not in {0o644, 0o755}}
+    assert wrong == {}
+
+
+def test_cli_demo_on_a_full_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                 capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    target = out / "bvh" / "biped22_walk_0.bvh"
+    target.parent.mkdir(parents=True)
+    target.write_text("the old file")
+
+    def no_space(fd: int) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", no_space)
+    assert cli.main(["demo", "--out", str(out), "--seconds", "0.2", "--no-gif"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.startswith("skelagnostic demo: ")]
+    assert lines == [f"skelagnostic demo: error: {target}: cannot write: No space left on device"]
+    assert target.read_text() == "the old file"
+    assert not [f for f in files(out) if f.endswith(".tmp")]
+    documented(lines[0], tmp_path)

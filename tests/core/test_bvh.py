@@ -1,4 +1,9 @@
+import errno
 import itertools
+import os
+import stat
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -9,6 +14,8 @@ import torch
 import skelagnostic as sa
 from skelagnostic.core import quaternion as Q
 from skelagnostic.io.bvh import BVHWarning
+
+REPO = Path(__file__).resolve().parents[2]
 
 TINY = """HIERARCHY
 ROOT Hips
@@ -380,3 +387,95 @@ def test_extreme_but_finite_frame_times_read_and_round_trip(tmp_path):
     # the usual rates keep their 8-decimal Frame Time line
     sa.write_bvh(sa.parse_bvh(TINY), tmp_path / "30.bvh")
     assert "\nFrame Time: 0.03333333\n" in (tmp_path / "30.bvh").read_text()
+
+
+@pytest.fixture
+def umask():
+    """Set the process umask for the test (``umask(0o022)``) and restore it afterwards."""
+    old = os.umask(0o022)
+    yield os.umask
+    os.umask(old)
+
+
+def test_written_files_get_the_permissions_the_umask_allows(tmp_path, umask):
+    motion = sa.parse_bvh(TINY)
+    for mask, mode in ((0o022, 0o644), (0o027, 0o640), (0o077, 0o600)):
+        umask(mask)
+        path = tmp_path / f"{mask:03o}.bvh"
+        sa.write_bvh(motion, path)
+        assert stat.S_IMODE(path.stat().st_mode) == mode, oct(mask)
+    # an existing file keeps its permissions when it is replaced
+    umask(0o022)
+    path = tmp_path / "private.bvh"
+    path.write_text("old")
+    path.chmod(0o600)
+    sa.write_bvh(motion, path)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and path.read_text().startswith("HIER")
+
+
+def test_write_through_a_symbolic_link(tmp_path):
+    motion = sa.parse_bvh(TINY)
+    real = tmp_path / "data" / "real.bvh"
+    real.parent.mkdir()
+    real.write_text("old")
+    link = tmp_path / "link.bvh"
+    link.symlink_to(Path("data") / "real.bvh")  # a relative link
+    sa.write_bvh(motion, link)
+    assert link.is_symlink() and os.readlink(link) == str(Path("data") / "real.bvh")
+    assert sa.read_bvh(real).num_frames == 3
+    assert sorted(p.name for p in real.parent.iterdir()) == ["real.bvh"]  # no temporary left
+    # a dangling link creates the file it names
+    dangling = tmp_path / "dangling.bvh"
+    dangling.symlink_to(tmp_path / "data" / "new.bvh")
+    sa.write_bvh(motion, dangling)
+    assert dangling.is_symlink() and (tmp_path / "data" / "new.bvh").is_file()
+    # a link loop is one clear error
+    loop = tmp_path / "loop.bvh"
+    loop.symlink_to(loop)
+    with pytest.raises(sa.BVHError) as info:
+        sa.write_bvh(motion, loop)
+    assert str(info.value) == f"{loop}: cannot write: Too many levels of symbolic links"
+    assert loop.is_symlink()
+
+
+def test_full_disk_is_a_bvh_error_and_leaves_the_target_untouched(tmp_path, monkeypatch):
+    motion = sa.parse_bvh(TINY)
+    target = tmp_path / "clip.bvh"
+    target.write_text("the old file")
+
+    def no_space(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", no_space)  # where a full disk may surface last
+    with pytest.raises(sa.BVHError) as info:
+        sa.write_bvh(motion, target)
+    assert str(info.value) == f"{target}: cannot write: No space left on device"
+    assert target.read_text() == "the old file"
+    assert [p.name for p in tmp_path.iterdir()] == ["clip.bvh"]
+
+
+def test_failing_write_is_a_bvh_error_and_leaves_the_target_untouched(tmp_path):
+    # a real failing write(2): the file size limit (RLIMIT_FSIZE) makes it fail with
+    # EFBIG, as a full disk fails with ENOSPC; in a subprocess so that the limit
+    # cannot touch pytest's own files
+    target = tmp_path / "clip.bvh"
+    target.write_text("the old file")
+    code = f"""
+import resource, signal
+import skelagnostic as sa
+motion, _ = sa.procedural.generate("biped22", "walk", seconds=2.0, fps=30)
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (4096, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+try:
+    sa.write_bvh(motion, {str(target)!r})
+except sa.BVHError as exc:
+    print(exc)
+"""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO / "src"),
+                                                       os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env, timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == f"{target}: cannot write: File too large", proc.stderr
+    assert target.read_text() == "the old file"
+    assert [p.name for p in tmp_path.iterdir()] == ["clip.bvh"]

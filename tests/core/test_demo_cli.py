@@ -1,4 +1,6 @@
 import json
+import os
+import stat
 import subprocess
 import sys
 
@@ -52,3 +54,16 @@ def test_unknown_verb_and_help(capsys):
     assert "unknown verb" in capsys.readouterr().err
     assert main(["--help"]) == 0
     assert "demo" in capsys.readouterr().out
+
+
+def test_demo_outputs_get_the_permissions_the_umask_allows(tmp_path):
+    out = tmp_path / "demo"
+    old = os.umask(0o022)
+    try:
+        assert main(["demo", "--out", str(out), "--seconds", "0.3"]) == 0
+    finally:
+        os.umask(old)
+    written = {str(p.relative_to(out)): stat.S_IMODE(p.stat().st_mode) for p in out.rglob("*")}
+    assert {"demo.png", "demo.gif", "summary.json", "bvh/biped22_walk_0.bvh"} <= set(written)
+    wrong = {name: oct(mode) for name, mode in written.items() if mode not in {0o644, 0o755}}
+    assert wrong == {}

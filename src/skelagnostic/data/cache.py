@@ -6,8 +6,10 @@ skeleton and window starts. Training reads windows with plain positioned reads
 (:meth:`CacheEntry.read`), not memory maps, so a process holds only the
 windows it is working on: its resident memory does not grow with the corpus
 (mapped pages would count in its RSS until unmapped). Both files are written
-to a temporary file and moved in place with :func:`os.replace`, the JSON last,
-so readers (other DDP ranks, concurrent runs) see a complete entry or none.
+to a temporary file and moved in place with :func:`os.replace`, the JSON last
+(:func:`~skelagnostic.io.atomic.atomic_write`, so they get the permissions the
+umask allows), so readers (other DDP ranks, concurrent runs) see a complete
+entry or none.
 An entry that is nevertheless damaged (unparsable JSON, an array whose
 header, shape or size disagrees with it, e.g. after a disk error or a manual
 edit) is reported with a :class:`CacheWarning` and treated as missing, so it
@@ -20,7 +22,6 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 import warnings
 from dataclasses import dataclass
 from functools import cached_property
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.io.atomic import atomic_write
 
 #: Bump when the cached layout or the window extraction changes.
 CACHE_VERSION = 1
@@ -57,20 +59,13 @@ class CacheWarning(UserWarning):
 def _atomic_write(path: Path, write: Any) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        atomic_write(path, write)
     except OSError as exc:
         raise SkelagnosticError(
             f"data.cache_dir: cannot write the window cache in {str(path.parent)!r} "
             f"({exc.strerror or exc}); set data.cache_dir or $SKELAGNOSTIC_CACHE to a "
             "writable directory"
         ) from exc
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 @dataclass(frozen=True)

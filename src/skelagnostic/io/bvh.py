@@ -12,16 +12,16 @@ and Bandai tools); a root without position channels stays at its OFFSET.
 Every problem raises :class:`~skelagnostic.BVHError` with the file and the
 1-based line at fault; nothing half-built is returned. A last motion line
 without a line end is read with a :class:`BVHWarning` (the file may be cut).
-Writing goes to a temporary file that replaces the target only when complete.
+Writing goes through :func:`~skelagnostic.io.atomic.atomic_write`: a temporary
+file replaces the target only when complete, with the permissions the umask
+allows, and a symbolic link is written through.
 """
 
 from __future__ import annotations
 
 import io
 import math
-import os
 import re
-import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +33,7 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import BVHError, SkeletonError
+from skelagnostic.io.atomic import atomic_write
 
 __all__ = ["BVHWarning", "parse_bvh", "read_bvh", "write_bvh"]
 
@@ -560,13 +561,18 @@ def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
     ``Zrotation Yrotation Xrotation`` on every joint. Euler angles are unwrapped
     along time so curves stay continuous.
 
+    A new file gets the permissions the umask allows (``0o644`` under umask
+    ``022``), an existing one keeps its own; a symbolic link is written through
+    (the file it points to is replaced, the link stays).
+
     Args:
         motion: The motion.
         path: Target file.
         precision: Decimals written for every value.
 
     Raises:
-        BVHError: If the directory cannot be written.
+        BVHError: If the file cannot be written (missing or read-only directory, full
+            disk, symbolic link loop, ...); the target is then left untouched.
     """
     path = Path(path)
     sk = motion.skeleton
@@ -635,15 +641,7 @@ def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
     row_fmt = " ".join([fmt] * table.shape[1])
     out.extend(row_fmt % tuple(row) for row in table.tolist())
     text = "\n".join(out) + "\n"
-    directory = path.parent if str(path.parent) else Path(".")
     try:
-        fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".tmp")
+        atomic_write(path, text.encode("utf-8"))
     except OSError as exc:
-        raise BVHError(f"cannot write: {exc.strerror}", path) from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        raise BVHError(f"cannot write: {exc.strerror or exc}", path) from None

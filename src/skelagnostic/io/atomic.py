@@ -1,0 +1,104 @@
+"""Atomic file writes that respect the umask and write through symbolic links.
+
+Every file skelagnostic writes in place (BVH files, window-cache entries) goes
+through :func:`atomic_write`, so that all of them behave the same way:
+
+* the content goes to a temporary file next to the target, is flushed to disk,
+  and replaces the target with one :func:`os.replace`: readers see the old file
+  or the new one, never a part of it, and a failed write (a full disk, say)
+  leaves the target untouched and removes the temporary file;
+* a new file gets the permissions :func:`open` would give it (``0o666`` minus
+  the umask, so ``0o644`` under the usual umask ``022``), unlike
+  :func:`tempfile.mkstemp`, which always gives ``0o600``; an existing file keeps
+  its permission bits;
+* a target that is a symbolic link is written through: the file it points to is
+  replaced and the link stays a link.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import secrets
+import stat
+from collections.abc import Callable
+from pathlib import Path
+from typing import BinaryIO
+
+__all__ = ["atomic_write", "write_target"]
+
+_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+
+
+def write_target(path: str | Path) -> Path:
+    """The file a write to ``path`` replaces: ``path`` with every symbolic link followed.
+
+    Args:
+        path: The path given by the user (it need not exist; a dangling link gives
+            the file it names).
+
+    Returns:
+        The absolute path of the file to replace.
+
+    Raises:
+        OSError: ``ELOOP`` if the links form a loop.
+    """
+    target = Path(os.path.realpath(path))
+    if target.is_symlink():  # realpath stops at a link loop instead of raising
+        raise OSError(errno.ELOOP, os.strerror(errno.ELOOP), str(path))
+    return target
+
+
+def _create_temporary(target: Path) -> tuple[int, Path]:
+    """Create a new empty file next to ``target`` with mode ``0o666`` minus the umask."""
+    for _ in range(100):
+        tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            return os.open(tmp, _FLAGS, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no free temporary file name", str(target.parent))
+
+
+def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object]) -> Path:
+    """Write a file atomically, with the permissions the umask allows.
+
+    Args:
+        path: The file to write. Its directory must exist. A symbolic link is
+            followed and the file it points to is replaced.
+        data: The content, or a function that writes it to the binary file object
+            it is given (e.g. ``lambda fh: np.save(fh, array)``).
+
+    Returns:
+        The path of the file written (``path`` with symbolic links followed).
+
+    Raises:
+        OSError: The directory is missing or read-only, the disk is full, the links
+            form a loop, ...; the target is then untouched and no temporary file
+            is left behind. Exceptions raised by ``data`` propagate the same way.
+    """
+    target = write_target(path)
+    try:
+        info = os.stat(target)
+        keep_mode = stat.S_IMODE(info.st_mode) if stat.S_ISREG(info.st_mode) else None
+    except FileNotFoundError:
+        keep_mode = None
+    fd, tmp = _create_temporary(target)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            if keep_mode is not None:
+                os.chmod(tmp, keep_mode)
+            if callable(data):
+                data(fh)
+            else:
+                fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return target
