@@ -337,6 +337,63 @@ def _discard_failed_run(run_dir: Path) -> str:
     return ""
 
 
+def split_hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
+    """Split a command line into Hydra's flags (with their values) and its overrides.
+
+    Hydra parses ``sys.argv`` with argparse, which takes the overrides as one
+    contiguous run of positional arguments; the CLI adds overrides of its own
+    (``task=<verb>``, the plugins' search path), so it re-orders the user's
+    arguments as flags first, overrides after. Flags and their arity come from
+    Hydra's own argument parser: ``--cfg job``, ``--cfg=job``, ``-m``,
+    ``--info`` with or without a value, ...
+
+    Args:
+        args: The arguments after the verb, in the user's order.
+
+    Returns:
+        ``(flags, overrides)``, each in the user's order.
+
+    Example:
+        >>> split_hydra_flags(["model=example", "--cfg", "job", "-m", "seed=1,2"])
+        (['--cfg', 'job', '-m'], ['model=example', 'seed=1,2'])
+    """
+    from hydra._internal.utils import get_args_parser
+
+    actions = get_args_parser()._option_string_actions
+    flags: list[str] = []
+    overrides: list[str] = []
+    tokens = list(args)
+    i = 0
+    while i < len(tokens):
+        token = tokens[i]
+        i += 1
+        name = token.split("=", 1)[0]
+        if not token.startswith("-") or name not in actions:
+            overrides.append(token)
+            continue
+        flags.append(token)
+        action = actions[name]
+        if "=" in token or action.nargs == 0:
+            continue
+        takes_value = action.nargs is None or (
+            action.nargs == "?" and i < len(tokens)
+            and (action.choices is None or tokens[i] in action.choices)
+        )
+        if takes_value and i < len(tokens):
+            flags.append(tokens[i])
+            i += 1
+    return flags, overrides
+
+
+#: Hydra flags that show something instead of running a job.
+_INFO_FLAGS = frozenset({"--help", "-h", "--cfg", "-c", "--info", "-i",
+                         "--shell-completion", "-sc"})
+
+
+def _informational(flags: Sequence[str]) -> bool:
+    return any(f.split("=", 1)[0] in _INFO_FLAGS for f in flags)
+
+
 def _failed_plugins(pm: PluginManager | None) -> str:
     if pm is None:
         return ""
@@ -379,7 +436,19 @@ def main(task: str, argv: Sequence[str]) -> int:
     try:
         pm = get_plugin_manager()
         register_model_configs(pm)
-        hydra_args = [*_searchpath_overrides(pm, args), *args, f"task={task}"]
+        flags, overrides = split_hydra_flags(args)
+        # Hydra's argparse takes its overrides as one run of positional arguments:
+        # flags first, then ours and the user's overrides (user's last, so they win).
+        # The plugins' config trees come from the search-path plugin in
+        # hydra_plugins/skelagnostic_searchpath (so --help lists their options).
+        ours = [f"task={task}"]
+        if _informational(flags) and not any(
+            o.split("=", 1)[0].lstrip("+") in ("model", "experiment") for o in overrides
+        ):
+            ours.append("~model")  # --help / --cfg / --info work before a model is chosen
+        hydra_args = [*flags, *ours, *overrides]
+        if "--hydra-help" in flags:  # Hydra's own help: no app config, no overrides
+            hydra_args = flags
 
         failures: list[Exception] = []
         terminated: list[bool] = []
@@ -397,7 +466,12 @@ def main(task: str, argv: Sequence[str]) -> int:
         entry = hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name="config",
                            version_base="1.3")(task_function)
         with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}):
-            entry()
+            try:
+                entry()
+            except SystemExit as exc:  # Hydra exits by itself after --help and --hydra-help
+                if exc.code not in (0, None) or failures or terminated or run_dirs:
+                    raise
+                return 0
         if failures:
             raise failures[0]
         if terminated:
