@@ -34,6 +34,7 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from skelagnostic.core.paths import expand_home_in_override, expand_path
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import PluginManager, get_plugin_manager
 
@@ -86,9 +87,9 @@ def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModul
     if data.get("representation"):
         rep_cls = pm.representation(data["representation"]).cls
         representation = rep_cls(**(data.get("representation_options") or {}))
-    return spec.datamodule(
-        sources=[dataset.factory(**options)], representation=representation, **dm_kwargs
-    )
+    made = dataset.factory(**options)  # one source, or several (data.paths entries)
+    sources = list(made) if isinstance(made, (list, tuple)) else [made]
+    return spec.datamodule(sources=sources, representation=representation, **dm_kwargs)
 
 
 def _instantiate_all(group: DictConfig | None, what: str) -> list[Any]:
@@ -195,6 +196,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
     run_dir = Path(cfg.run_dir)
     ckpt = cfg.ckpt_path
+    if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
+        ckpt = str(expand_path(ckpt))
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt) and not Path(ckpt).is_file():
         raise ConfigError(f"ckpt_path: no checkpoint file {str(ckpt)!r}")
     threads = cfg.get("threads")
@@ -225,14 +228,14 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     )
     _save_config(cfg, run_dir)
     if task == "fit":
-        trainer.fit(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+        trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt)
     elif task == "validate":
-        trainer.validate(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+        trainer.validate(model, datamodule=datamodule, ckpt_path=ckpt)
     elif task == "test":
-        trainer.test(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+        trainer.test(model, datamodule=datamodule, ckpt_path=ckpt)
     else:
         _save_predictions(
-            trainer.predict(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path), run_dir
+            trainer.predict(model, datamodule=datamodule, ckpt_path=ckpt), run_dir
         )
     return {k: float(v) for k, v in trainer.callback_metrics.items()}
 
@@ -273,6 +276,7 @@ def compose(
     """
     pm = plugin_manager or get_plugin_manager()
     register_model_configs(pm)
+    overrides = [expand_home_in_override(o) for o in overrides]
     with hydra.initialize_config_module(CONFIG_MODULE, version_base="1.3"):
         return hydra.compose(
             "config", overrides=[*_searchpath_overrides(pm, overrides), *overrides, f"task={task}"]
@@ -437,6 +441,7 @@ def main(task: str, argv: Sequence[str]) -> int:
         pm = get_plugin_manager()
         register_model_configs(pm)
         flags, overrides = split_hydra_flags(args)
+        overrides = [expand_home_in_override(o) for o in overrides]  # data.paths=[~/mocap]
         # Hydra's argparse takes its overrides as one run of positional arguments:
         # flags first, then ours and the user's overrides (user's last, so they win).
         # The plugins' config trees come from the search-path plugin in

@@ -14,8 +14,10 @@ import lightning as L
 import numpy as np
 import torch
 from lightning.pytorch.utilities import CombinedLoader
+from lightning.pytorch.utilities.rank_zero import rank_zero_info
 from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
 
+from skelagnostic.core.paths import expand_path
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data.cache import (
     CacheEntry,
@@ -226,6 +228,32 @@ def _split_clips(
     }
 
 
+def describe_dataset(name: str, members: Sequence[tuple[ClipRef, CacheEntry]],
+                     datasets: dict[str, dict[str, WindowDataset]]) -> str:
+    """One log line on a dataset: clips per split, joints, standing height and its unit.
+
+    The unit is what a wrong ``data.units`` (or a wrong guess) would show
+    first: a person 171 m tall, or a dog of 0.6 m logged as centimetres.
+    """
+    from skelagnostic.core.units import infer_units
+
+    meta = members[0][1].meta
+    skeleton = Skeleton.from_dict(meta["skeleton"])
+    height = skeleton.height()
+    units = meta.get("units")
+    if units == "m":
+        size = f"height {height:.2f} m"
+    elif units is not None:
+        size = f"height {height:.3g} {units}"
+    else:
+        size = (f"height {height:.3g} in the files' unit (not converted; data.units or a "
+                f"data.paths entry's units: sets it; the height suggests {infer_units(skeleton)})")
+    splits = ", ".join(f"{part} {len(datasets[part][name].entries)}" for part in SPLITS
+                       if name in datasets[part])
+    return (f"data: dataset {name!r}: {len(members)} clip(s) ({splits}), "
+            f"{skeleton.num_joints} joints, {size}")
+
+
 class MotionDataModule(L.LightningDataModule):
     """Windows of motion clips for one or several skeletons, cached on disk.
 
@@ -302,7 +330,8 @@ class MotionDataModule(L.LightningDataModule):
         self.val_fraction = float(val_fraction)
         self.test_fraction = float(test_fraction)
         self.split_seed = int(split_seed)
-        self.cache = WindowCache(cache_dir if cache_dir is not None else default_cache_dir())
+        self.cache = WindowCache(expand_path(cache_dir) if cache_dir is not None
+                                 else default_cache_dir())
         self.per_element_stats = per_element_stats
         #: ``split -> dataset name -> WindowDataset``, filled by :meth:`setup`.
         self.datasets: dict[str, dict[str, WindowDataset]] = {s: {} for s in SPLITS}
@@ -353,7 +382,7 @@ class MotionDataModule(L.LightningDataModule):
             feats = rep.encode(motion).float()
             windows = feats.unfold(0, self.window, self.stride).permute(0, 3, 1, 2).numpy()
         meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(), "starts": starts,
-                "fps": self.fps}
+                "fps": self.fps, "units": motion.units}
         return self.cache.put(key, windows, meta)
 
     def prepare_data(self) -> None:
@@ -383,7 +412,10 @@ class MotionDataModule(L.LightningDataModule):
                 topo = (tuple(sk["joint_names"]), tuple(sk["parents"]))
                 groups.setdefault(topo, []).append((clip, entry))
             for members in groups.values():
-                self._add_dataset(self._dataset_name(source, members, len(groups)), members)
+                name = self._dataset_name(source, members, len(groups))
+                self._add_dataset(name, members)
+                if name in self.skeletons:
+                    rank_zero_info(describe_dataset(name, members, self.datasets))
         if not self.skeletons:
             raise SkelagnosticError(
                 f"data: no clip is at least data.window={self.window} frames long at "
