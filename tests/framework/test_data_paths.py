@@ -119,3 +119,14 @@ def test_cli_fit_with_a_home_path(example_plugin: Path, home: Path, tmp_path: Pa
                      "data.stride=8", "trainer.max_epochs=1", f"runs_dir={tmp_path / 'runs'}",
                      f"data.cache_dir={tmp_path / 'cache'}"])
     assert code == 0, capsys.readouterr().err
+
+
+def test_file_verbs_expand_paths(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    from skelagnostic.cli.render import parse_arguments
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.setenv("SA_CLIPS", "/clips")
+    words, options = parse_arguments(["~/a.bvh", "$SA_CLIPS/b.bvh", "out=~/o.bvh",
+                                      "ckpt=$SA_CLIPS/x.ckpt", "labels=~a,b"])
+    assert words == [f"{tmp_path}/a.bvh", "/clips/b.bvh"]
+    assert options == {"out": f"{tmp_path}/o.bvh", "ckpt": "/clips/x.ckpt", "labels": "~a,b"}

@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = ["RENDER_OPTIONS", "main", "parse_arguments", "render_from_options"]
@@ -54,8 +55,16 @@ def _usage() -> str:
     return _USAGE.format(options="\n".join(lines))
 
 
+#: Options of the file verbs that name a path (``~`` and ``$VARS`` are expanded).
+PATH_OPTIONS = frozenset({"out", "ckpt", "render", "sheet", "html", "ckpt_path"})
+
+
 def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
     """Split command-line words into positional arguments and ``key=value`` options.
+
+    Positional arguments (input files) and the values of :data:`PATH_OPTIONS`
+    get ``~`` and ``$VARS`` expanded (:func:`~skelagnostic.core.paths.expand_path`):
+    a shell does not expand ``~`` after ``out=``.
 
     Args:
         argv: The words after the verb.
@@ -76,9 +85,9 @@ def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
         if sep and key.isidentifier():
             if key in options:
                 raise SkelagnosticError(f"option {key}= is given twice")
-            options[key] = value
+            options[key] = str(expand_path(value)) if key in PATH_OPTIONS and value else value
         else:
-            positional.append(word)
+            positional.append(str(expand_path(word)))
     return positional, options
 
 
