@@ -34,7 +34,20 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from skelagnostic.core.paths import expand_home_in_override, expand_path
+from skelagnostic.cli.runs import (
+    AdaptiveLogInterval,
+    RecordSplit,
+    checkpoint_of,
+    chosen_keys,
+    find_run_dir,
+    max_steps_overrides,
+    quiet_lightning,
+    read_split,
+    reuse_run_config,
+    run_of_overrides,
+    summary_table,
+)
+from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import PluginManager, get_plugin_manager
 
@@ -48,6 +61,8 @@ DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
 SIGTERM_EXIT_CODE = 143
 #: ``ckpt_path`` values Lightning resolves itself.
 _CKPT_ALIASES = ("last", "best", "hpc", "registry")
+#: Provider name of the configs this module puts into Hydra's ConfigStore.
+_PROVIDER = "skelagnostic"
 #: Data-config keys that are not options of the data module or the dataset source.
 _DATA_KEYS = ("source", "representation", "representation_options")
 
@@ -154,6 +169,23 @@ def _check_options(options: dict[str, Any], cls: type, prefix: str, owner: str) 
                               f"(expected {hint})")
 
 
+def _require_test_split(datamodule: L.LightningDataModule) -> None:
+    """Raise :class:`ConfigError` when the data module has no test clip (``test`` would do nothing).
+
+    Only for data modules that expose their splits (``datasets["test"]``).
+    """
+    if not hasattr(datamodule, "datasets"):
+        return
+    datamodule.setup("test")
+    if any(len(ds) for ds in datamodule.datasets.get("test", {}).values()):
+        return
+    raise ConfigError(
+        "test: the test split is empty (data.test_fraction=0 and no clip matches a test "
+        "pattern); set data.test_fraction>0 (test clips then come from clips the run did not "
+        "train on), data.test_pattern=REGEX, or use validate"
+    )
+
+
 @rank_zero_only
 def _save_config(cfg: DictConfig, run_dir: Path) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -196,8 +228,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
     run_dir = Path(cfg.run_dir)
     ckpt = cfg.ckpt_path
+    source_run: Path | None = None
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
-        ckpt = str(expand_path(ckpt))
+        source_run = find_run_dir(ckpt)
+        ckpt = str(checkpoint_of(ckpt))
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt) and not Path(ckpt).is_file():
         raise ConfigError(f"ckpt_path: no checkpoint file {str(ckpt)!r}")
     threads = cfg.get("threads")
@@ -208,15 +242,21 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     L.seed_everything(cfg.seed, workers=True)
     spec = pm.aligner(cfg.model.name)
     datamodule = build_datamodule(cfg, pm)
+    recorded = read_split(source_run) if source_run is not None else None
+    if recorded is not None and hasattr(datamodule, "recorded_splits"):
+        datamodule.recorded_splits = recorded  # never evaluate on the run's training clips
+    if task == "test":
+        _require_test_split(datamodule)
     model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
                     if k != "name"}
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
     if task == "fit":
-        from skelagnostic.callbacks import LatestWithoutValidation
+        from skelagnostic.callbacks import FinalStepCheckpoint, LatestWithoutValidation
 
-        callbacks.append(LatestWithoutValidation())
+        callbacks += [LatestWithoutValidation(), FinalStepCheckpoint(), RecordSplit(run_dir),
+                      AdaptiveLogInterval()]
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
     _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")
@@ -242,20 +282,31 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
 
 # ----------------------------------------------------------------- composition
 def register_model_configs(pm: PluginManager) -> None:
-    """Store each registered aligner's default config as ``model/<name>`` in the ConfigStore."""
+    """Store each registered aligner's default config as ``model/<name>`` in the ConfigStore.
+
+    Hydra's ConfigStore is one per process: the entries stored for an earlier
+    plugin manager (tagged with the provider ``skelagnostic``) are removed
+    first, so it lists exactly the aligners of ``pm``.
+    """
     store = ConfigStore.instance()
+    for group in ("model", "data"):
+        nodes = store.repo.get(group, {})
+        for key in [k for k, v in nodes.items() if getattr(v, "provider", None) == _PROVIDER]:
+            del nodes[key]
     for name, spec in pm.aligners.items():
         node: dict[str, Any] = {"model": {"name": name, **dict(spec.config)}}
         if spec.data:
             # The aligner's default data: selected unless the command line names data=...
             store.store(group="data", name=name,
-                        node={"defaults": ["_base", "_self_"], **dict(spec.data)})
+                        node={"defaults": ["/data_defaults@_here_", "_self_"], **dict(spec.data)},
+                        provider=_PROVIDER)
             node["defaults"] = [{"override /data": name}, "_self_"]
         if spec.data_options:
             node["data"] = dict(spec.data_options)
         if spec.trainer_options:
             node["trainer"] = dict(spec.trainer_options)
-        store.store(group="model", name=name, node=node, package="_global_")
+        store.store(group="model", name=name, node=node, package="_global_",
+                    provider=_PROVIDER)
 
 
 def compose(
@@ -451,6 +502,10 @@ def main(task: str, argv: Sequence[str]) -> int:
             o.split("=", 1)[0].lstrip("+") in ("model", "experiment") for o in overrides
         ):
             ours.append("~model")  # --help / --cfg / --info work before a model is chosen
+        saved = run_of_overrides(overrides)
+        if saved is not None and not chosen_keys(overrides) & {"model", "experiment"}:
+            ours.append(f"model={saved.model.name}")  # the run's aligner, e.g. for test
+        ours += max_steps_overrides(overrides)
         hydra_args = [*flags, *ours, *overrides]
         if "--hydra-help" in flags:  # Hydra's own help: no app config, no overrides
             hydra_args = flags
@@ -458,11 +513,18 @@ def main(task: str, argv: Sequence[str]) -> int:
         failures: list[Exception] = []
         terminated: list[bool] = []
 
+        results: list[tuple[Path, dict[str, float], Path | None]] = []
+
         def task_function(cfg: DictConfig) -> None:
             run_dirs.append(Path(cfg.run_dir))
+            if saved is not None:
+                reuse_run_config(cfg, saved, overrides)
             with _patched(outer_argv, {}):  # Lightning's DDP launcher re-executes sys.argv
                 try:
-                    run(cfg, pm)
+                    metrics = run(cfg, pm)
+                    ckpt = checkpoint_of(cfg.ckpt_path) if cfg.ckpt_path and task != "fit" \
+                        and cfg.ckpt_path not in _CKPT_ALIASES else None
+                    results.append((Path(cfg.run_dir), metrics, ckpt))
                 except (SkelagnosticError, MisconfigurationException, HydraException) as exc:
                     failures.append(exc)  # re-raised below, after Hydra cleaned up
                 except SIGTERMException:  # a SystemExit with status 0: report it as a failure
@@ -470,7 +532,8 @@ def main(task: str, argv: Sequence[str]) -> int:
 
         entry = hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name="config",
                            version_base="1.3")(task_function)
-        with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}):
+        with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}), \
+                quiet_lightning():
             try:
                 entry()
             except SystemExit as exc:  # Hydra exits by itself after --help and --hydra-help
@@ -483,6 +546,8 @@ def main(task: str, argv: Sequence[str]) -> int:
             kept = "".join(_discard_failed_run(d) for d in run_dirs)
             print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
             return SIGTERM_EXIT_CODE
+        for run_dir, metrics, ckpt in results:
+            summary_table(task, run_dir, metrics, checkpoint=ckpt)
     except (SkelagnosticError, HydraException, OmegaConfBaseException,
             MisconfigurationException) as exc:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)

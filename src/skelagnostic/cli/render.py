@@ -20,7 +20,7 @@ from typing import Any
 from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
-__all__ = ["RENDER_OPTIONS", "main", "parse_arguments", "render_from_options"]
+__all__ = ["RENDER_OPTIONS", "apply_threads", "main", "parse_arguments", "render_from_options"]
 
 #: Rendering options understood by :func:`render_from_options`, with their help.
 RENDER_OPTIONS: dict[str, str] = {
@@ -51,7 +51,8 @@ options:
 
 
 def _usage() -> str:
-    lines = [f"  {key:<11} {text}" for key, text in RENDER_OPTIONS.items()]
+    lines = [f"  {key:<11} {text}"
+             for key, text in {**RENDER_OPTIONS, "threads": THREADS_HELP}.items()]
     return _USAGE.format(options="\n".join(lines))
 
 
@@ -153,6 +154,29 @@ def render_from_options(
     return written
 
 
+#: Help of the ``threads=`` option every file verb takes.
+THREADS_HELP = "torch intra-op threads (a positive integer); default: torch's (one per core)"
+
+
+def apply_threads(options: dict[str, str]) -> None:
+    """Take ``threads=N`` out of ``options`` and set torch's intra-op threads to it.
+
+    The Hydra verbs take ``threads=`` as a config key; the file verbs take it
+    here, so ``threads=1`` works the same on every verb.
+
+    Raises:
+        SkelagnosticError: Not a positive integer.
+    """
+    value = options.pop("threads", None)
+    if value is None:
+        return
+    if not value.isdigit() or int(value) < 1:
+        raise SkelagnosticError(f"option threads={value!r}: must be a positive integer")
+    import torch
+
+    torch.set_num_threads(int(value))
+
+
 def main(argv: list[str]) -> int:
     """Run ``skelagnostic render``.
 
@@ -167,6 +191,7 @@ def main(argv: list[str]) -> int:
         return 0 if argv else 2
     try:
         paths, options = parse_arguments(argv)
+        apply_threads(options)
         unknown = sorted(set(options) - set(RENDER_OPTIONS) - {"out"})
         if unknown:
             raise SkelagnosticError(
