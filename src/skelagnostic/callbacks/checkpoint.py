@@ -15,7 +15,7 @@ from __future__ import annotations
 import lightning as L
 from lightning.pytorch.utilities import rank_zero_info
 
-__all__ = ["LatestWithoutValidation"]
+__all__ = ["FinalStepCheckpoint", "LatestWithoutValidation"]
 
 
 class LatestWithoutValidation(L.Callback):
@@ -53,3 +53,25 @@ class LatestWithoutValidation(L.Callback):
                     f"keeps the latest epoch instead (files in {callback.dirpath})"
                 )
                 callback.monitor = None
+
+
+class FinalStepCheckpoint(L.Callback):
+    """``last.ckpt`` holds the final step also when training stops mid-epoch.
+
+    A run sized in steps (``trainer.max_steps``, ``max_time``) usually stops
+    inside an epoch. Lightning's ``ModelCheckpoint`` writes ``last.ckpt`` at
+    epoch ends and validations, so the steps since then were in no checkpoint.
+    At ``on_train_end`` every ``save_last`` checkpoint callback whose latest
+    save is older than the final step saves ``last.ckpt`` again (through the
+    callback itself, so its naming and link options apply). ``skelagnostic
+    fit`` adds this callback to every run.
+    """
+
+    def on_train_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        """Save ``last.ckpt`` of the final step where it is missing."""
+        for callback in trainer.checkpoint_callbacks:
+            saved = getattr(callback, "_last_global_step_saved", None)
+            save = getattr(callback, "_save_last_checkpoint", None)
+            if (getattr(callback, "save_last", False) and save is not None
+                    and saved is not None and saved < trainer.global_step):
+                save(trainer, callback._monitor_candidates(trainer))

@@ -7,6 +7,7 @@ Each verb lives in its own module and is imported only when called, so
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -38,6 +39,36 @@ def _usage() -> str:
     return "\n".join(lines)
 
 
+#: Verbs that are one Hydra application (flags, overrides, shell completion).
+HYDRA_VERBS = ("fit", "validate", "test", "predict")
+
+
+def _complete(args: list[str]) -> int:
+    """Answer a shell-completion query of Hydra's bash/zsh/fish script.
+
+    The script installed by ``skelagnostic fit --shell-completion install=bash``
+    calls ``skelagnostic -sc query=bash`` with the line being typed in
+    ``COMP_LINE``. The first word after ``skelagnostic`` is completed with the
+    verbs; after a Hydra verb, the query goes to that verb's Hydra app with the
+    verb removed from the line (Hydra expects ``<app> <overrides...>``).
+    """
+    line = os.environ.get("COMP_LINE", "")
+    words = line.split(" ")
+    if len(words) <= 2:  # still typing the verb
+        prefix = words[1] if len(words) == 2 else ""
+        print(" ".join(v for v in VERBS if v.startswith(prefix)))
+        return 0
+    verb = words[1]
+    if verb not in HYDRA_VERBS:
+        return 0
+    point = int(os.environ.get("COMP_POINT", len(line)))
+    os.environ["COMP_LINE"] = " ".join([words[0], *words[2:]])
+    os.environ["COMP_POINT"] = str(max(0, point - len(verb) - 1))
+    from skelagnostic.cli import app
+
+    return app.main(verb, args)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``skelagnostic`` console script.
 
@@ -51,13 +82,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args or args[0] in {"-h", "--help", "help"}:
         print(_usage())
         return 0
+    if args[0] in {"-sc", "--shell-completion"}:
+        return _complete(args)
     verb, rest = args[0], args[1:]
     if verb not in VERBS:
         print(f"skelagnostic: unknown verb {verb!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     module_name, func_name, _ = VERBS[verb]
     func = getattr(importlib.import_module(module_name), func_name)
-    return int(func(rest) or 0)
+    try:
+        return int(func(rest) or 0)
+    except BrokenPipeError:  # e.g. `skelagnostic interpolate --help | head`
+        # Python flushes stdout again at exit: point it at /dev/null so that stays quiet.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

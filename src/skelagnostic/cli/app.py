@@ -34,6 +34,20 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from skelagnostic.cli.runs import (
+    AdaptiveLogInterval,
+    RecordSplit,
+    checkpoint_of,
+    chosen_keys,
+    find_run_dir,
+    max_steps_overrides,
+    quiet_lightning,
+    read_split,
+    reuse_run_config,
+    run_of_overrides,
+    summary_table,
+)
+from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import PluginManager, get_plugin_manager
 
@@ -47,6 +61,8 @@ DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
 SIGTERM_EXIT_CODE = 143
 #: ``ckpt_path`` values Lightning resolves itself.
 _CKPT_ALIASES = ("last", "best", "hpc", "registry")
+#: Provider name of the configs this module puts into Hydra's ConfigStore.
+_PROVIDER = "skelagnostic"
 #: Data-config keys that are not options of the data module or the dataset source.
 _DATA_KEYS = ("source", "representation", "representation_options")
 
@@ -86,9 +102,9 @@ def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModul
     if data.get("representation"):
         rep_cls = pm.representation(data["representation"]).cls
         representation = rep_cls(**(data.get("representation_options") or {}))
-    return spec.datamodule(
-        sources=[dataset.factory(**options)], representation=representation, **dm_kwargs
-    )
+    made = dataset.factory(**options)  # one source, or several (data.paths entries)
+    sources = list(made) if isinstance(made, (list, tuple)) else [made]
+    return spec.datamodule(sources=sources, representation=representation, **dm_kwargs)
 
 
 def _instantiate_all(group: DictConfig | None, what: str) -> list[Any]:
@@ -153,6 +169,23 @@ def _check_options(options: dict[str, Any], cls: type, prefix: str, owner: str) 
                               f"(expected {hint})")
 
 
+def _require_test_split(datamodule: L.LightningDataModule) -> None:
+    """Raise :class:`ConfigError` when the data module has no test clip (``test`` would do nothing).
+
+    Only for data modules that expose their splits (``datasets["test"]``).
+    """
+    if not hasattr(datamodule, "datasets"):
+        return
+    datamodule.setup("test")
+    if any(len(ds) for ds in datamodule.datasets.get("test", {}).values()):
+        return
+    raise ConfigError(
+        "test: the test split is empty (data.test_fraction=0 and no clip matches a test "
+        "pattern); set data.test_fraction>0 (test clips then come from clips the run did not "
+        "train on), data.test_pattern=REGEX, or use validate"
+    )
+
+
 @rank_zero_only
 def _save_config(cfg: DictConfig, run_dir: Path) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -195,6 +228,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
     run_dir = Path(cfg.run_dir)
     ckpt = cfg.ckpt_path
+    source_run: Path | None = None
+    if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
+        source_run = find_run_dir(ckpt)
+        ckpt = str(checkpoint_of(ckpt))
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt) and not Path(ckpt).is_file():
         raise ConfigError(f"ckpt_path: no checkpoint file {str(ckpt)!r}")
     threads = cfg.get("threads")
@@ -205,15 +242,21 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     L.seed_everything(cfg.seed, workers=True)
     spec = pm.aligner(cfg.model.name)
     datamodule = build_datamodule(cfg, pm)
+    recorded = read_split(source_run) if source_run is not None else None
+    if recorded is not None and hasattr(datamodule, "recorded_splits"):
+        datamodule.recorded_splits = recorded  # never evaluate on the run's training clips
+    if task == "test":
+        _require_test_split(datamodule)
     model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
                     if k != "name"}
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
     if task == "fit":
-        from skelagnostic.callbacks import LatestWithoutValidation
+        from skelagnostic.callbacks import FinalStepCheckpoint, LatestWithoutValidation
 
-        callbacks.append(LatestWithoutValidation())
+        callbacks += [LatestWithoutValidation(), FinalStepCheckpoint(), RecordSplit(run_dir),
+                      AdaptiveLogInterval()]
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
     _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")
@@ -225,34 +268,45 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     )
     _save_config(cfg, run_dir)
     if task == "fit":
-        trainer.fit(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+        trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt)
     elif task == "validate":
-        trainer.validate(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+        trainer.validate(model, datamodule=datamodule, ckpt_path=ckpt)
     elif task == "test":
-        trainer.test(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+        trainer.test(model, datamodule=datamodule, ckpt_path=ckpt)
     else:
         _save_predictions(
-            trainer.predict(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path), run_dir
+            trainer.predict(model, datamodule=datamodule, ckpt_path=ckpt), run_dir
         )
     return {k: float(v) for k, v in trainer.callback_metrics.items()}
 
 
 # ----------------------------------------------------------------- composition
 def register_model_configs(pm: PluginManager) -> None:
-    """Store each registered aligner's default config as ``model/<name>`` in the ConfigStore."""
+    """Store each registered aligner's default config as ``model/<name>`` in the ConfigStore.
+
+    Hydra's ConfigStore is one per process: the entries stored for an earlier
+    plugin manager (tagged with the provider ``skelagnostic``) are removed
+    first, so it lists exactly the aligners of ``pm``.
+    """
     store = ConfigStore.instance()
+    for group in ("model", "data"):
+        nodes = store.repo.get(group, {})
+        for key in [k for k, v in nodes.items() if getattr(v, "provider", None) == _PROVIDER]:
+            del nodes[key]
     for name, spec in pm.aligners.items():
         node: dict[str, Any] = {"model": {"name": name, **dict(spec.config)}}
         if spec.data:
             # The aligner's default data: selected unless the command line names data=...
             store.store(group="data", name=name,
-                        node={"defaults": ["_base", "_self_"], **dict(spec.data)})
+                        node={"defaults": ["/data_defaults@_here_", "_self_"], **dict(spec.data)},
+                        provider=_PROVIDER)
             node["defaults"] = [{"override /data": name}, "_self_"]
         if spec.data_options:
             node["data"] = dict(spec.data_options)
         if spec.trainer_options:
             node["trainer"] = dict(spec.trainer_options)
-        store.store(group="model", name=name, node=node, package="_global_")
+        store.store(group="model", name=name, node=node, package="_global_",
+                    provider=_PROVIDER)
 
 
 def compose(
@@ -273,6 +327,7 @@ def compose(
     """
     pm = plugin_manager or get_plugin_manager()
     register_model_configs(pm)
+    overrides = [expand_home_in_override(o) for o in overrides]
     with hydra.initialize_config_module(CONFIG_MODULE, version_base="1.3"):
         return hydra.compose(
             "config", overrides=[*_searchpath_overrides(pm, overrides), *overrides, f"task={task}"]
@@ -337,6 +392,63 @@ def _discard_failed_run(run_dir: Path) -> str:
     return ""
 
 
+def split_hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
+    """Split a command line into Hydra's flags (with their values) and its overrides.
+
+    Hydra parses ``sys.argv`` with argparse, which takes the overrides as one
+    contiguous run of positional arguments; the CLI adds overrides of its own
+    (``task=<verb>``, the plugins' search path), so it re-orders the user's
+    arguments as flags first, overrides after. Flags and their arity come from
+    Hydra's own argument parser: ``--cfg job``, ``--cfg=job``, ``-m``,
+    ``--info`` with or without a value, ...
+
+    Args:
+        args: The arguments after the verb, in the user's order.
+
+    Returns:
+        ``(flags, overrides)``, each in the user's order.
+
+    Example:
+        >>> split_hydra_flags(["model=example", "--cfg", "job", "-m", "seed=1,2"])
+        (['--cfg', 'job', '-m'], ['model=example', 'seed=1,2'])
+    """
+    from hydra._internal.utils import get_args_parser
+
+    actions = get_args_parser()._option_string_actions
+    flags: list[str] = []
+    overrides: list[str] = []
+    tokens = list(args)
+    i = 0
+    while i < len(tokens):
+        token = tokens[i]
+        i += 1
+        name = token.split("=", 1)[0]
+        if not token.startswith("-") or name not in actions:
+            overrides.append(token)
+            continue
+        flags.append(token)
+        action = actions[name]
+        if "=" in token or action.nargs == 0:
+            continue
+        takes_value = action.nargs is None or (
+            action.nargs == "?" and i < len(tokens)
+            and (action.choices is None or tokens[i] in action.choices)
+        )
+        if takes_value and i < len(tokens):
+            flags.append(tokens[i])
+            i += 1
+    return flags, overrides
+
+
+#: Hydra flags that show something instead of running a job.
+_INFO_FLAGS = frozenset({"--help", "-h", "--cfg", "-c", "--info", "-i",
+                         "--shell-completion", "-sc"})
+
+
+def _informational(flags: Sequence[str]) -> bool:
+    return any(f.split("=", 1)[0] in _INFO_FLAGS for f in flags)
+
+
 def _failed_plugins(pm: PluginManager | None) -> str:
     if pm is None:
         return ""
@@ -379,16 +491,40 @@ def main(task: str, argv: Sequence[str]) -> int:
     try:
         pm = get_plugin_manager()
         register_model_configs(pm)
-        hydra_args = [*_searchpath_overrides(pm, args), *args, f"task={task}"]
+        flags, overrides = split_hydra_flags(args)
+        overrides = [expand_home_in_override(o) for o in overrides]  # data.paths=[~/mocap]
+        # Hydra's argparse takes its overrides as one run of positional arguments:
+        # flags first, then ours and the user's overrides (user's last, so they win).
+        # The plugins' config trees come from the search-path plugin in
+        # hydra_plugins/skelagnostic_searchpath (so --help lists their options).
+        ours = [f"task={task}"]
+        if _informational(flags) and not any(
+            o.split("=", 1)[0].lstrip("+") in ("model", "experiment") for o in overrides
+        ):
+            ours.append("~model")  # --help / --cfg / --info work before a model is chosen
+        saved = run_of_overrides(overrides)
+        if saved is not None and not chosen_keys(overrides) & {"model", "experiment"}:
+            ours.append(f"model={saved.model.name}")  # the run's aligner, e.g. for test
+        ours += max_steps_overrides(overrides)
+        hydra_args = [*flags, *ours, *overrides]
+        if "--hydra-help" in flags:  # Hydra's own help: no app config, no overrides
+            hydra_args = flags
 
         failures: list[Exception] = []
         terminated: list[bool] = []
 
+        results: list[tuple[Path, dict[str, float], Path | None]] = []
+
         def task_function(cfg: DictConfig) -> None:
             run_dirs.append(Path(cfg.run_dir))
+            if saved is not None:
+                reuse_run_config(cfg, saved, overrides)
             with _patched(outer_argv, {}):  # Lightning's DDP launcher re-executes sys.argv
                 try:
-                    run(cfg, pm)
+                    metrics = run(cfg, pm)
+                    ckpt = checkpoint_of(cfg.ckpt_path) if cfg.ckpt_path and task != "fit" \
+                        and cfg.ckpt_path not in _CKPT_ALIASES else None
+                    results.append((Path(cfg.run_dir), metrics, ckpt))
                 except (SkelagnosticError, MisconfigurationException, HydraException) as exc:
                     failures.append(exc)  # re-raised below, after Hydra cleaned up
                 except SIGTERMException:  # a SystemExit with status 0: report it as a failure
@@ -396,14 +532,22 @@ def main(task: str, argv: Sequence[str]) -> int:
 
         entry = hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name="config",
                            version_base="1.3")(task_function)
-        with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}):
-            entry()
+        with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}), \
+                quiet_lightning():
+            try:
+                entry()
+            except SystemExit as exc:  # Hydra exits by itself after --help and --hydra-help
+                if exc.code not in (0, None) or failures or terminated or run_dirs:
+                    raise
+                return 0
         if failures:
             raise failures[0]
         if terminated:
             kept = "".join(_discard_failed_run(d) for d in run_dirs)
             print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
             return SIGTERM_EXIT_CODE
+        for run_dir, metrics, ckpt in results:
+            summary_table(task, run_dir, metrics, checkpoint=ckpt)
     except (SkelagnosticError, HydraException, OmegaConfBaseException,
             MisconfigurationException) as exc:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)

@@ -23,7 +23,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from skelagnostic.cli.render import RENDER_OPTIONS, parse_arguments, render_from_options
+from skelagnostic.cli.render import (
+    RENDER_OPTIONS,
+    THREADS_HELP,
+    apply_threads,
+    parse_arguments,
+    render_from_options,
+)
 from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
@@ -40,6 +46,7 @@ _COMMON = {
     "render": "also draw input and result side by side (.gif, .mp4 or .png)",
     "units": "length unit of the input BVH files (m, cm, mm, inch, ft, cmu); "
              "default: the aligner guesses",
+    "threads": THREADS_HELP,
 }
 
 _USAGE = {
@@ -210,6 +217,7 @@ def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
         from skelagnostic import write_bvh
 
         words, options = parse_arguments(argv)
+        apply_threads(options)
         known = set(_COMMON) | set(_USAGE[verb][1]) | set(RENDER_OPTIONS)
         unknown = sorted(set(options) - known)
         if unknown:

@@ -17,9 +17,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
-__all__ = ["RENDER_OPTIONS", "main", "parse_arguments", "render_from_options"]
+__all__ = ["RENDER_OPTIONS", "apply_threads", "main", "parse_arguments", "render_from_options"]
 
 #: Rendering options understood by :func:`render_from_options`, with their help.
 RENDER_OPTIONS: dict[str, str] = {
@@ -50,12 +51,21 @@ options:
 
 
 def _usage() -> str:
-    lines = [f"  {key:<11} {text}" for key, text in RENDER_OPTIONS.items()]
+    lines = [f"  {key:<11} {text}"
+             for key, text in {**RENDER_OPTIONS, "threads": THREADS_HELP}.items()]
     return _USAGE.format(options="\n".join(lines))
+
+
+#: Options of the file verbs that name a path (``~`` and ``$VARS`` are expanded).
+PATH_OPTIONS = frozenset({"out", "ckpt", "render", "sheet", "html", "ckpt_path"})
 
 
 def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
     """Split command-line words into positional arguments and ``key=value`` options.
+
+    Positional arguments (input files) and the values of :data:`PATH_OPTIONS`
+    get ``~`` and ``$VARS`` expanded (:func:`~skelagnostic.core.paths.expand_path`):
+    a shell does not expand ``~`` after ``out=``.
 
     Args:
         argv: The words after the verb.
@@ -76,9 +86,9 @@ def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
         if sep and key.isidentifier():
             if key in options:
                 raise SkelagnosticError(f"option {key}= is given twice")
-            options[key] = value
+            options[key] = str(expand_path(value)) if key in PATH_OPTIONS and value else value
         else:
-            positional.append(word)
+            positional.append(str(expand_path(word)))
     return positional, options
 
 
@@ -144,6 +154,29 @@ def render_from_options(
     return written
 
 
+#: Help of the ``threads=`` option every file verb takes.
+THREADS_HELP = "torch intra-op threads (a positive integer); default: torch's (one per core)"
+
+
+def apply_threads(options: dict[str, str]) -> None:
+    """Take ``threads=N`` out of ``options`` and set torch's intra-op threads to it.
+
+    The Hydra verbs take ``threads=`` as a config key; the file verbs take it
+    here, so ``threads=1`` works the same on every verb.
+
+    Raises:
+        SkelagnosticError: Not a positive integer.
+    """
+    value = options.pop("threads", None)
+    if value is None:
+        return
+    if not value.isdigit() or int(value) < 1:
+        raise SkelagnosticError(f"option threads={value!r}: must be a positive integer")
+    import torch
+
+    torch.set_num_threads(int(value))
+
+
 def main(argv: list[str]) -> int:
     """Run ``skelagnostic render``.
 
@@ -158,6 +191,7 @@ def main(argv: list[str]) -> int:
         return 0 if argv else 2
     try:
         paths, options = parse_arguments(argv)
+        apply_threads(options)
         unknown = sorted(set(options) - set(RENDER_OPTIONS) - {"out"})
         if unknown:
             raise SkelagnosticError(

@@ -16,6 +16,7 @@ from skelagnostic.data.sources import (
     ClipSource,
     DatasetPreset,
     ProceduralSource,
+    bvh_sources,
     preset_source,
     reroot,
 )
@@ -31,6 +32,7 @@ __all__ = [
     "ProceduralSource",
     "WindowCache",
     "WindowDataset",
+    "bvh_sources",
     "default_cache_dir",
     "preset_source",
     "reroot",

@@ -14,8 +14,10 @@ import lightning as L
 import numpy as np
 import torch
 from lightning.pytorch.utilities import CombinedLoader
+from lightning.pytorch.utilities.rank_zero import rank_zero_info
 from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
 
+from skelagnostic.core.paths import expand_path
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data.cache import (
     CacheEntry,
@@ -226,6 +228,51 @@ def _split_clips(
     }
 
 
+def _keep_recorded(split: dict[str, list[ClipRef]], recorded: dict[str, str],
+                   test_fraction: float, seed: int) -> dict[str, list[ClipRef]]:
+    """``split`` with the recorded clips moved back to their recorded split."""
+    out: dict[str, list[ClipRef]] = {part: [] for part in SPLITS}
+    for part in SPLITS:
+        for clip in split.get(part, []):
+            out[recorded.get(clip.id, part) if recorded.get(clip.id) in SPLITS else part].append(
+                clip)
+    if test_fraction > 0 and not out["test"] and out["val"]:
+        total = sum(len(v) for v in out.values())
+        n = min(len(out["val"]), max(1, round(test_fraction * total)))
+        ordered = sorted(out["val"],
+                         key=lambda c: hashlib.sha256(f"{seed}:test:{c.id}".encode()).hexdigest())
+        out["test"], out["val"] = ordered[:n], ordered[n:]
+    return out
+
+
+def describe_dataset(name: str, members: Sequence[tuple[ClipRef, CacheEntry]],
+                     datasets: dict[str, dict[str, WindowDataset]]) -> str:
+    """One log line on a dataset: clips per split, joints, standing height and its unit.
+
+    The unit is what a wrong ``data.units`` (or a wrong guess) would show
+    first: a person 171 m tall, or a dog of 0.6 m logged as centimetres.
+    """
+    from skelagnostic.core.units import infer_units
+
+    meta = members[0][1].meta
+    skeleton = Skeleton.from_dict(meta["skeleton"])
+    height = skeleton.height()
+    units = meta.get("units", "?")
+    if units == "?":  # an entry cached before units were recorded
+        size = f"height {height:.3g}"
+    elif units == "m":
+        size = f"height {height:.2f} m"
+    elif units is not None:
+        size = f"height {height:.3g} {units}"
+    else:
+        size = (f"height {height:.3g} in the files' unit (not converted; data.units or a "
+                f"data.paths entry's units: sets it; the height suggests {infer_units(skeleton)})")
+    splits = ", ".join(f"{part} {len(datasets[part][name].entries)}" for part in SPLITS
+                       if name in datasets[part])
+    return (f"data: dataset {name!r}: {len(members)} clip(s) ({splits}), "
+            f"{skeleton.num_joints} joints, {size}")
+
+
 class MotionDataModule(L.LightningDataModule):
     """Windows of motion clips for one or several skeletons, cached on disk.
 
@@ -302,7 +349,8 @@ class MotionDataModule(L.LightningDataModule):
         self.val_fraction = float(val_fraction)
         self.test_fraction = float(test_fraction)
         self.split_seed = int(split_seed)
-        self.cache = WindowCache(cache_dir if cache_dir is not None else default_cache_dir())
+        self.cache = WindowCache(expand_path(cache_dir) if cache_dir is not None
+                                 else default_cache_dir())
         self.per_element_stats = per_element_stats
         #: ``split -> dataset name -> WindowDataset``, filled by :meth:`setup`.
         self.datasets: dict[str, dict[str, WindowDataset]] = {s: {} for s in SPLITS}
@@ -310,6 +358,11 @@ class MotionDataModule(L.LightningDataModule):
         self.skeletons: dict[str, Skeleton] = {}
         #: A copy of the representation per dataset, with its normalisation fitted.
         self.representations: dict[str, MotionRepresentation] = {}
+        #: ``clip id -> split`` of every clip :meth:`split_clips` placed (the CLI
+        #: writes it to the run directory as ``split.json``).
+        self.assigned_splits: dict[str, str] = {}
+        #: A recorded ``clip id -> split`` to keep (a run's ``split.json``), or None.
+        self.recorded_splits: dict[str, str] | None = None
 
     def default_representation(self) -> MotionRepresentation:
         """The representation used when none is given (world joint positions)."""
@@ -353,7 +406,7 @@ class MotionDataModule(L.LightningDataModule):
             feats = rep.encode(motion).float()
             windows = feats.unfold(0, self.window, self.stride).permute(0, 3, 1, 2).numpy()
         meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(), "starts": starts,
-                "fps": self.fps}
+                "fps": self.fps, "units": motion.units}
         return self.cache.put(key, windows, meta)
 
     def prepare_data(self) -> None:
@@ -383,7 +436,10 @@ class MotionDataModule(L.LightningDataModule):
                 topo = (tuple(sk["joint_names"]), tuple(sk["parents"]))
                 groups.setdefault(topo, []).append((clip, entry))
             for members in groups.values():
-                self._add_dataset(self._dataset_name(source, members, len(groups)), members)
+                name = self._dataset_name(source, members, len(groups))
+                self._add_dataset(name, members)
+                if name in self.skeletons:
+                    rank_zero_info(describe_dataset(name, members, self.datasets))
         if not self.skeletons:
             raise SkelagnosticError(
                 f"data: no clip is at least data.window={self.window} frames long at "
@@ -403,10 +459,35 @@ class MotionDataModule(L.LightningDataModule):
             name, n = f"{base}-{n}", n + 1
         return name
 
+    def split_clips(self, clips: list[ClipRef]) -> dict[str, list[ClipRef]]:
+        """The train/val/test clips of one dataset (subclasses call this, not a copy).
+
+        Clips are ordered by a hash of ``(split_seed, clip id)`` and cut by
+        ``val_fraction`` / ``test_fraction``; clips a source marks as test stay
+        test. With :attr:`recorded_splits` (a run's ``split.json``), every clip
+        it lists keeps its recorded split, so a later verb never evaluates on a
+        clip the model trained on, whatever fractions it is given; a
+        ``test_fraction`` asked for later takes its test clips from the
+        recorded validation clips. Every placement is noted in
+        :attr:`assigned_splits`.
+
+        Args:
+            clips: The clips of one dataset.
+
+        Returns:
+            ``{"train": [...], "val": [...], "test": [...]}``.
+        """
+        split = _split_clips(clips, self.val_fraction, self.test_fraction, self.split_seed)
+        if self.recorded_splits:
+            split = _keep_recorded(split, self.recorded_splits, self.test_fraction,
+                                   self.split_seed)
+        for part, members in split.items():
+            self.assigned_splits.update((c.id, part) for c in members)
+        return split
+
     def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
         entries = {clip.id: entry for clip, entry in members}
-        split = _split_clips([c for c, _ in members], self.val_fraction, self.test_fraction,
-                             self.split_seed)
+        split = self.split_clips([c for c, _ in members])
         if not split["train"]:
             shown = ", ".join(c.id for c in split["test"][:3])
             more = f" and {len(split['test']) - 3} more" if len(split["test"]) > 3 else ""

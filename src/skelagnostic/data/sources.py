@@ -12,13 +12,15 @@ from __future__ import annotations
 import hashlib
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 
 from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.paths import expand_path
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 
@@ -29,6 +31,7 @@ __all__ = [
     "ClipSource",
     "DatasetPreset",
     "ProceduralSource",
+    "bvh_sources",
     "preset_source",
     "reroot",
 ]
@@ -152,7 +155,7 @@ class BVHSource(ClipSource):
                                     f"{', '.join(UNITS)}")
         files: list[Path] = []
         for raw in self.paths:
-            path = Path(raw).expanduser()
+            path = expand_path(raw)
             if path.is_file():
                 files.append(path.resolve())
             elif path.is_dir():
@@ -181,6 +184,62 @@ class BVHSource(ClipSource):
         if self.root_joint is not None:
             motion = reroot(motion, self.root_joint)
         return _to_metres(motion, self.units)
+
+
+#: Keys of a mapping entry of ``data.paths`` (besides ``path``/``paths``).
+_ENTRY_KEYS = ("units", "name", "pattern", "test_pattern", "root_joint")
+
+
+def bvh_sources(
+    paths: Sequence[str | Path | Mapping[str, Any]],
+    pattern: str = "**/*.bvh",
+    test_pattern: str | None = None,
+    units: str | None = None,
+    root_joint: str | None = None,
+    name: str = "bvh",
+) -> list[BVHSource]:
+    """The sources of ``data=bvh``: plain paths share the options, mappings bring their own.
+
+    A mapping entry such as ``{path: ~/mocap/dog, units: cm, name: dog}`` is a
+    source of its own, so characters recorded in different units (and named
+    apart in the logs and metrics) train together::
+
+        data.paths=[{path: ~/cmu, units: cmu, name: human}, {path: ~/dog, units: cm, name: dog}]
+
+    Its keys are ``path`` (or ``paths``, a list) and any of ``units``,
+    ``name``, ``pattern``, ``test_pattern``, ``root_joint``; what it leaves out
+    comes from the top-level options. Plain entries form one source with the
+    top-level options.
+
+    Raises:
+        SkelagnosticError: An entry without a path, with an unknown key, or any
+            error of :class:`BVHSource` (the message names ``data.paths[i]``).
+    """
+    if isinstance(paths, (str, Path, Mapping)):
+        paths = [paths]
+    defaults = {"units": units, "name": name, "pattern": pattern, "test_pattern": test_pattern,
+                "root_joint": root_joint}
+    plain = [p for p in paths if not isinstance(p, Mapping)]
+    sources = [BVHSource(plain, **defaults)] if plain else []
+    for i, entry in enumerate(paths):
+        if not isinstance(entry, Mapping):
+            continue
+        where = f"data.paths[{i}]"
+        unknown = sorted(set(entry) - {"path", "paths", *_ENTRY_KEYS})
+        if unknown:
+            raise SkelagnosticError(f"{where}.{unknown[0]} is not an option of a path entry; "
+                                    f"accepted: path, paths, {', '.join(_ENTRY_KEYS)}")
+        entry_paths = entry.get("paths", entry.get("path"))
+        if not entry_paths:
+            raise SkelagnosticError(f"{where}: give the entry a 'path' (or 'paths')")
+        options = {**defaults, **{k: entry[k] for k in _ENTRY_KEYS if k in entry}}
+        if "name" not in entry:
+            options["name"] = f"{name}{i}"
+        try:
+            sources.append(BVHSource(entry_paths, **options))
+        except SkelagnosticError as exc:
+            raise SkelagnosticError(f"{where}: {exc}") from exc
+    return sources
 
 
 @dataclass
@@ -289,4 +348,5 @@ def preset_source(preset: str, root: str | Path) -> BVHSource:
     if preset not in PRESETS:
         raise SkelagnosticError(f"unknown dataset preset {preset!r}; known: {', '.join(PRESETS)}")
     p = PRESETS[preset]
-    return BVHSource([root], p.pattern, p.test_pattern, p.units, p.root_joint, name=p.name)
+    return BVHSource([expand_path(root)], p.pattern, p.test_pattern, p.units, p.root_joint,
+                     name=p.name)

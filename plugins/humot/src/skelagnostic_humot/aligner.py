@@ -33,6 +33,7 @@ from lightning.pytorch.utilities import rank_zero_only
 from skelagnostic.aligners import Aligner, Latent
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import inverse_kinematics
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks, sample_keep
@@ -42,24 +43,6 @@ from skelagnostic_humot.template import from_model_frame, major_joints, to_model
 __all__ = ["HumotAligner", "infer_units", "leg_length"]
 
 #: Typical standing height (m) used to guess the units of a motion that does not state them.
-_HUMAN_HEIGHT = 1.7
-
-
-def infer_units(skeleton: Skeleton, units: str | None = None) -> str:
-    """The length unit of a human skeleton: ``units`` if given, else a guess from its height.
-
-    The guess is the unit of :data:`skelagnostic.core.motion.UNITS` that makes
-    :meth:`Skeleton.height` closest (in ratio) to 1.7 m.
-
-    Raises:
-        SkelagnosticError: ``units`` is not a known unit.
-    """
-    if units is not None:
-        if units not in UNITS:
-            raise SkelagnosticError(f"units: unknown unit {units!r}; known: {', '.join(UNITS)}")
-        return units
-    height = skeleton.height()
-    return min(UNITS, key=lambda u: abs(math.log(max(height * UNITS[u], 1e-9) / _HUMAN_HEIGHT)))
 
 
 def leg_length(template: torch.Tensor, skeleton: Skeleton) -> float:

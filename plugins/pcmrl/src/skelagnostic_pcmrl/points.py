@@ -36,8 +36,8 @@ from dataclasses import dataclass
 import torch
 
 from skelagnostic.core import quaternion as Q
-from skelagnostic.core.motion import UNITS
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError, SkeletonError
 from skelagnostic.representations import POINT_GROUPS, PointCloud, PointSamples
 
@@ -60,33 +60,10 @@ __all__ = [
 
 #: Bones shorter than this (in the skeleton's units, relative to its height) count as zero-length.
 ZERO_LENGTH = 1e-6
-#: Standing height of an adult human in metres, for :func:`infer_units`.
-_HUMAN_HEIGHT = 1.7
 
 
 class ZeroLengthBoneWarning(UserWarning):
     """A skeleton has bones of zero length, which PC-MRL ignores (paper Sec. 5)."""
-
-
-def infer_units(skeleton: Skeleton, units: str | None = None) -> str:
-    """The length unit of a human skeleton: ``units`` if given, else a guess from its height.
-
-    The guess is the unit of :data:`skelagnostic.core.motion.UNITS` that makes
-    :meth:`Skeleton.height` closest (in ratio) to 1.7 m.
-
-    Raises:
-        SkelagnosticError: ``units`` is not a known unit, or the skeleton has no height.
-    """
-    if units is not None:
-        if units not in UNITS:
-            raise SkelagnosticError(f"units: unknown unit {units!r}; known: {', '.join(UNITS)}")
-        return units
-    height = skeleton.height()
-    if not height > 0:
-        raise SkelagnosticError(
-            f"cannot infer the length units of {skeleton!r}: its height is 0; give the units"
-        )
-    return min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / _HUMAN_HEIGHT)))
 
 
 def zero_length_bones(skeleton: Skeleton) -> list[int]:

@@ -38,7 +38,6 @@ from torch.utils.data import DataLoader, Dataset
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import BVHSource, ClipRef, ClipSource, MotionDataModule, preset_source
 from skelagnostic.data.cache import CacheEntry, cache_key
-from skelagnostic.data.datamodule import _split_clips
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
 
@@ -335,8 +334,7 @@ class VQPAEDataModule(MotionDataModule):
 
     def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
         entries = {clip.id: entry for clip, entry in members}
-        split = _split_clips([c for c, _ in members], self.val_fraction, self.test_fraction,
-                             self.split_seed)
+        split = self.split_clips([c for c, _ in members])
         n_in = len(self.representation.channels)
         arrays = {cid: torch.from_numpy(np.array(e.open()[0])) for cid, e in entries.items()}
         train = [arrays[c.id] for c in split["train"]]

@@ -1,0 +1,266 @@
+"""Run directories: what later verbs reuse from them, and what every verb reports.
+
+A ``fit`` writes ``<run_dir>/config.yaml`` (the resolved config) and
+``<run_dir>/split.json`` (which clip went to which split). ``validate``,
+``test``, ``predict`` and a resumed ``fit`` given only ``ckpt_path=`` (a
+checkpoint inside a run directory, or the run directory itself) take the model
+and data configuration from there, and keep the recorded split, so a clip the
+model trained on is never evaluated as held out. Explicit overrides still win.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import re
+import sys
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+
+import lightning as L
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from lightning.pytorch.utilities import rank_zero_only
+from omegaconf import DictConfig, OmegaConf, open_dict
+
+from skelagnostic.core.paths import expand_path
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = ["RecordSplit", "checkpoint_of", "find_run_dir", "quiet_lightning", "read_split",
+           "reuse_run_config", "summary_table"]
+
+#: The resolved config a run writes.
+CONFIG_FILE = "config.yaml"
+#: The clip split a fit writes.
+SPLIT_FILE = "split.json"
+#: Config nodes a later verb takes from the run (unless the command line chooses them).
+REUSED = ("model", "data")
+
+
+def find_run_dir(ckpt: str | Path) -> Path | None:
+    """The run directory of a checkpoint (or the directory itself), if it has a ``config.yaml``.
+
+    Looks at the checkpoint's folder and the one above it
+    (``<run>/checkpoints/last.ckpt``).
+    """
+    path = expand_path(ckpt)
+    candidates = [path] if path.is_dir() else [path.parent, path.parent.parent]
+    return next((c for c in candidates if (c / CONFIG_FILE).is_file()), None)
+
+
+def checkpoint_of(path: str | Path) -> Path:
+    """``path`` itself, or for a run directory its ``best.ckpt`` (else ``last.ckpt``).
+
+    Raises:
+        SkelagnosticError: A directory without either checkpoint.
+    """
+    path = expand_path(path)
+    if not path.is_dir():
+        return path
+    for name in ("best.ckpt", "last.ckpt"):
+        for candidate in (path / "checkpoints" / name, path / name):
+            if candidate.is_file():
+                return candidate
+    raise SkelagnosticError(f"ckpt_path: the directory {str(path)!r} holds no "
+                            "checkpoints/best.ckpt or checkpoints/last.ckpt")
+
+
+def _value_of(overrides: Sequence[str], key: str) -> str | None:
+    for override in overrides:
+        name, sep, _ = override.partition("=")
+        if sep and name.lstrip("+") == key:
+            parsed = OverridesParser.create().parse_override(override).value()
+            return None if parsed is None else str(parsed)
+    return None
+
+
+def chosen_keys(overrides: Sequence[str]) -> set[str]:
+    """Keys (and groups) the command line sets, without ``+``/``~`` prefixes."""
+    return {o.partition("=")[0].lstrip("+~") for o in overrides}
+
+
+def run_of_overrides(overrides: Sequence[str]) -> DictConfig | None:
+    """The saved config of the run directory that ``ckpt_path=`` points into, if any."""
+    ckpt = _value_of(overrides, "ckpt_path")
+    if not ckpt or "://" in ckpt or ckpt in ("last", "best", "hpc", "registry"):
+        return None
+    run_dir = find_run_dir(ckpt)
+    if run_dir is None:
+        return None
+    return OmegaConf.load(run_dir / CONFIG_FILE)  # type: ignore[return-value]
+
+
+def reuse_run_config(cfg: DictConfig, saved: DictConfig, overrides: Sequence[str]) -> None:
+    """Put the saved run's ``model`` and ``data`` into ``cfg``; the command line still wins.
+
+    A node is reused unless the command line chooses its group (``model=``,
+    ``data=``) or an ``experiment=``; the command line's ``model.*`` and
+    ``data.*`` values are applied again on top of the reused node.
+
+    Args:
+        cfg: The composed config of this command (changed in place).
+        saved: The run's ``config.yaml``.
+        overrides: The user's overrides.
+    """
+    chosen = chosen_keys(overrides)
+    if "experiment" in chosen:
+        return
+    parser = OverridesParser.create()
+    with open_dict(cfg):
+        for node in REUSED:
+            if node in chosen or node not in saved:
+                continue
+            cfg[node] = saved[node]
+            for override in parser.parse_overrides(
+                    [o for o in overrides if o.lstrip("+~").startswith(f"{node}.")]):
+                key = override.key_or_group
+                if override.is_delete():
+                    parent, _, leaf = key.rpartition(".")
+                    OmegaConf.select(cfg, parent).pop(leaf, None)
+                else:
+                    OmegaConf.update(cfg, key, override.value(), merge=False, force_add=True)
+
+
+def read_split(run_dir: Path) -> dict[str, str] | None:
+    """``clip id -> split`` recorded in ``<run_dir>/split.json``, or None.
+
+    Raises:
+        SkelagnosticError: The file exists but cannot be read.
+    """
+    path = run_dir / SPLIT_FILE
+    if not path.is_file():
+        return None
+    try:
+        clips = json.loads(path.read_text(encoding="utf-8"))["clips"]
+        return {str(k): str(v) for k, v in clips.items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise SkelagnosticError(f"{path}: not a split file of skelagnostic ({exc})") from exc
+
+
+class RecordSplit(L.Callback):
+    """Writes ``<run_dir>/split.json`` once the data module has split its clips.
+
+    Args:
+        run_dir: The run directory.
+    """
+
+    def __init__(self, run_dir: str | Path) -> None:
+        self.run_dir = Path(run_dir)
+
+    def setup(self, trainer: L.Trainer, pl_module: L.LightningModule, stage: str) -> None:
+        """After the data module's ``setup``: write its ``assigned_splits`` (rank 0)."""
+        assigned = getattr(trainer.datamodule, "assigned_splits", None)
+        if assigned and trainer.is_global_zero:
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            counts = {part: sum(v == part for v in assigned.values())
+                      for part in ("train", "val", "test")}
+            payload = {"counts": counts, "clips": dict(sorted(assigned.items()))}
+            (self.run_dir / SPLIT_FILE).write_text(json.dumps(payload, indent=1) + "\n",
+                                                   encoding="utf-8")
+
+
+def summary_table(task: str, run_dir: Path, metrics: Mapping[str, float],
+                  checkpoint: Path | None = None, limit: int = 16) -> None:
+    """Print the run directory, the checkpoints and the headline metrics (one Rich table).
+
+    Args:
+        task: The verb.
+        run_dir: The run directory.
+        metrics: The trainer's final metrics.
+        checkpoint: The checkpoint evaluated (validate, test, predict).
+        limit: Metrics shown at most.
+    """
+    if rank_zero_only.rank != 0:
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    rows = [("run directory", str(run_dir))]
+    if checkpoint is not None:
+        rows.append(("evaluated checkpoint", str(checkpoint)))
+    for name in ("best", "last"):
+        ckpt = run_dir / "checkpoints" / f"{name}.ckpt"
+        if ckpt.is_file():
+            rows.append((f"{name} checkpoint", str(ckpt)))
+    rows += [(key, f"{metrics[key]:.5g}") for key in sorted(metrics)[:limit]]
+    if len(metrics) > limit:
+        rows.append(("...", f"{len(metrics) - limit} more in the run's csv/metrics.csv"))
+    table = Table(title=f"skelagnostic {task}", show_header=False, title_justify="left")
+    table.add_column(style="bold", no_wrap=True)
+    table.add_column(no_wrap=True)
+    for row in rows:
+        table.add_row(*row)
+    # wide enough for whole paths, so they can be copied
+    width = max(80, *(len(a) + len(b) + 8 for a, b in rows))
+    Console(file=sys.stdout, width=width).print(table)
+
+
+#: Warnings a CLI user cannot act on (messages, as regular expressions).
+NOISE = (
+    r"`isinstance\(treespec, LeafSpec\)` is deprecated",
+    r"The dirpath has changed from",
+    r"Trying to infer the `batch_size` from an ambiguous collection",
+    r"could not find the monitored key in the returned metrics",
+    r"The number of training batches \(\d+\) is smaller than the logging interval",
+    r"Checkpoint directory .* exists and is not empty",
+)
+
+
+class _DropTips(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "Tip:" not in record.getMessage()
+
+
+@contextlib.contextmanager
+def quiet_lightning() -> Iterator[None]:
+    """Within the block: drop the warnings of :data:`NOISE` and Lightning's advertising tips.
+
+    Used by the CLI only, so a library user keeps every warning.
+    """
+    logger = logging.getLogger("lightning.pytorch.utilities.rank_zero")
+    tips = _DropTips()
+    logger.addFilter(tips)
+    try:
+        with warnings.catch_warnings():
+            for pattern in NOISE:
+                warnings.filterwarnings("ignore", message=f".*{pattern}")
+            yield
+    finally:
+        logger.removeFilter(tips)
+
+
+class AdaptiveLogInterval(L.Callback):
+    """Logs ``train/*`` at least every few steps on short runs.
+
+    At the start of training, ``trainer.log_every_n_steps`` becomes at most
+    the number of batches per epoch and at most a twentieth of ``max_steps``
+    (never below 1), so a 40-step run logs its loss instead of nothing.
+    """
+
+    def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        """Shorten the interval to the run's length."""
+        interval = int(trainer.log_every_n_steps)
+        if interval <= 0:
+            return
+        batches = trainer.num_training_batches
+        if isinstance(batches, int) or (isinstance(batches, float) and batches != float("inf")):
+            interval = min(interval, max(1, int(batches)))
+        if trainer.max_steps and trainer.max_steps > 0:
+            interval = min(interval, max(1, trainer.max_steps // 20))
+        trainer.log_every_n_steps = interval
+
+
+def max_steps_overrides(overrides: Sequence[str]) -> list[str]:
+    """``trainer.max_epochs=-1`` when the user sets ``trainer.max_steps`` but not ``max_epochs``.
+
+    A preset's (or the default) ``max_epochs`` would otherwise end a run the
+    user sized in steps before it got there.
+    """
+    chosen = chosen_keys(overrides)
+    if "trainer.max_steps" in chosen and "trainer.max_epochs" not in chosen:
+        value = _value_of(overrides, "trainer.max_steps")
+        if value is not None and re.fullmatch(r"\d+", value) and int(value) > 0:
+            return ["trainer.max_epochs=-1"]
+    return []
+

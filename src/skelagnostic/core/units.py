@@ -1,0 +1,47 @@
+"""Length units of motion data: the known units and a guess from a skeleton's height."""
+
+from __future__ import annotations
+
+import math
+
+from skelagnostic.core.motion import UNITS
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = ["HUMAN_HEIGHT", "UNITS", "infer_units"]
+
+#: Standing height (metres) of the person the unit guess assumes.
+HUMAN_HEIGHT = 1.7
+
+
+def infer_units(skeleton: Skeleton, units: str | None = None) -> str:
+    """The length unit of a human skeleton: ``units`` if given, else a guess from its height.
+
+    The guess is the unit of :data:`UNITS` that makes :meth:`Skeleton.height`
+    closest (in ratio) to :data:`HUMAN_HEIGHT`. It is a guess: a child, an
+    animal or a rig with a wrong scale gets a wrong one, which is why the data
+    module logs the unit and height of every dataset.
+
+    Args:
+        skeleton: The skeleton, in the units of its file.
+        units: The unit, when known (checked against :data:`UNITS`).
+
+    Raises:
+        SkelagnosticError: ``units`` is not a known unit, or the skeleton has no height.
+
+    Example:
+        >>> from skelagnostic import procedural
+        >>> motion, _ = procedural.generate("biped22", "walk", seconds=1.0)  # in cm
+        >>> infer_units(motion.skeleton), infer_units(motion.skeleton.scaled(0.01))
+        ('cm', 'm')
+    """
+    if units is not None:
+        if units not in UNITS:
+            raise SkelagnosticError(f"units: unknown unit {units!r}; known: {', '.join(UNITS)}")
+        return units
+    height = skeleton.height()
+    if not height > 0:
+        raise SkelagnosticError(
+            f"cannot infer the length units of {skeleton!r}: its height is 0; give the units"
+        )
+    return min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / HUMAN_HEIGHT)))

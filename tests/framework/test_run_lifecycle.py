@@ -1,0 +1,126 @@
+"""A run's life through the CLI: fit, then validate/test/predict from its checkpoint alone."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+from skelagnostic import cli
+from skelagnostic.data import MotionDataModule
+from skelagnostic.data.sources import ClipRef
+
+FIT = ["model=example", "experiment=smoke", "model.hidden=8", "model.latent=4",
+       "data.seconds=2.0", "data.clips_per_gait=2", "data.window=16", "data.stride=8",
+       "threads=1"]
+
+
+@pytest.fixture
+def fitted(example_plugin: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+           capsys: pytest.CaptureFixture[str]) -> Path:
+    """A finished smoke fit of the example aligner (non-default sizes); its run directory."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    assert cli.main(["fit", *FIT]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    (run,) = (tmp_path / "runs" / "example" / "fit").iterdir()
+    return run
+
+
+def later_run(tmp_path: Path, verb: str) -> Path:
+    (run,) = (tmp_path / "runs" / "example" / verb).iterdir()
+    return run
+
+
+def test_fit_records_its_split_and_prints_a_summary(example_plugin: Path, tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    assert cli.main(["fit", *FIT]) == 0
+    out, err = capsys.readouterr()
+    (run,) = (tmp_path / "runs" / "example" / "fit").iterdir()
+    split = json.loads((run / "split.json").read_text())
+    assert split["counts"]["train"] > 0 and split["counts"]["val"] > 0
+    assert set(split["clips"].values()) <= {"train", "val", "test"}
+    assert "run directory" in out and str(run) in out
+    assert str(run / "checkpoints" / "best.ckpt") in out
+    assert str(run / "checkpoints" / "last.ckpt") in out and "val/loss" in out
+    for noise in ("litlogger", "LeafSpec", "dirpath has changed", "ambiguous collection"):
+        assert noise not in err + out
+
+
+@pytest.mark.parametrize("verb", ["validate", "test", "predict"])
+def test_later_verbs_need_only_the_checkpoint(verb: str, fitted: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    extra = ["data.test_fraction=0.3"] if verb == "test" else []
+    code = cli.main([verb, f"ckpt_path={fitted / 'checkpoints' / 'last.ckpt'}", *extra])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    config = yaml.safe_load((later_run(tmp_path, verb) / "config.yaml").read_text())
+    assert config["model"]["hidden"] == 8 and config["data"]["window"] == 16  # the run's
+    assert "evaluated checkpoint" in out
+
+
+def test_explicit_overrides_still_win(fitted: Path, tmp_path: Path,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["validate", f"ckpt_path={fitted}", "data.batch_size=3"]) == 0
+    config = yaml.safe_load((later_run(tmp_path, "validate") / "config.yaml").read_text())
+    assert config["data"]["batch_size"] == 3 and config["data"]["window"] == 16
+    assert config["ckpt_path"] == str(fitted)  # a run directory stands for its best.ckpt
+    assert str(fitted / "checkpoints" / "best.ckpt") in capsys.readouterr().out
+
+
+def test_test_with_an_empty_split_is_an_error(fitted: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["test", f"ckpt_path={fitted / 'checkpoints' / 'best.ckpt'}"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the test split is empty" in err[0]
+    assert "data.test_fraction>0" in err[0]
+
+
+def test_a_later_test_fraction_never_takes_training_clips() -> None:
+    clips = [ClipRef(f"clip{i}", f"k{i}") for i in range(10)]
+    dm = MotionDataModule(val_fraction=0.2, test_fraction=0.0, split_seed=3)
+    recorded = {c.id: part for part, members in dm.split_clips(clips).items() for c in members}
+    for fraction in (0.1, 0.3, 0.6):
+        later = MotionDataModule(val_fraction=0.2, test_fraction=fraction, split_seed=3)
+        later.recorded_splits = recorded
+        split = later.split_clips(clips)
+        trained = {c.id for c in split["train"]}
+        assert trained == {k for k, v in recorded.items() if v == "train"}
+        assert split["test"] and not trained & {c.id for c in split["test"]}
+        # without the record, the same fraction would have tested on training clips
+        fresh = MotionDataModule(val_fraction=0.2, test_fraction=fraction, split_seed=3)
+        fresh_test = {c.id for c in fresh.split_clips(clips)["test"]}
+        if fraction >= 0.3:
+            assert fresh_test & {k for k, v in recorded.items() if v == "train"}
+
+
+def test_max_steps_is_not_capped_by_max_epochs(example_plugin: Path, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    # smoke: 2 epochs of at most 4 batches; 11 steps need a third epoch
+    assert cli.main(["fit", *FIT, "trainer.max_steps=11"]) == 0
+    (run,) = (tmp_path / "runs" / "example" / "fit").iterdir()
+    state = torch.load(run / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+    assert state["global_step"] == 11
+    with open(run / "csv" / "metrics.csv") as fh:
+        logged = [row for row in csv.DictReader(fh) if row.get("train/loss")]
+    assert len(logged) >= 5  # at least every other step on an 11-step run
+
+
+def test_short_epochs_log_the_training_loss(example_plugin: Path, tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    assert cli.main(["fit", *FIT, "trainer.log_every_n_steps=50"]) == 0
+    (run,) = (tmp_path / "runs" / "example" / "fit").iterdir()
+    with open(run / "csv" / "metrics.csv") as fh:
+        logged = [row for row in csv.DictReader(fh) if row.get("train/loss")]
+    assert len(logged) >= 2  # 8 steps: one per epoch at least, not none
