@@ -278,7 +278,7 @@ def build_payload(
             }
         )
     tallest = max(max(heights), 0.1)
-    axis, offsets = _lanes(roots, spacing=max(1.0, 1.5 * tallest))
+    axis, offsets = _lanes(roots, spacing=max(1.0, 1.1 * tallest + 0.2))
     for clip, offset, path in zip(clips, offsets, roots, strict=True):
         clip["sideOffset"] = offset
         clip["overlayOffset"] = [-float(path[0, 0]), 0.0, -float(path[0, 2])]

@@ -43,7 +43,7 @@
     const bones = [];
     clip.parents.forEach((parent, child) => { if (parent >= 0) bones.push([parent, child]); });
     const height = Math.max(0.2, clip.height);
-    const jointRadius = Math.max(0.008, 0.016 * height / 1.7);
+    const jointRadius = Math.max(0.01, 0.024 * height / 1.7);
     const joints = new THREE.InstancedMesh(sphere, white(), numJoints);
     const boneMesh = new THREE.InstancedMesh(cylinder, white(), Math.max(1, bones.length));
     joints.frustumCulled = false;
@@ -62,7 +62,7 @@
     view.appendChild(label);
     return {
       index, clip, group, joints, boneMesh, bones, label, numJoints,
-      positions: decode(clip), jointRadius, boneRadius: 0.55 * jointRadius,
+      positions: decode(clip), jointRadius, boneRadius: 0.6 * jointRadius,
       frame: -1, visible: true, offset: new THREE.Vector3(),
     };
   });
@@ -109,6 +109,7 @@
     if (event.key === " ") { $("play").click(); event.preventDefault(); }
     if (event.key === ",") $("prev").click();
     if (event.key === ".") $("next").click();
+    if (event.key === "h") document.body.classList.toggle("bare");
   });
 
   // ---- legend, timeline marks
@@ -188,7 +189,7 @@
     scene.add(grid);
   }
   // Look across the lanes, from the front-right and a little above.
-  const viewDir = (data.laneAxis === 0 ? new THREE.Vector3(0.35, 0.4, 1) : new THREE.Vector3(1, 0.4, -0.35))
+  const viewDir = (data.laneAxis === 0 ? new THREE.Vector3(0.25, 0.35, 1) : new THREE.Vector3(1, 0.35, -0.25))
     .normalize();
   function rootCentre() {
     const centre = new THREE.Vector3();
@@ -205,19 +206,23 @@
     return centre;
   }
   function frameView() {
-    let centre, radius;
+    // Fit a box (half width across the view, half height) into both fields of view.
+    let centre, halfWidth, halfHeight;
     if (state.follow) {
       centre = rootCentre();
       const box = new THREE.Box3();
       clips.forEach((c) => { if (c.visible) box.expandByPoint(poseCentre(c)); });
-      radius = Math.max(data.height * 1.2, 0.5 * (box.max.x - box.min.x) + data.height,
-                        0.5 * (box.max.z - box.min.z) + data.height);
+      const size = box.isEmpty() ? new THREE.Vector3() : box.getSize(new THREE.Vector3());
+      halfWidth = 0.5 * Math.max(size.x, size.z) + 0.7 * data.height;
+      halfHeight = 0.85 * data.height;
     } else {
       const box = sceneBox();
       centre = box.getCenter(new THREE.Vector3());
-      radius = 0.5 * box.getSize(new THREE.Vector3()).length();
+      halfWidth = halfHeight = 0.5 * box.getSize(new THREE.Vector3()).length();
     }
-    const distance = Math.max(radius, 0.3) / Math.sin((fov / 2) * Math.PI / 180);
+    const tanV = Math.tan((fov / 2) * Math.PI / 180);
+    const tanH = tanV * camera.aspect;
+    const distance = Math.max(0.5, halfHeight / tanV, halfWidth / tanH) * 1.2;
     controls.target.copy(centre);
     camera.position.copy(centre).addScaledVector(viewDir, distance);
     camera.near = Math.max(0.005, distance / 200);
@@ -364,6 +369,14 @@
       for (let j = 0; j < clips[k].numJoints; j++) out.push(toScreen(worldJoint(clips[k], j, v)).slice(0, 2));
       return out;
     },
+    // Camera matrices (column-major, as three.js stores them) and the canvas rectangle.
+    camera: () => {
+      camera.updateMatrixWorld();
+      const rect = renderer.domElement.getBoundingClientRect();
+      return { view: camera.matrixWorldInverse.toArray(), projection: camera.projectionMatrix.toArray(),
+               rect: [rect.left, rect.top, rect.width, rect.height] };
+    },
+    offset: (k) => clips[k].offset.toArray(),
     joints: (k) => {
       const v = new THREE.Vector3();
       return clips[k].clip.joints.map((_, j) => worldJoint(clips[k], j, v).toArray());
