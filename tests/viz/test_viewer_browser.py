@@ -6,11 +6,14 @@ missing); the tests skip only when they, or selenium, are not installed.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
 import skelagnostic as sa
 from skelagnostic.core.motion import UNITS
+from skelagnostic.viz import StickFigure
 from skelagnostic.viz.browser import ViewerBrowser, browser_available
 from skelagnostic.viz.html import build_payload, clip_colors, to_html
 
@@ -118,4 +121,35 @@ def test_controls_play_and_switch_layout(motions, browser, tmp_path):
     Select(browser.driver.find_element("id", "layout")).select_by_value("side")
     for k in range(2):
         assert np.allclose(browser.call("offset", k), payload["clips"][k]["sideOffset"])
+    assert browser.console_errors() == []
+
+
+@pytest.mark.slow
+def test_ten_one_minute_clips_open_and_play_smoothly(browser, tmp_path):
+    rng = np.random.default_rng(0)
+    frames, joints = 60 * 30, 22
+    figures = []
+    for k in range(10):
+        path = np.cumsum(rng.normal(0, 0.02, (frames, 1, 3)), axis=0) * [1, 0, 1]
+        pose = rng.uniform(0, 1.7, (1, joints, 3))
+        figures.append(StickFigure(path + pose, parents=[-1, *range(joints - 1)], fps=30.0,
+                                   name=f"clip {k}"))
+    page = tmp_path / "ten.html"
+    to_html(figures, out=page, units="m")
+    start = time.monotonic()
+    browser.open(page)
+    print(f"opened in {time.monotonic() - start:.2f} s")
+    assert time.monotonic() - start < 15.0
+    browser.driver.find_element("id", "play").click()
+    first = browser.call("frame")
+    draws_per_second = browser.driver.execute_async_script(
+        "const done = arguments[0]; let n = 0; const t0 = performance.now();"
+        "function count() { n++; if (performance.now() - t0 < 2000) requestAnimationFrame(count);"
+        " else done(1000 * n / (performance.now() - t0)); }"
+        "requestAnimationFrame(count);")
+    advanced = browser.call("frame") - first
+    print(f"{draws_per_second:.1f} draws/s, {advanced} frames in 2 s")
+    browser.driver.find_element("id", "play").click()
+    assert draws_per_second >= 8.0  # software WebGL on a busy shared CPU (idle: ~28; a GPU: 60)
+    assert advanced >= 40  # about 60 frames of the 30 fps clock in 2 s: real time
     assert browser.console_errors() == []

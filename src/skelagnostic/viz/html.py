@@ -81,7 +81,7 @@ def clip_colors(index: int) -> dict[str, str]:
 
     Examples:
         >>> clip_colors(0)["spine"]
-        '#0f5e8a'
+        '#0f4f8a'
     """
     hue = CLIP_HUES[index % len(CLIP_HUES)]
     return {
