@@ -214,7 +214,7 @@
       clips.forEach((c) => { if (c.visible) box.expandByPoint(poseCentre(c)); });
       const size = box.isEmpty() ? new THREE.Vector3() : box.getSize(new THREE.Vector3());
       halfWidth = 0.5 * Math.max(size.x, size.z) + 0.7 * data.height;
-      halfHeight = 0.85 * data.height;
+      halfHeight = 1.0 * data.height;
     } else {
       const box = sceneBox();
       centre = box.getCenter(new THREE.Vector3());
@@ -222,7 +222,7 @@
     }
     const tanV = Math.tan((fov / 2) * Math.PI / 180);
     const tanH = tanV * camera.aspect;
-    const distance = Math.max(0.5, halfHeight / tanV, halfWidth / tanH) * 1.2;
+    const distance = Math.max(0.5, halfHeight / tanV, halfWidth / tanH) * 1.3;
     controls.target.copy(centre);
     camera.position.copy(centre).addScaledVector(viewDir, distance);
     camera.near = Math.max(0.005, distance / 200);
