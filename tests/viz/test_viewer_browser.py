@@ -146,6 +146,45 @@ def test_controls_play_and_switch_layout(motions, browser, tmp_path):
     Select(browser.driver.find_element("id", "layout")).select_by_value("side")
     for k in range(2):
         assert np.allclose(browser.call("offset", k), payload["clips"][k]["sideOffset"])
+
+    # a fixed camera stays put; a following one moves with the mean root position
+    fixed = browser.call("camera")
+    browser.step_to(50)
+    assert browser.call("camera")["position"] == fixed["position"]
+    browser.driver.find_element("id", "follow").click()
+    before = browser.call("camera")
+    browser.step_to(10)
+    after = browser.call("camera")
+    roots = {frame: np.mean([motion.global_positions()[frame, 0].double().numpy() * 0.01
+                             + payload["clips"][k]["sideOffset"]
+                             for k, motion in enumerate(motions)], axis=0)
+             for frame in (10, 50)}
+    moved = np.subtract(after["position"], before["position"])
+    assert np.allclose(moved[[0, 2]], (roots[10] - roots[50])[[0, 2]], atol=1e-3)
+    assert np.allclose(np.subtract(after["target"], before["target"]), moved, atol=1e-6)
+    assert browser.console_errors() == []
+
+
+def test_speed_changes_the_playback_rate(motions, browser, tmp_path):
+    from selenium.webdriver.support.ui import Select
+
+    page = tmp_path / "view.html"
+    to_html(motions, out=page, loop=False)
+    browser.open(page)
+    advanced = {}
+    for speed in ("0.1", "4"):
+        Select(browser.driver.find_element("id", "speed")).select_by_value(speed)
+        browser.step_to(1)
+        browser.driver.find_element("id", "play").click()
+        browser.driver.execute_async_script("setTimeout(arguments[0], 1000);")
+        advanced[speed] = browser.call("frame") - 1
+        if speed == "0.1":
+            browser.driver.find_element("id", "play").click()  # pause
+    # 30 fps clock: about 3 frames in 1 s at 0.1x; at 4x the 2 s clip ends after
+    # 0.5 s and, without loop, stops on its last frame (60)
+    assert 1 <= advanced["0.1"] <= 8
+    assert advanced["4"] == 59
+    assert browser.driver.find_element("id", "play").text == "\u25b6"  # paused at the end
     assert browser.console_errors() == []
 
 

@@ -374,7 +374,8 @@
       camera.updateMatrixWorld();
       const rect = renderer.domElement.getBoundingClientRect();
       return { view: camera.matrixWorldInverse.toArray(), projection: camera.projectionMatrix.toArray(),
-               rect: [rect.left, rect.top, rect.width, rect.height] };
+               rect: [rect.left, rect.top, rect.width, rect.height],
+               position: camera.position.toArray(), target: controls.target.toArray() };
     },
     offset: (k) => clips[k].offset.toArray(),
     joints: (k) => {
