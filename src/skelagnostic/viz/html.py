@@ -238,13 +238,12 @@ def build_payload(
     keys = _as_marks(keyframes, count, "keyframes")
     switches = _as_marks(transitions, count, "transitions")
 
-    clips, boxes, heights, roots = [], [], [], []
+    clips, lowest, heights, roots = [], [], [], []
     for k, figure in enumerate(figures):
         unit = unit_list[k] or guess_units(figure)
         metres = _y_up(figure.positions, figure.up_axis) * UNITS[unit]
         codes, origin, step = _quantise(metres)
-        flat = metres.reshape(-1, 3)
-        boxes.append((flat.min(axis=0), flat.max(axis=0)))
+        lowest.append(float(metres[..., 1].min()))
         roots.append(metres[:, 0])
         heights.append(float(np.ptp(metres[0, :, 1])))
         joint_names = getattr(figure, "joint_names", None)
@@ -282,7 +281,6 @@ def build_payload(
     for clip, offset, path in zip(clips, offsets, roots, strict=True):
         clip["sideOffset"] = offset
         clip["overlayOffset"] = [-float(path[0, 0]), 0.0, -float(path[0, 2])]
-    floor = min(float(lo[1]) for lo, _ in boxes)
     return {
         "title": title,
         "version": 1,
@@ -292,7 +290,7 @@ def build_payload(
         "speed": float(speed),
         "fps": max(f.fps for f in figures),
         "duration": max(f.duration for f in figures),
-        "floor": floor,
+        "floor": min(lowest),
         "laneAxis": axis,
         "height": tallest,
         "clips": clips,
