@@ -26,6 +26,15 @@ def test_demo_procedural_writes_bvh_png_and_summary(tmp_path, capsys):
     assert "biped31_run_1" in capsys.readouterr().out
 
 
+def test_demo_html_writes_the_viewer(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--seconds", "0.5", "--no-gif", "--html"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outputs"]["viewer"] == str(out / "demo.html")
+    page = (out / "demo.html").read_text(encoding="utf-8")
+    assert '"name":"quadruped_trot_3"' in page and "OrbitControls" in page
+
+
 @pytest.mark.data
 def test_demo_on_real_bvh(tmp_path, shared_data):
     clip = shared_data / "human" / "xia_cmu" / "angry_13_000.bvh"

@@ -44,6 +44,7 @@ class Keyed(ExampleAligner):
         return Motion(motion.skeleton, rot, root, motion.fps)
 
     def transfer(self, motion, targets):
+        self.last_transitions = [10, 25]  # as if matched windows started there
         return targets[0][: motion.num_frames]
 
 
@@ -147,6 +148,44 @@ def test_transfer_reads_target_directories(
     result = sa.read_bvh(out)
     assert result.skeleton.num_joints == sa.read_bvh(dog_dir / "a.bvh").skeleton.num_joints
     assert result.num_frames == sa.read_bvh(source).num_frames
+
+
+def test_interpolate_and_transfer_mark_keys_and_transitions_in_the_viewer(
+    keyed_plugin: None, trained: Path, clips, tmp_path: Path, capsys
+) -> None:
+    from skelagnostic.viz.html import decode_payload
+
+    clip = clips("biped22", "walk")
+    ckpt = f"ckpt={trained / 'checkpoints' / 'last.ckpt'}"
+    page = tmp_path / "keys.html"
+    code = cli.main(["interpolate", str(clip), ckpt, "model=keyed", "every=20",
+                     f"out={tmp_path / 'a.bvh'}", f"html={page}"])
+    assert code == 0, capsys.readouterr().err
+    text = page.read_text(encoding="utf-8")
+    assert text.count('"keyframes":[0,20,40,60]') == 2  # input and result
+    assert '"name":"input"' in text and '"name":"interpolate"' in text
+    assert str(page) in capsys.readouterr().out
+
+    dog = clips("quadruped", "trot", 3.0)
+    page = tmp_path / "transfer.html"
+    code = cli.main(["transfer", str(clip), str(dog), ckpt, "model=keyed",
+                     f"out={tmp_path / 'b.bvh'}", f"render={page}"])
+    assert code == 0, capsys.readouterr().err
+    text = page.read_text(encoding="utf-8")
+    assert '"transitions":[10,25]' in text and '"name":"transfer"' in text
+    assert [p.shape[1] for p in decode_payload(text)] == [22, 21]
+
+
+def test_retarget_html_option(example_plugin: Path, trained: Path, clips, tmp_path: Path,
+                              capsys) -> None:
+    source, target = clips("biped22", "walk"), clips("biped31", "run")
+    page = tmp_path / "retarget.html"
+    code = cli.main(["retarget", str(source), str(target),
+                     f"ckpt={trained / 'checkpoints' / 'last.ckpt'}",
+                     f"out={tmp_path / 'r.bvh'}", f"html={page}", "mode=overlay"])
+    assert code == 0, capsys.readouterr().err
+    text = page.read_text(encoding="utf-8")
+    assert '"mode":"overlay"' in text and '"name":"retarget"' in text
 
 
 @pytest.mark.parametrize(

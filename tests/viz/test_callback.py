@@ -117,6 +117,19 @@ def test_renders_every_n_epochs_and_last_epoch(tmp_path):
     np.testing.assert_array_equal(image, np.asarray(Image.open(renders / "epoch0001.png")))
 
 
+def test_html_writes_the_viewer_page_beside_the_gif(tmp_path):
+    from skelagnostic.viz.html import decode_payload
+
+    model = _RenderingModel()
+    callback = RenderSamples(every_n_epochs=1, size=(48, 48), sheet_frames=2, html=True)
+    _fit(model, callback, tmp_path, epochs=1)
+    page = tmp_path / "renders" / "epoch0000.html"
+    assert callback.last_html == page
+    text = page.read_text(encoding="utf-8")
+    assert '"name":"input"' in text and '"name":"output"' in text
+    assert len(decode_payload(text)) == 2
+
+
 def test_module_without_render_sample_warns_once(tmp_path):
     callback = RenderSamples(every_n_epochs=1, dirpath=tmp_path / "out")
     assert not isinstance(_Model(), RenderSampleSource)

@@ -181,3 +181,44 @@ def test_options_are_parsed_into_render_arguments(monkeypatch, tmp_path):
             "labels": ["x", "y"],
         }
     ]
+
+
+def test_out_html_writes_the_viewer_with_labels_and_mode(bvh_files, tmp_path, capsys):
+    from skelagnostic.viz.html import decode_payload
+
+    human, dog = bvh_files
+    out = tmp_path / "view.html"
+    assert main([str(human), str(dog), f"out={out}", "labels=h,d", "mode=overlay"]) == 0
+    assert capsys.readouterr().out.split() == [str(out)]
+    page = out.read_text(encoding="utf-8")
+    assert '"name":"h"' in page and '"name":"d"' in page and '"mode":"overlay"' in page
+    positions = decode_payload(page)
+    assert [p.shape[0] for p in positions] == [31, 31]
+    fk = sa.read_bvh(human).global_positions().double().numpy() * 0.01  # procedural: cm
+    assert np.abs(positions[0] - fk).max() < 1e-4
+
+
+def test_html_option_next_to_a_gif_and_cut_marks(bvh_files, tmp_path):
+    from skelagnostic.viz.html import decode_payload
+
+    human, _ = bvh_files
+    motion = sa.read_bvh(human)
+    gif, page = tmp_path / "a.gif", tmp_path / "a.html"
+    written = render_from_options(
+        [motion, motion],
+        {"out": str(gif), "html": str(page), "start": "0.2", "size": "48", "max_frames": "3"},
+        keyframes={0: [0, 5, 6, 20], 1: [30]},
+        transitions={1: [10]},
+    )
+    assert written == [page, gif] and gif.is_file()
+    text = page.read_text(encoding="utf-8")
+    # start=0.2 s cuts 6 frames at 30 fps: marks move with the cut, earlier ones are dropped
+    assert '"keyframes":[0,14]' in text and '"keyframes":[24]' in text
+    assert '"transitions":[4]' in text
+    assert decode_payload(text)[0].shape[0] == 31 - 6
+
+
+def test_html_option_must_be_an_html_path(bvh_files, tmp_path, capsys):
+    human, _ = bvh_files
+    assert main([str(human), f"out={tmp_path / 'a.gif'}", f"html={tmp_path / 'a.png'}"]) == 2
+    assert "option html=" in capsys.readouterr().err

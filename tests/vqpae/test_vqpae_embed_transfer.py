@@ -119,10 +119,15 @@ def test_aligner_transfer_matches_the_module_function(trained: dict) -> None:
     dogs = [procedural.generate("quadruped", g, seconds=3.0, fps=FPS, seed=3)[0]
             for g in ("walk", "trot")]
     source, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=FPS, seed=8)
+    assert model.last_transitions is None
     out = model.transfer(source, dogs)
-    expected = transfer(model, source, build_database(model, dogs)).motion
+    result = transfer(model, source, build_database(model, dogs))
+    expected = result.motion
     assert out.skeleton is dogs[0].skeleton and out.num_frames == source.num_frames
     assert torch.equal(out.rotations, expected.rotations)
+    # the viewer's timeline marks: output frames where a new matched window starts
+    assert model.last_transitions == [s.start for s in result.match.segments[1:]]
+    assert all(0 < f < out.num_frames for f in model.last_transitions)
     with pytest.raises(SkelagnosticError, match="empty"):
         model.transfer(source, [])
 

@@ -137,7 +137,11 @@ class Aligner(L.LightningModule, ABC):
         """Re-enact ``motion`` with another character's motion (capability ``"transfer"``).
 
         Aligners that declare ``"transfer"`` override this (for example by
-        matching in a shared latent space, as VQ-PAE does).
+        matching in a shared latent space, as VQ-PAE does). An aligner that
+        assembles the result from matched windows may set
+        ``self.last_transitions`` to the result's frames where a new window
+        starts; ``skelagnostic transfer html=...`` marks them on the viewer's
+        timeline.
 
         Args:
             motion: The source motion.

@@ -16,6 +16,7 @@ import torch
 from lightning.pytorch.utilities import rank_zero_warn
 from PIL import Image
 
+from skelagnostic.viz.html import to_html
 from skelagnostic.viz.render import contact_sheet, render_frames, write_animation
 from skelagnostic.viz.stick import RenderError
 
@@ -53,7 +54,8 @@ class RenderSamples(pl.Callback):
     ``trainer.max_epochs`` is known), the callback hands the epoch's first
     validation batch to ``pl_module.render_sample(batch)`` (see
     :class:`RenderSampleSource`) and writes ``epoch{N:04d}.gif`` and a contact
-    sheet ``epoch{N:04d}.png`` to ``dirpath``. Every attached logger whose
+    sheet ``epoch{N:04d}.png`` (and with ``html=True`` the 3D viewer page
+    ``epoch{N:04d}.html``) to ``dirpath``. Every attached logger whose
     ``experiment`` has ``add_image`` (TensorBoard's ``SummaryWriter``,
     tensorboardX) also receives the contact sheet under ``tag``. Only global
     rank 0 renders; the sanity check is skipped. A module without
@@ -67,6 +69,8 @@ class RenderSamples(pl.Callback):
         size: ``(width, height)`` of one panel in pixels.
         sheet_frames: Number of frames on the contact sheet (one row).
         tag: Image tag for the loggers.
+        html: Also write ``epochNNNN.html``, the interactive 3D viewer of
+            :func:`skelagnostic.viz.to_html` (one self-contained page).
 
     Raises:
         RenderError: If ``every_n_epochs`` or ``sheet_frames`` is not positive,
@@ -87,6 +91,7 @@ class RenderSamples(pl.Callback):
         size: tuple[int, int] = (240, 240),
         sheet_frames: int = 6,
         tag: str = "val/render",
+        html: bool = False,
     ) -> None:
         if every_n_epochs < 1:
             raise RenderError(f"every_n_epochs must be at least 1, got {every_n_epochs}")
@@ -101,6 +106,9 @@ class RenderSamples(pl.Callback):
         self.size = (int(size[0]), int(size[1]))
         self.sheet_frames = sheet_frames
         self.tag = tag
+        self.html = bool(html)
+        #: Viewer page written by the most recent render (``html=True``).
+        self.last_html: Path | None = None
         #: Paths written by the most recent render (GIF, PNG).
         self.last_paths: tuple[Path, Path] | None = None
         self._batch: Any = None
@@ -154,6 +162,9 @@ class RenderSamples(pl.Callback):
         png = directory / f"{stem}.png"
         Image.fromarray(sheet).save(png)
         self.last_paths = (gif, png)
+        if self.html:
+            self.last_html = directory / f"{stem}.html"
+            to_html(sample, names=labels, out=self.last_html, mode=self.mode)
         for logger in trainer.loggers:
             experiment: Any = getattr(logger, "experiment", None)
             if hasattr(experiment, "add_image"):

@@ -3,8 +3,8 @@
 Generates procedural gaits on four skeletons (or reads the BVH files given),
 runs forward kinematics, writes each motion as BVH, reads it back to check the
 round trip, and renders all characters side by side as a PNG contact sheet and
-an animated GIF. Everything lands in one output directory with a
-``summary.json``.
+an animated GIF (and with ``--html`` the interactive 3D viewer page).
+Everything lands in one output directory with a ``summary.json``.
 """
 
 from __future__ import annotations
@@ -36,6 +36,14 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--fps", type=float, default=30.0, help="procedural frame rate")
     parser.add_argument("--seed", type=int, default=0, help="procedural seed")
     parser.add_argument("--no-gif", action="store_true", help="skip the animated GIF")
+    parser.add_argument(
+        "--html",
+        nargs="?",
+        const="demo.html",
+        default=None,
+        metavar="PATH",
+        help="also write the interactive 3D viewer (default name demo.html, in --out)",
+    )
     return parser
 
 
@@ -46,7 +54,7 @@ def main(argv: Sequence[str]) -> int:
     from rich.table import Table
 
     import skelagnostic as sa
-    from skelagnostic.viz import render_motion
+    from skelagnostic.viz import render_motion, to_html
 
     console = Console(stderr=False)
     out: Path = args.out
@@ -109,6 +117,10 @@ def main(argv: Sequence[str]) -> int:
                 motions, out / "demo.gif", labels=labels, max_frames=90, follow=True
             )
             outputs["animation"] = str(gif)
+        if args.html is not None:
+            page = out / args.html
+            to_html(motions, names=labels, out=page)
+            outputs["viewer"] = str(page)
         (out / "summary.json").write_text(
             json.dumps({"source": source, "motions": summary, "outputs": outputs}, indent=2)
         )

@@ -6,8 +6,10 @@ Usage::
     skelagnostic interpolate INPUT.bvh ckpt=PATH (every=N | keys=0,15,40) out=OUT.bvh
     skelagnostic transfer SOURCE.bvh TARGET.bvh|DIR [...] ckpt=PATH out=OUT.bvh
 
-Every verb also takes ``render=OUT.gif`` (or ``.png``/``.mp4``) to draw the input
-next to the result, plus the rendering options of ``skelagnostic render``.
+Every verb also takes ``render=OUT.gif`` (or ``.png``/``.mp4``/``.html``) to draw
+the input next to the result, ``html=VIEW.html`` for the interactive 3D viewer
+(keyframes / matching transitions marked on its timeline), plus the rendering
+options of ``skelagnostic render``.
 
 The aligner is built from a checkpoint written by ``skelagnostic fit``; its name
 comes from ``model=`` or, when omitted, from the run's ``config.yaml`` next to
@@ -43,7 +45,7 @@ _COMMON = {
     "ckpt": "checkpoint written by `skelagnostic fit` (required)",
     "model": "registered aligner name; default: model.name of the run's config.yaml",
     "out": "output BVH path (required); written atomically",
-    "render": "also draw input and result side by side (.gif, .mp4 or .png)",
+    "render": "also draw input and result side by side (.gif, .mp4, .png or .html)",
     "units": "length unit of the input BVH files (m, cm, mm, inch, ft, cmu); "
              "default: the aligner guesses",
     "threads": THREADS_HELP,
@@ -208,8 +210,12 @@ def _bvh_paths(items: Sequence[str]) -> list[Path]:
 
 
 def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
-         apply: Callable[[Aligner, list[Path], dict[str, str]], tuple[Motion, Motion]]) -> int:
-    """Shared driver: parse, check options, load the aligner, apply, write, render."""
+         apply: Callable[[Aligner, list[Path], dict[str, str]], tuple[Motion, Motion]],
+         marks: dict[str, dict[int, list[int]]] | None = None) -> int:
+    """Shared driver: parse, check options, load the aligner, apply, write, render.
+
+    ``marks`` (filled by ``apply``) holds keyframes / transitions for the viewer.
+    """
     if not argv or any(word in ("-h", "--help", "help") for word in argv):
         print(_usage(verb))
         return 0 if argv else 2
@@ -245,10 +251,11 @@ def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
         Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
         write_bvh(result, options["out"])
         print(options["out"])
-        if "render" in options:
+        if "render" in options or "html" in options:
             labels = options.get("labels")
             render_options = {**options, "labels": labels or f"input,{verb}"}
-            for path in render_from_options([source, result], render_options, out_key="render"):
+            for path in render_from_options([source, result], render_options, out_key="render",
+                                            **(marks or {})):
                 print(path)
     except SkelagnosticError as error:
         print(f"skelagnostic {verb}: error: {error}", file=sys.stderr)
@@ -277,9 +284,11 @@ def interpolate(argv: list[str]) -> int:
         keys = keyframes_from_options(motion.num_frames, options.get("every"),
                                       options.get("keys"))
         aligner.require("interpolate")
+        marks["keyframes"] = {0: keys, 1: keys}
         return motion, aligner.interpolate(motion, keys)
 
-    return _run("interpolate", argv, (1, 1), apply)
+    marks: dict[str, dict[int, list[int]]] = {}
+    return _run("interpolate", argv, (1, 1), apply, marks)
 
 
 def transfer(argv: list[str]) -> int:
@@ -295,6 +304,11 @@ def transfer(argv: list[str]) -> int:
                 "the target clips are on different skeletons; give clips of one character"
             )
         aligner.require("transfer")
-        return source, aligner.transfer(source, targets)
+        result = aligner.transfer(source, targets)
+        switches = getattr(aligner, "last_transitions", None)
+        if switches is not None:
+            marks["transitions"] = {1: [int(f) for f in switches]}
+        return source, result
 
-    return _run("transfer", argv, (2, None), apply)
+    marks: dict[str, dict[int, list[int]]] = {}
+    return _run("transfer", argv, (2, None), apply, marks)

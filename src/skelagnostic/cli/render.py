@@ -1,13 +1,16 @@
-"""``skelagnostic render``: draw BVH clips to an animated GIF/MP4 or a contact sheet.
+"""``skelagnostic render``: draw BVH clips to a GIF/MP4, a contact sheet or a 3D viewer page.
 
 Usage::
 
     skelagnostic render a.bvh [b.bvh ...] out=anim.gif [mode=side|overlay] [fps=30]
-        [sheet=frames.png] [frames=8] [columns=4] [max_frames=N] [start=S] [end=S]
-        [size=WxH] [elev=DEG] [azim=DEG] [trajectory=true] [follow=true] [labels=a,b]
+        [sheet=frames.png] [html=view.html] [frames=8] [columns=4] [max_frames=N]
+        [start=S] [end=S] [size=WxH] [elev=DEG] [azim=DEG] [trajectory=true]
+        [follow=true] [labels=a,b]
 
-Other verbs that produce motion reuse :func:`render_from_options` so that
-``render=out.gif`` / ``sheet=out.png`` work the same way everywhere.
+``out=view.html`` (or ``html=view.html`` next to another output) writes the
+interactive viewer of :func:`skelagnostic.viz.to_html`. Other verbs that
+produce motion reuse :func:`render_from_options` so that ``render=out.gif`` /
+``sheet=out.png`` / ``html=view.html`` work the same way everywhere.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ RENDER_OPTIONS: dict[str, str] = {
     "mode": "side (one panel per clip) or overlay (one panel, one camera); default side",
     "fps": "output frame rate; default: highest input rate, at most 30",
     "sheet": "also write a PNG contact sheet to this path",
+    "html": "also write an interactive 3D viewer (one self-contained .html page) to this path",
     "frames": "frames on a contact sheet; default 8",
     "columns": "columns of a contact sheet; default 4",
     "max_frames": "keep at most N animation frames (playback stays real time)",
@@ -43,10 +47,11 @@ RENDER_OPTIONS: dict[str, str] = {
 _USAGE = """usage: skelagnostic render A.bvh [B.bvh ...] [out=render.gif] [key=value ...]
 
 Draw BVH clips as stick figures (bones coloured by body group) to an animated
-GIF (.gif), an MP4 (.mp4, needs ffmpeg) or a PNG contact sheet (.png).
+GIF (.gif), an MP4 (.mp4, needs ffmpeg), a PNG contact sheet (.png) or an
+interactive 3D viewer page (.html: orbit, scrub, speed, overlay; no network).
 
 options:
-  out         output path (.gif, .mp4 or .png); default render.gif
+  out         output path (.gif, .mp4, .png or .html); default render.gif
 {options}"""
 
 
@@ -93,12 +98,19 @@ def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
 
 
 def render_from_options(
-    motions: Sequence[Any], options: Mapping[str, str], *, out_key: str = "out"
+    motions: Sequence[Any],
+    options: Mapping[str, str],
+    *,
+    out_key: str = "out",
+    keyframes: Mapping[int, Sequence[int]] | None = None,
+    transitions: Mapping[int, Sequence[int]] | None = None,
 ) -> list[Path]:
     """Render motions as the ``key=value`` options ask; the shared back end of all verbs.
 
-    Writes the animation or sheet named by ``options[out_key]`` (if present) and
-    the contact sheet named by ``options["sheet"]`` (if present).
+    Writes the animation, sheet or viewer page (``.html``) named by
+    ``options[out_key]`` (if present), the contact sheet named by
+    ``options["sheet"]`` and the viewer page named by ``options["html"]`` (if
+    present).
 
     Args:
         motions: Motions (or BVH paths / stick figures) to draw.
@@ -106,6 +118,9 @@ def render_from_options(
             are read, others are ignored so that verbs can pass all their options.
         out_key: Option holding the main output path (``"render"`` in verbs
             whose ``out=`` is a BVH file).
+        keyframes: Clip index -> keyframe indices, marked on the viewer's timeline.
+        transitions: Clip index -> frames where a matched window starts, marked
+            on the viewer's timeline.
 
     Returns:
         The written paths (empty when neither output was asked for).
@@ -137,9 +152,20 @@ def render_from_options(
         "frames": _number(options, "frames", int) if "frames" in options else 8,
         "columns": _number(options, "columns", int) if "columns" in options else 4,
     }
+    firsts = _first_frames(motions, options)
     motions = _cut(motions, options)
+    marks = {
+        name: _shift_marks(given, firsts, motions)
+        for name, given in (("keyframes", keyframes), ("transitions", transitions))
+    }
     written = []
-    if out_key in options:
+    html_paths = [options[key] for key in (out_key, "html") if key in options
+                  and Path(options[key]).suffix.lower() in (".html", ".htm")]
+    if "html" in options and options["html"] not in html_paths:
+        raise SkelagnosticError(f"option html={options['html']!r}: must be an .html path")
+    for path in html_paths:
+        written.append(_write_html(motions, path, common, marks))
+    if out_key in options and options[out_key] not in html_paths:
         written.append(
             render_motion(
                 motions,
@@ -210,6 +236,40 @@ def main(argv: list[str]) -> int:
         print(f"skelagnostic render: error: {error}", file=sys.stderr)
         return 2
     return 0
+
+
+def _write_html(
+    motions: Sequence[Any],
+    path: str,
+    common: Mapping[str, Any],
+    marks: Mapping[str, dict[int, list[int]]],
+) -> Path:
+    """Write the viewer page with the options it understands (mode, follow, labels)."""
+    from skelagnostic.viz import to_html
+
+    extra = {key: common[key] for key in ("mode", "follow") if key in common}
+    to_html(motions, names=common.get("labels"), out=path, **marks, **extra)
+    return Path(path)
+
+
+def _first_frames(motions: Sequence[Any], options: Mapping[str, str]) -> list[int]:
+    """First frame kept of every clip by ``start=`` (0 without it)."""
+    if "start" not in options:
+        return [0] * len(motions)
+    start = _number(options, "start", float)
+    return [max(0, round(start * m.fps)) if hasattr(m, "fps") else 0 for m in motions]
+
+
+def _shift_marks(
+    marks: Mapping[int, Sequence[int]] | None, firsts: Sequence[int], motions: Sequence[Any]
+) -> dict[int, list[int]]:
+    """Frame marks moved to the cut clips; marks outside the cut are dropped."""
+    out: dict[int, list[int]] = {}
+    for clip, frames in (marks or {}).items():
+        length = getattr(motions[clip], "num_frames", None)
+        kept = [f - firsts[clip] for f in frames if f >= firsts[clip]]
+        out[clip] = [f for f in kept if length is None or f < length]
+    return out
 
 
 def _number(options: Mapping[str, str], key: str, kind: type) -> Any:

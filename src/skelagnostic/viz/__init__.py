@@ -1,5 +1,7 @@
 """See the results: stick-figure renderings of motions and plots for the methods.
 
+:func:`to_html` writes an interactive 3D viewer (one self-contained HTML page).
+
 Everything here draws headless on matplotlib's Agg canvas (no display, no
 pyplot state) and imports matplotlib only when a function is called, so
 ``import skelagnostic.viz`` stays cheap. It never imports lightning, hydra or
@@ -7,6 +9,7 @@ pluggy.
 """
 
 from skelagnostic.viz.camera import Camera
+from skelagnostic.viz.html import to_html
 from skelagnostic.viz.plots import (
     plot_codebook_usage,
     plot_metric_curves,
@@ -41,6 +44,7 @@ __all__ = [
     "render_frames",
     "render_motion",
     "synchronise",
+    "to_html",
     "write_animation",
     "write_contact_sheet",
 ]

@@ -55,6 +55,7 @@ class StickFigure:
         name: Label shown next to the character.
         up_axis: Which coordinate axis points up in ``positions`` (``"x"``,
             ``"y"`` or ``"z"``).
+        joint_names: Optional name of every joint (shown on hover by the HTML viewer).
 
     Raises:
         RenderError: If a field has the wrong shape or value; the message names it.
@@ -72,6 +73,7 @@ class StickFigure:
     fps: float = 30.0
     name: str = ""
     up_axis: str = "y"
+    joint_names: Sequence[str] | None = None
     _bones: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -111,6 +113,13 @@ class StickFigure:
             raise RenderError(
                 f"StickFigure.up_axis must be one of {_UP_AXES}, got {self.up_axis!r}"
             )
+        if self.joint_names is not None:
+            names = [str(n) for n in self.joint_names]
+            if len(names) != num_joints:
+                raise RenderError(
+                    f"StickFigure.joint_names has {len(names)} entries for {num_joints} joints"
+                )
+            self.joint_names = names
         self.positions = positions
         self.parents = parents
         self.groups = groups
@@ -139,6 +148,7 @@ class StickFigure:
             fps=float(motion.fps),
             name=name if name is not None else (getattr(motion, "name", None) or ""),
             up_axis=getattr(skeleton, "up_axis", "y"),
+            joint_names=list(skeleton.joint_names),
         )
 
     @property

@@ -196,6 +196,8 @@ class VQPAEAligner(Aligner):
         self._metrics: dict[str, ManifoldOverlap] = {}  # not a submodule: rebuilt per epoch
         #: Per dataset, the ``[K]`` code histogram of the last validation/test epoch.
         self.last_code_counts: dict[str, Tensor] = {}
+        #: Output frames where the last transfer switched to another matched window.
+        self.last_transitions: list[int] | None = None
         self._predictions: dict[str, list[dict[str, Tensor]]] = {}
         self.predictions_path: Path | None = None
         if datasets:
@@ -625,7 +627,9 @@ class VQPAEAligner(Aligner):
         from skelagnostic_vqpae.transfer import transfer as match_transfer
 
         database = build_database(self, list(targets))
-        return match_transfer(self, motion, database).motion
+        result = match_transfer(self, motion, database)
+        self.last_transitions = [seg.start for seg in result.match.segments[1:]]
+        return result.motion
 
     def dataset_of(self, skeleton: Skeleton) -> int:
         """Index of the dataset whose skeleton has ``skeleton``'s topology.
