@@ -8,19 +8,32 @@ from skelagnostic.core.motion import UNITS
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 
-__all__ = ["HUMAN_HEIGHT", "UNITS", "infer_units"]
+__all__ = ["HUMAN_HEIGHT", "QUADRUPED_HEIGHT", "UNITS", "infer_units", "units_for_height"]
 
 #: Standing height (metres) of the person the unit guess assumes.
 HUMAN_HEIGHT = 1.7
+#: Height (metres) assumed for a character with a tail (a quadruped).
+QUADRUPED_HEIGHT = 0.6
+
+
+def units_for_height(height: float, reference: float = HUMAN_HEIGHT) -> str:
+    """The unit of :data:`UNITS` that brings ``height`` closest (in ratio) to ``reference`` metres.
+
+    Example:
+        >>> units_for_height(171.0), units_for_height(60.0, QUADRUPED_HEIGHT)
+        ('cm', 'cm')
+    """
+    return min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / reference)))
 
 
 def infer_units(skeleton: Skeleton, units: str | None = None) -> str:
     """The length unit of a human skeleton: ``units`` if given, else a guess from its height.
 
     The guess is the unit of :data:`UNITS` that makes :meth:`Skeleton.height`
-    closest (in ratio) to :data:`HUMAN_HEIGHT`. It is a guess: a child, an
-    animal or a rig with a wrong scale gets a wrong one, which is why the data
-    module logs the unit and height of every dataset.
+    closest (in ratio) to :data:`HUMAN_HEIGHT`, or :data:`QUADRUPED_HEIGHT`
+    for a skeleton with a tail. It is a guess: a child, an unusual animal or a
+    rig with a wrong scale gets a wrong one, which is why the data module logs
+    the unit and height of every dataset.
 
     Args:
         skeleton: The skeleton, in the units of its file.
@@ -44,4 +57,5 @@ def infer_units(skeleton: Skeleton, units: str | None = None) -> str:
         raise SkelagnosticError(
             f"cannot infer the length units of {skeleton!r}: its height is 0; give the units"
         )
-    return min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / HUMAN_HEIGHT)))
+    reference = QUADRUPED_HEIGHT if "tail" in skeleton.body_groups else HUMAN_HEIGHT
+    return units_for_height(height, reference)

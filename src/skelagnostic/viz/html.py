@@ -56,8 +56,6 @@ _GROUP_SHADES: dict[str, tuple[float, float, float]] = {
 }
 
 #: Typical standing height in metres, to guess the length unit of a clip.
-_HUMAN_HEIGHT = 1.7
-_QUADRUPED_HEIGHT = 0.6
 _LEVELS = 65535
 _MODES = ("side", "overlay")
 _ASSETS = "assets"
@@ -110,14 +108,14 @@ def guess_units(figure: StickFigure) -> str:
         >>> guess_units(StickFigure(pose, parents=[-1, 0, 0]))
         'cm'
     """
-    from skelagnostic.core.motion import UNITS
+    from skelagnostic.core.units import HUMAN_HEIGHT, QUADRUPED_HEIGHT, units_for_height
 
     up = "xyz".index(figure.up_axis)
     height = float(np.ptp(figure.positions[0, :, up]))
     if not height > 0:
         return "m"
-    reference = _QUADRUPED_HEIGHT if "tail" in figure.groups else _HUMAN_HEIGHT  # type: ignore[operator]
-    return min(UNITS, key=lambda u: abs(math.log(height * UNITS[u] / reference)))
+    tailed = "tail" in figure.groups  # type: ignore[operator]
+    return units_for_height(height, QUADRUPED_HEIGHT if tailed else HUMAN_HEIGHT)
 
 
 def _y_up(positions: np.ndarray, up_axis: str) -> np.ndarray:
