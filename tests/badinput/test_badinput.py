@@ -397,7 +397,7 @@ def test_cli_demo_on_a_full_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(os, "fsync", no_space)
-    assert cli.main(["demo", "--out", str(out), "--seconds", "0.2", "--no-gif"]) == 1
+    assert cli.main(["demo", f"out={out}", "seconds=0.2", "gif=false"]) == 1
     err = capsys.readouterr().err
     assert "Traceback" not in err
     lines = [line for line in err.splitlines() if line.startswith("skelagnostic demo: ")]

@@ -3,17 +3,17 @@
 Generates procedural gaits on four skeletons (or reads the BVH files given),
 runs forward kinematics, writes each motion as BVH, reads it back to check the
 round trip, and renders all characters side by side as a PNG contact sheet and
-an animated GIF (and with ``--html`` the interactive 3D viewer page).
+an animated GIF (and with ``html=`` the interactive 3D viewer page).
 Everything lands in one output directory with a ``summary.json``.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 _DEFAULT_CLIPS = (
     ("biped22", "walk"),
@@ -23,33 +23,76 @@ _DEFAULT_CLIPS = (
 )
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="skelagnostic demo",
-        description="Procedural or BVH motion -> forward kinematics -> BVH files + rendering.",
-    )
-    parser.add_argument(
-        "bvh", nargs="*", type=Path, help="BVH files to use instead of procedural motion"
-    )
-    parser.add_argument("--out", type=Path, default=Path("runs/demo"), help="output directory")
-    parser.add_argument("--seconds", type=float, default=3.0, help="procedural clip length")
-    parser.add_argument("--fps", type=float, default=30.0, help="procedural frame rate")
-    parser.add_argument("--seed", type=int, default=0, help="procedural seed")
-    parser.add_argument("--no-gif", action="store_true", help="skip the animated GIF")
-    parser.add_argument(
-        "--html",
-        nargs="?",
-        const="demo.html",
-        default=None,
-        metavar="PATH",
-        help="also write the interactive 3D viewer (default name demo.html, in --out)",
-    )
-    return parser
+#: Options of ``skelagnostic demo`` with their help.
+OPTIONS: dict[str, str] = {
+    "out": "output directory; default runs/demo",
+    "seconds": "procedural clip length in seconds; default 3",
+    "fps": "procedural frame rate; default 30",
+    "seed": "procedural seed; default 0",
+    "gif": "false to skip the animated GIF; default true",
+    "html": "also write the interactive 3D viewer: a file name (in out=) or true for demo.html",
+}
+
+_USAGE = """usage: skelagnostic demo [A.bvh B.bvh ...] [key=value ...]
+
+Procedural gaits on four skeletons (or the BVH files given) -> forward
+kinematics -> BVH files, a PNG contact sheet, an animated GIF and summary.json.
+
+options:
+{options}"""
+
+
+def _usage() -> str:
+    from skelagnostic.cli.render import THREADS_HELP
+
+    lines = [f"  {k:<8} {v}" for k, v in {**OPTIONS, "threads": THREADS_HELP}.items()]
+    return _USAGE.format(options="\n".join(lines))
+
+
+def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
+    """BVH paths and typed options; raises SkelagnosticError naming the bad option."""
+    from skelagnostic.cli.render import apply_threads, parse_arguments
+    from skelagnostic.errors import SkelagnosticError
+
+    flags = [w for w in argv if w.startswith("--")]
+    if flags:
+        name = flags[0][2:].split("=", 1)[0].replace("no-gif", "gif")
+        raise SkelagnosticError(f"option {flags[0]}: every verb takes key=value options, "
+                                f"e.g. {name}=...; see 'skelagnostic demo --help'")
+    words, raw = parse_arguments(argv)
+    apply_threads(raw)
+    unknown = sorted(set(raw) - set(OPTIONS))
+    if unknown:
+        raise SkelagnosticError(f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
+                                "see 'skelagnostic demo --help'")
+    options: dict[str, Any] = {"out": Path(raw.get("out", "runs/demo"))}
+    for key, kind, default in (("seconds", float, 3.0), ("fps", float, 30.0), ("seed", int, 0)):
+        try:
+            options[key] = kind(raw.get(key, default))
+        except ValueError:
+            raise SkelagnosticError(f"option {key}={raw[key]!r}: not a number") from None
+    gif = raw.get("gif", "true").lower()
+    if gif not in ("true", "false"):
+        raise SkelagnosticError(f"option gif={raw['gif']!r}: true or false")
+    options["gif"] = gif == "true"
+    html = raw.get("html")
+    options["html"] = None if html in (None, "false") else (
+        "demo.html" if html == "true" else html)
+    return [Path(w) for w in words], options
 
 
 def main(argv: Sequence[str]) -> int:
     """Run the demo; returns the exit code."""
-    args = _parser().parse_args(list(argv))
+    if any(word in ("-h", "--help", "help") for word in argv):
+        print(_usage())
+        return 0
+    from skelagnostic.errors import SkelagnosticError
+
+    try:
+        bvh_files, args = _options(argv)
+    except SkelagnosticError as exc:
+        print(f"skelagnostic demo: error: {exc}", file=sys.stderr)
+        return 2
     from rich.console import Console
     from rich.table import Table
 
@@ -57,18 +100,18 @@ def main(argv: Sequence[str]) -> int:
     from skelagnostic.viz import render_motion, to_html
 
     console = Console(stderr=False)
-    out: Path = args.out
+    out: Path = args["out"]
     try:
         out.mkdir(parents=True, exist_ok=True)
         motions = []
-        if args.bvh:
-            for path in args.bvh:
+        if bvh_files:
+            for path in bvh_files:
                 motions.append(sa.read_bvh(path))
             source = "bvh"
         else:
             for i, (kind, gait) in enumerate(_DEFAULT_CLIPS):
                 motion, _ = sa.procedural.generate(
-                    kind, gait, seconds=args.seconds, fps=args.fps, seed=args.seed + i
+                    kind, gait, seconds=args["seconds"], fps=args["fps"], seed=args["seed"] + i
                 )
                 motions.append(motion)
             source = "procedural (synthetic)"
@@ -112,13 +155,13 @@ def main(argv: Sequence[str]) -> int:
             motions, out / "demo.png", labels=labels, sheet_frames=6, columns=3, follow=True
         )
         outputs = {"contact_sheet": str(sheet)}
-        if not args.no_gif:
+        if args["gif"]:
             gif = render_motion(
                 motions, out / "demo.gif", labels=labels, max_frames=90, follow=True
             )
             outputs["animation"] = str(gif)
-        if args.html is not None:
-            page = out / args.html
+        if args["html"] is not None:
+            page = out / args["html"]
             to_html(motions, names=labels, out=page)
             outputs["viewer"] = str(page)
         (out / "summary.json").write_text(
