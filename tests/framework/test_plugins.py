@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 import skelagnostic.plugins as plugins
+from conftest import EXAMPLE_SRC, write_dist
 from skelagnostic.aligners import Aligner, CapabilityError
 from skelagnostic.plugins import (
     PluginError,
@@ -198,3 +199,44 @@ def test_plugins_command_lists_broken_plugin(add_plugin, fake_site: Path) -> Non
     assert rows["broken"]["source"] == "fake-broken"
     assert rows["broken"]["error"] == "ImportError: no such thing"
     assert rows["skelagnostic"]["status"] == "loaded"
+
+
+def test_plugin_without_hookimpl_is_reported(add_plugin) -> None:
+    add_plugin("nohooks", "def register_aligners(register):\n    pass\n")
+    with pytest.warns(PluginLoadWarning, match="register_aligners is not decorated with "
+                                               r"@skelagnostic\.plugins\.hookimpl"):
+        pm = PluginManager()
+    info = {i.name: i for i in pm.plugins()}["nohooks"]
+    assert info.status == "failed" and "fake_plugin_nohooks" in info.error
+
+
+def test_plugin_with_misspelt_undecorated_hook_is_reported(add_plugin) -> None:
+    add_plugin("typo", "def register_aligner(register):\n    pass\n")
+    with pytest.warns(PluginLoadWarning, match=r"implements no skelagnostic hook \(misspelt "
+                                               r"hook\? register_aligner\)"):
+        pm = PluginManager()
+    assert {i.name: i for i in pm.plugins()}["typo"].status == "failed"
+
+
+def test_plugin_with_another_projects_marker_is_reported(add_plugin) -> None:
+    add_plugin("foreign", "import pluggy\nimpl = pluggy.HookimplMarker('other')\n"
+                          "@impl\ndef register_aligners(register):\n    pass\n")
+    with pytest.warns(PluginLoadWarning, match="another project's HookimplMarker"):
+        PluginManager()
+
+
+def test_fit_error_names_the_plugin_without_hookimpl(add_plugin, fake_site: Path,
+                                                      tmp_path: Path) -> None:
+    add_plugin("mlp", "def register_aligners(register):\n    pass\n")
+    write_dist(fake_site, "skelagnostic-example-aligner", "0.1.0",
+               {"example": "skelagnostic_example.plugin"})
+    out = subprocess.run(
+        [sys.executable, "-m", "skelagnostic.cli", "fit", "model=mlp"],
+        capture_output=True, text=True, cwd=tmp_path,
+        env={"PYTHONPATH": f"{fake_site}:{EXAMPLE_SRC}:{REPO / 'src'}", "PATH": "/usr/bin:/bin",
+             plugins.LOAD_PLUGINS_ENV: "mlp,example", "OMP_NUM_THREADS": "1"},
+    )
+    assert out.returncode == 1
+    line = out.stderr.strip().splitlines()[-1]
+    assert "Could not find 'model/mlp'" in line
+    assert "mlp (PluginError: plugin 'mlp': fake_plugin_mlp: register_aligners is not " in line

@@ -11,6 +11,8 @@ as ``failed``; two contributions with the same name raise :class:`PluginError`.
 
 from __future__ import annotations
 
+import difflib
+import inspect
 import os
 import warnings
 from collections.abc import Callable, Iterable, Mapping
@@ -227,12 +229,33 @@ class PluginManager:
             try:
                 plugin = ep.load()
                 self.register(plugin, ep.name, version=version, source=source)
+                self._require_hooks(plugin, ep.name, ep.value)
             except PluginError as exc:
                 if not isinstance(exc.__cause__, pluggy.PluginValidationError):
                     raise  # two plugins under one name: a collision, not a broken plugin
                 self._fail(ep.name, version, source, exc)
             except Exception as exc:  # a broken third-party plugin must not break the CLI
                 self._fail(ep.name, version, source, exc)
+
+    def _require_hooks(self, plugin: object, name: str, target: str) -> None:
+        """Unregister ``plugin`` and raise when it implements no hook (or forgot ``@hookimpl``).
+
+        A function named like a hook but not decorated with :data:`hookimpl` is
+        ignored by pluggy, so the plugin would load silently and contribute
+        nothing (``Could not find 'model/<name>'`` later); this turns that into
+        a failure naming the function.
+
+        Raises:
+            PluginError: Caused by a :class:`pluggy.PluginValidationError`, so that
+                :meth:`load_entrypoints` reports the plugin as failed.
+        """
+        problem = _hook_problem(plugin, target, self._infos[name].hooks)
+        if problem is None:
+            return
+        self._pm.unregister(name=name)
+        del self._infos[name]
+        cause = pluggy.PluginValidationError(plugin, problem)
+        raise PluginError(f"plugin {name!r}: {problem}") from cause
 
     def _fail(self, name: str, version: str, source: str, exc: BaseException) -> None:
         warnings.warn(
@@ -321,6 +344,40 @@ class PluginManager:
             )
         self._collected = total
         return total
+
+
+def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | None:
+    """What is wrong with an entry-point plugin's hooks, or ``None``.
+
+    Args:
+        plugin: The loaded entry-point object (usually a module).
+        target: The entry point's value (``module`` or ``module:attr``), for the message.
+        hooks: The hooks pluggy found implemented.
+    """
+    functions = {
+        attr: value for attr in dir(plugin)
+        if not attr.startswith("_") and callable(value := getattr(plugin, attr, None))
+        and (inspect.isfunction(value) or inspect.ismethod(value))
+    }
+    marker = f"{ENTRY_POINT_GROUP}_impl"
+    unmarked = {a: f for a, f in functions.items() if a.startswith("register")
+                and not hasattr(f, marker)}
+    foreign = sorted(a for a, f in unmarked.items()
+                     if any(k.endswith("_impl") for k in getattr(f, "__dict__", {})))
+    if foreign:
+        return (f"{target}: {', '.join(foreign)} is marked by another project's HookimplMarker; "
+                "use @skelagnostic.plugins.hookimpl")
+    undecorated = sorted(a for a in unmarked if a in _HOOKS)
+    if undecorated:
+        return (f"{target}: {', '.join(undecorated)} is not decorated with "
+                "@skelagnostic.plugins.hookimpl, so skelagnostic never calls it")
+    if hooks:
+        return None
+    close = sorted(a for a in unmarked
+                   if difflib.get_close_matches(a, _HOOKS, n=1, cutoff=0.8))
+    hint = f" (misspelt hook? {', '.join(close)})" if close else ""
+    return (f"{target} implements no skelagnostic hook{hint}: decorate functions named "
+            f"{', '.join(_HOOKS)} with @skelagnostic.plugins.hookimpl")
 
 
 def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
