@@ -6,6 +6,7 @@ import inspect
 import json
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -240,3 +241,42 @@ def test_fit_error_names_the_plugin_without_hookimpl(add_plugin, fake_site: Path
     line = out.stderr.strip().splitlines()[-1]
     assert "Could not find 'model/mlp'" in line
     assert "mlp (PluginError: plugin 'mlp': fake_plugin_mlp: register_aligners is not " in line
+
+
+def _conf_plugin(site: Path, name: str, url: str, init: bool) -> None:
+    pkg = site / f"confplug_{name}"
+    (pkg / "conf" / "experiment").mkdir(parents=True)
+    (pkg / "__init__.py").write_text(
+        "from skelagnostic.plugins import hookimpl\n\n@hookimpl\n"
+        f"def register_config_paths(register):\n    register({url!r})\n")
+    if init:
+        (pkg / "conf" / "__init__.py").write_text("")
+    (pkg / "conf" / "experiment" / f"{name}_seed.yaml").write_text(
+        "# @package _global_\nseed: 1234\n")
+    write_dist(site, f"confplug-{name}", "0.1.0", {name: f"confplug_{name}"})
+
+
+@pytest.mark.parametrize("init", [True, False])
+def test_conf_package_with_or_without_init_is_found(example_plugin: Path, tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch,
+                                                    init: bool) -> None:
+    from skelagnostic.cli.app import compose
+
+    name = "withinit" if init else "noinit"  # distinct modules: sys.modules keeps the first
+    _conf_plugin(example_plugin, name, f"pkg://confplug_{name}.conf", init)
+    monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, f"example,{name}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cfg = compose(["model=example", f"experiment={name}_seed", f"run_dir={tmp_path}"])
+    assert cfg.seed == 1234
+    # Hydra's pkg:// source wants an __init__.py and warns "... is not available" without one
+    assert not [w for w in caught if "not available" in str(w.message)]
+
+
+def test_missing_conf_package_is_named(example_plugin: Path, monkeypatch) -> None:
+    _conf_plugin(example_plugin, "nope", "pkg://confplug_nope.configs", True)
+    monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, "example,nope")
+    with pytest.warns(PluginLoadWarning, match="config path 'pkg://confplug_nope.configs': "
+                                               "'confplug_nope.configs' is not importable"):
+        infos = {i.name: i for i in plugins.get_plugin_manager().plugins()}
+    assert infos["nope"].status == "failed"

@@ -12,12 +12,14 @@ as ``failed``; two contributions with the same name raise :class:`PluginError`.
 from __future__ import annotations
 
 import difflib
+import importlib.util
 import inspect
 import os
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from importlib import metadata
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -380,6 +382,38 @@ def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | 
             f"{', '.join(_HOOKS)} with @skelagnostic.plugins.hookimpl")
 
 
+def _config_urls(path: str, plugin_name: str) -> list[str]:
+    """Hydra search-path URLs for a registered config path.
+
+    Hydra's ``pkg://`` source needs a regular package: for a directory without
+    ``__init__.py`` (a namespace package) it only warns that the path "is not
+    available" and ignores its configs. Such a package is registered as the
+    ``file://`` URL of its directory (or directories) instead.
+
+    Raises:
+        PluginError: A ``pkg://`` URL names no importable package.
+    """
+    if not path.startswith("pkg://"):
+        return [path]
+    package = path[len("pkg://"):].strip("/").replace("/", ".")
+    try:
+        spec = importlib.util.find_spec(package)
+    except (ImportError, ValueError) as exc:
+        spec, error = None, f" ({_error_text(exc)})"
+    else:
+        error = ""
+    if spec is None or spec.submodule_search_locations is None:
+        what = "a module, not a package" if spec is not None else "not importable"
+        raise PluginError(
+            f"plugin {plugin_name!r}: config path {path!r}: {package!r} is {what}{error}; "
+            f"it must be a package directory of YAML files with an __init__.py, "
+            f"shipped as package data"
+        )
+    if spec.origin is not None:  # a regular package: Hydra reads it
+        return [path]
+    return [Path(location).resolve().as_uri() for location in spec.submodule_search_locations]
+
+
 def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
     if name not in table:
         known = ", ".join(sorted(table)) or "none"
@@ -448,7 +482,8 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
                 f"config path {path!r}: expected a Hydra search-path URL such as "
                 "'pkg://my_plugin.conf' or 'file:///abs/dir'"
             )
-        out.config_paths.append((path, plugin_name))
+        for url in _config_urls(path, plugin_name):
+            out.config_paths.append((url, plugin_name))
 
     callbacks = {
         "register_aligners": register_aligner,
