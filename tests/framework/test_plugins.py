@@ -280,3 +280,48 @@ def test_missing_conf_package_is_named(example_plugin: Path, monkeypatch) -> Non
                                                "'confplug_nope.configs' is not importable"):
         infos = {i.name: i for i in plugins.get_plugin_manager().plugins()}
     assert infos["nope"].status == "failed"
+
+
+def test_plugins_command_shows_description_version_and_contents(subprocess_env,
+                                                                 tmp_path: Path) -> None:
+    def plugins_cli(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "skelagnostic.cli", "plugins", *args],
+                              capture_output=True, text=True, cwd=tmp_path, env=subprocess_env)
+
+    text = plugins_cli().stdout
+    assert "example 0.1.0 (skelagnostic-example-aligner) loaded" in text
+    assert "Example third-party aligner: a per-joint GRU autoencoder" in text
+    assert "aligners (model=): example" in text
+    assert "experiments (experiment=): example_quick" in text
+    assert "experiments (experiment=): smoke" in text  # the built-in plugin's
+    assert "data presets (data=): bandai, bvh, cmu, lafan1, mann_dog, procedural" in text
+    rows = {row["name"]: row for row in json.loads(plugins_cli("--json").stdout)}
+    assert rows["example"]["description"].startswith("Example third-party aligner")
+    assert "experiment:example_quick" in rows["example"]["provides"]
+
+
+def test_plugins_name_shows_capabilities_and_defaults(example_plugin, capsys) -> None:
+    from skelagnostic.cli.plugins import main
+
+    assert main(["example"]) == 0
+    out = capsys.readouterr().out
+    assert "aligner example (plugin example 0.1.0, skelagnostic-example-aligner)" in out
+    for line in ("retarget: yes", "interpolate: no", "transfer: no", "unseen topology: yes",
+                 "declared: decode, encode, quadruped, retarget, unseen_topology",
+                 "  hidden: 64", "  latent: 16", "  lr: 0.003"):
+        assert line in out
+    assert main(["example", "--json"]) == 0
+    details = json.loads(capsys.readouterr().out)
+    assert details["config"] == {"hidden": 64, "latent": 16, "lr": 3e-3}
+    assert details["capabilities"] == {"retarget": True, "interpolate": False,
+                                       "transfer": False, "unseen_topology": True}
+    assert details["module"] == "skelagnostic_example.aligner.ExampleAligner"
+
+
+def test_plugins_name_unknown_lists_the_known_ones(example_plugin, capsys) -> None:
+    from skelagnostic.cli.plugins import main
+
+    assert main(["nope"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("skelagnostic plugins: 'nope' is neither an aligner nor a plugin; "
+                          "aligners: example; plugins: skelagnostic, example")

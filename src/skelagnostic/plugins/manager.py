@@ -17,8 +17,8 @@ import inspect
 import os
 import warnings
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
-from importlib import metadata
+from dataclasses import dataclass, field, replace
+from importlib import metadata, resources
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -62,7 +62,12 @@ class PluginInfo:
             ``SKELAGNOSTIC_LOAD_PLUGINS``).
         error: ``"ExceptionType: message"`` when the plugin failed.
         hooks: Names of the hooks the plugin implements.
-        provides: What it registered, as ``"kind:name"`` strings.
+        provides: What it registered, as ``"kind:name"`` strings: ``aligner``,
+            ``representation``, ``dataset`` (``data.source=``), ``config_path``, and
+            the configs it ships: ``experiment`` (``experiment=``) and ``data_preset``
+            (``data=``).
+        description: First line of the plugin module's docstring, else the
+            distribution's summary.
     """
 
     name: str
@@ -72,6 +77,7 @@ class PluginInfo:
     error: str | None = None
     hooks: tuple[str, ...] = ()
     provides: tuple[str, ...] = ()
+    description: str = ""
 
 
 @dataclass(frozen=True)
@@ -186,7 +192,8 @@ class PluginManager:
         if load_entrypoints:
             self.load_entrypoints(_allowed_plugins() if only is None else frozenset(only))
 
-    def register(self, plugin: object, name: str, *, version: str = "", source: str = "") -> None:
+    def register(self, plugin: object, name: str, *, version: str = "", source: str = "",
+                 description: str | None = None) -> None:
         """Register a plugin object (usually a module with ``@hookimpl`` functions).
 
         Args:
@@ -194,6 +201,8 @@ class PluginManager:
             name: Its unique name.
             version: Version shown by ``skelagnostic plugins``.
             source: Where it comes from (distribution name, ``"built-in"``, ...).
+            description: One line for ``skelagnostic plugins``; ``None`` takes the
+                first line of the plugin's docstring.
 
         Raises:
             PluginError: ``name`` or the plugin object is already registered, or the
@@ -212,7 +221,10 @@ class PluginManager:
                 self._pm.unregister(name=name)
             raise PluginError(f"plugin {name!r}: {exc}") from exc
         hooks = tuple(h.name for h in self._pm.get_hookcallers(plugin) or ())
-        self._infos[name] = PluginInfo(name, version, source, "loaded", hooks=hooks)
+        if description is None:
+            description = _first_line(getattr(plugin, "__doc__", None))
+        self._infos[name] = PluginInfo(name, version, source, "loaded", hooks=hooks,
+                                       description=description)
         self._collected = None
 
     def load_entrypoints(self, only: frozenset[str] | None = None) -> None:
@@ -225,12 +237,16 @@ class PluginManager:
             dist = ep.dist
             version = dist.version if dist is not None else ""
             source = dist.name if dist is not None else ep.value
+            summary = (dist.metadata["Summary"] or "") if dist is not None else ""
             if only is not None and ep.name not in only:
-                self._infos.setdefault(ep.name, PluginInfo(ep.name, version, source, "disabled"))
+                self._infos.setdefault(ep.name, PluginInfo(ep.name, version, source, "disabled",
+                                                           description=summary))
                 continue
             try:
                 plugin = ep.load()
-                self.register(plugin, ep.name, version=version, source=source)
+                described = _first_line(getattr(plugin, "__doc__", None)) or summary
+                self.register(plugin, ep.name, version=version, source=source,
+                              description=described)
                 self._require_hooks(plugin, ep.name, ep.value)
             except PluginError as exc:
                 if not isinstance(exc.__cause__, pluggy.PluginValidationError):
@@ -267,7 +283,9 @@ class PluginManager:
         )
         old = self._infos.get(name)
         hooks = old.hooks if old is not None else ()
-        self._infos[name] = PluginInfo(name, version, source, "failed", _error_text(exc), hooks)
+        description = old.description if old is not None else ""
+        self._infos[name] = PluginInfo(name, version, source, "failed", _error_text(exc), hooks,
+                                       description=description)
 
     def plugins(self) -> list[PluginInfo]:
         """Every plugin seen, in registration order, with what it provides."""
@@ -340,12 +358,45 @@ class PluginManager:
             total.representations += mine.representations
             total.datasets += mine.datasets
             total.config_paths += mine.config_paths
-            self._infos[name] = PluginInfo(
-                info.name, info.version, info.source, info.status, None, info.hooks,
-                tuple(provides),
-            )
+            config_urls = [path for path, _ in mine.config_paths]
+            if name == BUILTIN_NAME:
+                config_urls.insert(0, "pkg://skelagnostic.conf")
+            presets = [*(f"data/{spec.name}" for spec in mine.aligners if spec.data)]
+            for url in config_urls:
+                provides += [f"experiment:{n}" for n in _config_names(url, "experiment")]
+                presets += [f"data/{n}" for n in _config_names(url, "data")]
+            provides += [f"data_preset:{p.split('/', 1)[1]}" for p in dict.fromkeys(presets)]
+            self._infos[name] = replace(info, error=None, provides=tuple(provides))
         self._collected = total
         return total
+
+
+def _first_line(doc: str | None) -> str:
+    """The first line of a docstring, without reStructuredText double backticks."""
+    lines = (doc or "").strip().splitlines()
+    return lines[0].strip().replace("``", "") if lines else ""
+
+
+def _config_names(url: str, group: str) -> list[str]:
+    """Names of the ``<group>/*.yaml`` configs under a Hydra search-path URL (sorted).
+
+    Files starting with ``_`` (shared bases) are left out; an unreadable location
+    gives an empty list.
+    """
+    try:
+        if url.startswith("pkg://"):
+            root: Any = resources.files(url[len("pkg://"):].strip("/").replace("/", "."))
+        elif url.startswith("file://"):
+            root = Path(url[len("file://"):])
+        else:
+            return []
+        folder = root.joinpath(group)
+        if not folder.is_dir():
+            return []
+        names = [f.name[:-5] for f in folder.iterdir() if f.name.endswith(".yaml")]
+    except (ImportError, OSError, TypeError, ValueError):
+        return []
+    return sorted(n for n in names if not n.startswith("_"))
 
 
 def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | None:
