@@ -1,0 +1,25 @@
+"""The reusable aligner contract (skelagnostic.testing) on ``model=pcmrl`` at a tiny size."""
+
+from __future__ import annotations
+
+from conftest import TINY
+from skelagnostic.plugins import PluginManager
+from skelagnostic.testing import AlignerContract, ContractRun
+
+
+class TestPcmrlContract(AlignerContract):
+    aligner = "pcmrl"
+    overrides = (*(f"model.{k}={v}" for k, v in TINY.items()), "data.seconds=2",
+                 "data.clips_per_gait=2", "data.gaits=[walk]", "data.window=16")
+    steps = 2
+
+    def plugin_manager(self) -> PluginManager:
+        import skelagnostic_pcmrl.plugin as plugin
+
+        pm = PluginManager(load_entrypoints=False)
+        pm.register(plugin, "pcmrl", version="0.1.0", source="skelagnostic-pcmrl")
+        return pm
+
+    def target_skeleton(self, run: ContractRun, motion):
+        """Stage 1 reconstructs onto its one trained target skeleton."""
+        return run.model.target_skeleton
