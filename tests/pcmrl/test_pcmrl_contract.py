@@ -23,3 +23,19 @@ class TestPcmrlContract(AlignerContract):
     def target_skeleton(self, run: ContractRun, motion):
         """Stage 1 reconstructs onto its one trained target skeleton."""
         return run.model.target_skeleton
+
+
+class TestPcmrlInterpContract(AlignerContract):
+    aligner = "pcmrl_interp"
+    overrides = ("model.dim=16", "model.heads=2", "model.layers=1", "model.ff_mult=2",
+                 "model.warmup_steps=1", "data.seconds=3", "data.clips_per_gait=2",
+                 "data.window=32", "data.stride=16", "data.max_gap=10", "data.max_keys=8",
+                 "data.val_gap=8", "data.gaits=[walk]")
+    steps = 2
+
+    def plugin_manager(self) -> PluginManager:
+        import skelagnostic_pcmrl.plugin as plugin
+
+        pm = PluginManager(load_entrypoints=False)
+        pm.register(plugin, "pcmrl", version="0.1.0", source="skelagnostic-pcmrl")
+        return pm
