@@ -5,11 +5,12 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import venv
 from pathlib import Path
 
 import pytest
 
-from conftest import REPO, write_dist
+from conftest import REPO
 from skelagnostic.cli import new_plugin
 from skelagnostic.plugins import LOAD_PLUGINS_ENV
 
@@ -47,30 +48,37 @@ def test_a_non_empty_directory_is_refused(tmp_path: Path, capsys) -> None:
 def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> None:
     work = tmp_path / "work"  # outside the repository
     work.mkdir()
-    env = dict(os.environ, OMP_NUM_THREADS="1", SKELAGNOSTIC_CACHE=str(tmp_path / "cache"))
+    env = {k: v for k, v in os.environ.items() if k != LOAD_PLUGINS_ENV}
+    env.update(OMP_NUM_THREADS="1", SKELAGNOSTIC_CACHE=str(tmp_path / "cache"),
+               PYTHONPATH=str(REPO / "src"))
+    # a throwaway venv on top of this interpreter's packages (torch, lightning, ...)
+    env_dir = tmp_path / "env"
+    venv.create(env_dir, system_site_packages=True, with_pip=False)
+    py = str(env_dir / "bin" / "python")
+    purelib = subprocess.run([py, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+    deps = [p for p in sys.path if p.endswith("site-packages")]
+    Path(purelib, "deps.pth").write_text("\n".join(deps) + "\n")
+    script = Path(sys.executable).with_name("skelagnostic")  # the installed console script
+    command = [py, str(script)] if script.is_file() else [py, "-m", "skelagnostic.cli"]
 
-    def cli(*args: str, **kw) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "skelagnostic.cli", *args], cwd=work,
-                              capture_output=True, text=True, env=env, timeout=600, **kw)
+    def run(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(list(args), cwd=work, capture_output=True, text=True, env=env,
+                              timeout=600)
 
-    env["PYTHONPATH"] = str(REPO / "src")
-    made = cli("new-plugin", "tiny", "--dir", str(tmp_path / "pkg"))
+    made = run(*command, "new-plugin", "tiny", "--dir", str(tmp_path / "pkg"))
     assert made.returncode == 0, made.stderr
     assert "pip install -e" in made.stdout
-    # "install" it: its src on the path plus a dist-info with the entry point
-    site = tmp_path / "site"
-    write_dist(site, "skelagnostic-tiny", "0.1.0", {"tiny": "skelagnostic_tiny.plugin"})
-    env["PYTHONPATH"] = os.pathsep.join([str(site), str(tmp_path / "pkg" / "src"),
-                                         str(REPO / "src")])
-    env[LOAD_PLUGINS_ENV] = "tiny"
-    fit = cli("fit", "model=tiny", "experiment=smoke", "threads=1")
+    installed = run(sys.executable, "-m", "pip", "--python", py, "install", "-q", "--no-deps",
+                    "--no-build-isolation", "--no-index", "-e", str(tmp_path / "pkg"))
+    assert installed.returncode == 0, installed.stderr[-2000:]
+    env[LOAD_PLUGINS_ENV] = "tiny"  # only the new plugin (and the built-ins)
+    fit = run(*command, "fit", "model=tiny", "experiment=smoke", "threads=1")
     assert fit.returncode == 0, fit.stderr[-2000:]
     (ckpt,) = work.glob("runs/tiny/fit/*/checkpoints/last.ckpt")
     assert ckpt.stat().st_size > 0
-    listed = cli("plugins", "tiny")
+    listed = run(*command, "plugins", "tiny")
     assert "aligner tiny (plugin tiny 0.1.0, skelagnostic-tiny)" in listed.stdout
-    own = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                          str(tmp_path / "pkg" / "tests")], cwd=work, capture_output=True,
-                         text=True, env=env, timeout=600)
+    own = run(py, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tmp_path / "pkg" / "tests"))
     assert own.returncode == 0, own.stdout[-3000:]
     assert "4 passed" in own.stdout
