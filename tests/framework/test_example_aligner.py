@@ -10,10 +10,11 @@ import torch
 
 import skelagnostic as sa
 import skelagnostic.plugins as plugins
-from conftest import EXAMPLE_SRC
 from skelagnostic.aligners import Latent
 from skelagnostic.plugins import PluginManager
 from skelagnostic.testing import AlignerContract
+
+EXAMPLE_SRC = Path(__file__).resolve().parents[2] / "plugins" / "example-aligner" / "src"
 
 
 @pytest.fixture

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO
 from skelagnostic.cli import new_plugin
 from skelagnostic.plugins import LOAD_PLUGINS_ENV
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_files_are_named_after_the_plugin() -> None:

@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 
 import skelagnostic.plugins as plugins
-from conftest import EXAMPLE_SRC, write_dist
 from skelagnostic.aligners import Aligner, CapabilityError
 from skelagnostic.plugins import (
     PluginError,
@@ -23,6 +22,7 @@ from skelagnostic.plugins import (
 )
 
 REPO = Path(__file__).resolve().parents[2]
+EXAMPLE_SRC = REPO / "plugins" / "example-aligner" / "src"
 HOOKS = [name for name, f in inspect.getmembers(hookspecs, inspect.isfunction)
          if name.startswith("register_")]
 
@@ -226,11 +226,9 @@ def test_plugin_with_another_projects_marker_is_reported(add_plugin) -> None:
         PluginManager()
 
 
-def test_fit_error_names_the_plugin_without_hookimpl(add_plugin, fake_site: Path,
-                                                      tmp_path: Path) -> None:
+def test_fit_error_names_the_plugin_without_hookimpl(example_plugin: Path, add_plugin,
+                                                      fake_site: Path, tmp_path: Path) -> None:
     add_plugin("mlp", "def register_aligners(register):\n    pass\n")
-    write_dist(fake_site, "skelagnostic-example-aligner", "0.1.0",
-               {"example": "skelagnostic_example.plugin"})
     out = subprocess.run(
         [sys.executable, "-m", "skelagnostic.cli", "fit", "model=mlp"],
         capture_output=True, text=True, cwd=tmp_path,
@@ -243,7 +241,7 @@ def test_fit_error_names_the_plugin_without_hookimpl(add_plugin, fake_site: Path
     assert "mlp (PluginError: plugin 'mlp': fake_plugin_mlp: register_aligners is not " in line
 
 
-def _conf_plugin(site: Path, name: str, url: str, init: bool) -> None:
+def _conf_plugin(site: Path, name: str, url: str, init: bool, write_dist) -> None:
     pkg = site / f"confplug_{name}"
     (pkg / "conf" / "experiment").mkdir(parents=True)
     (pkg / "__init__.py").write_text(
@@ -259,11 +257,11 @@ def _conf_plugin(site: Path, name: str, url: str, init: bool) -> None:
 @pytest.mark.parametrize("init", [True, False])
 def test_conf_package_with_or_without_init_is_found(example_plugin: Path, tmp_path: Path,
                                                     monkeypatch: pytest.MonkeyPatch,
-                                                    init: bool) -> None:
+                                                    init: bool, dist_writer) -> None:
     from skelagnostic.cli.app import compose
 
     name = "withinit" if init else "noinit"  # distinct modules: sys.modules keeps the first
-    _conf_plugin(example_plugin, name, f"pkg://confplug_{name}.conf", init)
+    _conf_plugin(example_plugin, name, f"pkg://confplug_{name}.conf", init, dist_writer)
     monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, f"example,{name}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -273,8 +271,8 @@ def test_conf_package_with_or_without_init_is_found(example_plugin: Path, tmp_pa
     assert not [w for w in caught if "not available" in str(w.message)]
 
 
-def test_missing_conf_package_is_named(example_plugin: Path, monkeypatch) -> None:
-    _conf_plugin(example_plugin, "nope", "pkg://confplug_nope.configs", True)
+def test_missing_conf_package_is_named(example_plugin: Path, monkeypatch, dist_writer) -> None:
+    _conf_plugin(example_plugin, "nope", "pkg://confplug_nope.configs", True, dist_writer)
     monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, "example,nope")
     with pytest.warns(PluginLoadWarning, match="config path 'pkg://confplug_nope.configs': "
                                                "'confplug_nope.configs' is not importable"):
