@@ -323,3 +323,13 @@ def test_plugins_name_unknown_lists_the_known_ones(example_plugin, capsys) -> No
     err = capsys.readouterr().err.strip()
     assert err.startswith("skelagnostic plugins: 'nope' is neither an aligner nor a plugin; "
                           "aligners: example; plugins: skelagnostic, example")
+
+
+def test_plugin_with_one_undecorated_hook_among_decorated_ones_is_reported(add_plugin) -> None:
+    add_plugin("half", "from skelagnostic.plugins import hookimpl\n\n"
+                       "@hookimpl\ndef register_datasets(register):\n    pass\n\n"
+                       "def register_config_paths(register):\n    register('pkg://x.conf')\n")
+    with pytest.warns(PluginLoadWarning, match="fake_plugin_half: register_config_paths is not "
+                                               "decorated"):
+        pm = PluginManager()
+    assert {i.name: i for i in pm.plugins()}["half"].status == "failed"

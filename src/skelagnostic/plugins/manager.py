@@ -417,13 +417,13 @@ def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | 
                 and not hasattr(f, marker)}
     foreign = sorted(a for a, f in unmarked.items()
                      if any(k.endswith("_impl") for k in getattr(f, "__dict__", {})))
-    if foreign:
-        return (f"{target}: {', '.join(foreign)} is marked by another project's HookimplMarker; "
-                "use @skelagnostic.plugins.hookimpl")
     undecorated = sorted(a for a in unmarked if a in _HOOKS)
-    if undecorated:
-        return (f"{target}: {', '.join(undecorated)} is not decorated with "
-                "@skelagnostic.plugins.hookimpl, so skelagnostic never calls it")
+    if undecorated or (foreign and not hooks):
+        names = undecorated or foreign
+        why = (" (marked by another project's HookimplMarker)"
+               if set(names) & set(foreign) else "")
+        return (f"{target}: {', '.join(names)} is not decorated with "
+                f"@skelagnostic.plugins.hookimpl{why}, so skelagnostic never calls it")
     if hooks:
         return None
     close = sorted(a for a in unmarked
@@ -436,9 +436,10 @@ def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | 
 def _config_urls(path: str, plugin_name: str) -> list[str]:
     """Hydra search-path URLs for a registered config path.
 
-    Hydra's ``pkg://`` source needs a regular package: for a directory without
-    ``__init__.py`` (a namespace package) it only warns that the path "is not
-    available" and ignores its configs. Such a package is registered as the
+    Hydra's ``pkg://`` source expects a regular package: for a directory without
+    ``__init__.py`` (a namespace package) it warns that the path "is not
+    available" (and whether it still reads the files depends on the Python
+    version and the installation). Such a package is registered as the
     ``file://`` URL of its directory (or directories) instead.
 
     Raises:
