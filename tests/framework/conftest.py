@@ -48,6 +48,12 @@ def example_plugin(fake_site: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 
 @pytest.fixture
+def dist_writer() -> Callable[[Path, str, str, dict[str, str]], Path]:
+    """:func:`write_dist`, for test modules (``from conftest import`` is ambiguous across dirs)."""
+    return write_dist
+
+
+@pytest.fixture
 def add_plugin(fake_site: Path) -> Callable[[str, str], None]:
     """``add_plugin(name, source)``: a one-module plugin distribution named ``name``."""
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,10 @@ import torch
 import skelagnostic as sa
 import skelagnostic.plugins as plugins
 from skelagnostic.aligners import Latent
+from skelagnostic.plugins import PluginManager
+from skelagnostic.testing import AlignerContract
+
+EXAMPLE_SRC = Path(__file__).resolve().parents[2] / "plugins" / "example-aligner" / "src"
 
 
 @pytest.fixture
@@ -57,3 +62,19 @@ def test_decode_without_extras_stays_at_origin(model) -> None:
     out = model.decode(Latent(torch.zeros(5, 8), fps=30.0), dog.skeleton)
     assert out.num_frames == 5
     assert float(out.root_positions[:, [0, 2]].abs().max()) < 1e-6
+
+
+class TestExampleContract(AlignerContract):
+    """The reusable third-party contract (skelagnostic.testing) on the example aligner."""
+
+    aligner = "example"
+    overrides = ("model.hidden=16", "model.latent=8", "data.seconds=2", "data.clips_per_gait=1")
+
+    def plugin_manager(self) -> PluginManager:
+        if str(EXAMPLE_SRC) not in sys.path:
+            sys.path.insert(0, str(EXAMPLE_SRC))
+        import skelagnostic_example.plugin as plugin
+
+        pm = PluginManager(load_entrypoints=False)
+        pm.register(plugin, "example", version="0.1.0", source="skelagnostic-example-aligner")
+        return pm

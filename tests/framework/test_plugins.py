@@ -6,6 +6,7 @@ import inspect
 import json
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -21,6 +22,7 @@ from skelagnostic.plugins import (
 )
 
 REPO = Path(__file__).resolve().parents[2]
+EXAMPLE_SRC = REPO / "plugins" / "example-aligner" / "src"
 HOOKS = [name for name, f in inspect.getmembers(hookspecs, inspect.isfunction)
          if name.startswith("register_")]
 
@@ -198,3 +200,136 @@ def test_plugins_command_lists_broken_plugin(add_plugin, fake_site: Path) -> Non
     assert rows["broken"]["source"] == "fake-broken"
     assert rows["broken"]["error"] == "ImportError: no such thing"
     assert rows["skelagnostic"]["status"] == "loaded"
+
+
+def test_plugin_without_hookimpl_is_reported(add_plugin) -> None:
+    add_plugin("nohooks", "def register_aligners(register):\n    pass\n")
+    with pytest.warns(PluginLoadWarning, match="register_aligners is not decorated with "
+                                               r"@skelagnostic\.plugins\.hookimpl"):
+        pm = PluginManager()
+    info = {i.name: i for i in pm.plugins()}["nohooks"]
+    assert info.status == "failed" and "fake_plugin_nohooks" in info.error
+
+
+def test_plugin_with_misspelt_undecorated_hook_is_reported(add_plugin) -> None:
+    add_plugin("typo", "def register_aligner(register):\n    pass\n")
+    with pytest.warns(PluginLoadWarning, match=r"implements no skelagnostic hook \(misspelt "
+                                               r"hook\? register_aligner\)"):
+        pm = PluginManager()
+    assert {i.name: i for i in pm.plugins()}["typo"].status == "failed"
+
+
+def test_plugin_with_another_projects_marker_is_reported(add_plugin) -> None:
+    add_plugin("foreign", "import pluggy\nimpl = pluggy.HookimplMarker('other')\n"
+                          "@impl\ndef register_aligners(register):\n    pass\n")
+    with pytest.warns(PluginLoadWarning, match="another project's HookimplMarker"):
+        PluginManager()
+
+
+def test_fit_error_names_the_plugin_without_hookimpl(example_plugin: Path, add_plugin,
+                                                      fake_site: Path, tmp_path: Path) -> None:
+    add_plugin("mlp", "def register_aligners(register):\n    pass\n")
+    out = subprocess.run(
+        [sys.executable, "-m", "skelagnostic.cli", "fit", "model=mlp"],
+        capture_output=True, text=True, cwd=tmp_path,
+        env={"PYTHONPATH": f"{fake_site}:{EXAMPLE_SRC}:{REPO / 'src'}", "PATH": "/usr/bin:/bin",
+             plugins.LOAD_PLUGINS_ENV: "mlp,example", "OMP_NUM_THREADS": "1"},
+    )
+    assert out.returncode == 1
+    line = out.stderr.strip().splitlines()[-1]
+    assert "Could not find 'model/mlp'" in line
+    assert "mlp (PluginError: plugin 'mlp': fake_plugin_mlp: register_aligners is not " in line
+
+
+def _conf_plugin(site: Path, name: str, url: str, init: bool, write_dist) -> None:
+    pkg = site / f"confplug_{name}"
+    (pkg / "conf" / "experiment").mkdir(parents=True)
+    (pkg / "__init__.py").write_text(
+        "from skelagnostic.plugins import hookimpl\n\n@hookimpl\n"
+        f"def register_config_paths(register):\n    register({url!r})\n")
+    if init:
+        (pkg / "conf" / "__init__.py").write_text("")
+    (pkg / "conf" / "experiment" / f"{name}_seed.yaml").write_text(
+        "# @package _global_\nseed: 1234\n")
+    write_dist(site, f"confplug-{name}", "0.1.0", {name: f"confplug_{name}"})
+
+
+@pytest.mark.parametrize("init", [True, False])
+def test_conf_package_with_or_without_init_is_found(example_plugin: Path, tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch,
+                                                    init: bool, dist_writer) -> None:
+    from skelagnostic.cli.app import compose
+
+    name = "withinit" if init else "noinit"  # distinct modules: sys.modules keeps the first
+    _conf_plugin(example_plugin, name, f"pkg://confplug_{name}.conf", init, dist_writer)
+    monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, f"example,{name}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cfg = compose(["model=example", f"experiment={name}_seed", f"run_dir={tmp_path}"])
+    assert cfg.seed == 1234
+    # Hydra's pkg:// source wants an __init__.py and warns "... is not available" without one
+    assert not [w for w in caught if "not available" in str(w.message)]
+
+
+def test_missing_conf_package_is_named(example_plugin: Path, monkeypatch, dist_writer) -> None:
+    _conf_plugin(example_plugin, "nope", "pkg://confplug_nope.configs", True, dist_writer)
+    monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, "example,nope")
+    with pytest.warns(PluginLoadWarning, match="config path 'pkg://confplug_nope.configs': "
+                                               "'confplug_nope.configs' is not importable"):
+        infos = {i.name: i for i in plugins.get_plugin_manager().plugins()}
+    assert infos["nope"].status == "failed"
+
+
+def test_plugins_command_shows_description_version_and_contents(subprocess_env,
+                                                                 tmp_path: Path) -> None:
+    def plugins_cli(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "skelagnostic.cli", "plugins", *args],
+                              capture_output=True, text=True, cwd=tmp_path, env=subprocess_env)
+
+    text = plugins_cli().stdout
+    assert "example 0.1.0 (skelagnostic-example-aligner) loaded" in text
+    assert "Example third-party aligner: a per-joint GRU autoencoder" in text
+    assert "aligners (model=): example" in text
+    assert "experiments (experiment=): example_quick" in text
+    assert "experiments (experiment=): smoke" in text  # the built-in plugin's
+    assert "data presets (data=): bandai, bvh, cmu, lafan1, mann_dog, procedural" in text
+    rows = {row["name"]: row for row in json.loads(plugins_cli("--json").stdout)}
+    assert rows["example"]["description"].startswith("Example third-party aligner")
+    assert "experiment:example_quick" in rows["example"]["provides"]
+
+
+def test_plugins_name_shows_capabilities_and_defaults(example_plugin, capsys) -> None:
+    from skelagnostic.cli.plugins import main
+
+    assert main(["example"]) == 0
+    out = capsys.readouterr().out
+    assert "aligner example (plugin example 0.1.0, skelagnostic-example-aligner)" in out
+    for line in ("retarget: yes", "interpolate: no", "transfer: no", "unseen topology: yes",
+                 "declared: decode, encode, quadruped, retarget, unseen_topology",
+                 "  hidden: 64", "  latent: 16", "  lr: 0.003"):
+        assert line in out
+    assert main(["example", "--json"]) == 0
+    details = json.loads(capsys.readouterr().out)
+    assert details["config"] == {"hidden": 64, "latent": 16, "lr": 3e-3}
+    assert details["capabilities"] == {"retarget": True, "interpolate": False,
+                                       "transfer": False, "unseen_topology": True}
+    assert details["module"] == "skelagnostic_example.aligner.ExampleAligner"
+
+
+def test_plugins_name_unknown_lists_the_known_ones(example_plugin, capsys) -> None:
+    from skelagnostic.cli.plugins import main
+
+    assert main(["nope"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("skelagnostic plugins: 'nope' is neither an aligner nor a plugin; "
+                          "aligners: example; plugins: skelagnostic, example")
+
+
+def test_plugin_with_one_undecorated_hook_among_decorated_ones_is_reported(add_plugin) -> None:
+    add_plugin("half", "from skelagnostic.plugins import hookimpl\n\n"
+                       "@hookimpl\ndef register_datasets(register):\n    pass\n\n"
+                       "def register_config_paths(register):\n    register('pkg://x.conf')\n")
+    with pytest.warns(PluginLoadWarning, match="fake_plugin_half: register_config_paths is not "
+                                               "decorated"):
+        pm = PluginManager()
+    assert {i.name: i for i in pm.plugins()}["half"].status == "failed"

@@ -11,11 +11,15 @@ as ``failed``; two contributions with the same name raise :class:`PluginError`.
 
 from __future__ import annotations
 
+import difflib
+import importlib.util
+import inspect
 import os
 import warnings
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
-from importlib import metadata
+from dataclasses import dataclass, field, replace
+from importlib import metadata, resources
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -58,7 +62,12 @@ class PluginInfo:
             ``SKELAGNOSTIC_LOAD_PLUGINS``).
         error: ``"ExceptionType: message"`` when the plugin failed.
         hooks: Names of the hooks the plugin implements.
-        provides: What it registered, as ``"kind:name"`` strings.
+        provides: What it registered, as ``"kind:name"`` strings: ``aligner``,
+            ``representation``, ``dataset`` (``data.source=``), ``config_path``, and
+            the configs it ships: ``experiment`` (``experiment=``) and ``data_preset``
+            (``data=``).
+        description: First line of the plugin module's docstring, else the
+            distribution's summary.
     """
 
     name: str
@@ -68,6 +77,7 @@ class PluginInfo:
     error: str | None = None
     hooks: tuple[str, ...] = ()
     provides: tuple[str, ...] = ()
+    description: str = ""
 
 
 @dataclass(frozen=True)
@@ -182,7 +192,8 @@ class PluginManager:
         if load_entrypoints:
             self.load_entrypoints(_allowed_plugins() if only is None else frozenset(only))
 
-    def register(self, plugin: object, name: str, *, version: str = "", source: str = "") -> None:
+    def register(self, plugin: object, name: str, *, version: str = "", source: str = "",
+                 description: str | None = None) -> None:
         """Register a plugin object (usually a module with ``@hookimpl`` functions).
 
         Args:
@@ -190,6 +201,8 @@ class PluginManager:
             name: Its unique name.
             version: Version shown by ``skelagnostic plugins``.
             source: Where it comes from (distribution name, ``"built-in"``, ...).
+            description: One line for ``skelagnostic plugins``; ``None`` takes the
+                first line of the plugin's docstring.
 
         Raises:
             PluginError: ``name`` or the plugin object is already registered, or the
@@ -208,7 +221,10 @@ class PluginManager:
                 self._pm.unregister(name=name)
             raise PluginError(f"plugin {name!r}: {exc}") from exc
         hooks = tuple(h.name for h in self._pm.get_hookcallers(plugin) or ())
-        self._infos[name] = PluginInfo(name, version, source, "loaded", hooks=hooks)
+        if description is None:
+            description = _first_line(getattr(plugin, "__doc__", None))
+        self._infos[name] = PluginInfo(name, version, source, "loaded", hooks=hooks,
+                                       description=description)
         self._collected = None
 
     def load_entrypoints(self, only: frozenset[str] | None = None) -> None:
@@ -221,18 +237,43 @@ class PluginManager:
             dist = ep.dist
             version = dist.version if dist is not None else ""
             source = dist.name if dist is not None else ep.value
+            summary = (dist.metadata["Summary"] or "") if dist is not None else ""
             if only is not None and ep.name not in only:
-                self._infos.setdefault(ep.name, PluginInfo(ep.name, version, source, "disabled"))
+                self._infos.setdefault(ep.name, PluginInfo(ep.name, version, source, "disabled",
+                                                           description=summary))
                 continue
             try:
                 plugin = ep.load()
-                self.register(plugin, ep.name, version=version, source=source)
+                described = _first_line(getattr(plugin, "__doc__", None)) or summary
+                self.register(plugin, ep.name, version=version, source=source,
+                              description=described)
+                self._require_hooks(plugin, ep.name, ep.value)
             except PluginError as exc:
                 if not isinstance(exc.__cause__, pluggy.PluginValidationError):
                     raise  # two plugins under one name: a collision, not a broken plugin
                 self._fail(ep.name, version, source, exc)
             except Exception as exc:  # a broken third-party plugin must not break the CLI
                 self._fail(ep.name, version, source, exc)
+
+    def _require_hooks(self, plugin: object, name: str, target: str) -> None:
+        """Unregister ``plugin`` and raise when it implements no hook (or forgot ``@hookimpl``).
+
+        A function named like a hook but not decorated with :data:`hookimpl` is
+        ignored by pluggy, so the plugin would load silently and contribute
+        nothing (``Could not find 'model/<name>'`` later); this turns that into
+        a failure naming the function.
+
+        Raises:
+            PluginError: Caused by a :class:`pluggy.PluginValidationError`, so that
+                :meth:`load_entrypoints` reports the plugin as failed.
+        """
+        problem = _hook_problem(plugin, target, self._infos[name].hooks)
+        if problem is None:
+            return
+        self._pm.unregister(name=name)
+        del self._infos[name]
+        cause = pluggy.PluginValidationError(plugin, problem)
+        raise PluginError(f"plugin {name!r}: {problem}") from cause
 
     def _fail(self, name: str, version: str, source: str, exc: BaseException) -> None:
         warnings.warn(
@@ -242,7 +283,9 @@ class PluginManager:
         )
         old = self._infos.get(name)
         hooks = old.hooks if old is not None else ()
-        self._infos[name] = PluginInfo(name, version, source, "failed", _error_text(exc), hooks)
+        description = old.description if old is not None else ""
+        self._infos[name] = PluginInfo(name, version, source, "failed", _error_text(exc), hooks,
+                                       description=description)
 
     def plugins(self) -> list[PluginInfo]:
         """Every plugin seen, in registration order, with what it provides."""
@@ -315,12 +358,112 @@ class PluginManager:
             total.representations += mine.representations
             total.datasets += mine.datasets
             total.config_paths += mine.config_paths
-            self._infos[name] = PluginInfo(
-                info.name, info.version, info.source, info.status, None, info.hooks,
-                tuple(provides),
-            )
+            config_urls = [path for path, _ in mine.config_paths]
+            if name == BUILTIN_NAME:
+                config_urls.insert(0, "pkg://skelagnostic.conf")
+            presets = [*(f"data/{spec.name}" for spec in mine.aligners if spec.data)]
+            for url in config_urls:
+                provides += [f"experiment:{n}" for n in _config_names(url, "experiment")]
+                presets += [f"data/{n}" for n in _config_names(url, "data")]
+            provides += [f"data_preset:{p.split('/', 1)[1]}" for p in dict.fromkeys(presets)]
+            self._infos[name] = replace(info, error=None, provides=tuple(provides))
         self._collected = total
         return total
+
+
+def _first_line(doc: str | None) -> str:
+    """The first line of a docstring, without reStructuredText double backticks."""
+    lines = (doc or "").strip().splitlines()
+    return lines[0].strip().replace("``", "") if lines else ""
+
+
+def _config_names(url: str, group: str) -> list[str]:
+    """Names of the ``<group>/*.yaml`` configs under a Hydra search-path URL (sorted).
+
+    Files starting with ``_`` (shared bases) are left out; an unreadable location
+    gives an empty list.
+    """
+    try:
+        if url.startswith("pkg://"):
+            root: Any = resources.files(url[len("pkg://"):].strip("/").replace("/", "."))
+        elif url.startswith("file://"):
+            root = Path(url[len("file://"):])
+        else:
+            return []
+        folder = root.joinpath(group)
+        if not folder.is_dir():
+            return []
+        names = [f.name[:-5] for f in folder.iterdir() if f.name.endswith(".yaml")]
+    except (ImportError, OSError, TypeError, ValueError):
+        return []
+    return sorted(n for n in names if not n.startswith("_"))
+
+
+def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | None:
+    """What is wrong with an entry-point plugin's hooks, or ``None``.
+
+    Args:
+        plugin: The loaded entry-point object (usually a module).
+        target: The entry point's value (``module`` or ``module:attr``), for the message.
+        hooks: The hooks pluggy found implemented.
+    """
+    functions = {
+        attr: value for attr in dir(plugin)
+        if not attr.startswith("_") and callable(value := getattr(plugin, attr, None))
+        and (inspect.isfunction(value) or inspect.ismethod(value))
+    }
+    marker = f"{ENTRY_POINT_GROUP}_impl"
+    unmarked = {a: f for a, f in functions.items() if a.startswith("register")
+                and not hasattr(f, marker)}
+    foreign = sorted(a for a, f in unmarked.items()
+                     if any(k.endswith("_impl") for k in getattr(f, "__dict__", {})))
+    undecorated = sorted(a for a in unmarked if a in _HOOKS)
+    if undecorated or (foreign and not hooks):
+        names = undecorated or foreign
+        why = (" (marked by another project's HookimplMarker)"
+               if set(names) & set(foreign) else "")
+        return (f"{target}: {', '.join(names)} is not decorated with "
+                f"@skelagnostic.plugins.hookimpl{why}, so skelagnostic never calls it")
+    if hooks:
+        return None
+    close = sorted(a for a in unmarked
+                   if difflib.get_close_matches(a, _HOOKS, n=1, cutoff=0.8))
+    hint = f" (misspelt hook? {', '.join(close)})" if close else ""
+    return (f"{target} implements no skelagnostic hook{hint}: decorate functions named "
+            f"{', '.join(_HOOKS)} with @skelagnostic.plugins.hookimpl")
+
+
+def _config_urls(path: str, plugin_name: str) -> list[str]:
+    """Hydra search-path URLs for a registered config path.
+
+    Hydra's ``pkg://`` source expects a regular package: for a directory without
+    ``__init__.py`` (a namespace package) it warns that the path "is not
+    available" (and whether it still reads the files depends on the Python
+    version and the installation). Such a package is registered as the
+    ``file://`` URL of its directory (or directories) instead.
+
+    Raises:
+        PluginError: A ``pkg://`` URL names no importable package.
+    """
+    if not path.startswith("pkg://"):
+        return [path]
+    package = path[len("pkg://"):].strip("/").replace("/", ".")
+    try:
+        spec = importlib.util.find_spec(package)
+    except (ImportError, ValueError) as exc:
+        spec, error = None, f" ({_error_text(exc)})"
+    else:
+        error = ""
+    if spec is None or spec.submodule_search_locations is None:
+        what = "a module, not a package" if spec is not None else "not importable"
+        raise PluginError(
+            f"plugin {plugin_name!r}: config path {path!r}: {package!r} is {what}{error}; "
+            f"it must be a package directory of YAML files with an __init__.py, "
+            f"shipped as package data"
+        )
+    if spec.origin is not None:  # a regular package: Hydra reads it
+        return [path]
+    return [Path(location).resolve().as_uri() for location in spec.submodule_search_locations]
 
 
 def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
@@ -391,7 +534,8 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
                 f"config path {path!r}: expected a Hydra search-path URL such as "
                 "'pkg://my_plugin.conf' or 'file:///abs/dir'"
             )
-        out.config_paths.append((path, plugin_name))
+        for url in _config_urls(path, plugin_name):
+            out.config_paths.append((url, plugin_name))
 
     callbacks = {
         "register_aligners": register_aligner,

@@ -1,4 +1,7 @@
-"""Hook implementations of the example plugin (the ``skelagnostic`` entry point)."""
+"""Example third-party aligner: a per-joint GRU autoencoder (the tutorial's package).
+
+Hook implementations of the example plugin (the ``skelagnostic`` entry point).
+"""
 
 from __future__ import annotations
 

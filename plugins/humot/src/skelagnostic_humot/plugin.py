@@ -1,4 +1,7 @@
-"""Hook implementations of the HuMoT plugin (entry point ``humot`` in group ``skelagnostic``)."""
+"""HuMoT: topology-agnostic transformer autoencoder, retargeting between human skeletons.
+
+Hook implementations of the HuMoT plugin (entry point ``humot`` in group ``skelagnostic``).
+"""
 
 from __future__ import annotations
 

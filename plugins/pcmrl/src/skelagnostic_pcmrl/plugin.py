@@ -1,4 +1,6 @@
-"""Hook implementations of the PC-MRL plugin (entry point ``pcmrl`` in group ``skelagnostic``).
+"""PC-MRL: point-cloud reconstruction onto any target skeleton and keyframe interpolation.
+
+Hook implementations of the PC-MRL plugin (entry point ``pcmrl`` in group ``skelagnostic``).
 
 Two aligners, one per stage of the paper (one registered name has one module
 and one data-module class, so the stages are two names):

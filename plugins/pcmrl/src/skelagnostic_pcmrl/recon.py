@@ -52,6 +52,11 @@ __all__ = ["PcmrlReconstruction", "end_effector_pairs"]
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
+
+def _batch_size(batch: dict[str, Any]) -> int:
+    """Windows in a ``{dataset: batch}`` step (Lightning cannot infer it from a dict)."""
+    return sum(len(sub["features"]) for sub in batch.values() if sub is not None)
+
 class PcmrlReconstruction(Aligner):
     """PC-MRL point-cloud-to-motion reconstruction onto one target skeleton.
 
@@ -368,21 +373,21 @@ class PcmrlReconstruction(Aligner):
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         """KNN + unit-norm (+ end-effector) loss on fresh clouds; logs ``train/loss``."""
         loss = self._step(batch, None, "train")
-        self.log("train/loss", loss, prog_bar=True)
+        self.log("train/loss", loss, prog_bar=True, batch_size=_batch_size(batch))
         return loss
 
     def validation_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         """The same loss on clouds seeded by ``sample_seed`` and the batch index."""
         gen = torch.Generator().manual_seed(self.hparams.sample_seed + batch_idx)
         loss = self._step(batch, gen, "val")
-        self.log("val/loss", loss, prog_bar=True, sync_dist=True)
+        self.log("val/loss", loss, prog_bar=True, sync_dist=True, batch_size=_batch_size(batch))
         return loss
 
     def test_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         """As :meth:`validation_step`, logged as ``test/*``."""
         gen = torch.Generator().manual_seed(self.hparams.sample_seed + batch_idx)
         loss = self._step(batch, gen, "test")
-        self.log("test/loss", loss, sync_dist=True)
+        self.log("test/loss", loss, sync_dist=True, batch_size=_batch_size(batch))
         return loss
 
     def configure_optimizers(self) -> torch.optim.Optimizer:

@@ -1,4 +1,7 @@
-"""Hook implementations of the ``vqpae`` plugin (entry point ``skelagnostic: vqpae``)."""
+"""WalkTheDog VQ-PAE: a phase manifold shared across characters (human, dog, ...).
+
+Hook implementations of the ``vqpae`` plugin (entry point ``skelagnostic: vqpae``).
+"""
 
 from __future__ import annotations
 

@@ -1,0 +1,356 @@
+"""A reusable contract test for aligners: what ``skelagnostic fit`` and users rely on.
+
+Subclass :class:`AlignerContract` in a pytest module of your plugin and name
+your aligner; pytest then runs four tests against it, at the sizes you give::
+
+    from skelagnostic.testing import AlignerContract
+
+    class TestMyAligner(AlignerContract):
+        aligner = "mine"                      # the model=<name> you register
+        overrides = ("model.hidden=8",)       # Hydra overrides: keep it tiny and fast
+
+The tests share one short training run (``experiment=smoke``, :attr:`~AlignerContract.steps`
+optimizer steps, one validation pass, CPU) made through the same
+:func:`skelagnostic.cli.app.compose` and :func:`~skelagnostic.cli.app.run` as
+``skelagnostic fit``:
+
+* ``test_fit_a_few_steps``: the run logs a finite ``train/loss`` and ``val/loss``,
+  changes the weights and writes ``checkpoints/last.ckpt``;
+* ``test_checkpoint_round_trip``: :func:`skelagnostic.plugins.load_aligner` rebuilds
+  the network from the checkpoint alone (sizes that depend on the data must be
+  saved in the hyper-parameters) with exactly the saved weights, and encodes
+  like the trained model;
+* ``test_encode_decode_shapes``: ``encode`` a clip of the training data and
+  ``decode`` it (and ``retarget``, if declared) onto :meth:`~AlignerContract.target_skeleton`:
+  a finite :class:`~skelagnostic.core.motion.Motion` of that skeleton with the
+  clip's length and frame rate;
+* ``test_logging_is_ddp_safe``: every ``self.log`` in a step passes an explicit
+  ``batch_size`` (batches are dicts of datasets, which Lightning cannot size),
+  and every epoch-level value logged in a step (validation, test, ``on_epoch=True``)
+  passes ``sync_dist=True`` so that DDP ranks agree; torchmetrics ``Metric``
+  objects are exempt (they synchronise themselves), and so are values logged in
+  epoch-end hooks (compute them from synchronised state).
+
+The same checks are plain functions (:func:`fit_for_contract`,
+:func:`check_fit`, :func:`check_checkpoint_round_trip`,
+:func:`check_encode_decode`, :func:`check_logging`) for other test runners.
+This module imports pytest: use it from tests.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import pytest
+import torch
+
+if TYPE_CHECKING:
+    from skelagnostic.aligners import Aligner
+    from skelagnostic.core.motion import Motion
+    from skelagnostic.core.skeleton import Skeleton
+    from skelagnostic.plugins import PluginManager
+
+__all__ = [
+    "AlignerContract",
+    "ContractRun",
+    "LogCall",
+    "check_checkpoint_round_trip",
+    "check_encode_decode",
+    "check_fit",
+    "check_logging",
+    "fit_for_contract",
+]
+
+#: Lightning hooks whose ``self.log`` is per batch (``batch_size`` matters there).
+_STEP_HOOKS = ("training_step", "validation_step", "test_step")
+#: Step hooks where ``on_epoch`` defaults to ``True`` in ``LightningModule.log``.
+_EPOCH_DEFAULT_HOOKS = ("validation_step", "test_step")
+
+
+@dataclass(frozen=True)
+class LogCall:
+    """One ``self.log(name, value, ...)`` call seen during the contract run.
+
+    Attributes:
+        hook: The Lightning hook that logged (``training_step``, ...).
+        name: The logged key.
+        kwargs: The keyword arguments given to ``log``.
+        is_metric: The value was a torchmetrics ``Metric`` (it synchronises itself).
+    """
+
+    hook: str
+    name: str
+    kwargs: dict[str, Any]
+    is_metric: bool
+
+
+@dataclass
+class ContractRun:
+    """The result of :func:`fit_for_contract`.
+
+    Attributes:
+        aligner: The registered aligner name.
+        run_dir: The run directory.
+        metrics: What :func:`~skelagnostic.cli.app.run` returned.
+        model: The trained aligner.
+        datamodule: Its data module (set up).
+        initial: The weights at the first training step, before any update.
+        logs: Every ``self.log`` call.
+        plugin_manager: Where the aligner was looked up.
+        global_manager: ``plugin_manager`` is the process-wide one (then the round
+            trip goes through :func:`skelagnostic.plugins.load_aligner`).
+    """
+
+    aligner: str
+    run_dir: Path
+    metrics: dict[str, float]
+    model: Aligner
+    datamodule: Any
+    initial: dict[str, torch.Tensor]
+    plugin_manager: PluginManager
+    logs: list[LogCall] = field(default_factory=list)
+    global_manager: bool = True
+
+    @property
+    def checkpoint(self) -> Path:
+        """``<run_dir>/checkpoints/last.ckpt``."""
+        return self.run_dir / "checkpoints" / "last.ckpt"
+
+
+@contextmanager
+def _spy_on_log(cls: type, calls: list[LogCall], seen: dict[str, Any]) -> Iterator[None]:
+    """Record ``cls.log`` calls; remember the module and its weights at its first call."""
+    from torchmetrics import Metric
+
+    original = cls.log
+
+    def log(self: Any, name: str, value: Any, *args: Any, **kwargs: Any) -> None:
+        hook = str(getattr(self, "_current_fx_name", None) or "")
+        if "model" not in seen:
+            seen["model"] = self
+        if hook == "training_step" and "initial" not in seen:
+            seen["initial"] = {k: v.detach().clone() for k, v in self.state_dict().items()}
+        names = ("prog_bar", "logger", "on_step", "on_epoch", "reduce_fx", "enable_graph",
+                 "sync_dist", "sync_dist_group", "add_dataloader_idx", "batch_size",
+                 "metric_attribute", "rank_zero_only")
+        given = {**dict(zip(names, args, strict=False)), **kwargs}
+        calls.append(LogCall(hook, name, given, isinstance(value, Metric)))
+        return original(self, name, value, *args, **kwargs)
+
+    cls.log = log  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        cls.log = original  # type: ignore[method-assign]
+
+
+def fit_for_contract(
+    aligner: str,
+    run_dir: str | Path,
+    overrides: Sequence[str] = (),
+    steps: int = 4,
+    plugin_manager: PluginManager | None = None,
+) -> ContractRun:
+    """Train ``aligner`` for ``steps`` optimizer steps plus one validation pass, on CPU.
+
+    Args:
+        aligner: A registered aligner name.
+        run_dir: Where the run writes (its window cache goes to ``run_dir/cache``).
+        overrides: Extra Hydra overrides (after ``experiment=smoke``), e.g. tiny sizes.
+        steps: Training batches (one epoch).
+        plugin_manager: Where the aligner is looked up (default: the process-wide one).
+
+    Returns:
+        The run, with the trained model and every ``self.log`` call.
+    """
+    from skelagnostic.cli.app import compose, run
+    from skelagnostic.plugins import get_plugin_manager
+
+    pm = plugin_manager or get_plugin_manager()
+    run_dir = Path(run_dir)
+    cfg = compose([f"model={aligner}", "experiment=smoke", f"run_dir={run_dir}",
+                   f"data.cache_dir={run_dir / 'cache'}", "threads=1", "trainer.max_epochs=1",
+                   "trainer.max_time=null", f"trainer.limit_train_batches={steps}",
+                   "trainer.limit_val_batches=1", "~callbacks.rich_progress_bar",
+                   "+trainer.enable_progress_bar=false", "+trainer.num_sanity_val_steps=0",
+                   *overrides], plugin_manager=pm)
+    calls: list[LogCall] = []
+    seen: dict[str, Any] = {}
+    with _spy_on_log(pm.aligner(aligner).module, calls, seen):
+        metrics = run(cfg, pm)
+    model = seen.get("model")
+    assert model is not None, f"aligner {aligner!r} never called self.log during fit"
+    assert "initial" in seen, f"aligner {aligner!r}: training_step logged nothing"
+    return ContractRun(aligner, run_dir, metrics, model, model.trainer.datamodule,
+                       seen["initial"], pm, calls, plugin_manager is None)
+
+
+def check_fit(run: ContractRun) -> None:
+    """Finite ``train/loss`` and ``val/loss``, weights that changed, a ``last.ckpt``."""
+    for key in ("train/loss", "val/loss"):
+        assert key in run.metrics, (f"aligner {run.aligner!r} did not log {key!r} "
+                                    f"(logged: {', '.join(sorted(run.metrics)) or 'nothing'})")
+        assert math.isfinite(run.metrics[key]), f"aligner {run.aligner!r}: {key} is not finite"
+    now = run.model.state_dict()
+    changed = [k for k, v in run.initial.items()
+               if v.is_floating_point() and not torch.equal(v.cpu(), now[k].detach().cpu())]
+    assert changed, f"aligner {run.aligner!r}: training did not change any weight"
+    assert run.checkpoint.is_file(), f"aligner {run.aligner!r}: no {run.checkpoint}"
+
+
+def _load(run: ContractRun) -> Aligner:
+    from skelagnostic.plugins import load_aligner
+
+    if run.global_manager:
+        return load_aligner(run.aligner, checkpoint=run.checkpoint)
+    spec = run.plugin_manager.aligner(run.aligner)
+    return spec.module.load_from_checkpoint(run.checkpoint, map_location="cpu").eval()
+
+
+def check_checkpoint_round_trip(run: ContractRun, motion: Motion | None = None) -> Aligner:
+    """The checkpoint alone rebuilds the network with the saved weights (and same encodings).
+
+    Args:
+        run: The contract run.
+        motion: A clip to encode with both models (default: :func:`contract_motion`).
+
+    Returns:
+        The reloaded aligner.
+    """
+    saved = torch.load(run.checkpoint, map_location="cpu", weights_only=False)["state_dict"]
+    loaded = _load(run)
+    state = loaded.state_dict()
+    missing, extra = sorted(set(saved) - set(state)), sorted(set(state) - set(saved))
+    assert not missing and not extra, (
+        f"aligner {run.aligner!r}: the network rebuilt from the checkpoint's hyper-parameters "
+        f"differs (missing: {missing[:5]}, unexpected: {extra[:5]}); save data-dependent sizes "
+        "with self.save_hyperparameters()")
+    for key, value in saved.items():
+        assert torch.equal(value, state[key].cpu()), (
+            f"aligner {run.aligner!r}: weight {key!r} differs after load_aligner")
+    motion = motion if motion is not None else contract_motion(run)
+    run.model.eval()
+    a, b = run.model.encode(motion), loaded.encode(motion)
+    torch.testing.assert_close(b.z.float().cpu(), a.z.float().cpu(), rtol=1e-4, atol=1e-5,
+                               msg=lambda m: f"aligner {run.aligner!r}: reloaded encode "
+                                             f"differs: {m}")
+    return loaded
+
+
+def contract_motion(run: ContractRun, max_frames: int = 64) -> Motion:
+    """The first clip of the run's first data source at the data module's fps (cut short)."""
+    dm = run.datamodule
+    source = dm.sources[0]
+    motion = source.load(source.clips()[0])
+    if abs(motion.fps - dm.fps) > 1e-6:
+        motion = motion.resample(dm.fps)
+    return motion[: min(motion.num_frames, max_frames)]
+
+
+def check_encode_decode(run: ContractRun, motion: Motion, target: Skeleton) -> None:
+    """``decode(encode(motion), target)`` (and ``retarget``) give finite motions on ``target``.
+
+    Args:
+        run: The contract run.
+        motion: A clip of a skeleton the aligner was trained on.
+        target: The skeleton to decode onto.
+    """
+    from skelagnostic.aligners import Latent
+    from skelagnostic.core.motion import Motion
+
+    model = run.model.eval()
+    latent = model.encode(motion)
+    assert isinstance(latent, Latent), f"{type(model).__name__}.encode must return a Latent"
+    assert isinstance(latent.z, torch.Tensor) and bool(torch.isfinite(latent.z).all()), (
+        f"{type(model).__name__}.encode: z is not a finite tensor")
+    results = {"decode": model.decode(latent, target)}
+    if model.supports("retarget"):
+        results["retarget"] = model.retarget(motion, target)
+    for what, out in results.items():
+        name = f"{type(model).__name__}.{what}"
+        assert isinstance(out, Motion), f"{name} must return a Motion, got {type(out).__name__}"
+        assert out.skeleton.num_joints == target.num_joints, f"{name}: wrong skeleton"
+        assert out.num_frames == motion.num_frames, (
+            f"{name}: {out.num_frames} frames for a {motion.num_frames}-frame clip")
+        assert abs(out.fps - motion.fps) < 1e-6, f"{name}: fps {out.fps} != {motion.fps}"
+        assert tuple(out.rotations.shape) == (motion.num_frames, target.num_joints, 4)
+        assert bool(torch.isfinite(out.global_positions()).all()), f"{name}: non-finite output"
+
+
+def check_logging(run: ContractRun) -> None:
+    """Explicit ``batch_size`` in step logs; ``sync_dist=True`` for epoch-level step values.
+
+    Values logged in epoch-end hooks are not checked: they are usually computed
+    from already synchronised state (a torchmetrics ``compute()``, an
+    ``all_gather``), which the contract cannot see.
+    """
+    problems = []
+    for call in run.logs:
+        if call.is_metric or call.kwargs.get("rank_zero_only"):
+            continue
+        where = f"{type(run.model).__name__}.{call.hook} logs {call.name!r}"
+        if call.hook in _STEP_HOOKS and call.kwargs.get("batch_size") is None:
+            problems.append(f"{where} without batch_size=")
+        on_epoch = call.kwargs.get("on_epoch")
+        epoch_level = on_epoch if on_epoch is not None else call.hook in _EPOCH_DEFAULT_HOOKS
+        if call.hook in _STEP_HOOKS and epoch_level and not call.kwargs.get("sync_dist"):
+            problems.append(f"{where} per epoch without sync_dist=True")
+    assert not problems, "; ".join(dict.fromkeys(problems))
+    assert any(c.hook == "validation_step" and c.name == "val/loss" for c in run.logs), (
+        f"{type(run.model).__name__}.validation_step must log 'val/loss' (checkpoint monitor)")
+
+
+class AlignerContract:
+    """Base class of a pytest test class that runs the aligner contract (see the module).
+
+    Attributes:
+        aligner: The registered ``model=<name>`` to test.
+        overrides: Hydra overrides after ``experiment=smoke`` (tiny sizes, data).
+        steps: Training steps of the shared run.
+    """
+
+    aligner: ClassVar[str] = ""
+    overrides: ClassVar[Sequence[str]] = ()
+    steps: ClassVar[int] = 4
+
+    def plugin_manager(self) -> PluginManager | None:
+        """Where the aligner is registered; ``None`` (the default): the process-wide manager."""
+        return None
+
+    def motion(self, run: ContractRun) -> Motion:
+        """The clip to encode (default: :func:`contract_motion`)."""
+        return contract_motion(run)
+
+    def target_skeleton(self, run: ContractRun, motion: Motion) -> Skeleton:
+        """The skeleton to decode onto (default: the clip's own)."""
+        return motion.skeleton
+
+    @pytest.fixture(scope="class")
+    def contract_run(self, tmp_path_factory: pytest.TempPathFactory) -> ContractRun:
+        """One short training run shared by the tests of the class."""
+        assert self.aligner, f"{type(self).__name__}: set the class attribute 'aligner'"
+        root = tmp_path_factory.mktemp(f"contract-{self.aligner}")
+        return fit_for_contract(self.aligner, root / "run", self.overrides, self.steps,
+                                self.plugin_manager())
+
+    def test_fit_a_few_steps(self, contract_run: ContractRun) -> None:
+        """Losses logged and finite, weights updated, a checkpoint written."""
+        check_fit(contract_run)
+
+    def test_checkpoint_round_trip(self, contract_run: ContractRun) -> None:
+        """``load_aligner`` rebuilds the same network from the checkpoint."""
+        check_checkpoint_round_trip(contract_run, self.motion(contract_run))
+
+    def test_encode_decode_shapes(self, contract_run: ContractRun) -> None:
+        """``encode``/``decode`` (and ``retarget``) shapes, fps and finiteness."""
+        motion = self.motion(contract_run)
+        check_encode_decode(contract_run, motion, self.target_skeleton(contract_run, motion))
+
+    def test_logging_is_ddp_safe(self, contract_run: ContractRun) -> None:
+        """``batch_size`` in step logs, ``sync_dist`` for epoch-level values."""
+        check_logging(contract_run)

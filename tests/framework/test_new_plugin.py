@@ -1,0 +1,85 @@
+"""``skelagnostic new-plugin``: the generated package installs, trains and passes its own test."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+import pytest
+
+from skelagnostic.cli import new_plugin
+from skelagnostic.plugins import LOAD_PLUGINS_ENV
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_files_are_named_after_the_plugin() -> None:
+    layout = new_plugin.files("tiny_net")
+    assert set(layout) == {
+        "pyproject.toml", "README.md", "src/skelagnostic_tiny_net/__init__.py",
+        "src/skelagnostic_tiny_net/plugin.py", "src/skelagnostic_tiny_net/aligner.py",
+        "src/skelagnostic_tiny_net/conf/__init__.py",
+        "src/skelagnostic_tiny_net/conf/experiment/tiny_net_quick.yaml",
+        "tests/test_tiny_net.py",
+    }
+    assert 'tiny_net = "skelagnostic_tiny_net.plugin"' in layout["pyproject.toml"]
+    assert "class TinyNetAligner(Aligner):" in layout["src/skelagnostic_tiny_net/aligner.py"]
+    for text in layout.values():
+        assert "__NAME__" not in text and "__PKG__" not in text and "__CLASS__" not in text
+
+
+@pytest.mark.parametrize("name", ["Tiny", "1net", "tiny-net", ""])
+def test_bad_names_are_refused(tmp_path: Path, name: str, capsys) -> None:
+    assert new_plugin.main([name, "--dir", str(tmp_path / "pkg")]) == 1
+    assert f"plugin name {name!r} must be lowercase letters" in capsys.readouterr().err
+    assert not (tmp_path / "pkg").exists()
+
+
+def test_a_non_empty_directory_is_refused(tmp_path: Path, capsys) -> None:
+    (tmp_path / "keep.txt").write_text("mine")
+    assert new_plugin.main(["tiny", "--dir", str(tmp_path)]) == 1
+    assert "is not an empty directory" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.txt"]
+
+
+@pytest.mark.slow
+def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> None:
+    work = tmp_path / "work"  # outside the repository
+    work.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != LOAD_PLUGINS_ENV}
+    env.update(OMP_NUM_THREADS="1", SKELAGNOSTIC_CACHE=str(tmp_path / "cache"),
+               PYTHONPATH=str(REPO / "src"))
+    # a throwaway venv on top of this interpreter's packages (torch, lightning, ...)
+    env_dir = tmp_path / "env"
+    venv.create(env_dir, system_site_packages=True, with_pip=False)
+    py = str(env_dir / "bin" / "python")
+    purelib = subprocess.run([py, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+    deps = [p for p in sys.path if p.endswith("site-packages")]
+    Path(purelib, "deps.pth").write_text("\n".join(deps) + "\n")
+    script = Path(sys.executable).with_name("skelagnostic")  # the installed console script
+    command = [py, str(script)] if script.is_file() else [py, "-m", "skelagnostic.cli"]
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(list(args), cwd=work, capture_output=True, text=True, env=env,
+                              timeout=600)
+
+    made = run(*command, "new-plugin", "tiny", "--dir", str(tmp_path / "pkg"))
+    assert made.returncode == 0, made.stderr
+    assert "pip install -e" in made.stdout
+    installed = run(sys.executable, "-m", "pip", "--python", py, "install", "-q", "--no-deps",
+                    "--no-build-isolation", "--no-index", "-e", str(tmp_path / "pkg"))
+    assert installed.returncode == 0, installed.stderr[-2000:]
+    env[LOAD_PLUGINS_ENV] = "tiny"  # only the new plugin (and the built-ins)
+    fit = run(*command, "fit", "model=tiny", "experiment=smoke", "threads=1")
+    assert fit.returncode == 0, fit.stderr[-2000:]
+    (ckpt,) = work.glob("runs/tiny/fit/*/checkpoints/last.ckpt")
+    assert ckpt.stat().st_size > 0
+    listed = run(*command, "plugins", "tiny")
+    assert "aligner tiny (plugin tiny 0.1.0, skelagnostic-tiny)" in listed.stdout
+    own = run(py, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tmp_path / "pkg" / "tests"))
+    assert own.returncode == 0, own.stdout[-3000:]
+    assert "4 passed" in own.stdout
