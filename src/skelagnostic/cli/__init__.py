@@ -18,6 +18,7 @@ VERBS: dict[str, tuple[str, str, str]] = {
     "test": ("skelagnostic.cli.app", "test", "evaluate on the test split"),
     "predict": ("skelagnostic.cli.app", "predict", "aligner outputs -> predictions.pt"),
     "plugins": ("skelagnostic.cli.plugins", "main", "list plugins: name, version, source, status"),
+    "cache": ("skelagnostic.cli.cache", "main", "window cache: info (entries, size) or clear"),
     "render": ("skelagnostic.cli.render", "main", "render a motion to PNG/GIF"),
     "retarget": ("skelagnostic.cli.infer", "retarget",
                  "a trained aligner moves a BVH onto another skeleton"),

@@ -23,6 +23,7 @@ from skelagnostic.data.cache import (
     cache_key,
     default_cache_dir,
     read_exactly,
+    slot_key,
 )
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
@@ -35,6 +36,33 @@ SPLITS = ("train", "val", "test")
 #: pass reads the training windows in chunks of this fixed size, so what it
 #: allocates does not depend on the corpus or the clip lengths.
 STATS_CHUNK_VALUES = 1 << 20
+
+
+def check_statistics(dataset: str, representation: MotionRepresentation,
+                     label: str = "features") -> None:
+    """Fail loudly if a fitted normalisation statistic is NaN or infinite.
+
+    Non-finite statistics (a training clip with NaN or infinite values, e.g. a
+    corrupt file) would otherwise train to ``loss=nan`` without an error.
+
+    Args:
+        dataset: Name of the dataset, for the message.
+        representation: The representation whose statistics were just fitted.
+        label: What the statistics describe (``features``, ``input``, ``pose``).
+
+    Raises:
+        SkelagnosticError: ``mean`` or ``std`` has a non-finite value (one line
+            naming the dataset and the statistic).
+    """
+    for stat in ("mean", "std"):
+        value = getattr(representation, stat)
+        if value is not None and not bool(torch.isfinite(value).all()):
+            bad = int((~torch.isfinite(value)).sum())
+            raise SkelagnosticError(
+                f"dataset {dataset!r}: the {label} normalisation statistic {stat!r} is not "
+                f"finite ({bad} of {value.numel()} values); a training clip holds NaN or "
+                "infinite values (check the source files, or run 'skelagnostic cache clear')"
+            )
 
 
 class WindowDataset(Dataset):
@@ -333,10 +361,21 @@ class MotionDataModule(L.LightningDataModule):
 
     # ------------------------------------------------------------------ caching
     def _entry(self, source: ClipSource, clip: ClipRef) -> CacheEntry:
+        """The clip's cache entry, built with :meth:`_encode` when missing or damaged.
+
+        A clip whose id is a file path keeps one entry per preprocessing: the
+        entry of an earlier version of the file is deleted (:meth:`WindowCache.track`).
+        """
         key = cache_key(clip.key, self.preprocessing())
         entry = self.cache.get(key)
-        if entry is not None:
-            return entry
+        if entry is None:
+            entry = self.cache.put(key, *self._encode(source, clip))
+        if os.path.isfile(clip.id):
+            self.cache.track(slot_key(os.path.abspath(clip.id), self.preprocessing()), key)
+        return entry
+
+    def _encode(self, source: ClipSource, clip: ClipRef) -> tuple[np.ndarray, dict[str, Any]]:
+        """Load, resample and encode ``clip``: its ``(windows, metadata)`` for the cache."""
         motion = source.load(clip)
         if motion.fps != self.fps:
             motion = motion.resample(self.fps)
@@ -354,7 +393,7 @@ class MotionDataModule(L.LightningDataModule):
             windows = feats.unfold(0, self.window, self.stride).permute(0, 3, 1, 2).numpy()
         meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(), "starts": starts,
                 "fps": self.fps}
-        return self.cache.put(key, windows, meta)
+        return windows, meta
 
     def prepare_data(self) -> None:
         """Preprocess and cache every clip (runs once per node under DDP)."""
@@ -422,6 +461,7 @@ class MotionDataModule(L.LightningDataModule):
         self.skeletons[name] = Skeleton.from_dict(train.entries[0].meta["skeleton"])
         rep = copy.deepcopy(self.representation)
         rep.fit_normalization(train.feature_chunks(), per_element=self.per_element_stats)
+        check_statistics(name, rep)
         self.representations[name] = rep
 
     # -------------------------------------------------------------- dataloaders
