@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,7 +38,7 @@ from torch.utils.data import DataLoader, Dataset
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import MotionDataModule
-from skelagnostic.data.cache import CacheEntry, cache_key, read_exactly
+from skelagnostic.data.cache import CacheEntry, cache_key, read_exactly, slot_key
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic_pcmrl.rpa import augment_rest_pose, bone_tails, random_tail_offsets
@@ -384,8 +385,8 @@ class InterpolationDataModule(MotionDataModule):
         loading = {"class": f"{type(source).__module__}.{type(source).__qualname__}",
                    "units": getattr(source, "units", None),
                    "root_joint": getattr(source, "root_joint", None)}
-        key = cache_key(clip.key, {"layout": _LAYOUT, "fps": self.fps, "mirror": mirror,
-                                   "source": loading})
+        pre = {"layout": _LAYOUT, "fps": self.fps, "mirror": mirror, "source": loading}
+        key = cache_key(clip.key, pre)
         entry = self.cache.get(key)
         if entry is None:
             motion = source.load(clip)
@@ -400,6 +401,8 @@ class InterpolationDataModule(MotionDataModule):
                     "fps": self.fps, "offsets": m.skeleton.offsets.float().tolist(),
                     "tails": bone_tails(m.skeleton).tails.float().tolist()}
             entry = self.cache.put(key, frames.numpy()[None], meta)
+        if os.path.isfile(clip.id):  # an edited file's earlier entry is deleted
+            self.cache.track(slot_key(os.path.abspath(clip.id), pre), key)
         return entry
 
     def _check(self, entry: CacheEntry, name: str) -> None:
