@@ -4,9 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
-from skelagnostic_vqpae.data import FrameWindows, MultiSource, VQPAEDataModule, human_dog_source
+from skelagnostic_vqpae.data import (
+    CachedFrameWindows,
+    FrameWindows,
+    MultiSource,
+    VQPAEDataModule,
+    human_dog_source,
+)
 
 from skelagnostic import Motion, procedural
 from skelagnostic.data import ProceduralSource
@@ -172,3 +179,39 @@ def test_nearly_constant_channels_are_floored(cache_dir: Path) -> None:
     assert raised  # the floor does bite on these clips
     with pytest.raises(SkelagnosticError, match="std_floor"):
         VQPAEDataModule(std_floor=1.5, cache_dir=cache_dir)
+
+
+def test_streamed_windows_and_statistics_match_the_in_memory_ones(cache_dir: Path) -> None:
+    """Windows read from the cache per batch equal those of all frames held in memory."""
+    dm = _dm(cache_dir, val_fraction=0.25)
+    n_in = len(dm.representation.channels)
+    for name in dm.dataset_names:
+        train = dm.datasets["train"][name]
+        assert isinstance(train, CachedFrameWindows)
+        raw = {part: [torch.from_numpy(np.array(e.open()[0])) for e in ds.entries]
+               for part, ds in ((p, dm.datasets[p][name]) for p in ("train", "val"))}
+        # statistics over all training frames at once (the concatenating computation)
+        every = torch.cat(raw["train"]).double()
+        for rep, channels in ((dm.representations[name], slice(None, n_in)),
+                              (dm.pose_representations[name], slice(n_in, None))):
+            values = every[..., channels]
+            std = values.std(0, unbiased=False)
+            std = torch.where(std < 1e-6, torch.ones_like(std), std)
+            std = torch.maximum(std, 0.01 * std.mean())
+            assert torch.allclose(rep.mean.double(), values.mean(0), atol=1e-5)
+            assert torch.allclose(rep.std.double(), std, rtol=1e-5, atol=1e-6)
+        rep, poses = dm.representations[name], dm.pose_representations[name]
+        for part, ds in (("train", train), ("val", dm.datasets["val"][name])):
+            lengths = np.cumsum([0] + [len(a) for a in raw[part]])
+            held = FrameWindows(
+                torch.cat([rep.normalize(a[..., :n_in]).flatten(1) for a in raw[part]]),
+                torch.cat([poses.normalize(a[..., n_in:]).flatten(1) for a in raw[part]]),
+                list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True)),
+                dm.window, dm.stride, ds.pair_shift)
+            assert len(held) == len(ds) > 0
+            everything = list(range(len(ds)))
+            want, got = held.__getitems__(everything), ds.__getitems__(everything)
+            assert set(want) == set(got) == ({"features", "poses", "clip", "pivot"} | (
+                {"shifted", "shift"} if part == "train" else set()))
+            for key in want:
+                assert torch.equal(want[key], got[key]), (name, part, key)

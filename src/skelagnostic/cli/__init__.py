@@ -22,6 +22,7 @@ VERBS: dict[str, tuple[str, str, str]] = {
                 "list plugins and what they provide; plugins NAME: an aligner's defaults"),
     "new-plugin": ("skelagnostic.cli.new_plugin", "main",
                    "write a third-party aligner package: new-plugin NAME [--dir DIR]"),
+    "cache": ("skelagnostic.cli.cache", "main", "window cache: info (entries, size) or clear"),
     "render": ("skelagnostic.cli.render", "main", "render a motion to PNG/GIF"),
     "retarget": ("skelagnostic.cli.infer", "retarget",
                  "a trained aligner moves a BVH onto another skeleton"),

@@ -11,9 +11,16 @@ to a temporary file and moved in place with :func:`os.replace`, the JSON last
 umask allows), so readers (other DDP ranks, concurrent runs) see a complete
 entry or none.
 An entry that is nevertheless damaged (unparsable JSON, an array whose
-header, shape or size disagrees with it, e.g. after a disk error or a manual
-edit) is reported with a :class:`CacheWarning` and treated as missing, so it
-is rebuilt.
+header, shape or size disagrees with it, or whose bytes do not match the
+CRC-32 checksum stored in the JSON, e.g. after a disk error or a manual edit)
+is reported with a :class:`CacheWarning` and treated as missing, so it is
+rebuilt. The checksum is verified the first time a process opens an entry
+(one sequential read of the array) and not again while the file is unchanged,
+so it costs one read of the corpus per process, not per epoch.
+
+Clips read from a file keep one entry per (file path, preprocessing)
+(:meth:`WindowCache.track`): when the file changes, its old entry is deleted
+once the new one is in place, so stale entries do not accumulate.
 """
 
 from __future__ import annotations
@@ -22,7 +29,10 @@ import hashlib
 import json
 import math
 import os
+import shutil
 import warnings
+import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -52,8 +62,45 @@ def cache_key(clip_key: str, preprocessing: dict[str, Any]) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
+def slot_key(source_id: str, preprocessing: dict[str, Any]) -> str:
+    """SHA-256 of where a clip comes from (e.g. its file path) and the preprocessing.
+
+    Unlike :func:`cache_key` it does not depend on the clip's content, so a file
+    that changes keeps its slot (:meth:`WindowCache.track`).
+    """
+    blob = json.dumps({"source": source_id, "pre": preprocessing, "version": CACHE_VERSION},
+                      sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
 class CacheWarning(UserWarning):
     """A damaged cache entry was found; it is rebuilt."""
+
+
+#: Arrays verified by this process: path -> (inode, size, mtime) when they matched.
+_VERIFIED: dict[Path, tuple[int, int, int]] = {}
+#: Bytes per read when computing a checksum.
+_CHECKSUM_BLOCK = 1 << 20
+
+
+def _signature(path: Path) -> tuple[int, int, int]:
+    st = path.stat()
+    return st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def checksum(data: np.ndarray) -> str:
+    """``"crc32:<hex>"`` of the bytes of the C-contiguous array ``data``."""
+    return f"crc32:{zlib.crc32(data.reshape(-1).view(np.uint8)) if data.size else 0:08x}"
+
+
+def file_checksum(path: Path, offset: int) -> str:
+    """``"crc32:<hex>"`` of the bytes of ``path`` from ``offset`` on, read in blocks."""
+    crc = 0
+    with path.open("rb") as fh:
+        fh.seek(offset)
+        for block in iter(lambda: fh.read(_CHECKSUM_BLOCK), b""):
+            crc = zlib.crc32(block, crc)
+    return f"crc32:{crc:08x}"
 
 
 def _atomic_write(path: Path, write: Any) -> None:
@@ -191,6 +238,7 @@ class WindowCache:
             if array.stat().st_size != expected:
                 raise ValueError(f"array file has {array.stat().st_size} bytes, expected "
                                  f"{expected}")
+            self._verify(array, data_start, info)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             warnings.warn(f"damaged cache entry {array} rebuilt ({exc})", CacheWarning,
                           stacklevel=2)
@@ -199,10 +247,91 @@ class WindowCache:
         entry.__dict__["layout"] = (data_start, shape)  # known: spare a second header read
         return entry
 
+    @staticmethod
+    def _verify(array: Path, data_start: int, info: dict[str, Any]) -> None:
+        """Check the array's bytes against the checksum of its metadata, once per process.
+
+        Raises:
+            ValueError: No checksum (an entry of an older version) or a mismatch.
+        """
+        signature = _signature(array)
+        if _VERIFIED.get(array) == signature:
+            return
+        want = info.get("checksum")
+        if not want:
+            raise ValueError("no checksum (written by an older version)")
+        got = file_checksum(array, data_start)
+        if got != want:
+            raise ValueError(f"checksum {got} of the array bytes, expected {want}")
+        _VERIFIED[array] = signature
+
     def put(self, key: str, windows: np.ndarray, meta: dict[str, Any]) -> CacheEntry:
-        """Store ``windows`` (cast to float32) and ``meta`` atomically under ``key``."""
+        """Store ``windows`` (cast to float32) and ``meta`` atomically under ``key``.
+
+        The metadata gets the ``checksum`` of the array's bytes (:func:`checksum`).
+        """
         array, meta_path = self._paths(key)
         data = np.ascontiguousarray(windows, dtype=np.float32)
+        meta = {**meta, "checksum": checksum(data)}
         _atomic_write(array, lambda fh: np.save(fh, data))
         _atomic_write(meta_path, lambda fh: fh.write(json.dumps(meta).encode()))
+        _VERIFIED[array] = _signature(array)  # its checksum was just computed
         return CacheEntry(array, meta)
+
+    # ------------------------------------------------------------- maintenance
+    def _slot_path(self, slot: str) -> Path:
+        return self.root / "slots" / slot[:2] / slot
+
+    def track(self, slot: str, key: str) -> None:
+        """Record that ``slot`` (e.g. a source file and preprocessing) is cached under ``key``.
+
+        If the slot named another entry (the file has changed since), that
+        entry is deleted: a source file keeps one entry per preprocessing.
+
+        Args:
+            slot: Hex digest identifying the file and preprocessing, not the content.
+            key: The entry's key (content and preprocessing).
+        """
+        path = self._slot_path(slot)
+        try:
+            old = path.read_text().strip()
+        except OSError:
+            old = ""
+        if old == key:
+            return
+        if old:
+            self.remove(old)
+        _atomic_write(path, lambda fh: fh.write(key.encode()))
+
+    def remove(self, key: str) -> int:
+        """Delete the entry ``key`` (if present); returns the bytes freed."""
+        freed = 0
+        for path in self._paths(key):
+            try:
+                freed += path.stat().st_size
+                path.unlink()
+            except FileNotFoundError:
+                pass
+        return freed
+
+    def entries(self) -> Iterator[tuple[str, Path, dict[str, Any] | None]]:
+        """Every entry's ``(key, array path, metadata or None if unreadable)``, sorted by key."""
+        for array in sorted((self.root / "windows").glob("*/*.npy")):
+            try:
+                meta = json.loads(array.with_suffix(".json").read_text())
+            except (OSError, ValueError):
+                meta = None
+            yield array.stem, array, meta
+
+    def size(self) -> int:
+        """Bytes of all files of the cache (entries, slots, temporary files)."""
+        return sum(p.stat().st_size for sub in ("windows", "slots")
+                   for p in (self.root / sub).rglob("*") if p.is_file())
+
+    def clear(self) -> int:
+        """Delete every entry (the ``windows`` and ``slots`` directories); returns bytes freed."""
+        freed = self.size()
+        for sub in ("windows", "slots"):
+            shutil.rmtree(self.root / sub, ignore_errors=True)
+        _VERIFIED.clear()
+        return freed

@@ -25,6 +25,7 @@ from skelagnostic.data.cache import (
     cache_key,
     default_cache_dir,
     read_exactly,
+    slot_key,
 )
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
@@ -37,6 +38,33 @@ SPLITS = ("train", "val", "test")
 #: pass reads the training windows in chunks of this fixed size, so what it
 #: allocates does not depend on the corpus or the clip lengths.
 STATS_CHUNK_VALUES = 1 << 20
+
+
+def check_statistics(dataset: str, representation: MotionRepresentation,
+                     label: str = "features") -> None:
+    """Fail loudly if a fitted normalisation statistic is NaN or infinite.
+
+    Non-finite statistics (a training clip with NaN or infinite values, e.g. a
+    corrupt file) would otherwise train to ``loss=nan`` without an error.
+
+    Args:
+        dataset: Name of the dataset, for the message.
+        representation: The representation whose statistics were just fitted.
+        label: What the statistics describe (``features``, ``input``, ``pose``).
+
+    Raises:
+        SkelagnosticError: ``mean`` or ``std`` has a non-finite value (one line
+            naming the dataset and the statistic).
+    """
+    for stat in ("mean", "std"):
+        value = getattr(representation, stat)
+        if value is not None and not bool(torch.isfinite(value).all()):
+            bad = int((~torch.isfinite(value)).sum())
+            raise SkelagnosticError(
+                f"dataset {dataset!r}: the {label} normalisation statistic {stat!r} is not "
+                f"finite ({bad} of {value.numel()} values); a training clip holds NaN or "
+                "infinite values (check the source files, or run 'skelagnostic cache clear')"
+            )
 
 
 class WindowDataset(Dataset):
@@ -246,7 +274,7 @@ def _keep_recorded(split: dict[str, list[ClipRef]], recorded: dict[str, str],
 
 
 def describe_dataset(name: str, members: Sequence[tuple[ClipRef, CacheEntry]],
-                     datasets: dict[str, dict[str, WindowDataset]]) -> str:
+                     assigned: dict[str, str]) -> str:
     """One log line on a dataset: clips per split, joints, standing height and its unit.
 
     The unit is what a wrong ``data.units`` (or a wrong guess) would show
@@ -267,8 +295,8 @@ def describe_dataset(name: str, members: Sequence[tuple[ClipRef, CacheEntry]],
     else:
         size = (f"height {height:.3g} in the files' unit (not converted; data.units or a "
                 f"data.paths entry's units: sets it; the height suggests {infer_units(skeleton)})")
-    splits = ", ".join(f"{part} {len(datasets[part][name].entries)}" for part in SPLITS
-                       if name in datasets[part])
+    parts = [assigned.get(clip.id) for clip, _ in members]
+    splits = ", ".join(f"{part} {parts.count(part)}" for part in SPLITS if part in parts)
     return (f"data: dataset {name!r}: {len(members)} clip(s) ({splits}), "
             f"{skeleton.num_joints} joints, {size}")
 
@@ -386,10 +414,21 @@ class MotionDataModule(L.LightningDataModule):
 
     # ------------------------------------------------------------------ caching
     def _entry(self, source: ClipSource, clip: ClipRef) -> CacheEntry:
+        """The clip's cache entry, built with :meth:`_encode` when missing or damaged.
+
+        A clip whose id is a file path keeps one entry per preprocessing: the
+        entry of an earlier version of the file is deleted (:meth:`WindowCache.track`).
+        """
         key = cache_key(clip.key, self.preprocessing())
         entry = self.cache.get(key)
-        if entry is not None:
-            return entry
+        if entry is None:
+            entry = self.cache.put(key, *self._encode(source, clip))
+        if os.path.isfile(clip.id):
+            self.cache.track(slot_key(os.path.abspath(clip.id), self.preprocessing()), key)
+        return entry
+
+    def _encode(self, source: ClipSource, clip: ClipRef) -> tuple[np.ndarray, dict[str, Any]]:
+        """Load, resample and encode ``clip``: its ``(windows, metadata)`` for the cache."""
         motion = source.load(clip)
         if motion.fps != self.fps:
             motion = motion.resample(self.fps)
@@ -407,7 +446,7 @@ class MotionDataModule(L.LightningDataModule):
             windows = feats.unfold(0, self.window, self.stride).permute(0, 3, 1, 2).numpy()
         meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(), "starts": starts,
                 "fps": self.fps, "units": motion.units}
-        return self.cache.put(key, windows, meta)
+        return windows, meta
 
     def prepare_data(self) -> None:
         """Preprocess and cache every clip (runs once per node under DDP)."""
@@ -439,7 +478,7 @@ class MotionDataModule(L.LightningDataModule):
                 name = self._dataset_name(source, members, len(groups))
                 self._add_dataset(name, members)
                 if name in self.skeletons:
-                    rank_zero_info(describe_dataset(name, members, self.datasets))
+                    rank_zero_info(describe_dataset(name, members, self.assigned_splits))
         if not self.skeletons:
             raise SkelagnosticError(
                 f"data: no clip is at least data.window={self.window} frames long at "
@@ -503,6 +542,7 @@ class MotionDataModule(L.LightningDataModule):
         self.skeletons[name] = Skeleton.from_dict(train.entries[0].meta["skeleton"])
         rep = copy.deepcopy(self.representation)
         rep.fit_normalization(train.feature_chunks(), per_element=self.per_element_stats)
+        check_statistics(name, rep)
         self.representations[name] = rep
 
     # -------------------------------------------------------------- dataloaders

@@ -22,25 +22,34 @@ Validation/test windows are fixed (every ``stride`` frames) with a key every
 from __future__ import annotations
 
 import logging
+import math
+import os
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
+import torch.nn.functional as F
 from torch.utils.data import DataLoader, Dataset
 
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import MotionDataModule
-from skelagnostic.data.sources import ClipSource, ProceduralSource
+from skelagnostic.data.cache import CacheEntry, cache_key, read_exactly, slot_key
+from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic_pcmrl.rpa import augment_rest_pose, bone_tails, random_tail_offsets
 
-__all__ = ["Clip", "InterpolationDataModule", "gap_keys", "random_keys", "regular_keys"]
+__all__ = ["CachedClip", "Clip", "InterpolationDataModule", "gap_keys", "random_keys",
+           "regular_keys"]
 
 log = logging.getLogger(__name__)
+
+#: Version of the cached per-clip layout (global rotations and root per frame).
+_LAYOUT = "pcmrl-interp-frames-1"
 
 #: A target skeleton taller than this (in metres) is almost certainly not in metres.
 MAX_HEIGHT_M = 3.0
@@ -77,6 +86,60 @@ class Clip:
     def num_frames(self) -> int:
         """Frames of the clip."""
         return int(self.root.shape[0])
+
+    def frames(self, start: int, stop: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(global rotations [n, J, 4], root [n, 3])`` of frames ``start:stop``."""
+        return self.global_rotations[start:stop], self.root[start:stop]
+
+
+class CachedClip(Clip):
+    """A :class:`Clip` whose frames stay in the window cache and are read per window.
+
+    The entry holds ``[1, T, J + 1, 4]`` float32 values: the global rotations
+    and, in the last row, the root position (padded with 0). :meth:`frames`
+    reads only the asked frames (positioned read, no memory map), so a process
+    holds the windows of its current batches, not the corpus.
+
+    Args:
+        name: Clip identifier.
+        entry: The cache entry (metadata: ``skeleton``, ``offsets``, ``tails``).
+    """
+
+    def __init__(self, name: str, entry: CacheEntry) -> None:
+        meta = entry.meta
+        sk = Skeleton.from_dict(meta["skeleton"])
+        # the float32 skeleton of Clip.from_motion (motion.float() converts its offsets)
+        self.name, self.entry = name, entry
+        self.skeleton = Motion(sk, torch.zeros(1, sk.num_joints, 4).index_fill_(
+            -1, torch.tensor([0]), 1.0), torch.zeros(1, 3), float(meta["fps"])).float().skeleton
+        self.offsets = torch.tensor(meta["offsets"], dtype=torch.float32)
+        self.tails = torch.tensor(meta["tails"], dtype=torch.float32)
+
+    @property
+    def num_frames(self) -> int:
+        """Frames of the clip."""
+        return int(self.entry.layout[1][1])
+
+    def frames(self, start: int, stop: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Frames ``start:stop`` read from the cache entry."""
+        offset, shape = self.entry.layout
+        stop = min(stop, shape[1])
+        out = np.empty((max(0, stop - start), *shape[2:]), np.float32)
+        with self.entry.array.open("rb", buffering=0) as fh:
+            fh.seek(offset + start * 4 * math.prod(shape[2:]))
+            read_exactly(fh, out, self.entry.array)
+        values = torch.from_numpy(out)
+        return values[:, :-1], values[:, -1, :3]
+
+    @property  # type: ignore[override]
+    def global_rotations(self) -> torch.Tensor:
+        """``[T, J, 4]`` of the whole clip (reads it all)."""
+        return self.frames(0, self.num_frames)[0]
+
+    @property  # type: ignore[override]
+    def root(self) -> torch.Tensor:
+        """``[T, 3]`` of the whole clip (reads it all)."""
+        return self.frames(0, self.num_frames)[1]
 
 
 def random_keys(length: int, min_keys: int, max_keys: int, rng: random.Random) -> torch.Tensor:
@@ -118,8 +181,8 @@ def gap_keys(length: int, gap: int) -> torch.Tensor:
 
 
 def _window(clip: Clip, start: int, length: int, keys: torch.Tensor) -> dict[str, torch.Tensor]:
-    stop = start + length
-    return {"global_rotations": clip.global_rotations[start:stop], "root": clip.root[start:stop],
+    rotations, root = clip.frames(start, start + length)
+    return {"global_rotations": rotations, "root": root,
             "offsets": clip.offsets, "tails": clip.tails, "keys": keys}
 
 
@@ -211,7 +274,9 @@ class InterpolationDataModule(MotionDataModule):
         test_fraction: Share of the clips moved to the test split (besides the clips a
             source marks as test, e.g. with ``data.test_pattern``).
         split_seed: Seed of the clip split.
-        cache_dir: Unused (the clips are held in memory); accepted for the shared data keys.
+        cache_dir: Window cache; every clip's global rotations and root are cached
+            there and read per window (:class:`CachedClip`), so memory does not grow
+            with the corpus.
 
     Raises:
         SkelagnosticError: On out-of-range options, clips of another hierarchy, or
@@ -288,50 +353,96 @@ class InterpolationDataModule(MotionDataModule):
 
     # ------------------------------------------------------------------ loading
     def prepare_data(self) -> None:
-        """Nothing to cache: the clips are small and loaded in :meth:`setup`."""
+        """Cache every clip's global rotations and root (runs once per node under DDP)."""
+        for source, ref, mirror in self._refs():
+            self._entry(source, ref, mirror)
 
     @property
     def dataset_names(self) -> list[str]:
         """One dataset: the target skeleton (after :meth:`setup`)."""
         return ["target"] if self.skeleton is not None else []
 
-    def _prepare(self, motion: Motion, name: str) -> Motion:
-        if motion.fps != self.fps:
-            motion = motion.resample(self.fps)
+    def _extra(self) -> ProceduralSource | None:
+        if not (self.procedural_kind and self.procedural_clips > 0):
+            return None
+        return ProceduralSource(kinds=(self.procedural_kind,), gaits=("walk", "run"),
+                                clips_per_gait=self.procedural_clips, seconds=8.0,
+                                seed=self.seed + 1000, name="procedural_extra")
+
+    def _refs(self) -> list[tuple[ClipSource, ClipRef, bool]]:
+        """Every clip to cache: ``(source, clip, mirrored)`` (mirrors of all non-test clips)."""
+        sources: list[ClipSource] = list(self.sources)
+        extra = self._extra()
+        if extra is not None:
+            sources.append(extra)
+        return [(src, ref, mirror) for src in sources for ref in src.clips()
+                for mirror in ((False, True) if self.mirror and ref.split != "test"
+                               else (False,))]
+
+    def _entry(self, source: ClipSource, clip: ClipRef, mirror: bool = False) -> CacheEntry:
+        """The cached frames of ``clip`` (resampled, mirrored if asked), built when missing."""
+        # what the source does to the clip's content when loading it (class, units, re-rooting)
+        loading = {"class": f"{type(source).__module__}.{type(source).__qualname__}",
+                   "units": getattr(source, "units", None),
+                   "root_joint": getattr(source, "root_joint", None)}
+        pre = {"layout": _LAYOUT, "fps": self.fps, "mirror": mirror, "source": loading}
+        key = cache_key(clip.key, pre)
+        entry = self.cache.get(key)
+        if entry is None:
+            motion = source.load(clip)
+            if motion.fps != self.fps:
+                motion = motion.resample(self.fps)
+            if mirror:
+                motion = motion.mirror()
+            m = motion.float()
+            frames = torch.cat([m.global_rotations(),
+                                F.pad(m.root_positions, (0, 1))[:, None]], dim=1)
+            meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(), "starts": [0],
+                    "fps": self.fps, "offsets": m.skeleton.offsets.float().tolist(),
+                    "tails": bone_tails(m.skeleton).tails.float().tolist()}
+            entry = self.cache.put(key, frames.numpy()[None], meta)
+        if os.path.isfile(clip.id):  # an edited file's earlier entry is deleted
+            self.cache.track(slot_key(os.path.abspath(clip.id), pre), key)
+        return entry
+
+    def _check(self, entry: CacheEntry, name: str) -> None:
+        """The target-skeleton checks of the (resampled) clip ``name``."""
+        skeleton = Skeleton.from_dict(entry.meta["skeleton"])
         if self.skeleton is None:
-            height = motion.skeleton.height()
+            height = skeleton.height()
             if height > MAX_HEIGHT_M:
                 raise SkelagnosticError(
                     f"data: clip {name!r} is {height:.3g} units tall; pcmrl_interp expects "
                     "metres (set data.units, e.g. data.units=cmu or data.units=cm)"
                 )
-            self.skeleton = motion.skeleton
-        elif list(motion.skeleton.parents) != list(self.skeleton.parents):
+            self.skeleton = skeleton
+        elif list(skeleton.parents) != list(self.skeleton.parents):
             raise SkelagnosticError(
-                f"data: clip {name!r} has {motion.skeleton.num_joints} joints with another "
+                f"data: clip {name!r} has {skeleton.num_joints} joints with another "
                 f"hierarchy than the target skeleton {self.skeleton!r}; pcmrl_interp trains on "
                 "one target skeleton"
             )
-        return motion
 
     def setup(self, stage: str | None = None) -> None:
-        """Load every clip, check the hierarchy, split by clip (idempotent)."""
+        """Cache and check every clip, split by clip (idempotent).
+
+        The clips stay in the cache (:class:`CachedClip`): memory does not grow
+        with the corpus.
+        """
         if self.skeleton is not None:
             return
-        test: list[tuple[str, Motion]] = []
-        rest: list[tuple[str, Motion]] = []
+        test: list[tuple[str, ClipSource, ClipRef]] = []
+        rest: list[tuple[str, ClipSource, ClipRef]] = []
         for source in self.sources:
             for ref in source.clips():
-                motion = self._prepare(source.load(ref), ref.id)
-                (test if ref.split == "test" else rest).append((ref.id, motion))
-        if self.procedural_kind and self.procedural_clips > 0:
-            extra = ProceduralSource(kinds=(self.procedural_kind,), gaits=("walk", "run"),
-                                     clips_per_gait=self.procedural_clips, seconds=8.0,
-                                     seed=self.seed + 1000, name="procedural_extra")
-            procedural = [(f"procedural:{r.id}", self._prepare(extra.load(r), r.id))
-                          for r in extra.clips()]
-        else:
-            procedural = []
+                self._check(self._entry(source, ref), ref.id)
+                (test if ref.split == "test" else rest).append((ref.id, source, ref))
+        extra = self._extra()
+        procedural = []
+        if extra is not None:
+            for r in extra.clips():
+                self._check(self._entry(extra, r), r.id)
+                procedural.append((f"procedural:{r.id}", extra, r))
         if not rest and not procedural:
             raise SkelagnosticError("data: no training clips (every clip is in the test split)")
         order = list(range(len(rest)))
@@ -344,12 +455,16 @@ class InterpolationDataModule(MotionDataModule):
             n_val = max(n_val, 1)
         val_idx = set(order[:n_val])
         train = [rest[i] for i in order if i not in val_idx] + procedural
-        if self.mirror:
-            train = train + [(f"{n}:mirror", m.mirror()) for n, m in train]
+
+        def clips(items: list[tuple[str, ClipSource, ClipRef]],
+                  mirror: bool = False) -> list[Clip]:
+            return [CachedClip(f"{n}:mirror" if mirror else n, self._entry(src, ref, mirror))
+                    for n, src, ref in items]
+
         self.clips = {
-            "train": [Clip.from_motion(m, n) for n, m in train],
-            "val": [Clip.from_motion(rest[i][1], rest[i][0]) for i in sorted(val_idx)],
-            "test": [Clip.from_motion(m, n) for n, m in test],
+            "train": clips(train) + (clips(train, mirror=True) if self.mirror else []),
+            "val": clips([rest[i] for i in sorted(val_idx)]),
+            "test": clips(test),
         }
         self.skeletons = {"target": self.skeleton}
         self.train_set = TrainWindows(self.clips["train"], self.window, self.min_keys,

@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
-from lightning.pytorch.utilities import rank_zero_only
+from lightning.pytorch.utilities import rank_zero_info, rank_zero_only
 from torch import Tensor, nn
 
 from skelagnostic.aligners import Aligner, Latent
@@ -194,6 +194,7 @@ class VQPAEAligner(Aligner):
         self.characters = nn.ModuleList()
         self.codebook: SharedCodebook | None = None
         self._metrics: dict[str, ManifoldOverlap] = {}  # not a submodule: rebuilt per epoch
+        self._overlap_na_reported = False  # one character: said once per run
         #: Per dataset, the ``[K]`` code histogram of the last validation/test epoch.
         self.last_code_counts: dict[str, Tensor] = {}
         #: Output frames where the last transfer switched to another matched window.
@@ -391,10 +392,17 @@ class VQPAEAligner(Aligner):
             counts = metric.counts.clone()
         if int(counts.sum()) > 0:
             self.log(f"{stage}/usage", out["usage"])
-            self.log(f"{stage}/overlap", out["overlap"])
-            for name, share, row in zip(self.dataset_names, out["per_dataset"], counts,
-                                        strict=True):
-                if not torch.isnan(share):
+            # torchmetrics squeezes a one-dataset result to a 0-d tensor
+            shares = out["per_dataset"].reshape(-1)
+            single = len(self.dataset_names) < 2
+            if single:  # codes shared by every character: meaningless with one character
+                if not self._overlap_na_reported:
+                    rank_zero_info(f"{stage}/overlap: not applicable (one dataset)")
+                    self._overlap_na_reported = True
+            else:
+                self.log(f"{stage}/overlap", out["overlap"])
+            for name, share, row in zip(self.dataset_names, shares, counts, strict=True):
+                if not single and not torch.isnan(share):
                     self.log(f"{stage}/overlap/{name}", share)
                 self.log(f"{stage}/codes/{name}", (row > 0).sum().float())
             self.last_code_counts = dict(zip(self.dataset_names, counts.cpu(), strict=True))
@@ -549,10 +557,11 @@ class VQPAEAligner(Aligner):
         codes = [torch.cat([e.code for e in embeddings.get(n, [])] or
                            [torch.zeros(0, dtype=torch.long)]) for n in self.dataset_names]
         overlap = manifold_overlap(codes, self._require_built().num_codes)
+        single = len(self.dataset_names) < 2  # overlap is not applicable: None, not a number
         return {
             "usage": overlap["usage"],
-            "overlap": overlap["overlap"],
-            "per_dataset": {n: None if math.isnan(v) else v for n, v in
+            "overlap": None if single else overlap["overlap"],
+            "per_dataset": {n: None if single or math.isnan(v) else v for n, v in
                             zip(self.dataset_names, overlap["per_dataset"], strict=True)},
             "codes_used": {n: int(c.unique().numel()) for n, c in
                            zip(self.dataset_names, codes, strict=True)},

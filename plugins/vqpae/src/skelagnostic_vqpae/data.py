@@ -9,9 +9,12 @@ training split) are guarded: every standard deviation is raised to at least
 ``std_floor`` times the dataset's mean channel standard deviation (0.01), and
 one that is still below ``1e-6`` becomes 1. A window has ``T = round(fps *
 window_seconds) + 1`` frames (odd) centred on its pivot; pivots are every
-``stride``-th frame whose window stays inside its clip. Frames are kept once in
-memory and windows are gathered per batch, so stride 1 (the authors' setting)
-costs no extra memory.
+``stride``-th frame whose window stays inside its clip. Each clip's frames are
+cached once on disk (one entry per clip) and the frames of a batch's windows are
+read from there when the batch is asked for (:class:`CachedFrameWindows`, no
+memory map), so stride 1 (the authors' setting) costs no extra memory and the
+process's memory does not grow with the corpus. The normalisation statistics
+are summed over chunks of a fixed size.
 
 Every clip also keeps its root-local joint positions (normalised the same way)
 for the average-pose MLP (Sec. 5.2).
@@ -25,7 +28,8 @@ sources (a human and a dog directory, several style sets) into the one
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,11 +41,13 @@ from torch.utils.data import DataLoader, Dataset
 
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import BVHSource, ClipRef, ClipSource, MotionDataModule, preset_source
-from skelagnostic.data.cache import CacheEntry, cache_key
+from skelagnostic.data.cache import CacheEntry, read_exactly
+from skelagnostic.data.datamodule import STATS_CHUNK_VALUES, check_statistics
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
 
-__all__ = ["FrameWindows", "MultiSource", "VQPAEDataModule", "human_dog_source", "styles_source"]
+__all__ = ["CachedFrameWindows", "FrameWindows", "MultiSource", "VQPAEDataModule",
+           "human_dog_source", "styles_source"]
 
 #: Version of the cached per-clip layout (velocities and root-local positions per frame).
 _LAYOUT = "vqpae-frames-1"
@@ -156,9 +162,15 @@ class FrameWindows(Dataset):
 
     def __init__(self, features: Tensor, poses: Tensor, bounds: Sequence[tuple[int, int]],
                  window: int, stride: int, pair_shift: int = 0) -> None:
+        self.features, self.poses = features, poses
+        self._index(bounds, window, stride, pair_shift)
+
+    def _index(self, bounds: Sequence[tuple[int, int]], window: int, stride: int,
+               pair_shift: int) -> None:
+        """Window starts, pivots, clips and partner shifts of clips at ``bounds``."""
         if pair_shift < 0:
             raise SkelagnosticError(f"data.pair_shift must be >= 0 frames, got {pair_shift}")
-        self.features, self.poses, self.window = features, poses, window
+        self.window = window
         self.pair_shift = int(pair_shift)
         half = window // 2
         starts, clips, pivots, shifts = [], [], [], []
@@ -189,23 +201,128 @@ class FrameWindows(Dataset):
     def gather(self, indices: Sequence[int], partners: bool = False) -> dict[str, Tensor]:
         """The windows ``indices`` stacked; ``partners`` adds ``shifted`` and ``shift``."""
         idx = torch.as_tensor(indices, dtype=torch.long)
-        frames = self.starts[idx, None] + self._offsets
+        feats, poses = self._take(self.starts[idx])
         item = {
-            "features": self.features[frames].transpose(1, 2).contiguous(),
-            "poses": self.poses[frames],
+            "features": feats.transpose(1, 2).contiguous(),
+            "poses": poses,
             "clip": self.clips[idx],
             "pivot": self.pivots[idx],
         }
         if partners:
             shift = self.shifts[idx]
-            item["shifted"] = self.features[frames + shift[:, None]].transpose(1, 2).contiguous()
+            item["shifted"] = self._take(self.starts[idx] + shift, poses=False)[0].transpose(
+                1, 2).contiguous()
             item["shift"] = shift
         return item
+
+    def _take(self, starts: Tensor, poses: bool = True) -> tuple[Tensor, Tensor | None]:
+        """``([B, T, C] features, [B, T, P] poses or None)`` of the windows at ``starts``."""
+        frames = starts[:, None] + self._offsets
+        return self.features[frames], self.poses[frames] if poses else None
 
     def __getitem__(self, index: int) -> dict[str, Tensor]:
         if not 0 <= index < len(self):
             raise IndexError(f"window index {index} out of range [0, {len(self)})")
         return {k: v[0] for k, v in self.gather([index]).items()}
+
+
+class CachedFrameWindows(FrameWindows):
+    """:class:`FrameWindows` whose frames stay in the cache and are read per batch.
+
+    Every clip is one cache entry of ``[1, F, J, C_in + C_pose]`` raw values
+    (velocities, then root-local positions). :meth:`gather` reads the ``T``
+    frames of each asked window from its entry with a positioned read (no
+    memory map) and normalises them with the dataset's statistics, so the
+    values are those of :class:`FrameWindows` over the normalised frames, and
+    the process holds only the windows of its current batches. Pickles
+    cheaply into data-loader workers (paths and statistics).
+
+    Args:
+        entries: Cache entries of the clips, in dataset order.
+        representation: The fitted input representation (its statistics are copied).
+        poses: The fitted pose representation (its statistics are copied).
+        window: ``T`` (odd).
+        stride: Frames between pivots.
+        pair_shift: Frames between a window and its partner (0: no partner).
+    """
+
+    def __init__(self, entries: Sequence[CacheEntry], representation: MotionRepresentation,
+                 poses: MotionRepresentation, window: int, stride: int,
+                 pair_shift: int = 0) -> None:
+        self.entries = list(entries)
+        self._n_in = len(representation.channels)
+        self._stats = [(r.mean.clone(), r.std.clone())  # type: ignore[union-attr]
+                       for r in (representation, poses)]
+        lengths = np.cumsum([0] + [e.layout[1][1] if e.num_windows else 0
+                                   for e in self.entries])
+        self._firsts = torch.as_tensor(lengths[:-1], dtype=torch.long)
+        self._index(list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True)),
+                    window, stride, pair_shift)
+
+    def _read(self, clip: int, first: int, count: int) -> np.ndarray:
+        """Raw frames ``first:first + count`` of clip ``clip``, ``[count, J, C_in + C_pose]``."""
+        entry = self.entries[clip]
+        offset, shape = entry.layout
+        out = np.empty((count, *shape[2:]), np.float32)
+        with entry.array.open("rb", buffering=0) as fh:
+            fh.seek(offset + first * 4 * math.prod(shape[2:]))
+            read_exactly(fh, out, entry.array)
+        return out
+
+    def _normalize(self, raw: Tensor, poses: bool = True) -> tuple[Tensor, Tensor | None]:
+        (mean, std), (pmean, pstd) = self._stats
+        feats = ((raw[..., : self._n_in] - mean) / std).flatten(-2)
+        if not poses:
+            return feats, None
+        return feats, ((raw[..., self._n_in :] - pmean) / pstd).flatten(-2)
+
+    def _take(self, starts: Tensor, poses: bool = True) -> tuple[Tensor, Tensor | None]:
+        clips = torch.searchsorted(self._firsts, starts, right=True) - 1
+        raw = torch.from_numpy(np.stack([
+            self._read(int(c), int(s - self._firsts[c]), self.window)
+            for c, s in zip(clips.tolist(), starts.tolist(), strict=True)
+        ])) if len(starts) else torch.zeros(0, self.window, 0, 0)
+        return self._normalize(raw, poses)
+
+    def frames(self) -> Iterator[tuple[Tensor, Tensor]]:
+        """Every clip's normalised ``([F, C] features, [F, P] poses)``, one clip at a time."""
+        for clip, entry in enumerate(self.entries):
+            if entry.num_windows:
+                feats, poses = self._normalize(
+                    torch.from_numpy(self._read(clip, 0, entry.layout[1][1])))
+                yield feats, poses  # type: ignore[misc]
+
+    @property
+    def features(self) -> Tensor:  # type: ignore[override]
+        """``[F, C]`` normalised features of all clips (loads them all: small data only)."""
+        return torch.cat([f for f, _ in self.frames()])
+
+    @property
+    def poses(self) -> Tensor:  # type: ignore[override]
+        """``[F, P]`` normalised poses of all clips (loads them all: small data only)."""
+        return torch.cat([p for _, p in self.frames()])
+
+
+def _frame_chunks(entries: Sequence[CacheEntry], channels: slice,
+                  chunk_values: int = STATS_CHUNK_VALUES) -> Iterator[Tensor]:
+    """The ``channels`` of every frame of ``entries`` in ``[frames, J, C]`` chunks.
+
+    Chunks hold a fixed number of frames (``chunk_values`` values with all
+    channels; the last chunk of a clip may be shorter), read from the files, so
+    fitting statistics over them (:meth:`MotionRepresentation.fit_normalization`)
+    needs memory independent of the corpus.
+    """
+    for entry in entries:
+        if not entry.num_windows:
+            continue
+        offset, shape = entry.layout
+        rows = max(1, chunk_values // max(1, math.prod(shape[2:])))
+        with entry.array.open("rb", buffering=0) as fh:
+            fh.seek(offset)
+            for first in range(0, shape[1], rows):
+                buf = np.empty((min(rows, shape[1] - first), *shape[2:]), np.float32)
+                read_exactly(fh, buf, entry.array)
+                yield torch.from_numpy(buf[..., channels])
 
 
 def _passthrough(batch: dict[str, Tensor]) -> dict[str, Tensor]:
@@ -316,11 +433,8 @@ class VQPAEDataModule(MotionDataModule):
             "layout": _LAYOUT,
         }
 
-    def _entry(self, source: ClipSource, clip: ClipRef) -> CacheEntry:
-        key = cache_key(clip.key, self.preprocessing())
-        entry = self.cache.get(key)
-        if entry is not None:
-            return entry
+    def _encode(self, source: ClipSource, clip: ClipRef) -> tuple[np.ndarray, dict[str, Any]]:
+        """The clip's frames as one ``[1, F, J, C_in + C_pose]`` cache entry and its metadata."""
         motion = source.load(clip)
         if motion.fps != self.fps:
             motion = motion.resample(self.fps)
@@ -329,20 +443,20 @@ class VQPAEDataModule(MotionDataModule):
         array = feats.float().numpy()[None] if long_enough else np.zeros(
             (0, *feats.shape), np.float32)
         meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(),
-                "starts": [0] if long_enough else [], "fps": self.fps}
-        return self.cache.put(key, array, meta)
+                "starts": [0] if long_enough else [], "fps": self.fps, "units": motion.units}
+        return array, meta
 
     def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
         entries = {clip.id: entry for clip, entry in members}
         split = self.split_clips([c for c, _ in members])
         n_in = len(self.representation.channels)
-        arrays = {cid: torch.from_numpy(np.array(e.open()[0])) for cid, e in entries.items()}
-        train = [arrays[c.id] for c in split["train"]]
+        train = [entries[c.id] for c in split["train"]]
         rep = copy.deepcopy(self.representation)
-        rep.fit_normalization([a[..., :n_in] for a in train], per_element=True)
+        rep.fit_normalization(_frame_chunks(train, slice(None, n_in)), per_element=True)
         poses = copy.deepcopy(self._poses)
-        poses.fit_normalization([a[..., n_in:] for a in train], per_element=True)
-        for r in (rep, poses):
+        poses.fit_normalization(_frame_chunks(train, slice(n_in, None)), per_element=True)
+        for r, label in ((rep, "input"), (poses, "pose")):
+            check_statistics(name, r, label)
             if r.std is not None:
                 r.std = torch.maximum(r.std, self.std_floor * r.std.mean())
         self.representations[name] = rep
@@ -351,13 +465,8 @@ class VQPAEDataModule(MotionDataModule):
         for part, clips in split.items():
             if not clips:
                 continue
-            chunks = [arrays[c.id] for c in clips]
-            lengths = np.cumsum([0] + [len(a) for a in chunks])
-            feats = torch.cat([rep.normalize(a[..., :n_in]).flatten(1) for a in chunks])
-            pos = torch.cat([poses.normalize(a[..., n_in:]).flatten(1) for a in chunks])
-            bounds = list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True))
-            ds = FrameWindows(feats, pos, bounds, self.window, self.stride,
-                              self.pair_shift if part == "train" else 0)
+            ds = CachedFrameWindows([entries[c.id] for c in clips], rep, poses, self.window,
+                                    self.stride, self.pair_shift if part == "train" else 0)
             if len(ds):
                 self.datasets[part][name] = ds  # type: ignore[assignment]
                 self.clip_ids[part][name] = [c.id for c in clips]

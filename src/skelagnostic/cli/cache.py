@@ -1,0 +1,70 @@
+"""``skelagnostic cache info|clear``: what the window cache holds, and emptying it."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from skelagnostic.data.cache import CACHE_ENV, WindowCache, default_cache_dir
+
+
+def _size(num: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if num < 1024 or unit == "GiB":
+            return f"{num:.0f} {unit}" if unit == "B" else f"{num:.1f} {unit}"
+        num /= 1024
+    return f"{num:.1f} GiB"  # pragma: no cover
+
+
+def info(cache: WindowCache, verbose: bool) -> int:
+    """Print the directory, entry count and size; with ``verbose`` one line per entry."""
+    rows = list(cache.entries())
+    print(f"cache: {cache.root}")
+    print(f"entries: {len(rows)}, size: {_size(cache.size())}")
+    if verbose:
+        for key, array, meta in rows:
+            size = array.stat().st_size + (
+                array.with_suffix(".json").stat().st_size if array.with_suffix(".json").exists()
+                else 0)
+            what = "(unreadable metadata)" if meta is None else (
+                f"{meta.get('clip', '?')} ({len(meta.get('starts', []))} windows)")
+            print(f"  {key[:12]}  {_size(size):>10}  {what}")
+    return 0
+
+
+def clear(cache: WindowCache) -> int:
+    """Delete every entry and print what was freed."""
+    count = sum(1 for _ in cache.entries())
+    freed = cache.clear()
+    print(f"cache: {cache.root}: removed {count} entries ({_size(freed)})")
+    return 0
+
+
+def main(argv: Sequence[str]) -> int:
+    """Run ``skelagnostic cache info`` or ``skelagnostic cache clear``.
+
+    Args:
+        argv: Arguments after the verb.
+
+    Returns:
+        The exit code: 0, or 2 for a usage error.
+    """
+    parser = argparse.ArgumentParser(
+        prog="skelagnostic cache",
+        description="Show or empty the window cache (data.cache_dir; default "
+                    f"${CACHE_ENV} or ~/.cache/skelagnostic).",
+    )
+    parser.add_argument("action", choices=("info", "clear"),
+                        help="info: directory, entries and size; clear: delete every entry")
+    parser.add_argument("--cache-dir", type=Path, default=None,
+                        help="the cache directory (default: the one training uses)")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="info: one line per entry (key, size, clip, windows)")
+    args = parser.parse_args(list(argv))
+    cache = WindowCache(args.cache_dir if args.cache_dir is not None else default_cache_dir())
+    if cache.root.exists() and not cache.root.is_dir():
+        print(f"skelagnostic cache: error: {cache.root} is not a directory", file=sys.stderr)
+        return 1
+    return info(cache, args.verbose) if args.action == "info" else clear(cache)
