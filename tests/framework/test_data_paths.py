@@ -130,3 +130,15 @@ def test_file_verbs_expand_paths(monkeypatch: pytest.MonkeyPatch, tmp_path: Path
                                       "ckpt=$SA_CLIPS/x.ckpt", "labels=~a,b"])
     assert words == [f"{tmp_path}/a.bvh", "/clips/b.bvh"]
     assert options == {"out": f"{tmp_path}/o.bvh", "ckpt": "/clips/x.ckpt", "labels": "~a,b"}
+
+
+def test_other_units_never_reuse_cached_windows(home: Path, tmp_path: Path) -> None:
+    from skelagnostic.data import MotionDataModule
+
+    heights = []
+    for units in ("cm", "mm"):
+        sources = bvh_sources([{"path": home / "mocap" / "human", "units": units}])
+        dm = MotionDataModule(sources, window=8, stride=8, cache_dir=tmp_path / "cache")
+        dm.setup("fit")
+        heights.append(next(iter(dm.skeletons.values())).height())
+    assert heights[1] == pytest.approx(heights[0] / 10, rel=1e-5)

@@ -419,7 +419,7 @@ class MotionDataModule(L.LightningDataModule):
         A clip whose id is a file path keeps one entry per preprocessing: the
         entry of an earlier version of the file is deleted (:meth:`WindowCache.track`).
         """
-        key = cache_key(clip.key, self.preprocessing())
+        key = cache_key(clip.key, {**self.preprocessing(), "loading": source.loading()})
         entry = self.cache.get(key)
         if entry is None:
             entry = self.cache.put(key, *self._encode(source, clip))

@@ -69,6 +69,15 @@ class ClipSource(ABC):
     def load(self, clip: ClipRef) -> Motion:
         """Read one clip."""
 
+    def loading(self) -> dict[str, Any]:
+        """The options that change what :meth:`load` returns for the same file.
+
+        They are part of the window cache's key, so changing them (the units
+        of ``data=bvh``, a re-rooting) never reuses windows built with other
+        values. The default: none.
+        """
+        return {}
+
 
 def _to_metres(motion: Motion, units: str | None) -> Motion:
     units = units or motion.units
@@ -175,6 +184,10 @@ class BVHSource(ClipSource):
             ClipRef(str(path), _file_key(path), "test" if test and test.search(str(path)) else None)
             for path in self._files
         ]
+
+    def loading(self) -> dict[str, Any]:
+        """``units`` and ``root_joint``: they change the loaded motion."""
+        return {"units": self.units, "root_joint": self.root_joint}
 
     def load(self, clip: ClipRef) -> Motion:
         """Read the BVH file of ``clip``."""

@@ -383,8 +383,7 @@ class InterpolationDataModule(MotionDataModule):
         """The cached frames of ``clip`` (resampled, mirrored if asked), built when missing."""
         # what the source does to the clip's content when loading it (class, units, re-rooting)
         loading = {"class": f"{type(source).__module__}.{type(source).__qualname__}",
-                   "units": getattr(source, "units", None),
-                   "root_joint": getattr(source, "root_joint", None)}
+                   **source.loading()}
         pre = {"layout": _LAYOUT, "fps": self.fps, "mirror": mirror, "source": loading}
         key = cache_key(clip.key, pre)
         entry = self.cache.get(key)
