@@ -91,20 +91,22 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
         The aligner in eval mode.
 
     Raises:
-        SkelagnosticError: The checkpoint is missing, the name cannot be found,
-            or the name is not registered.
+        SkelagnosticError: The name cannot be found or is not registered.
+        CheckpointError: The checkpoint is missing, not a readable checkpoint,
+            refused by the safe loader (``weights_only=True``), written by another
+            model or of a different architecture.
     """
-    from skelagnostic.plugins import load_aligner
+    from skelagnostic.aligners.checkpoints import load_checkpoint, read_checkpoint
+    from skelagnostic.plugins import get_plugin_manager
 
     path = Path(ckpt)
     if not path.is_file():
-        raise SkelagnosticError(f"ckpt={str(path)!r}: no such checkpoint file")
+        read_checkpoint(path, option="ckpt")  # raises the "no checkpoint file" error
     if model is None:
         model = _model_name_near(path)
-    try:
-        return load_aligner(model, path)
-    except FileNotFoundError as error:  # pragma: no cover - checked above, kept for races
-        raise SkelagnosticError(str(error)) from None
+    pm = get_plugin_manager()
+    return load_checkpoint(pm.aligner(model).module, path, option="ckpt",
+                           plugin_manager=pm).eval()
 
 
 def _model_name_near(ckpt: Path) -> str:
