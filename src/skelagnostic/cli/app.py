@@ -34,6 +34,7 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from skelagnostic.aligners.checkpoints import architecture_mismatch, read_checkpoint
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import PluginManager, get_plugin_manager
 
@@ -184,10 +185,14 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         The trainer's final ``callback_metrics`` as floats.
 
     Raises:
-        ConfigError: Unknown task, a missing ``ckpt_path`` file, a model or
+        ConfigError: Unknown task, a model or
             trainer option the aligner or ``lightning.Trainer`` does not take (or
             of the wrong type), or another config that cannot work.
         PluginError: Unknown aligner, dataset or representation.
+        CheckpointError: ``ckpt_path`` is missing, not a readable checkpoint,
+            refused by the safe loader (checkpoints are loaded with
+            ``weights_only=True``), written by another model or of a different
+            architecture.
     """
     pm = plugin_manager or get_plugin_manager()
     task = cfg.task
@@ -195,15 +200,18 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
     run_dir = Path(cfg.run_dir)
     ckpt = cfg.ckpt_path
-    if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt) and not Path(ckpt).is_file():
-        raise ConfigError(f"ckpt_path: no checkpoint file {str(ckpt)!r}")
+    spec = pm.aligner(cfg.model.name)
+    saved: dict[str, Any] = {}
+    if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
+        checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path", plugin_manager=pm)
+        saved = dict(checkpoint.get("hyper_parameters") or {})
+        del checkpoint
     threads = cfg.get("threads")
     if threads is not None:
         if not isinstance(threads, int) or threads < 1:
             raise ConfigError(f"threads must be a positive integer or null, got {threads!r}")
         torch.set_num_threads(threads)
     L.seed_everything(cfg.seed, workers=True)
-    spec = pm.aligner(cfg.model.name)
     datamodule = build_datamodule(cfg, pm)
     model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
                     if k != "name"}
@@ -224,16 +232,18 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         default_root_dir=str(run_dir),
     )
     _save_config(cfg, run_dir)
-    if task == "fit":
-        trainer.fit(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
-    elif task == "validate":
-        trainer.validate(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
-    elif task == "test":
-        trainer.test(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
-    else:
-        _save_predictions(
-            trainer.predict(model, datamodule=datamodule, ckpt_path=cfg.ckpt_path), run_dir
-        )
+    # weights_only=True: a checkpoint is never unpickled into code (what skelagnostic's
+    # aligners, callbacks and data loaders save is tensors and plain data).
+    with architecture_mismatch(ckpt or "", saved, dict(model.hparams), "ckpt_path"):
+        if task == "fit":
+            trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
+        elif task == "validate":
+            trainer.validate(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
+        elif task == "test":
+            trainer.test(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
+        else:
+            _save_predictions(trainer.predict(model, datamodule=datamodule, ckpt_path=ckpt,
+                                              weights_only=True), run_dir)
     return {k: float(v) for k, v in trainer.callback_metrics.items()}
 
 
