@@ -202,9 +202,17 @@ def _bvh_paths(items: Sequence[str]) -> list[Path]:
     return paths
 
 
+#: What a verb does with a loaded aligner: ``(aligner) -> (input shown, result)``.
+Apply = Callable[["Aligner"], tuple["Motion", "Motion"]]
+
+
 def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
-         apply: Callable[[Aligner, list[Path], dict[str, str]], tuple[Motion, Motion]]) -> int:
-    """Shared driver: parse, check options, load the aligner, apply, write, render."""
+         prepare: Callable[[list[Path], dict[str, str]], Apply]) -> int:
+    """Shared driver: parse, check options, read the inputs, load the aligner, apply, write.
+
+    ``prepare`` reads and checks the inputs before the (slower) checkpoint is
+    loaded, so bad input files fail fast; it returns what to do with the aligner.
+    """
     if not argv or any(word in ("-h", "--help", "help") for word in argv):
         print(_usage(verb))
         return 0 if argv else 2
@@ -234,8 +242,9 @@ def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
         for path in paths[: 1 if verb == "transfer" else len(paths)]:
             if not path.is_file():
                 raise SkelagnosticError(f"{path}: no such file")
+        apply = prepare(paths, options)
         aligner = load_from_checkpoint(options["ckpt"], options.get("model"))
-        source, result = apply(aligner, paths, options)
+        source, result = apply(aligner)
         Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
         write_bvh(result, options["out"])
         print(options["out"])
@@ -253,34 +262,39 @@ def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
 def retarget(argv: list[str]) -> int:
     """Run ``skelagnostic retarget`` (``Aligner.retarget``)."""
 
-    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
-              ) -> tuple[Motion, Motion]:
+    def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         source, target = _read(paths[0], options), _read(paths[1], options)
-        aligner.require("retarget")
-        return source, aligner.retarget(source, target.skeleton)
 
-    return _run("retarget", argv, (2, 2), apply)
+        def apply(aligner: Aligner) -> tuple[Motion, Motion]:
+            aligner.require("retarget")
+            return source, aligner.retarget(source, target.skeleton)
+
+        return apply
+
+    return _run("retarget", argv, (2, 2), prepare)
 
 
 def interpolate(argv: list[str]) -> int:
     """Run ``skelagnostic interpolate`` (``Aligner.interpolate``)."""
 
-    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
-              ) -> tuple[Motion, Motion]:
+    def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         motion = _read(paths[0], options)
         keys = keyframes_from_options(motion.num_frames, options.get("every"),
                                       options.get("keys"))
-        aligner.require("interpolate")
-        return motion, aligner.interpolate(motion, keys)
 
-    return _run("interpolate", argv, (1, 1), apply)
+        def apply(aligner: Aligner) -> tuple[Motion, Motion]:
+            aligner.require("interpolate")
+            return motion, aligner.interpolate(motion, keys)
+
+        return apply
+
+    return _run("interpolate", argv, (1, 1), prepare)
 
 
 def transfer(argv: list[str]) -> int:
     """Run ``skelagnostic transfer`` (``Aligner.transfer``)."""
 
-    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
-              ) -> tuple[Motion, Motion]:
+    def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         source = _read(paths[0], options)
         targets = [_read(p, options) for p in _bvh_paths([str(p) for p in paths[1:]])]
         skeletons = {tuple(t.skeleton.joint_names) for t in targets}
@@ -288,7 +302,11 @@ def transfer(argv: list[str]) -> int:
             raise SkelagnosticError(
                 "the target clips are on different skeletons; give clips of one character"
             )
-        aligner.require("transfer")
-        return source, aligner.transfer(source, targets)
 
-    return _run("transfer", argv, (2, None), apply)
+        def apply(aligner: Aligner) -> tuple[Motion, Motion]:
+            aligner.require("transfer")
+            return source, aligner.transfer(source, targets)
+
+        return apply
+
+    return _run("transfer", argv, (2, None), prepare)
