@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from skelagnostic.plugins import PluginManager
 
 __all__ = ["CheckpointError", "CheckpointNotFoundError", "architecture_mismatch",
-           "load_checkpoint", "read_checkpoint"]
+           "check_architecture", "load_checkpoint", "read_checkpoint"]
 
 ModuleT = TypeVar("ModuleT", bound="L.LightningModule")
 
@@ -172,26 +172,64 @@ def architecture_mismatch(path: str | Path, saved: Mapping[str, Any], used: Mapp
         text = str(error)
         if _STATE_DICT_ERROR not in text:
             raise
-        differ = [f"{prefix}{key}={saved[key]!r} in the checkpoint, {used[key]!r} here"
-                  for key in saved
-                  if key in used and _plain(saved[key]) and _plain(used[key])
-                  and saved[key] != used[key]]
-        if differ:
-            what = "; ".join(differ)
-        else:
-            unexpected = re.search(r"Unexpected key\(s\) in state_dict: (.*)", text)
-            missing = re.search(r"Missing key\(s\) in state_dict: (.*)", text)
-            shapes = len(re.findall(r"size mismatch for ", text))
-            parts = []
-            if missing:
-                parts.append(f"{missing.group(1).count(',') + 1} missing")
-            if unexpected:
-                parts.append(f"{unexpected.group(1).count(',') + 1} unexpected")
-            if shapes:
-                parts.append(f"{shapes} of another shape")
-            what = "its weights do not fit (" + ", ".join(parts or ["different keys"]) + ")"
-        raise CheckpointError(path, f"{str(Path(path))!r} is of a different architecture: "
-                                    f"{what}", option) from None
+        counts = {"missing": 0, "unexpected": 0}
+        for kind in counts:
+            found = re.search(rf"{kind.capitalize()} key\(s\) in state_dict: (.*)", text)
+            if found:
+                counts[kind] = found.group(1).count(",") + 1
+        raise _architecture_error(path, saved, used, option, prefix, missing=counts["missing"],
+                                  unexpected=counts["unexpected"],
+                                  shapes=len(re.findall(r"size mismatch for ", text))) from None
+
+
+def check_architecture(path: str | Path, checkpoint: Mapping[str, Any], model: torch.nn.Module,
+                       option: str = "checkpoint", prefix: str = "model.") -> None:
+    """Compare a checkpoint's weights with a built model before Lightning loads them.
+
+    Weights of another shape, and weights of the model the checkpoint lacks,
+    are a different architecture. Weights only the checkpoint has are not
+    judged: aligners may build layers later (``configure_model``, ``setup``).
+    Lightning's own check still runs when it loads the weights
+    (:func:`architecture_mismatch`); this one fails before the run starts.
+
+    Args:
+        path: The checkpoint file.
+        checkpoint: What :func:`read_checkpoint` returned.
+        model: The module about to load it (its hyperparameters, if any, are
+            compared for the message).
+        option: How the user named the file.
+        prefix: Config path of the hyperparameters, for the message.
+
+    Raises:
+        CheckpointError: The weights do not fit.
+    """
+    saved, own = checkpoint["state_dict"], model.state_dict()
+    shapes = sum(1 for key, value in own.items() if key in saved
+                 and tuple(getattr(saved[key], "shape", ())) != tuple(value.shape))
+    strict = getattr(model, "strict_loading", True)
+    missing = sum(1 for key in own if key not in saved) if strict else 0
+    if shapes or missing:
+        raise _architecture_error(path, dict(checkpoint.get("hyper_parameters") or {}),
+                                  dict(getattr(model, "hparams", {})), option, prefix,
+                                  missing=missing, unexpected=0, shapes=shapes)
+
+
+def _architecture_error(path: str | Path, saved: Mapping[str, Any], used: Mapping[str, Any],
+                        option: str, prefix: str, missing: int, unexpected: int,
+                        shapes: int) -> CheckpointError:
+    """The "different architecture" error: the hyperparameters that differ, else the counts."""
+    differ = [f"{prefix}{key}={saved[key]!r} in the checkpoint, {used[key]!r} here"
+              for key in saved
+              if key in used and _plain(saved[key]) and _plain(used[key])
+              and saved[key] != used[key]]
+    if differ:
+        what = "; ".join(differ)
+    else:
+        parts = [f"{n} {kind}" for n, kind in ((missing, "missing"), (unexpected, "unexpected"),
+                                                (shapes, "of another shape")) if n]
+        what = "its weights do not fit (" + ", ".join(parts or ["different keys"]) + ")"
+    return CheckpointError(path, f"{str(Path(path))!r} is of a different architecture: {what}",
+                           option)
 
 
 def _plain(value: Any) -> bool:

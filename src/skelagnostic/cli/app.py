@@ -37,7 +37,11 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from skelagnostic.aligners.checkpoints import architecture_mismatch, read_checkpoint
+from skelagnostic.aligners.checkpoints import (
+    architecture_mismatch,
+    check_architecture,
+    read_checkpoint,
+)
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import PluginManager, get_plugin_manager
 
@@ -317,11 +321,9 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     run_dir = Path(cfg.run_dir)
     ckpt = cfg.ckpt_path
     spec = pm.aligner(cfg.model.name)
-    saved: dict[str, Any] = {}
+    checkpoint: dict[str, Any] | None = None
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
         checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path", plugin_manager=pm)
-        saved = dict(checkpoint.get("hyper_parameters") or {})
-        del checkpoint
     if cfg.seed is not None and (not isinstance(cfg.seed, int) or isinstance(cfg.seed, bool)):
         raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
     threads = cfg.get("threads")
@@ -335,6 +337,11 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
                     if k != "name"}
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
+    saved: dict[str, Any] = {}
+    if checkpoint is not None:  # fail before the Trainer starts when the weights cannot fit
+        check_architecture(ckpt, checkpoint, model, "ckpt_path")
+        saved = dict(checkpoint.get("hyper_parameters") or {})
+        del checkpoint
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
     if task == "fit":
         from skelagnostic.callbacks import LatestWithoutValidation
