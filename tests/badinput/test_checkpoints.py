@@ -160,8 +160,12 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("verb", [*TRAIN_VERBS, *INFER_VERBS])
-@pytest.mark.parametrize("kind", sorted(CASES))
+@pytest.mark.parametrize(
+    ("kind", "verb"),
+    # a missing ckpt_path= file was already one line (test_badinput.py::test_cli_wrong_config)
+    [(kind, verb) for kind in sorted(CASES) for verb in (*TRAIN_VERBS, *INFER_VERBS)
+     if not (kind == "missing" and verb in TRAIN_VERBS)],
+)
 def test_bad_checkpoint_is_one_line(with_humot: None, trained: Path, tmp_path: Path,
                                     capsys: pytest.CaptureFixture[str], kind: str,
                                     verb: str) -> None:
