@@ -197,7 +197,7 @@ def test_retarget_html_option(example_plugin: Path, trained: Path, clips, tmp_pa
         (["retarget", "{clip}", "{clip}", "ckpt={ckpt}"], "missing option out="),
         (["retarget", "{clip}", "{clip}", "ckpt={ckpt}", "out=x.gif"], "must be a .bvh path"),
         (["retarget", "{clip}", "{clip}", "ckpt=nope.ckpt", "out={out}"],
-         "no such checkpoint file"),
+         "ckpt: no checkpoint file 'nope.ckpt'"),
         (["retarget", "{clip}", "{clip}", "ckpt={ckpt}", "model=nope", "out={out}"], "nope"),
         (["retarget", "missing.bvh", "{clip}", "ckpt={ckpt}", "out={out}"],
          "missing.bvh: no such file"),

@@ -124,3 +124,12 @@ def test_short_epochs_log_the_training_loss(example_plugin: Path, tmp_path: Path
     with open(run / "csv" / "metrics.csv") as fh:
         logged = [row for row in csv.DictReader(fh) if row.get("train/loss")]
     assert len(logged) >= 2  # 8 steps: one per epoch at least, not none
+
+
+@pytest.mark.parametrize("content", ["model: [unclosed", "seed: 1\n"])
+def test_a_broken_run_config_is_one_line(fitted: Path, content: str,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    (fitted / "config.yaml").write_text(content)
+    assert cli.main(["validate", f"ckpt_path={fitted / 'checkpoints' / 'last.ckpt'}"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not the config.yaml of a skelagnostic run" in err[0], err

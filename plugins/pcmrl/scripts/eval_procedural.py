@@ -21,10 +21,11 @@ def main(ckpt: str, out: str) -> None:
     from skelagnostic_pcmrl.recon import PcmrlReconstruction
 
     from skelagnostic import procedural
+    from skelagnostic.aligners.checkpoints import load_checkpoint
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = PcmrlReconstruction.load_from_checkpoint(ckpt, map_location="cpu").eval()
+        model = load_checkpoint(PcmrlReconstruction, ckpt, option="ckpt").eval()
     clips = [procedural.generate("biped22", gait, seconds=4.0, seed=100 + i)[0]
              for i, gait in enumerate(["walk", "run"])]
     result = evaluate_clips(clips, procedural.skeleton("biped31"), model)

@@ -6,5 +6,7 @@ your own by subclassing :class:`Aligner` and registering it through the
 """
 
 from skelagnostic.aligners.base import KNOWN_CAPABILITIES, Aligner, CapabilityError, Latent
+from skelagnostic.aligners.checkpoints import CheckpointError, read_checkpoint
 
-__all__ = ["KNOWN_CAPABILITIES", "Aligner", "CapabilityError", "Latent"]
+__all__ = ["KNOWN_CAPABILITIES", "Aligner", "CapabilityError", "CheckpointError", "Latent",
+           "read_checkpoint"]

@@ -90,7 +90,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _complete(args)
     verb, rest = args[0], args[1:]
     if verb not in VERBS:
-        print(f"skelagnostic: unknown verb {verb!r}\n\n{_usage()}", file=sys.stderr)
+        print(f"skelagnostic: error: unknown verb {verb!r} (verbs: {', '.join(VERBS)}); "
+              "see 'skelagnostic --help'", file=sys.stderr)
         return 2
     module_name, func_name, _ = VERBS[verb]
     func = getattr(importlib.import_module(module_name), func_name)

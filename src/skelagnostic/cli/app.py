@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import contextlib
 import inspect
+import logging
 import os
+import re
 import shutil
 import sys
 import types
 import typing
+import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, Literal, Union
@@ -34,6 +37,11 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from skelagnostic.aligners.checkpoints import (
+    architecture_mismatch,
+    check_architecture,
+    read_checkpoint,
+)
 from skelagnostic.cli.runs import (
     AdaptiveLogInterval,
     RecordSplit,
@@ -63,6 +71,8 @@ SIGTERM_EXIT_CODE = 143
 _CKPT_ALIASES = ("last", "best", "hpc", "registry")
 #: Provider name of the configs this module puts into Hydra's ConfigStore.
 _PROVIDER = "skelagnostic"
+#: Trainer options Lightning takes without checking, then divides by.
+_POSITIVE_TRAINER_KEYS = ("accumulate_grad_batches", "check_val_every_n_epoch")
 #: Data-config keys that are not options of the data module or the dataset source.
 _DATA_KEYS = ("source", "representation", "representation_options")
 
@@ -88,6 +98,7 @@ def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModul
     dataset = pm.dataset(data["source"])
     dm_params = inspect.signature(spec.datamodule).parameters
     dm_kwargs = {k: data.pop(k) for k in list(data) if k in dm_params and k not in _DATA_KEYS}
+    _check_options(dm_kwargs, spec.datamodule, "data", spec.datamodule.__name__)
     options = {k: v for k, v in data.items() if k not in _DATA_KEYS}
     factory_params = inspect.signature(dataset.factory).parameters
     if not any(p.kind is p.VAR_KEYWORD for p in factory_params.values()):
@@ -108,18 +119,128 @@ def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModul
 
 
 def _instantiate_all(group: DictConfig | None, what: str) -> list[Any]:
+    """Instantiate each ``_target_`` node of a config group (``callbacks``, ``logger``).
+
+    Raises:
+        ConfigError: A node fails to build; the message names the node and,
+            when the error mentions one of its options, that option.
+    """
     out = []
     for name, node in (group or {}).items():
         if node is None:
             continue
         try:
-            out.append(instantiate(node))
+            obj = instantiate(node)
         except Exception as exc:
             cause = exc.__cause__ or exc
             if isinstance(cause, (ImportError, ModuleNotFoundError)):
                 raise ConfigError(f"{what}.{name}: {cause}") from exc
-            raise
+            options = {k: v for k, v in node.items() if k != "_target_"}
+            key = _mentioned(str(cause), options)
+            where = f"{what}.{name}" if key is None else f"{what}.{name}.{key}={options[key]!r}"
+            raise ConfigError(f"{where}: {_describe(cause)}") from exc
+        _check_output_dirs(obj, node, f"{what}.{name}")
+        out.append(obj)
     return out
+
+
+def _check_output_dirs(obj: Any, node: DictConfig, where: str) -> None:
+    """Raise :class:`ConfigError` for a ``save_dir`` (logger) or ``dirpath`` (callback) not usable.
+
+    Nothing is created: the nearest existing ancestor must be a writable directory.
+    """
+    for attr in ("save_dir", "dirpath"):
+        value = getattr(obj, attr, None)
+        if not isinstance(value, (str, Path)) or "://" in str(value):
+            continue
+        key = next((k for k, v in node.items() if v == value), attr)
+        path = Path(value).absolute()
+        existing = next(p for p in (path, *path.parents) if p.exists())
+        if not existing.is_dir():
+            problem = f"{str(existing)!r} is not a directory"
+        elif not os.access(existing, os.W_OK | os.X_OK):
+            problem = f"{str(existing)!r} is not writable"
+        else:
+            continue
+        raise ConfigError(f"{where}.{key}={str(value)!r}: cannot write there ({problem})")
+
+
+def _describe(exc: BaseException) -> str:
+    """``exc`` as one line; with its type when the message alone would not say much."""
+    text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    if isinstance(exc, (TypeError, ValueError, KeyError, ZeroDivisionError)) or not text:
+        return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return text
+
+
+def _mentioned(text: str, options: dict[str, Any]) -> str | None:
+    """The first option of ``options`` an error message names (`` `key` ``, ``key=``, ``'key'``)."""
+    for key in options:
+        if re.search(rf"(`{re.escape(key)}[`=(]|\b{re.escape(key)}=|'{re.escape(key)}')",
+                     text):
+            return key
+    return None
+
+
+def _build_trainer(trainer_kwargs: dict[str, Any], callbacks: list[Any], loggers: list[Any],
+                   run_dir: Path) -> L.Trainer:
+    """``lightning.Trainer`` of the config; its errors name the ``trainer.<key>`` at fault.
+
+    Lightning's messages rarely name the option (``trainer.accelerator=tpu`` fails
+    with a missing package), so on failure the Trainer is built again with the
+    first 1, 2, ... keys of ``cfg.trainer``: the key whose addition fails is the
+    culprit. Without one, the callbacks and loggers are.
+
+    Raises:
+        ConfigError: The Trainer cannot be built.
+    """
+    for key in _POSITIVE_TRAINER_KEYS:
+        value = trainer_kwargs.get(key)
+        if isinstance(value, int) and value < 1:
+            raise ConfigError(f"trainer.{key}={value!r} must be a positive integer")
+
+    def build(kwargs: dict[str, Any]) -> L.Trainer:
+        return L.Trainer(**kwargs, callbacks=list(callbacks), logger=loggers or False,
+                         default_root_dir=str(run_dir))
+
+    try:
+        return build(trainer_kwargs)
+    except Exception as exc:  # Lightning raises TypeError, ValueError, ImportError, ...
+        where = "callbacks/logger"
+        lightning_log = logging.getLogger("lightning")
+        level = lightning_log.level
+        lightning_log.setLevel(logging.ERROR)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                keys = list(trainer_kwargs)
+                for i, key in enumerate(keys):
+                    try:
+                        build({k: trainer_kwargs[k] for k in keys[: i + 1]})
+                    except Exception:
+                        where = f"trainer.{key}={trainer_kwargs[key]!r}"
+                        break
+        finally:
+            lightning_log.setLevel(level)
+        raise ConfigError(f"{where}: {_describe(exc)}") from exc
+
+
+def _name_config_key(exc: MisconfigurationException, cfg: DictConfig) -> ConfigError | None:
+    """A Lightning error during the run that quotes a callback or logger option, as a ConfigError.
+
+    For example ``ModelCheckpoint(monitor='nope')`` not finding its metric
+    becomes ``callbacks.model_checkpoint.monitor='nope': ...``.
+    """
+    text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    for group in ("callbacks", "logger"):
+        for name, node in (cfg.get(group) or {}).items():
+            if node is None:
+                continue
+            for key, value in node.items():
+                if key != "_target_" and isinstance(value, str) and value and (
+                        f"{key}={value!r}" in text or f"{key}='{value}'" in text):
+                    return ConfigError(f"{group}.{name}.{key}={value!r}: {text}")
+    return None
 
 
 def _accepts(hint: Any, value: Any) -> bool:
@@ -217,10 +338,14 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         The trainer's final ``callback_metrics`` as floats.
 
     Raises:
-        ConfigError: Unknown task, a missing ``ckpt_path`` file, a model or
+        ConfigError: Unknown task, a model or
             trainer option the aligner or ``lightning.Trainer`` does not take (or
             of the wrong type), or another config that cannot work.
         PluginError: Unknown aligner, dataset or representation.
+        CheckpointError: ``ckpt_path`` is missing, not a readable checkpoint,
+            refused by the safe loader (checkpoints are loaded with
+            ``weights_only=True``), written by another model or of a different
+            architecture.
     """
     pm = plugin_manager or get_plugin_manager()
     task = cfg.task
@@ -228,29 +353,36 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         raise ConfigError(f"task must be one of {', '.join(TASKS)}, got {task!r}")
     run_dir = Path(cfg.run_dir)
     ckpt = cfg.ckpt_path
+    spec = pm.aligner(cfg.model.name)
+    checkpoint: dict[str, Any] | None = None
     source_run: Path | None = None
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
-        source_run = find_run_dir(ckpt)
+        source_run = find_run_dir(ckpt)  # a run directory stands for its best/last checkpoint
         ckpt = str(checkpoint_of(ckpt))
-    if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt) and not Path(ckpt).is_file():
-        raise ConfigError(f"ckpt_path: no checkpoint file {str(ckpt)!r}")
+        checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path", plugin_manager=pm)
+    if cfg.seed is not None and (not isinstance(cfg.seed, int) or isinstance(cfg.seed, bool)):
+        raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
     threads = cfg.get("threads")
     if threads is not None:
         if not isinstance(threads, int) or threads < 1:
             raise ConfigError(f"threads must be a positive integer or null, got {threads!r}")
         torch.set_num_threads(threads)
     L.seed_everything(cfg.seed, workers=True)
-    spec = pm.aligner(cfg.model.name)
     datamodule = build_datamodule(cfg, pm)
     recorded = read_split(source_run) if source_run is not None else None
     if recorded is not None and hasattr(datamodule, "recorded_splits"):
         datamodule.recorded_splits = recorded  # never evaluate on the run's training clips
-    if task == "test":
-        _require_test_split(datamodule)
     model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
                     if k != "name"}
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
+    saved: dict[str, Any] = {}
+    if checkpoint is not None:  # fail before the Trainer starts when the weights cannot fit
+        check_architecture(ckpt, checkpoint, model, "ckpt_path")
+        saved = dict(checkpoint.get("hyper_parameters") or {})
+        del checkpoint
+    if task == "test":
+        _require_test_split(datamodule)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
     if task == "fit":
         from skelagnostic.callbacks import FinalStepCheckpoint, LatestWithoutValidation
@@ -260,23 +392,27 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
     _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")
-    trainer = L.Trainer(
-        **trainer_kwargs,
-        callbacks=callbacks,
-        logger=loggers or False,
-        default_root_dir=str(run_dir),
-    )
+    trainer = _build_trainer(trainer_kwargs, callbacks, loggers, run_dir)
     _save_config(cfg, run_dir)
-    if task == "fit":
-        trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt)
-    elif task == "validate":
-        trainer.validate(model, datamodule=datamodule, ckpt_path=ckpt)
-    elif task == "test":
-        trainer.test(model, datamodule=datamodule, ckpt_path=ckpt)
-    else:
-        _save_predictions(
-            trainer.predict(model, datamodule=datamodule, ckpt_path=ckpt), run_dir
-        )
+    # weights_only=True: a checkpoint is never unpickled into code (what skelagnostic's
+    # aligners, callbacks and data loaders save is tensors and plain data).
+    try:
+        with architecture_mismatch(ckpt or "", saved, dict(model.hparams), "ckpt_path"):
+            if task == "fit":
+                trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
+            elif task == "validate":
+                trainer.validate(model, datamodule=datamodule, ckpt_path=ckpt,
+                                 weights_only=True)
+            elif task == "test":
+                trainer.test(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
+            else:
+                _save_predictions(trainer.predict(model, datamodule=datamodule, ckpt_path=ckpt,
+                                                  weights_only=True), run_dir)
+    except MisconfigurationException as exc:
+        named = _name_config_key(exc, cfg)
+        if named is None:
+            raise
+        raise named from exc
     return {k: float(v) for k, v in trainer.callback_metrics.items()}
 
 

@@ -100,20 +100,22 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
         The aligner in eval mode.
 
     Raises:
-        SkelagnosticError: The checkpoint is missing, the name cannot be found,
-            or the name is not registered.
+        SkelagnosticError: The name cannot be found or is not registered.
+        CheckpointError: The checkpoint is missing, not a readable checkpoint,
+            refused by the safe loader (``weights_only=True``), written by another
+            model or of a different architecture.
     """
-    from skelagnostic.plugins import load_aligner
+    from skelagnostic.aligners.checkpoints import load_checkpoint, read_checkpoint
+    from skelagnostic.plugins import get_plugin_manager
 
     path = Path(ckpt)
     if not path.is_file():
-        raise SkelagnosticError(f"ckpt={str(path)!r}: no such checkpoint file")
+        read_checkpoint(path, option="ckpt")  # raises the "no checkpoint file" error
     if model is None:
         model = _model_name_near(path)
-    try:
-        return load_aligner(model, path)
-    except FileNotFoundError as error:  # pragma: no cover - checked above, kept for races
-        raise SkelagnosticError(str(error)) from None
+    pm = get_plugin_manager()
+    return load_checkpoint(pm.aligner(model).module, path, option="ckpt",
+                           plugin_manager=pm).eval()
 
 
 def _model_name_near(ckpt: Path) -> str:
@@ -209,12 +211,18 @@ def _bvh_paths(items: Sequence[str]) -> list[Path]:
     return paths
 
 
-def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
-         apply: Callable[[Aligner, list[Path], dict[str, str]], tuple[Motion, Motion]],
-         marks: dict[str, dict[int, list[int]]] | None = None) -> int:
-    """Shared driver: parse, check options, load the aligner, apply, write, render.
+#: What a verb does with a loaded aligner: ``(aligner) -> (input shown, result)``.
+Apply = Callable[["Aligner"], tuple["Motion", "Motion"]]
 
-    ``marks`` (filled by ``apply``) holds keyframes / transitions for the viewer.
+
+def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
+         prepare: Callable[[list[Path], dict[str, str]], Apply],
+         marks: dict[str, dict[int, list[int]]] | None = None) -> int:
+    """Shared driver: parse, check options, read the inputs, load the aligner, apply, write.
+
+    ``prepare`` reads and checks the inputs before the (slower) checkpoint is
+    loaded, so bad input files fail fast; it returns what to do with the aligner.
+    ``marks`` (filled by that) holds keyframes / transitions for the viewer.
     """
     if not argv or any(word in ("-h", "--help", "help") for word in argv):
         print(_usage(verb))
@@ -246,8 +254,9 @@ def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
         for path in paths[: 1 if verb == "transfer" else len(paths)]:
             if not path.is_file():
                 raise SkelagnosticError(f"{path}: no such file")
+        apply = prepare(paths, options)
         aligner = load_from_checkpoint(options["ckpt"], options.get("model"))
-        source, result = apply(aligner, paths, options)
+        source, result = apply(aligner)
         Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
         write_bvh(result, options["out"])
         print(options["out"])
@@ -266,36 +275,41 @@ def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
 def retarget(argv: list[str]) -> int:
     """Run ``skelagnostic retarget`` (``Aligner.retarget``)."""
 
-    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
-              ) -> tuple[Motion, Motion]:
+    def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         source, target = _read(paths[0], options), _read(paths[1], options)
-        aligner.require("retarget")
-        return source, aligner.retarget(source, target.skeleton)
 
-    return _run("retarget", argv, (2, 2), apply)
+        def apply(aligner: Aligner) -> tuple[Motion, Motion]:
+            aligner.require("retarget")
+            return source, aligner.retarget(source, target.skeleton)
+
+        return apply
+
+    return _run("retarget", argv, (2, 2), prepare)
 
 
 def interpolate(argv: list[str]) -> int:
     """Run ``skelagnostic interpolate`` (``Aligner.interpolate``)."""
 
-    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
-              ) -> tuple[Motion, Motion]:
+    def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         motion = _read(paths[0], options)
         keys = keyframes_from_options(motion.num_frames, options.get("every"),
                                       options.get("keys"))
-        aligner.require("interpolate")
-        marks["keyframes"] = {0: keys, 1: keys}
-        return motion, aligner.interpolate(motion, keys)
+
+        def apply(aligner: Aligner) -> tuple[Motion, Motion]:
+            aligner.require("interpolate")
+            marks["keyframes"] = {0: keys, 1: keys}
+            return motion, aligner.interpolate(motion, keys)
+
+        return apply
 
     marks: dict[str, dict[int, list[int]]] = {}
-    return _run("interpolate", argv, (1, 1), apply, marks)
+    return _run("interpolate", argv, (1, 1), prepare, marks)
 
 
 def transfer(argv: list[str]) -> int:
     """Run ``skelagnostic transfer`` (``Aligner.transfer``)."""
 
-    def apply(aligner: Aligner, paths: list[Path], options: dict[str, str]
-              ) -> tuple[Motion, Motion]:
+    def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         source = _read(paths[0], options)
         targets = [_read(p, options) for p in _bvh_paths([str(p) for p in paths[1:]])]
         skeletons = {tuple(t.skeleton.joint_names) for t in targets}
@@ -303,12 +317,16 @@ def transfer(argv: list[str]) -> int:
             raise SkelagnosticError(
                 "the target clips are on different skeletons; give clips of one character"
             )
-        aligner.require("transfer")
-        result = aligner.transfer(source, targets)
-        switches = getattr(aligner, "last_transitions", None)
-        if switches is not None:
-            marks["transitions"] = {1: [int(f) for f in switches]}
-        return source, result
+
+        def apply(aligner: Aligner) -> tuple[Motion, Motion]:
+            aligner.require("transfer")
+            result = aligner.transfer(source, targets)
+            switches = getattr(aligner, "last_transitions", None)
+            if switches is not None:
+                marks["transitions"] = {1: [int(f) for f in switches]}
+            return source, result
+
+        return apply
 
     marks: dict[str, dict[int, list[int]]] = {}
-    return _run("transfer", argv, (2, None), apply, marks)
+    return _run("transfer", argv, (2, None), prepare, marks)

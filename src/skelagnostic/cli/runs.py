@@ -88,7 +88,17 @@ def run_of_overrides(overrides: Sequence[str]) -> DictConfig | None:
     run_dir = find_run_dir(ckpt)
     if run_dir is None:
         return None
-    return OmegaConf.load(run_dir / CONFIG_FILE)  # type: ignore[return-value]
+    path = run_dir / CONFIG_FILE
+    try:
+        saved = OmegaConf.load(path)
+        name = saved.model.name if isinstance(saved, DictConfig) else None
+    except Exception as exc:  # YAML errors, missing keys: the file is not a run's config
+        raise SkelagnosticError(f"{path}: not the config.yaml of a skelagnostic run "
+                                f"({type(exc).__name__}); give model=... and data=...") from exc
+    if not isinstance(name, str):
+        raise SkelagnosticError(f"{path}: not the config.yaml of a skelagnostic run (no "
+                                "model.name); give model=... and data=...")
+    return saved
 
 
 def reuse_run_config(cfg: DictConfig, saved: DictConfig, overrides: Sequence[str]) -> None:

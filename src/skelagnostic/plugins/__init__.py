@@ -92,16 +92,22 @@ def load_aligner(name: str, checkpoint: str | Path | None = None, **overrides: A
     Returns:
         The aligner, in eval mode.
 
+    The checkpoint is read with ``torch.load(weights_only=True)``, which never
+    unpickles code (see :func:`skelagnostic.aligners.checkpoints.read_checkpoint`).
+
     Raises:
         PluginError: ``name`` is not registered.
-        FileNotFoundError: ``checkpoint`` does not exist.
+        CheckpointError: ``checkpoint`` does not exist (a ``CheckpointNotFoundError``,
+            also a ``FileNotFoundError``), is not a readable checkpoint, holds
+            Python objects a safe load refuses, was written by another aligner or
+            has a different architecture.
     """
     spec = get_plugin_manager().aligner(name)
     if checkpoint is None:
         model = spec.module(**{**spec.config, **overrides})
     else:
-        path = Path(checkpoint)
-        if not path.is_file():
-            raise FileNotFoundError(f"checkpoint {str(path)!r} of aligner {name!r} does not exist")
-        model = spec.module.load_from_checkpoint(path, map_location="cpu", **overrides)
+        from skelagnostic.aligners.checkpoints import load_checkpoint
+
+        model = load_checkpoint(spec.module, Path(checkpoint),
+                                plugin_manager=get_plugin_manager(), **overrides)
     return model.eval()

@@ -24,6 +24,7 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import MotionDataModule
+from skelagnostic.errors import MotionError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, inverse_kinematics
 
 
@@ -149,7 +150,7 @@ class ExampleAligner(Aligner):
     @torch.no_grad()
     def encode(self, motion: Motion) -> Latent:
         """Per-frame latent ``[T, latent]``; extras: root path, facing, height."""
-        height = motion.skeleton.height()
+        height = _height(motion.skeleton)
         pos = GlobalPositions(frame="root").encode(motion).float() / height
         template = motion.skeleton.template().float() / height
         z = self.encode_positions(pos[None].to(self.device), template[None].to(self.device))[0]
@@ -171,7 +172,7 @@ class ExampleAligner(Aligner):
         With the encoder's extras the motion follows the source root path (scaled
         by the height ratio) and heading; without them the root stays above the origin.
         """
-        height = skeleton.height()
+        height = _height(skeleton)
         template = skeleton.template().float() / height
         z = latent.z.to(self.device)
         local = self.decode_positions(z[None], template[None].to(self.device))[0].cpu() * height
@@ -188,3 +189,19 @@ class ExampleAligner(Aligner):
             world = local
         rotations, root = inverse_kinematics(world.double(), skeleton)
         return Motion(skeleton, rotations, root, latent.fps)
+
+
+def _height(skeleton: Skeleton) -> float:
+    """The skeleton height the positions are divided by.
+
+    Raises:
+        MotionError: The skeleton has height 0 (one joint, or every bone of zero length).
+    """
+    height = skeleton.height()
+    if height <= 0:
+        raise MotionError(
+            f"model=example: skeleton {skeleton.name or ''!r} has height 0 "
+            f"({skeleton.num_joints} joint(s), no bone of non-zero length); the example "
+            "aligner normalises positions by the skeleton height"
+        )
+    return height

@@ -47,6 +47,7 @@ from typing import Any
 import torch
 
 from skelagnostic import procedural
+from skelagnostic.aligners.checkpoints import load_checkpoint
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
@@ -439,7 +440,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for g in args.group:
         if len(g) < 2:
             parser.error(f"--group {g[0]}: give a name and at least one BVH file")
-    model = HumotAligner.load_from_checkpoint(args.checkpoint, map_location="cpu").eval()
+    model = load_checkpoint(HumotAligner, args.checkpoint, option="checkpoint").eval()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {"checkpoint": str(args.checkpoint)}

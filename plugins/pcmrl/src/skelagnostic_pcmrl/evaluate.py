@@ -262,9 +262,10 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     args = parser.parse_args(argv)
     aligner = None
     if args.ckpt:
+        from skelagnostic.aligners.checkpoints import load_checkpoint
         from skelagnostic_pcmrl.recon import PcmrlReconstruction
 
-        aligner = PcmrlReconstruction.load_from_checkpoint(args.ckpt, map_location="cpu").eval()
+        aligner = load_checkpoint(PcmrlReconstruction, args.ckpt, option="--ckpt").eval()
     if args.target:
         from skelagnostic_pcmrl.recon_data import load_target_skeleton
 

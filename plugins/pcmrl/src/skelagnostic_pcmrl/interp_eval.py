@@ -242,9 +242,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     methods: dict[str, Interpolator] = {"LERP": lerp_slerp}
     fps = args.fps
     if args.ckpt:
+        from skelagnostic.aligners.checkpoints import load_checkpoint
         from skelagnostic_pcmrl.interp import InterpolationAligner
 
-        model = InterpolationAligner.load_from_checkpoint(args.ckpt, map_location="cpu").eval()
+        model = load_checkpoint(InterpolationAligner, args.ckpt, option="--ckpt").eval()
         methods["PC-MRL"] = model.interpolate
         fps = fps or model.hparams.fps
     fps = float(fps or 30.0)
