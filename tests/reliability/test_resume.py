@@ -169,8 +169,7 @@ def _state(trainer: L.Trainer, model: ExampleAligner) -> dict:
 
 @pytest.mark.parametrize("options", [
     pytest.param({"limit_val_batches": 1}, id="validation"),
-    pytest.param({"limit_train_batches": 4, "limit_val_batches": 0}, id="limit_train_batches",
-                 marks=pytest.mark.slow),
+    pytest.param({"limit_train_batches": 4, "limit_val_batches": 0}, id="limit_train_batches"),
 ])
 def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path,
                                                            options: dict) -> None:
