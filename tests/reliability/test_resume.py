@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import copy
 import signal
 import subprocess
 import sys
 from pathlib import Path
 
+import lightning as L
 import pytest
 import torch
+from lightning.pytorch.callbacks import ModelCheckpoint
+from skelagnostic_example import ExampleAligner, ExampleDataModule
 from torch.utils.data import TensorDataset
 
 from skelagnostic.data.datamodule import ResumableDataLoader, _ResumableSampler
+from skelagnostic.data.sources import ProceduralSource
 
 #: Small procedural data: two datasets of different lengths (the shorter one cycles).
 ARGS = ["model=example", "model.hidden=16", "model.latent=4", "data.seconds=2.0",
@@ -65,6 +70,25 @@ def test_loader_resumes_mid_pass_with_the_same_batches() -> None:
     assert sorted(i for b in batches for i in b) == list(range(10))
 
 
+def test_loader_state_of_a_finished_pass_starts_the_next_epoch_whole() -> None:
+    ds = TensorDataset(torch.arange(10))
+
+    def loader() -> ResumableDataLoader:
+        return ResumableDataLoader(ds, 3, _ResumableSampler(ds, 1, 0, True, seed=5))
+
+    done = loader()
+    done.sampler.set_epoch(1)
+    assert len(list(done)) == 4
+    assert done.state_dict() == {"epoch": 1, "served": 4}
+    ref = loader()
+    ref.sampler.set_epoch(2)
+    resumed = loader()
+    resumed.load_state_dict(done.state_dict())
+    resumed.sampler.set_epoch(2)  # Lightning does this before the next epoch's pass
+    assert [b[0].tolist() for b in resumed] == [b[0].tolist() for b in ref]
+    assert resumed.state_dict() == {"epoch": 2, "served": 4}
+
+
 def test_ranks_get_disjoint_shards() -> None:
     ds = TensorDataset(torch.arange(10))
     shards = [list(_ResumableSampler(ds, 2, r, True, seed=0)) for r in (0, 1)]
@@ -72,16 +96,24 @@ def test_ranks_get_disjoint_shards() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize(("signum", "where"), [
+    pytest.param(signal.SIGKILL, "mid-epoch", id="SIGKILL-mid-epoch"),
+    pytest.param(signal.SIGTERM, "mid-epoch", id="SIGTERM-mid-epoch"),
+    pytest.param(signal.SIGKILL, "epoch-boundary", id="SIGKILL-epoch-boundary"),
+])
 def test_killed_fit_resumes_bitwise(cli_env: dict[str, str], tmp_path: Path,
-                                    signum: signal.Signals) -> None:
+                                    signum: signal.Signals, where: str) -> None:
     ref = fit(cli_env, tmp_path, tmp_path / "ref")
     assert ref.returncode == 0, ref.stderr[-3000:]
     reference = final_state(tmp_path / "ref")
     steps_per_epoch = reference["global_step"] // 2
     assert steps_per_epoch >= 4
-    # SIGKILL in the middle of epoch 0, SIGTERM in the middle of epoch 1
-    kill_step = 2 if signum == signal.SIGKILL else steps_per_epoch + 2
+    # SIGKILL in the middle of epoch 0, SIGTERM in the middle of epoch 1; at the epoch
+    # boundary, SIGKILL on the first step of epoch 1 (the newest checkpoint is epoch 0's last)
+    if where == "epoch-boundary":
+        kill_step = steps_per_epoch + 1
+    else:
+        kill_step = 2 if signum == signal.SIGKILL else steps_per_epoch + 2
     killed = fit(cli_env, tmp_path, tmp_path / "killed", "+callbacks.kill._target_=killer.KillAt",
                  f"+callbacks.kill.step={kill_step}", f"+callbacks.kill.signum={int(signum)}")
     assert killed.returncode == (143 if signum == signal.SIGTERM else -signal.SIGKILL)
@@ -95,8 +127,67 @@ def test_killed_fit_resumes_bitwise(cli_env: dict[str, str], tmp_path: Path,
     # (its handler only sets a flag), the checkpoint callback saves it, then the run stops.
     saved = kill_step - 1 if signum == signal.SIGKILL else kill_step
     assert interrupted["global_step"] == saved
-    assert interrupted["global_step"] % steps_per_epoch != 0
+    assert (interrupted["global_step"] % steps_per_epoch == 0) == (where == "epoch-boundary")
     resumed = fit(cli_env, tmp_path, tmp_path / "resumed", f"ckpt_path={last}")
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     assert "not resumable" not in resumed.stderr + resumed.stdout
     assert_same_training_state(final_state(tmp_path / "resumed"), reference)
+
+
+# ------------------------------------------------ resume from every checkpoint of a run
+def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner,
+                                                     ExampleDataModule]:
+    """A 3-epoch example-aligner fit that checkpoints at every point Lightning can.
+
+    After every training batch (``steps/``), after every validation run
+    (``val/``) and at every training-epoch end (``epochs/``): together the
+    checkpoints a run interrupted anywhere would resume from.
+    """
+    L.seed_everything(7, workers=True)
+    dm = ExampleDataModule(sources=[ProceduralSource(clips_per_gait=1, seconds=2.0)], window=16,
+                           stride=4, batch_size=4, cache_dir=root.parent / "cache")
+    model = ExampleAligner(hidden=16, latent=4)
+    checkpoints = [
+        ModelCheckpoint(dirpath=root / "steps", filename="{step}", save_top_k=-1,
+                        every_n_train_steps=1),
+        ModelCheckpoint(dirpath=root / "val", filename="{step}", save_top_k=-1,
+                        save_on_train_epoch_end=False),
+        ModelCheckpoint(dirpath=root / "epochs", filename="{step}", save_top_k=-1,
+                        save_on_train_epoch_end=True, mode="max"),  # mode: a distinct state key
+    ]
+    trainer = L.Trainer(accelerator="cpu", max_epochs=3, logger=False, callbacks=checkpoints,
+                        enable_progress_bar=False, enable_model_summary=False,
+                        default_root_dir=root, **options)
+    return trainer, model, dm
+
+
+def _state(trainer: L.Trainer, model: ExampleAligner) -> dict:
+    return {"global_step": trainer.global_step, "epoch": trainer.current_epoch,
+            "state_dict": {k: v.clone() for k, v in model.state_dict().items()},
+            "optimizer_states": [copy.deepcopy(trainer.optimizers[0].state_dict())]}
+
+
+@pytest.mark.parametrize("options", [
+    pytest.param({"limit_val_batches": 1}, id="validation"),
+    pytest.param({"limit_train_batches": 4, "limit_val_batches": 0}, id="limit_train_batches"),
+])
+def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path,
+                                                           options: dict) -> None:
+    trainer, model, dm = _trainer(tmp_path / "ref", **options)
+    trainer.fit(model, datamodule=dm)
+    reference = _state(trainer, model)
+    per_epoch = trainer.num_training_batches
+    assert reference["global_step"] == 3 * per_epoch and per_epoch >= 4
+    saved = sorted((tmp_path / "ref").glob("*/*.ckpt"))
+    steps = {int(p.stem.split("=")[1]) for p in saved if p.parent.name == "steps"}
+    assert steps == set(range(1, 3 * per_epoch + 1))  # every step: first, middle, last batch
+    assert {p.parent.name for p in saved} == (
+        {"steps", "epochs"} if options.get("limit_val_batches") == 0 else {"steps", "val",
+                                                                           "epochs"})
+    for ckpt in saved:
+        trainer, model, dm = _trainer(tmp_path / "resumed" / ckpt.parent.name / ckpt.stem,
+                                      **options)
+        trainer.fit(model, datamodule=dm, ckpt_path=ckpt)
+        resumed = _state(trainer, model)
+        assert resumed["global_step"] == reference["global_step"], ckpt
+        assert_same_training_state(resumed, reference)

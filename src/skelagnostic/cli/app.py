@@ -325,7 +325,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     everything, build the aligner ``cfg.model.name`` (its keyword
     arguments are the other ``cfg.model`` keys) and its data module
     (:func:`build_datamodule`), the callbacks and loggers (``_target_`` nodes),
-    a Lightning Trainer from ``cfg.trainer``; save the resolved config as
+    a Lightning Trainer from ``cfg.trainer`` (``fit`` adds the plugin
+    :class:`~skelagnostic.callbacks.AtomicCheckpointIO`); save the resolved config as
     ``<run_dir>/config.yaml``; then call ``trainer.<task>`` with ``cfg.ckpt_path``.
     ``predict`` also saves ``<run_dir>/predictions.pt``.
 
@@ -392,6 +393,12 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
     _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")
+    if task == "fit":  # checkpoint files are never half-written
+        from skelagnostic.callbacks import AtomicCheckpointIO
+
+        plugins = trainer_kwargs.get("plugins") or []
+        trainer_kwargs["plugins"] = [*(plugins if isinstance(plugins, list) else [plugins]),
+                                     AtomicCheckpointIO()]
     trainer = _build_trainer(trainer_kwargs, callbacks, loggers, run_dir)
     _save_config(cfg, run_dir)
     # weights_only=True: a checkpoint is never unpickled into code (what skelagnostic's

@@ -187,6 +187,12 @@ class ResumableDataLoader(DataLoader):
     very next batch of the interrupted pass: exact resume. It counts the
     batches handed to the training loop (not those prefetched by workers).
 
+    The saved position belongs to the pass of one epoch. It is applied only if
+    the next pass is of that same epoch: a checkpoint taken on the last batch
+    of epoch ``k`` (the pass is over; Lightning resumes with epoch ``k + 1``
+    and sets the sampler's epoch before iterating) starts the next pass at its
+    first batch instead of skipping it whole.
+
     Args:
         dataset: The windows.
         batch_size: Windows per batch.
@@ -199,23 +205,32 @@ class ResumableDataLoader(DataLoader):
         super().__init__(dataset, batch_size=batch_size, sampler=sampler,
                          num_workers=num_workers, persistent_workers=num_workers > 0)
         self._served = 0
-        self._resume_at = 0
+        #: ``(epoch, batches served)`` of the interrupted pass, set by :meth:`load_state_dict`.
+        self._resume_at: tuple[int, int] | None = None
 
     def __iter__(self) -> Iterator[Any]:
-        self._served, self._resume_at = self._resume_at, 0
+        resume, self._resume_at = self._resume_at, None
+        epoch = int(self.sampler.epoch)
+        served = resume[1] if resume is not None and resume[0] == epoch else 0
+        self.sampler.skip = served * int(self.batch_size)
+        self._served = served
         for batch in super().__iter__():
             self._served += 1
             yield batch
 
     def state_dict(self) -> dict[str, int]:
-        """The epoch of the sampler and the batches served in the current pass."""
+        """The epoch of the sampler and the batches served in its current pass."""
         return {"epoch": int(self.sampler.epoch), "served": self._served}
 
     def load_state_dict(self, state_dict: dict[str, int]) -> None:
-        """Continue the pass of :meth:`state_dict` with its next batch."""
+        """Continue the pass of :meth:`state_dict` with its next batch.
+
+        The sampler is set to the saved epoch; if the epoch is changed before
+        the next pass starts (the saved pass was complete), that pass starts
+        from its beginning.
+        """
         self.sampler.set_epoch(state_dict["epoch"])
-        self.sampler.skip = state_dict["served"] * int(self.batch_size)
-        self._resume_at = state_dict["served"]
+        self._resume_at = (int(state_dict["epoch"]), int(state_dict["served"]))
 
 
 class _Tagged:
