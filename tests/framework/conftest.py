@@ -76,19 +76,6 @@ def subprocess_env(tmp_path: Path) -> dict[str, str]:
     env["PYTHONPATH"] = os.pathsep.join([str(site), str(EXAMPLE_SRC), str(REPO / "src")])
     env[LOAD_PLUGINS_ENV] = "example"
     env["SKELAGNOSTIC_CACHE"] = str(tmp_path / "cache")
-    return env
-
-
-@pytest.fixture
-def example_script_env(tmp_path: Path) -> dict[str, str]:
-    """Environment of the ``skelagnostic`` console script with the example plugin "installed"."""
-    site = tmp_path / "script-site"
-    write_dist(site, "skelagnostic-example-aligner", "0.1.0",
-               {"example": "skelagnostic_example.plugin"})
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(site), str(EXAMPLE_SRC), str(REPO / "src")])
-    env[LOAD_PLUGINS_ENV] = "example"
-    env["SKELAGNOSTIC_CACHE"] = str(tmp_path / "cache")
     env["OMP_NUM_THREADS"] = "1"
     env.pop("SKELAGNOSTIC_DEBUG", None)
     return env

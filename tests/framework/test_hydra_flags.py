@@ -52,12 +52,12 @@ def test_split_keeps_flag_values_with_their_flags() -> None:
 
 
 @pytest.mark.parametrize("flag", list(FLAGS))
-def test_flag_through_the_console_script(flag: str, example_script_env: dict[str, str],
+def test_flag_through_the_console_script(flag: str, subprocess_env: dict[str, str],
                                          tmp_path: Path) -> None:
     args, expected = FLAGS[flag]
     verb = VERBS[list(FLAGS).index(flag) % len(VERBS)]
     # the flag after the overrides, as users type it (this once gave "unrecognized arguments")
-    proc = console([verb, "model=example", *args], example_script_env, tmp_path)
+    proc = console([verb, "model=example", *args], subprocess_env, tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert expected in proc.stdout, proc.stdout[-2000:]
     assert "unrecognized arguments" not in proc.stderr
@@ -100,11 +100,11 @@ def test_help_with_a_model_shows_its_resolved_defaults(example_plugin: Path,
     assert cfg["model"]["name"] == "example" and cfg["model"]["hidden"] > 0
 
 
-def test_multirun_sweeps_into_one_directory(example_script_env: dict[str, str],
+def test_multirun_sweeps_into_one_directory(subprocess_env: dict[str, str],
                                             tmp_path: Path) -> None:
     proc = console(["fit", "-m", "model=example", "experiment=smoke", "model.hidden=8,16",
                     "trainer.max_epochs=1", "threads=1", "data.seconds=2.0",
-                    "data.clips_per_gait=1"], example_script_env, tmp_path)
+                    "data.clips_per_gait=1"], subprocess_env, tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     sweeps = list((tmp_path / "runs" / "example" / "fit").glob("multirun_*"))
     assert len(sweeps) == 1
@@ -116,13 +116,13 @@ def test_multirun_sweeps_into_one_directory(example_script_env: dict[str, str],
     assert sorted(hidden) == [8, 16]
 
 
-def test_shell_completion_queries(example_script_env: dict[str, str], tmp_path: Path) -> None:
+def test_shell_completion_queries(subprocess_env: dict[str, str], tmp_path: Path) -> None:
     line = "skelagnostic f"
-    proc = console(["-sc", "query=bash"], example_script_env, tmp_path, COMP_LINE=line,
+    proc = console(["-sc", "query=bash"], subprocess_env, tmp_path, COMP_LINE=line,
                    COMP_POINT=str(len(line)))
     assert proc.returncode == 0 and proc.stdout.split() == ["fit"]
     line = "skelagnostic fit model=exa"
-    proc = console(["-sc", "query=bash"], example_script_env, tmp_path, COMP_LINE=line,
+    proc = console(["-sc", "query=bash"], subprocess_env, tmp_path, COMP_LINE=line,
                    COMP_POINT=str(len(line)))
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["model=example"]
