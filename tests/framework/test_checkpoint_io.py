@@ -125,7 +125,18 @@ def test_model_checkpoint_top_k_and_last(tmp_path: Path, private_tmpdir: Path, u
     assert not any(private_tmpdir.iterdir())
 
 
-def test_ddp_trainer_saves_through_it_on_rank_zero_only(tmp_path: Path) -> None:
+def test_ddp_trainer_saves_through_it_on_rank_zero_only(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    # set_global_rank(1) below also sets the process-wide rank of Lightning's
+    # rank_zero_only helpers: restore them after the test, or later tests in this
+    # worker would log, save configs and write metrics as a non-zero rank (nothing).
+    from lightning.fabric.utilities import rank_zero as fabric_rank_zero
+    from lightning.pytorch.utilities import rank_zero_only
+    from lightning_utilities.core import rank_zero as utilities_rank_zero
+
+    for helper in {id(f): f for f in (rank_zero_only, fabric_rank_zero.rank_zero_only,
+                                      utilities_rank_zero.rank_zero_only)}.values():
+        monkeypatch.setattr(helper, "rank", getattr(helper, "rank", 0), raising=False)
     trainer = L.Trainer(accelerator="cpu", strategy="ddp", devices=2, logger=False,
                         plugins=[AtomicCheckpointIO()], default_root_dir=tmp_path)
     strategy = trainer.strategy
