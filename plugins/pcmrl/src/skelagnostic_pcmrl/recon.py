@@ -63,7 +63,7 @@ class _ReconstructionGraph(torch.nn.Module):
 
     def forward(self, points: torch.Tensor, groups: torch.Tensor
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``[B, T, P, 3]`` clouds, ``[B, P]`` groups -> root, global, local rotations, positions."""
+        """Clouds ``[B, T, P, 3]``, groups ``[B, P]`` -> root, rotations (global, local), joints."""
         out = self.aligner.reconstruct(points, groups, self.up)
         parents = self.aligner._require_target().parents
         local = Q.normalize(global_to_local(out["rotations"], parents))
