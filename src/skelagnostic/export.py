@@ -209,6 +209,30 @@ def _dynamic_shapes(graph: ExportGraph) -> tuple[dict[int, Any] | None, ...]:
     return tuple(shapes)
 
 
+def _label_dynamic_outputs(path: Path, graph: ExportGraph) -> None:
+    """Write the declared axis labels into the ONNX file's output shapes.
+
+    The exporter infers output shapes itself and can leave a dynamic output axis
+    at its example size (e.g. after a GRU), which only makes onnxruntime warn;
+    the labels make the file's interface match the sidecar. The intermediate
+    shape annotations are then dropped too (runtimes infer them again).
+    """
+    import onnx
+
+    model = onnx.load(str(path))
+    changed = False
+    for value in model.graph.output:
+        axes = graph.dynamic_axes.get(value.name, {})
+        dims = value.type.tensor_type.shape.dim
+        for axis, label in axes.items():
+            if axis < len(dims) and dims[axis].dim_param != label:
+                dims[axis].dim_param = label
+                changed = True
+    if changed:  # the intermediate shapes carry the same example size: let runtimes infer them
+        del model.graph.value_info[:]
+        onnx.save(model, str(path))
+
+
 def _require_onnx() -> None:
     missing = []
     for package in ("onnx", "onnxscript"):
@@ -289,6 +313,7 @@ def export_graph(graph: ExportGraph, fmt: str, out_dir: str | Path, aligner: str
                           output_names=list(graph.output_names),
                           dynamic_shapes=_dynamic_shapes(graph), external_data=False,
                           verbose=False)
+        _label_dynamic_outputs(path, graph)
 
     def write_torchscript(path: Path) -> None:
         with torch.no_grad(), _jit_scripting(module):

@@ -77,6 +77,11 @@ def check_graph(out_dir: Path, name: str, fmt: str, inputs: Sequence[str],
                 outputs: Sequence[str], case: Case, sizes: Sequence[tuple[int, int]]) -> dict:
     """Exported graph ``name`` against PyTorch on ``case(batch, time)`` for each size."""
     meta = check_sidecar(out_dir / f"{name}.json", fmt, inputs, outputs)
+    if fmt == "onnx":  # the file's interface is the sidecar's, dynamic axes by their labels
+        session = ort.InferenceSession(str(out_dir / meta["file"]),
+                                       providers=["CPUExecutionProvider"])
+        assert [o.shape for o in session.get_outputs()] == [o["shape"] for o in meta["outputs"]]
+        assert [i.shape for i in session.get_inputs()] == [i["shape"] for i in meta["inputs"]]
     for batch, frames in sizes:
         args, want = case(batch, frames)
         assert_matches(run_file(out_dir / meta["file"], inputs, args), want, outputs)
@@ -148,7 +153,7 @@ def test_example_exported_by_the_cli_matches_pytorch(
         with torch.no_grad():
             return (z, t), (aligner.decode_positions(z, t),)
 
-    sizes = [(2, 24), (3, 41)]
+    sizes = [(2, 24), (3, 41), (1, 17)]
     meta = check_graph(out, "encoder", fmt, ["positions", "template"], ["z"], encoder, sizes)
     assert meta["inputs"][0]["shape"] == ["batch", "time", "joints", 3]
     assert meta["aligner"] == "example"
@@ -219,7 +224,7 @@ def test_humot_encoder_and_decoder_match_pytorch(lafan: sa.Motion, fmt: str,
         with torch.no_grad():
             return (z, tmpl), (aligner.net.decoder(z, tmpl),)
 
-    sizes = [(2, 30), (3, 17)]
+    sizes = [(2, 30), (3, 17), (1, 30)]
     meta = check_graph(tmp_path, "encoder", fmt, ["motion", "template"], ["z"], encoder, sizes)
     assert meta["metadata"]["chunk_frames"] == 30 and meta["metadata"]["units"] == "m"
     check_graph(tmp_path, "decoder", fmt, ["z", "template"], ["motion"], decoder, sizes)
@@ -259,7 +264,7 @@ def test_vqpae_encoder_and_pose_decoder_match_pytorch(lafan: sa.Motion, fmt: str
             return (want[4],), (char.pose(want[4]),)
 
     outputs = ["phase", "frequency", "code", "amplitude", "manifold"]
-    sizes = [(2, 31), (5, 31)]  # the window length is fixed by the architecture
+    sizes = [(2, 31), (5, 31), (1, 31)]  # the window length is fixed by the architecture
     meta = check_graph(tmp_path, "encoder_lafan_human", fmt, ["windows"], outputs, encoder,
                        sizes)
     assert "window" in meta["fixed_axes"]
@@ -301,7 +306,7 @@ def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str,
 
     meta = check_graph(tmp_path, "reconstruction", fmt, ["points", "groups"],
                        ["root", "global_rotations", "local_rotations", "positions"], case,
-                       [(2, 12), (3, 23)])
+                       [(2, 12), (3, 23), (1, 16)])
     assert meta["metadata"]["target_skeleton"]["parents"] == list(parents)
     assert "points" in meta["fixed_axes"]
 
@@ -335,6 +340,6 @@ def test_pcmrl_interpolation_matches_pytorch(lafan: sa.Motion, fmt: str,
 
     meta = check_graph(tmp_path, "interpolation", fmt,
                        ["global_rotations", "root", "keys", "offsets", "tails"],
-                       ["out_global_rotations", "out_root"], case, [(2, 16), (3, 27)])
+                       ["out_global_rotations", "out_root"], case, [(2, 16), (3, 27), (1, 16)])
     assert meta["metadata"]["training_window"] == 16
     assert np.allclose(meta["metadata"]["tails"], tails)
