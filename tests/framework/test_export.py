@@ -165,6 +165,8 @@ def test_export_errors_are_one_line(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     ckpt = example_run / "checkpoints" / "last.ckpt"
+    assert cli.main(["export", "--help"]) == 0
+    assert "format=onnx|torchscript" in capsys.readouterr().out
     assert cli.main(["export", f"ckpt_path={ckpt}", "format=tflite"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "format='tflite'" in err and "onnx, torchscript" in err
