@@ -122,15 +122,22 @@ def example_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
 def test_example_exported_by_the_cli_matches_pytorch(
     example_plugin: Path, example_run: Path, lafan: sa.Motion, fmt: str, tmp_path: Path,
-    capsys: pytest.CaptureFixture[str],
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     from skelagnostic.cli.infer import load_from_checkpoint
     from skelagnostic.representations import GlobalPositions
 
     ckpt = example_run / "checkpoints" / "last.ckpt"
     out = tmp_path / fmt
-    assert cli.main(["export", f"ckpt_path={ckpt}", f"format={fmt}", f"out={out}"]) == 0, (
-        capsys.readouterr().err)
+    monkeypatch.setenv("EXPORT_OUT", str(tmp_path))  # path options expand $VARS
+    before = torch.get_num_threads()
+    try:
+        code = cli.main(["export", f"ckpt_path={ckpt}", f"format={fmt}",
+                         f"out=$EXPORT_OUT/{fmt}", "threads=1"])
+        assert code == 0, capsys.readouterr().err
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
     printed = capsys.readouterr().out.split()
     suffix = ".onnx" if fmt == "onnx" else ".pt"
     assert sorted(Path(p).name for p in printed) == sorted(
@@ -172,6 +179,8 @@ def test_export_errors_are_one_line(
     assert err.count("\n") == 0 and "format='tflite'" in err and "onnx, torchscript" in err
     assert cli.main(["export", "format=onnx"]) == 2
     assert "missing option ckpt_path=" in capsys.readouterr().err
+    assert cli.main(["export", f"ckpt_path={ckpt}", "format=onnx", "threads=zero"]) == 2
+    assert "option threads='zero': must be a positive integer" in capsys.readouterr().err
     monkeypatch.setitem(sys.modules, "onnxscript", None)  # as if not installed
     out = tmp_path / "out"
     assert cli.main(["export", f"ckpt_path={ckpt}", "format=onnx", f"out={out}"]) == 2

@@ -3,16 +3,19 @@
 Usage::
 
     skelagnostic export ckpt_path=PATH format=onnx|torchscript [out=DIR] [model=NAME]
+                        [threads=N]
 
 Every graph the aligner declares (:meth:`~skelagnostic.aligners.Aligner.export_graphs`)
 becomes ``DIR/<graph>.onnx`` (or ``.pt``) plus the JSON sidecar ``DIR/<graph>.json``
 (inputs, outputs, dynamic and fixed axes, normalisation statistics, skeleton).
+Path options expand ``~`` and ``$VARS``.
 The checkpoint is loaded like the inference verbs do
 (:func:`skelagnostic.cli.infer.load_from_checkpoint`).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -25,6 +28,7 @@ _OPTIONS = {
     "format": "onnx or torchscript (required)",
     "out": "output directory; default: <checkpoint name>-<format> next to the checkpoint",
     "model": "registered aligner name; default: model.name of the run's config.yaml",
+    "threads": "torch intra-op threads (a positive integer); default: torch's",
 }
 
 _USAGE = (
@@ -66,14 +70,21 @@ def main(argv: list[str]) -> int:
         if unknown:
             raise SkelagnosticError(f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
                                     "see 'skelagnostic export --help'")
+        if "threads" in options:
+            threads = options["threads"]
+            if not threads.isdigit() or int(threads) < 1:
+                raise SkelagnosticError(f"option threads={threads!r}: must be a positive integer")
+            import torch
+
+            torch.set_num_threads(int(threads))
         for key in ("ckpt_path", "format"):
             if key not in options:
                 raise SkelagnosticError(f"missing option {key}=")
         fmt = options["format"]
         if fmt not in FORMATS:
             raise SkelagnosticError(f"option format={fmt!r}: use one of {', '.join(FORMATS)}")
-        ckpt = Path(options["ckpt_path"])
-        out = Path(options.get("out") or ckpt.parent / f"{ckpt.stem}-{fmt}")
+        ckpt = _path(options["ckpt_path"])
+        out = _path(options["out"]) if options.get("out") else ckpt.parent / f"{ckpt.stem}-{fmt}"
         aligner = load_from_checkpoint(ckpt, options.get("model"))
         name = options.get("model") or _registered_name(aligner)
         for path in export_aligner(aligner, fmt, out, name):
@@ -82,6 +93,11 @@ def main(argv: list[str]) -> int:
         print(f"skelagnostic export: error: {error}", file=sys.stderr)
         return 2
     return 0
+
+
+def _path(text: str) -> Path:
+    """A path option with ``~`` and ``$VARS`` expanded."""
+    return Path(os.path.expandvars(os.path.expanduser(text)))
 
 
 def _registered_name(aligner: object) -> str:
