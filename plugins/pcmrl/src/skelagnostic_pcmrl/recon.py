@@ -53,23 +53,6 @@ __all__ = ["PcmrlReconstruction", "end_effector_pairs"]
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
-class _ReconstructionGraph(torch.nn.Module):
-    """:meth:`PcmrlReconstruction.reconstruct` for one up axis, plus local rotations."""
-
-    def __init__(self, aligner: PcmrlReconstruction, up: int) -> None:
-        super().__init__()
-        self.aligner = aligner
-        self.up = up
-
-    def forward(self, points: torch.Tensor, groups: torch.Tensor
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Clouds ``[B, T, P, 3]``, groups ``[B, P]`` -> root, rotations (global, local), joints."""
-        out = self.aligner.reconstruct(points, groups, self.up)
-        parents = self.aligner._require_target().parents
-        local = Q.normalize(global_to_local(out["rotations"], parents))
-        return out["root"], out["rotations"], local, out["positions"]
-
-
 class PcmrlReconstruction(Aligner):
     """PC-MRL point-cloud-to-motion reconstruction onto one target skeleton.
 
@@ -565,3 +548,20 @@ class PcmrlReconstruction(Aligner):
         units = self._output_units(skeleton)
         local = Q.normalize(global_to_local(rot, skeleton.parents))
         return Motion(skeleton, local.cpu(), (root / UNITS[units]).cpu(), latent.fps, units=units)
+
+
+class _ReconstructionGraph(torch.nn.Module):
+    """:meth:`PcmrlReconstruction.reconstruct` for one up axis, plus local rotations."""
+
+    def __init__(self, aligner: PcmrlReconstruction, up: int) -> None:
+        super().__init__()
+        self.aligner = aligner
+        self.up = up
+
+    def forward(self, points: torch.Tensor, groups: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Clouds ``[B, T, P, 3]``, groups ``[B, P]`` -> root, rotations (global, local), joints."""
+        out = self.aligner.reconstruct(points, groups, self.up)
+        parents = self.aligner._require_target().parents
+        local = Q.normalize(global_to_local(out["rotations"], parents))
+        return out["root"], out["rotations"], local, out["positions"]
