@@ -12,7 +12,7 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 # constraints.txt pins the CPU build of torch (an unpinned torch pulls CUDA wheels).
 "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
-  -c constraints.txt -e ".[test,bench,docs]"
+  -c constraints.txt -e ".[test,bench,docs,export]"
 echo "== ruff"
 "$VENV/bin/ruff" check src tests benchmarks plugins
 echo "== pytest"

@@ -15,6 +15,7 @@ from skelagnostic.errors import SkelagnosticError
 if TYPE_CHECKING:
     from skelagnostic.core.motion import Motion
     from skelagnostic.core.skeleton import Skeleton
+    from skelagnostic.export import ExportGraph
 
 #: Capability names with an agreed meaning; aligners may declare others.
 KNOWN_CAPABILITIES = frozenset(
@@ -157,6 +158,20 @@ class Aligner(L.LightningModule, ABC):
         self.require("transfer")
         raise NotImplementedError(f"{type(self).__name__} declares 'transfer' but "
                                   "does not override Aligner.transfer")
+
+    def export_graphs(self) -> list[ExportGraph]:
+        """The networks an engine needs, for ``skelagnostic export`` (ONNX / TorchScript).
+
+        The default exports nothing. Aligners that can be exported override this
+        and return one :class:`~skelagnostic.export.ExportGraph` per network: a
+        module taking and returning tensors only, example inputs, input/output
+        names, the axes that may change size at run time, and sidecar metadata
+        (normalisation statistics, skeleton). See ``docs/export.md``.
+
+        Returns:
+            The graphs; empty when the aligner cannot be exported.
+        """
+        return []
 
     def supports(self, capability: str) -> bool:
         """Whether the aligner declares ``capability``."""

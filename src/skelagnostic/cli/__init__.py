@@ -30,6 +30,8 @@ VERBS: dict[str, tuple[str, str, str]] = {
                     "a trained aligner fills the frames between keyframes of a BVH"),
     "transfer": ("skelagnostic.cli.infer", "transfer",
                  "a trained aligner re-enacts a BVH with another character's clips"),
+    "export": ("skelagnostic.cli.export", "main",
+               "a trained aligner's networks -> ONNX / TorchScript files + JSON sidecars"),
 }
 
 

@@ -25,6 +25,7 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import MotionDataModule
 from skelagnostic.errors import MotionError
+from skelagnostic.export import ExportGraph, Method
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, inverse_kinematics
 
 
@@ -145,6 +146,44 @@ class ExampleAligner(Aligner):
     def configure_optimizers(self) -> torch.optim.Optimizer:
         """Adam."""
         return torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
+
+    # ------------------------------------------------------------------- export
+    def export_graphs(self) -> list[ExportGraph]:
+        """The encoder and the decoder, each over any batch, frame and joint count.
+
+        This is the pattern for a third-party aligner: wrap the tensor-only
+        methods with :class:`~skelagnostic.export.Method`, give example inputs
+        whose dynamic axes have distinct sizes, name every input and output,
+        and describe in ``metadata`` what the runtime does before and after.
+        """
+        hp = self.hparams
+        positions, template = torch.randn(2, 7, 5, 3), torch.randn(2, 5, 3)
+        z = torch.randn(2, 7, hp.latent)
+        prepare = ("positions: GlobalPositions(frame='root') of the motion (root-local joint "
+                   "positions), divided by the skeleton height (Skeleton.height); template: "
+                   "Skeleton.template() divided by the same height")
+        common = {"representation": "GlobalPositions(frame='root')",
+                  "normalisation": {"divide_by": "skeleton height (Skeleton.height)"},
+                  "skeleton": "any: the template is an input", "preprocess": prepare}
+        return [
+            ExportGraph(
+                "encoder", Method(self, "encode_positions"), (positions, template),
+                ("positions", "template"), ("z",),
+                {"positions": {0: "batch", 1: "time", 2: "joints"},
+                 "template": {0: "batch", 1: "joints"}, "z": {0: "batch", 1: "time"}},
+                description="height-normalised root-local positions and the skeleton "
+                            "template -> per-frame latent",
+                metadata=common),
+            ExportGraph(
+                "decoder", Method(self, "decode_positions"), (z, template),
+                ("z", "template"), ("positions",),
+                {"z": {0: "batch", 1: "time"}, "template": {0: "batch", 1: "joints"},
+                 "positions": {0: "batch", 1: "time", 2: "joints"}},
+                description="per-frame latent and a target template -> height-normalised "
+                            "root-local positions of the target's joints",
+                metadata={**common, "postprocess": "multiply by the target skeleton height; "
+                                                   "inverse kinematics gives rotations"}),
+        ]
 
     # ------------------------------------------------------------------ aligner
     @torch.no_grad()

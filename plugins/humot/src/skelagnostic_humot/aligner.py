@@ -35,6 +35,7 @@ from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.export import ExportGraph, Method
 from skelagnostic.representations import inverse_kinematics
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks, sample_keep
 from skelagnostic_humot.model import HuMoT, bone_length_consistency_loss, reconstruction_loss
@@ -306,6 +307,60 @@ class HumotAligner(Aligner):
                           sheet_frames=4)
         finally:
             self.train(was_training)
+
+    # ------------------------------------------------------------------- export
+    def export_graphs(self) -> list[ExportGraph]:
+        """HuMoT's encoder and decoder, with the skeleton template as an input.
+
+        Both take any batch, frame and joint count (the XCiT blocks attend over
+        channels, the convolutions pad in time, the frame encoding is computed
+        from the frame count). Padding masks are not exported: give one skeleton
+        per batch.
+        """
+        from skelagnostic_humot.template import _TO_MODEL
+
+        hp = self.hparams
+        motion, template = torch.randn(2, 9, 5, 3), torch.randn(2, 5, 3)
+        z = torch.randn(2, 9, hp.latent)
+        meta = {
+            "units": "m",
+            "fps": 30.0,
+            "chunk_frames": int(hp.chunk),
+            "model_frame": {"description": "Z up, X the character's left, Y backward; "
+                                           "model = positions @ matrix.T",
+                            "matrix_from_up_axis": {k: v for k, v in _TO_MODEL.items()}},
+            "preprocess": (
+                "resample to 30 fps, convert to metres, rotate to the model frame, cut into "
+                f"{int(hp.chunk)}-frame chunks every {int(hp.chunk) // 2} frames, subtract from "
+                "every chunk the mean of its major joints (hips, knees, ankles, shoulders, "
+                "elbows, wrists; all joints if none) over all its frames"),
+            "template": (
+                "[J, 3] neutral pose in the model frame, root at the origin, with the clip's "
+                "median bone lengths: skelagnostic_humot.data.Topology.of(skeleton)"
+                ".templates(lengths)"),
+            "postprocess": (
+                "add the chunk centres back (scaled by the target/source leg-length ratio), "
+                "cross-fade overlapping chunks with triangular weights, rotate back from the "
+                "model frame; inverse kinematics gives rotations"),
+        }
+        return [
+            ExportGraph(
+                "encoder", Method(self.net.encoder, "forward"), (motion, template),
+                ("motion", "template"), ("z",),
+                {"motion": {0: "batch", 1: "time", 2: "joints"},
+                 "template": {0: "batch", 1: "joints"}, "z": {0: "batch", 1: "time"}},
+                description="E(X | T): centred joint positions [B, F, J, 3] (metres, model "
+                            "frame) and the source template [B, J, 3] -> latent [B, F, Z]",
+                metadata=meta),
+            ExportGraph(
+                "decoder", Method(self.net.decoder, "forward"), (z, template),
+                ("z", "template"), ("motion",),
+                {"z": {0: "batch", 1: "time"}, "template": {0: "batch", 1: "joints"},
+                 "motion": {0: "batch", 1: "time", 2: "joints"}},
+                description="D(z | T): latent [B, F, Z] and a target template [B, J, 3] -> "
+                            "centred joint positions [B, F, J, 3] of the target skeleton",
+                metadata=meta),
+        ]
 
     # ------------------------------------------------------------------ aligner
     def _motion_positions(self, motion: Motion, units: str | None) -> torch.Tensor:

@@ -48,6 +48,7 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import MotionError, SkelagnosticError
+from skelagnostic.export import ExportGraph, Method
 from skelagnostic_pcmrl.points import group_of_joints, heading_frames
 from skelagnostic_pcmrl.rpa import bone_tails
 
@@ -173,6 +174,28 @@ def sign_invariant_l1(pred: Tensor, target: Tensor) -> Tensor:
     return torch.minimum(plus, minus).mean() / 4.0
 
 
+def _surrounding_keys(keys: Tensor) -> tuple[Tensor, Tensor]:
+    """Per frame, the last key at or before it (-1: none) and the first at or after (T: none).
+
+    Written as a masked max/min over a ``[T, T]`` comparison instead of
+    ``cummax``/``cummin``, which ONNX has no operator for; the result is the same.
+
+    Args:
+        keys: ``[B, T]`` boolean keyframe mask.
+
+    Returns:
+        ``(prev [B, T], next [B, T])`` long frame indices.
+    """
+    num_t = keys.shape[-1]
+    frames = torch.arange(num_t, device=keys.device)
+    key_s = keys[:, None, :]  # [B, t, s]: is frame s a key
+    before = (frames[None, :] <= frames[:, None]) & key_s  # key s at or before t
+    after = (frames[None, :] >= frames[:, None]) & key_s  # key s at or after t
+    prev = torch.where(before, frames, torch.full_like(frames, -1)).amax(dim=-1)
+    nxt = torch.where(after, frames, torch.full_like(frames, num_t)).amin(dim=-1)
+    return prev, nxt
+
+
 def key_brackets(keys: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     """Previous key, next key and the linear weight of every frame.
 
@@ -185,9 +208,7 @@ def key_brackets(keys: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     """
     num_t = keys.shape[-1]
     frames = torch.arange(num_t, device=keys.device).expand_as(keys)
-    prev = torch.where(keys, frames, torch.full_like(frames, -1)).cummax(dim=-1).values
-    nxt_rev = torch.where(keys, frames, torch.full_like(frames, num_t)).flip(-1)
-    nxt = nxt_rev.cummin(dim=-1).values.flip(-1)
+    prev, nxt = _surrounding_keys(keys)
     nxt = torch.where(nxt >= num_t, prev, nxt)
     prev = prev.clamp_min(0)
     span = (nxt - prev).clamp_min(1)
@@ -252,9 +273,7 @@ def _key_continuity(q: Tensor, keys: Tensor) -> Tensor:
     Sign flips are removed from key to key, so the result does not depend on
     the (unknown) frames between keys.
     """
-    num_t = keys.shape[1]
-    frames = torch.arange(num_t, device=keys.device).expand_as(keys)
-    prev_incl = torch.where(keys, frames, torch.full_like(frames, -1)).cummax(dim=1).values
+    prev_incl = _surrounding_keys(keys)[0]
     prev = torch.cat([torch.full_like(prev_incl[:, :1], -1), prev_incl[:, :-1]], dim=1)
     before = _gather_t(q, prev.clamp_min(0))
     flip = keys[..., None] & (prev >= 0)[..., None] & ((q * before).sum(-1) < 0)
@@ -795,6 +814,85 @@ class InterpolationAligner(Aligner):
         ratio = math.log(trained / own)
         return min(UNITS.values(), key=lambda f: abs(math.log(f) - ratio))
 
+    def interpolate_window(self, global_rotations: Tensor, root: Tensor, keys: Tensor,
+                           offsets: Tensor, tails: Tensor) -> tuple[Tensor, Tensor]:
+        """Fill one window between its keys (what :meth:`interpolate` does per chunk).
+
+        Args:
+            global_rotations: ``[B, T, J, 4]`` global unit quaternions; only keyframes are read.
+            root: ``[B, T, 3]`` root positions (training units, metres); only keyframes are read.
+            keys: ``[B, T]`` boolean keyframe mask; frame 0 must be a key.
+            offsets: ``[B, J, 3]`` rest offsets.
+            tails: ``[B, J, 3]`` rest bone tails (:func:`~skelagnostic_pcmrl.rpa.bone_tails`).
+
+        Returns:
+            ``(global_rotations [B, T, J, 4], root [B, T, 3])``: the keys as given,
+            the other frames generated.
+        """
+        grot, base_root, turn = self.canonical(global_rotations, root, offsets)
+        feats = self.features(grot, base_root, offsets, tails, keys)
+        pred = self.predict_window(feats, keys)
+        pred_global = Q.mul(turn[:, None, None], pred["global"])
+        pred_root = Q.rotate(turn[:, None], pred["root"] + feats["center"])
+        key = keys[..., None]
+        return (torch.where(key[..., None], global_rotations, pred_global),
+                torch.where(key, root, pred_root))
+
+    def export_graphs(self) -> list[ExportGraph]:
+        """The interpolation network on one window: keyframes -> full window.
+
+        Batch and time are dynamic (the relative positions are clipped at
+        ``max_relative`` frames; the model was trained on ``window``-frame
+        windows); the joint count is the target skeleton's.
+
+        Raises:
+            SkelagnosticError: The model has no skeleton yet.
+        """
+        self._require_net()
+        skeleton = self.skeleton
+        assert skeleton is not None  # built together with the network
+        hp = self.hparams
+        num_b, num_t, num_j = 2, 9, skeleton.num_joints
+        rotations = Q.normalize(torch.randn(num_b, num_t, num_j, 4))
+        keys = torch.zeros(num_b, num_t, dtype=torch.bool)
+        keys[:, [0, 4, num_t - 1]] = True
+        offsets = skeleton.offsets.float()[None].expand(num_b, -1, -1).contiguous()
+        tails = self.tails.float()[None].expand(num_b, -1, -1).contiguous()
+        return [ExportGraph(
+            "interpolation", Method(self, "interpolate_window"),
+            (rotations, torch.randn(num_b, num_t, 3), keys, offsets, tails),
+            ("global_rotations", "root", "keys", "offsets", "tails"),
+            ("out_global_rotations", "out_root"),
+            {"global_rotations": {0: "batch", 1: "time"}, "root": {0: "batch", 1: "time"},
+             "keys": {0: "batch", 1: "time"}, "offsets": {0: "batch"}, "tails": {0: "batch"},
+             "out_global_rotations": {0: "batch", 1: "time"},
+             "out_root": {0: "batch", 1: "time"}},
+            description=(
+                f"a window of the target skeleton ({num_j} joints): global unit quaternions "
+                "(w, x, y, z) [B, T, J, 4] and root positions [B, T, 3] (metres; only the "
+                "keyframes are read), the keyframe mask [B, T] (frame 0 a key), rest offsets "
+                "and bone tails [B, J, 3] -> the window with the frames between the keys "
+                "generated"),
+            fixed_axes={"joints": f"{num_j}: the network's input and output layers are per "
+                                  "joint of the trained skeleton"},
+            metadata={
+                "skeleton": skeleton.to_dict(),
+                "offsets": skeleton.offsets.float(),
+                "tails": self.tails,
+                "units": "m (the training data's)",
+                "fps": hp.fps,
+                "training_window": int(hp.window),
+                "max_relative": int(hp.max_relative),
+                "canonical_heading": bool(hp.canonical_heading),
+                "preprocess": (
+                    "global rotations by forward kinematics of the local ones; pass the "
+                    "skeleton's offsets and tails (the values above for the trained skeleton)"),
+                "postprocess": (
+                    "local rotations: inverse(parent global) * global; clips longer than "
+                    "training_window: cut at keyframes into chained windows sharing their "
+                    "boundary key, as InterpolationAligner.interpolate does"),
+            })]
+
     @torch.no_grad()
     def interpolate(self, motion: Motion, keyframes: Sequence[int]) -> Motion:
         """Keep the keyframes of ``motion`` and generate the frames between them.
@@ -860,15 +958,12 @@ class InterpolationAligner(Aligner):
             end = key_set[end_i]
             mask = torch.zeros(1, end - start + 1, dtype=torch.bool, device=self.device)
             mask[0, [k - start for k in key_set[ki:end_i + 1]]] = True
-            chunk_rot, chunk_root, turn = self.canonical(grot[None, start:end + 1],
-                                                         root[None, start:end + 1], offsets[None])
-            feats = self.features(chunk_rot, chunk_root, offsets[None], tails[None], mask)
-            pred = self.predict_window(feats, mask)
-            pred_global = Q.mul(turn[:, None, None], pred["global"])
-            pred_root = Q.rotate(turn[:, None], pred["root"] + feats["center"])
-            inner = ~mask[0]
-            out_global[start:end + 1][inner] = pred_global[0][inner]
-            out_root[start:end + 1][inner] = pred_root[0][inner]
+            # chunks share only their boundary keys, which the window keeps unchanged
+            chunk_global, chunk_root = self.interpolate_window(
+                grot[None, start:end + 1], root[None, start:end + 1], mask, offsets[None],
+                tails[None])
+            out_global[start:end + 1] = chunk_global[0]
+            out_root[start:end + 1] = chunk_root[0]
             start, ki = end, end_i
         local = global_to_local(out_global, skeleton.parents)
         local[keys] = work.rotations[keys]

@@ -30,6 +30,7 @@ from skelagnostic.core.kinematics import forward_kinematics
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.export import ExportGraph
 from skelagnostic.representations import POINT_GROUPS
 from skelagnostic_pcmrl.losses import end_effector_loss, temporal_knn_loss, unit_norm_penalty
 from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
@@ -333,6 +334,59 @@ class PcmrlReconstruction(Aligner):
                                     self._ancestors)
         return {"root": root, "raw": raw, "rotations": rot, "positions": pos}
 
+    # ----------------------------------------------------------------- export
+    def export_graphs(self) -> list[ExportGraph]:
+        """The reconstruction network: source point clouds -> target-skeleton motion.
+
+        The graph includes the cloud centring, the heading canonicalisation
+        (``canonical_yaw``), the point and temporal transformers and forward
+        kinematics. Batch and time are dynamic; the number of points is fixed
+        (the pooling stages reduce it to one point).
+
+        Raises:
+            SkelagnosticError: The model has no target skeleton yet.
+        """
+        target = self._require_target()
+        hp = self.hparams
+        up = _AXES[target.up_axis]
+        points = torch.randn(2, 6, hp.num_source_points, 3)
+        groups = torch.arange(hp.num_source_points).remainder(len(POINT_GROUPS))[None].expand(
+            2, -1).contiguous()
+        return [ExportGraph(
+            "reconstruction", _ReconstructionGraph(self, up), (points, groups),
+            ("points", "groups"), ("root", "global_rotations", "local_rotations", "positions"),
+            {"points": {0: "batch", 1: "time"}, "groups": {0: "batch"},
+             "root": {0: "batch", 1: "time"}, "global_rotations": {0: "batch", 1: "time"},
+             "local_rotations": {0: "batch", 1: "time"}, "positions": {0: "batch", 1: "time"}},
+            description=(
+                f"source point clouds [B, T, {hp.num_source_points}, 3] (metres, "
+                f"{target.up_axis} up) with their body groups [B, {hp.num_source_points}] -> "
+                f"motion of the target skeleton ({target.num_joints} joints): root [B, T, 3], "
+                "global and local unit quaternions (w, x, y, z) [B, T, J, 4], joint positions "
+                "[B, T, J, 3] (metres)"),
+            fixed_axes={"points": f"{hp.num_source_points} points per cloud: the point "
+                                  f"encoder pools them to one in {hp.stages} stages"},
+            metadata={
+                "target_skeleton": target.to_dict(),
+                "target_units": self.target_units,
+                "units": "m",
+                "up_axis": target.up_axis,
+                "point_groups": list(POINT_GROUPS),
+                "sigma": float(hp.sigma),
+                "training_window": self.window,
+                "canonical_yaw": bool(hp.canonical_yaw),
+                "preprocess": (
+                    "draw the cloud layout once per source skeleton "
+                    "(skelagnostic_pcmrl.points.sample_layout: a bone per point with "
+                    "probability proportional to its length, a position along it and a "
+                    "Gaussian offset of sigma metres) and place it on every frame "
+                    "(PointLayout.points); groups are the layout's body-group ids"),
+                "postprocess": (
+                    "rotations are unit quaternions (w, x, y, z); sequences longer than "
+                    "the training window: run overlapping chunks and blend them, as "
+                    "PcmrlReconstruction.decode does"),
+            })]
+
     # --------------------------------------------------------------- training
     def _step(self, batch: dict[str, Any], generator: torch.Generator | None,
               prefix: str) -> torch.Tensor:
@@ -499,3 +553,20 @@ class PcmrlReconstruction(Aligner):
         units = self._output_units(skeleton)
         local = Q.normalize(global_to_local(rot, skeleton.parents))
         return Motion(skeleton, local.cpu(), (root / UNITS[units]).cpu(), latent.fps, units=units)
+
+
+class _ReconstructionGraph(torch.nn.Module):
+    """:meth:`PcmrlReconstruction.reconstruct` for one up axis, plus local rotations."""
+
+    def __init__(self, aligner: PcmrlReconstruction, up: int) -> None:
+        super().__init__()
+        self.aligner = aligner
+        self.up = up
+
+    def forward(self, points: torch.Tensor, groups: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Clouds ``[B, T, P, 3]``, groups ``[B, P]`` -> root, rotations (global, local), joints."""
+        out = self.aligner.reconstruct(points, groups, self.up)
+        parents = self.aligner._require_target().parents
+        local = Q.normalize(global_to_local(out["rotations"], parents))
+        return out["root"], out["rotations"], local, out["positions"]

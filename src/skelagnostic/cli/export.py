@@ -1,0 +1,110 @@
+"""``skelagnostic export``: write a trained aligner's networks as ONNX or TorchScript files.
+
+Usage::
+
+    skelagnostic export ckpt_path=PATH format=onnx|torchscript [out=DIR] [model=NAME]
+                        [threads=N]
+
+Every graph the aligner declares (:meth:`~skelagnostic.aligners.Aligner.export_graphs`)
+becomes ``DIR/<graph>.onnx`` (or ``.pt``) plus the JSON sidecar ``DIR/<graph>.json``
+(inputs, outputs, dynamic and fixed axes, normalisation statistics, skeleton).
+Path options expand ``~`` and ``$VARS``.
+The checkpoint is loaded like the inference verbs do
+(:func:`skelagnostic.cli.infer.load_from_checkpoint`).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = ["main"]
+
+_OPTIONS = {
+    "ckpt_path": "checkpoint written by `skelagnostic fit` (required; `ckpt=` also works)",
+    "format": "onnx or torchscript (required)",
+    "out": "output directory; default: <checkpoint name>-<format> next to the checkpoint",
+    "model": "registered aligner name; default: model.name of the run's config.yaml",
+    "threads": "torch intra-op threads (a positive integer); default: torch's",
+}
+
+_USAGE = (
+    "usage: skelagnostic export ckpt_path=PATH format=onnx|torchscript [out=DIR] "
+    "[model=NAME]\n\n"
+    "Write the networks of a trained aligner for a game engine or another runtime:\n"
+    "one .onnx (or TorchScript .pt) file per network plus a .json sidecar describing\n"
+    "its inputs, outputs, dynamic axes, normalisation statistics and skeleton.\n\n"
+    "options:\n" + "\n".join(f"  {k:<10} {v}" for k, v in _OPTIONS.items())
+)
+
+
+def main(argv: list[str]) -> int:
+    """Run ``skelagnostic export``.
+
+    Args:
+        argv: The words after the verb.
+
+    Returns:
+        0 on success, 2 on a usage or export error (one line on stderr).
+    """
+    if not argv or any(word in ("-h", "--help", "help") for word in argv):
+        print(_USAGE)
+        return 0 if argv else 2
+    try:
+        from skelagnostic.cli.infer import load_from_checkpoint
+        from skelagnostic.cli.render import parse_arguments
+        from skelagnostic.export import FORMATS, export_aligner
+
+        words, options = parse_arguments(argv)
+        if words:
+            raise SkelagnosticError(f"unexpected argument {words[0]!r}; options are key=value, "
+                                    "see 'skelagnostic export --help'")
+        if "ckpt" in options and "ckpt_path" in options:
+            raise SkelagnosticError("give ckpt_path= or ckpt=, not both")
+        if "ckpt" in options:
+            options["ckpt_path"] = options.pop("ckpt")
+        unknown = sorted(set(options) - set(_OPTIONS))
+        if unknown:
+            raise SkelagnosticError(f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
+                                    "see 'skelagnostic export --help'")
+        if "threads" in options:
+            threads = options["threads"]
+            if not threads.isdigit() or int(threads) < 1:
+                raise SkelagnosticError(f"option threads={threads!r}: must be a positive integer")
+            import torch
+
+            torch.set_num_threads(int(threads))
+        for key in ("ckpt_path", "format"):
+            if key not in options:
+                raise SkelagnosticError(f"missing option {key}=")
+        fmt = options["format"]
+        if fmt not in FORMATS:
+            raise SkelagnosticError(f"option format={fmt!r}: use one of {', '.join(FORMATS)}")
+        ckpt = _path(options["ckpt_path"])
+        out = _path(options["out"]) if options.get("out") else ckpt.parent / f"{ckpt.stem}-{fmt}"
+        aligner = load_from_checkpoint(ckpt, options.get("model"))
+        name = options.get("model") or _registered_name(aligner)
+        for path in export_aligner(aligner, fmt, out, name):
+            print(path)
+    except SkelagnosticError as error:
+        print(f"skelagnostic export: error: {error}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _path(text: str) -> Path:
+    """A path option with ``~`` and ``$VARS`` expanded."""
+    return Path(os.path.expandvars(os.path.expanduser(text)))
+
+
+def _registered_name(aligner: object) -> str:
+    """The registered name of ``aligner``'s class (``""`` when it is not registered)."""
+    from skelagnostic.plugins import get_plugin_manager
+
+    for name, spec in get_plugin_manager().aligners.items():
+        if spec.module is type(aligner):
+            return name
+    return ""
