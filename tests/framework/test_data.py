@@ -197,3 +197,34 @@ def test_skeleton_with_only_test_clips_is_reported(tmp_path: Path) -> None:
     dm = MotionDataModule(src, window=16, stride=16, fps=30, cache_dir=tmp_path / "cache")
     with pytest.raises(SkelagnosticError, match=r"no training clip.*data\.test_pattern"):
         dm.setup()
+
+
+def test_overfit_batches_repeats_the_same_training_batches(tmp_path: Path) -> None:
+    """``Trainer(overfit_batches=N)`` works with the data module (the resumable loader did not)."""
+    import lightning as L
+
+    class Recorder(L.LightningModule):
+        def __init__(self) -> None:
+            super().__init__()
+            self.weight = torch.nn.Parameter(torch.zeros(()))
+            self.seen: list[torch.Tensor] = []
+
+        def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+            features = batch["procedural/biped22"]["features"]
+            self.seen.append(features.clone())
+            return (self.weight - features.mean()) ** 2
+
+        def configure_optimizers(self) -> torch.optim.Optimizer:
+            return torch.optim.SGD(self.parameters(), lr=0.1)
+
+    dm = MotionDataModule(small_source(), window=16, stride=8, batch_size=2, cache_dir=tmp_path)
+    module = Recorder()
+    trainer = L.Trainer(overfit_batches=2, max_epochs=3, accelerator="cpu", logger=False,
+                        enable_checkpointing=False, enable_progress_bar=False,
+                        enable_model_summary=False, limit_val_batches=0)
+    trainer.fit(module, datamodule=dm)
+    assert len(module.seen) == 6
+    for epoch in (1, 2):
+        for i in range(2):
+            assert torch.equal(module.seen[2 * epoch + i], module.seen[i])
+    assert not torch.equal(module.seen[0], module.seen[1])

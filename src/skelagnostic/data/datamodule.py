@@ -579,8 +579,14 @@ class MotionDataModule(L.LightningDataModule):
         Each dataset's order is a permutation seeded by the run's ``seed``
         (``PL_GLOBAL_SEED``, set by :func:`lightning.seed_everything`) and the
         epoch, sharded over the DDP ranks (:class:`ResumableDataLoader`).
+        With ``trainer.overfit_batches`` set, plain loaders in a fixed order
+        instead: Lightning rebuilds the training loaders with a sequential
+        sampler to overfit the same batches, which the resumable loader does not
+        support.
         """
         trainer = self.trainer
+        if trainer is not None and getattr(trainer, "overfit_batches", 0):
+            return CombinedLoader(self._loaders("train", shuffle=False), mode="max_size_cycle")
         replicas, rank = (trainer.world_size, trainer.global_rank) if trainer else (1, 0)
         seed = int(os.environ.get("PL_GLOBAL_SEED", "0"))
         loaders = {
