@@ -7,16 +7,30 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import lightning as L
 import pytest
 import torch
 from lightning.pytorch.callbacks import ModelCheckpoint
-from skelagnostic_example import ExampleAligner, ExampleDataModule
 from torch.utils.data import TensorDataset
 
 from skelagnostic.data.datamodule import ResumableDataLoader, _ResumableSampler
 from skelagnostic.data.sources import ProceduralSource
+
+if TYPE_CHECKING:
+    from skelagnostic_example import ExampleAligner, ExampleDataModule
+
+
+def _example() -> Any:
+    """The example plugin's package, from its sources (it need not be installed)."""
+    import importlib
+
+    from reliability_env import EXAMPLE_SRC
+
+    if str(EXAMPLE_SRC) not in sys.path:
+        sys.path.append(str(EXAMPLE_SRC))
+    return importlib.import_module("skelagnostic_example")
 
 #: Small procedural data: two datasets of different lengths (the shorter one cycles).
 ARGS = ["model=example", "model.hidden=16", "model.latent=4", "data.seconds=2.0",
@@ -144,9 +158,11 @@ def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner,
     checkpoints a run interrupted anywhere would resume from.
     """
     L.seed_everything(7, workers=True)
-    dm = ExampleDataModule(sources=[ProceduralSource(clips_per_gait=1, seconds=2.0)], window=16,
-                           stride=4, batch_size=4, cache_dir=root.parent / "cache")
-    model = ExampleAligner(hidden=16, latent=4)
+    example = _example()
+    dm = example.ExampleDataModule(sources=[ProceduralSource(clips_per_gait=1, seconds=2.0)],
+                                   window=16, stride=4, batch_size=4,
+                                   cache_dir=root.parent / "cache")
+    model = example.ExampleAligner(hidden=16, latent=4)
     checkpoints = [
         ModelCheckpoint(dirpath=root / "steps", filename="{step}", save_top_k=-1,
                         every_n_train_steps=1),
