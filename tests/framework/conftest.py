@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import pytest
@@ -79,3 +79,32 @@ def subprocess_env(tmp_path: Path) -> dict[str, str]:
     env["OMP_NUM_THREADS"] = "1"
     env.pop("SKELAGNOSTIC_DEBUG", None)
     return env
+
+
+@pytest.fixture(scope="session")
+def fit_example() -> Callable[[Path, Sequence[str]], Path]:
+    """``fit_example(root, overrides)``: train the example aligner in-process; its run directory.
+
+    The plugin comes from its sources through a private plugin manager, so it
+    need not be installed; the run and its window cache live below ``root``.
+    """
+
+    def fit(root: Path, overrides: Sequence[str]) -> Path:
+        from skelagnostic.cli import app
+        from skelagnostic.plugins import PluginManager
+
+        sys.path.insert(0, str(EXAMPLE_SRC))
+        try:
+            import skelagnostic_example.plugin as plugin
+
+            pm = PluginManager(load_entrypoints=False)
+            pm.register(plugin, "example")
+            run_dir = root / "run"
+            app.run(app.compose(["model=example", f"data.cache_dir={root / 'cache'}",
+                                 *overrides, f"run_dir={run_dir}"], plugin_manager=pm),
+                    plugin_manager=pm)
+        finally:
+            sys.path.remove(str(EXAMPLE_SRC))
+        return run_dir
+
+    return fit

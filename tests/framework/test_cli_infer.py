@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import pytest
@@ -11,7 +11,6 @@ import torch
 
 import skelagnostic as sa
 from skelagnostic import cli
-from skelagnostic.cli import app
 from skelagnostic.cli.infer import keyframes_from_options
 from skelagnostic.core.quaternion import slerp
 from skelagnostic.errors import SkelagnosticError
@@ -55,26 +54,10 @@ def register_aligners(register):
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def trained(tmp_path_factory: pytest.TempPathFactory,
+            fit_example: Callable[[Path, Sequence[str]], Path]) -> Path:
     """A run directory of the example aligner trained for one tiny epoch."""
-    import sys
-
-    from skelagnostic.plugins import PluginManager
-
-    root = tmp_path_factory.mktemp("infer")
-    src = Path(__file__).resolve().parents[2] / "plugins" / "example-aligner" / "src"
-    sys.path.insert(0, str(src))
-    try:
-        import skelagnostic_example.plugin as plugin
-
-        pm = PluginManager(load_entrypoints=False)
-        pm.register(plugin, "example")
-        run_dir = root / "run"
-        app.run(app.compose(["model=example", f"data.cache_dir={root / 'cache'}", *FAST,
-                             f"run_dir={run_dir}"], plugin_manager=pm), plugin_manager=pm)
-    finally:
-        sys.path.remove(str(src))
-    return run_dir
+    return fit_example(tmp_path_factory.mktemp("infer"), FAST)
 
 
 @pytest.fixture

@@ -20,7 +20,6 @@ import torch
 
 import skelagnostic as sa
 from skelagnostic import cli
-from skelagnostic.cli import app
 from skelagnostic.export import ExportError, export_aligner
 
 ort = pytest.importorskip("onnxruntime")
@@ -100,23 +99,10 @@ def windows(x: torch.Tensor, batch: int, frames: int, step: int = 37) -> torch.T
 
 # ----------------------------------------------------------------------------- example
 @pytest.fixture(scope="module")
-def example_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def example_run(tmp_path_factory: pytest.TempPathFactory,
+                fit_example: Callable[[Path, Sequence[str]], Path]) -> Path:
     """A run of the example aligner trained for one tiny epoch on procedural motion."""
-    from skelagnostic.plugins import PluginManager
-
-    root = tmp_path_factory.mktemp("export")
-    sys.path.insert(0, str(EXAMPLE_SRC))
-    try:
-        import skelagnostic_example.plugin as plugin
-
-        pm = PluginManager(load_entrypoints=False)
-        pm.register(plugin, "example")
-        run_dir = root / "run"
-        app.run(app.compose(["model=example", f"data.cache_dir={root / 'cache'}", *FAST,
-                             f"run_dir={run_dir}"], plugin_manager=pm), plugin_manager=pm)
-    finally:
-        sys.path.remove(str(EXAMPLE_SRC))
-    return run_dir
+    return fit_example(tmp_path_factory.mktemp("export"), FAST)
 
 
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
