@@ -11,7 +11,6 @@ next to the checkpoint instead and renames.
 
 from __future__ import annotations
 
-import contextlib
 import os
 from pathlib import Path
 from typing import Any
@@ -20,35 +19,25 @@ import torch
 from lightning.fabric.plugins.io import TorchCheckpointIO
 from lightning.fabric.utilities.types import _PATH
 
+from skelagnostic.io.atomic import atomic_write
+
 __all__ = ["TEMP_SUFFIX", "AtomicCheckpointIO", "atomic_torch_save"]
 
 #: Suffix of the file a checkpoint is written to before it is renamed onto its path.
 TEMP_SUFFIX = ".tmp"
 
 
-def _fsync_directory(directory: Path) -> None:
-    """Flush a directory entry (the rename) to disk, where the platform allows it."""
-    flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0)
-    try:
-        fd = os.open(directory, flags)
-    except OSError:  # e.g. Windows: directories cannot be opened
-        return
-    try:
-        with contextlib.suppress(OSError):  # some file systems refuse fsync on directories
-            os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def atomic_torch_save(obj: Any, path: str | os.PathLike[str]) -> None:
     """``torch.save(obj, path)`` so that ``path`` holds either its old or its new content.
 
-    The object is written to ``<path>.tmp`` in the same directory (replacing a
-    stale one a killed save left behind), flushed to disk with ``fsync``,
-    renamed onto ``path`` with :func:`os.replace` (atomic on POSIX and
-    Windows), and the directory is flushed too. If ``path`` is a symbolic
-    link, the link is replaced, not the file it points to. The file gets the
-    permissions of a newly created file (``0o666`` less the process umask).
+    The object goes through :func:`skelagnostic.io.atomic.atomic_write`: it is
+    written to ``<path>.tmp`` in the same directory (replacing a stale one a
+    killed save left behind), flushed to disk with ``fsync``, renamed onto
+    ``path`` with :func:`os.replace` (atomic on POSIX and Windows), and the
+    directory is flushed too. If ``path`` is a symbolic link, the link is
+    replaced, not the file it points to. A new file gets the permissions of a
+    newly created file (``0o666`` less the process umask); an existing one
+    keeps its permission bits.
     On an error the temporary file is removed and the error raised; a
     ``SIGKILL`` can leave the temporary file, never a damaged ``path``.
 
@@ -58,20 +47,8 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike[str]) -> None:
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    temp = target.with_name(target.name + TEMP_SUFFIX)
-    fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_BINARY", 0),
-                 0o666)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            torch.save(obj, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(temp, target)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            temp.unlink()
-        raise
-    _fsync_directory(target.parent)
+    atomic_write(target, lambda fh: torch.save(obj, fh), follow_symlinks=False,
+                 temp_suffix=TEMP_SUFFIX)
 
 
 class AtomicCheckpointIO(TorchCheckpointIO):

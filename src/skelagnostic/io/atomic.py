@@ -12,11 +12,19 @@ through :func:`atomic_write`, so that all of them behave the same way:
   :func:`tempfile.mkstemp`, which always gives ``0o600``; an existing file keeps
   its permission bits;
 * a target that is a symbolic link is written through: the file it points to is
-  replaced and the link stays a link.
+  replaced and the link stays a link (``follow_symlinks=False`` replaces the
+  link itself, as checkpoint files need);
+* the directory entry (the rename) is flushed to disk too, where the platform
+  allows it.
+
+Checkpoints (:func:`skelagnostic.callbacks.checkpoint_io.atomic_torch_save`) go
+through the same function with a fixed temporary name, so that a save killed
+mid-write leaves one ``<name>.tmp`` that the next save of that name reuses.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import secrets
@@ -25,7 +33,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write", "write_target"]
+__all__ = ["atomic_write", "fsync_directory", "write_target"]
 
 _FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
 
@@ -49,8 +57,36 @@ def write_target(path: str | Path) -> Path:
     return target
 
 
-def _create_temporary(target: Path) -> tuple[int, Path]:
-    """Create a new empty file next to ``target`` with mode ``0o666`` minus the umask."""
+def fsync_directory(directory: str | Path) -> None:
+    """Flush a directory entry (a rename) to disk, where the platform allows it.
+
+    Args:
+        directory: The directory whose entries to flush. Platforms that cannot
+            open a directory (Windows) or file systems that refuse ``fsync`` on one
+            are skipped silently: the rename itself is still atomic there.
+    """
+    flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0)
+    try:
+        fd = os.open(directory, flags)
+    except OSError:
+        return
+    try:
+        with contextlib.suppress(OSError):
+            os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _create_temporary(target: Path, temp_suffix: str | None) -> tuple[int, Path]:
+    """Create an empty file next to ``target`` with mode ``0o666`` minus the umask.
+
+    With ``temp_suffix`` the name is fixed (``<name><suffix>``, replacing a stale
+    one); otherwise a fresh random name is taken.
+    """
+    if temp_suffix is not None:
+        tmp = target.with_name(target.name + temp_suffix)
+        flags = (_FLAGS & ~os.O_EXCL) | os.O_TRUNC
+        return os.open(tmp, flags, 0o666), tmp
     for _ in range(100):
         tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp")
         try:
@@ -60,7 +96,8 @@ def _create_temporary(target: Path) -> tuple[int, Path]:
     raise FileExistsError(errno.EEXIST, "no free temporary file name", str(target.parent))
 
 
-def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object]) -> Path:
+def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object], *,
+                 follow_symlinks: bool = True, temp_suffix: str | None = None) -> Path:
     """Write a file atomically, with the permissions the umask allows.
 
     Args:
@@ -68,22 +105,28 @@ def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object]) -
             followed and the file it points to is replaced.
         data: The content, or a function that writes it to the binary file object
             it is given (e.g. ``lambda fh: np.save(fh, array)``).
+        follow_symlinks: Write through a symbolic link (default); ``False``
+            replaces the link itself by a regular file.
+        temp_suffix: Write to the fixed name ``<name><temp_suffix>`` instead of
+            a random one, so that a process killed mid-write leaves at most one
+            temporary file, which the next write reuses.
 
     Returns:
-        The path of the file written (``path`` with symbolic links followed).
+        The path of the file written (``path``, with symbolic links followed
+        unless ``follow_symlinks=False``).
 
     Raises:
         OSError: The directory is missing or read-only, the disk is full, the links
             form a loop, ...; the target is then untouched and no temporary file
             is left behind. Exceptions raised by ``data`` propagate the same way.
     """
-    target = write_target(path)
+    target = write_target(path) if follow_symlinks else Path(os.path.abspath(path))
     try:
         info = os.stat(target)
         keep_mode = stat.S_IMODE(info.st_mode) if stat.S_ISREG(info.st_mode) else None
     except FileNotFoundError:
         keep_mode = None
-    fd, tmp = _create_temporary(target)
+    fd, tmp = _create_temporary(target, temp_suffix)
     try:
         with os.fdopen(fd, "wb") as fh:
             if keep_mode is not None:
@@ -101,4 +144,5 @@ def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object]) -
         except OSError:
             pass
         raise
+    fsync_directory(target.parent)
     return target
