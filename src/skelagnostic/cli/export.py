@@ -15,10 +15,9 @@ The checkpoint is loaded like the inference verbs do
 
 from __future__ import annotations
 
-import os
 import sys
-from pathlib import Path
 
+from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = ["main"]
@@ -55,7 +54,7 @@ def main(argv: list[str]) -> int:
         return 0 if argv else 2
     try:
         from skelagnostic.cli.infer import load_from_checkpoint
-        from skelagnostic.cli.render import parse_arguments
+        from skelagnostic.cli.render import apply_threads, parse_arguments
         from skelagnostic.export import FORMATS, export_aligner
 
         words, options = parse_arguments(argv)
@@ -70,21 +69,16 @@ def main(argv: list[str]) -> int:
         if unknown:
             raise SkelagnosticError(f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
                                     "see 'skelagnostic export --help'")
-        if "threads" in options:
-            threads = options["threads"]
-            if not threads.isdigit() or int(threads) < 1:
-                raise SkelagnosticError(f"option threads={threads!r}: must be a positive integer")
-            import torch
-
-            torch.set_num_threads(int(threads))
+        apply_threads(options)
         for key in ("ckpt_path", "format"):
             if key not in options:
                 raise SkelagnosticError(f"missing option {key}=")
         fmt = options["format"]
         if fmt not in FORMATS:
             raise SkelagnosticError(f"option format={fmt!r}: use one of {', '.join(FORMATS)}")
-        ckpt = _path(options["ckpt_path"])
-        out = _path(options["out"]) if options.get("out") else ckpt.parent / f"{ckpt.stem}-{fmt}"
+        ckpt = expand_path(options["ckpt_path"])
+        out = (expand_path(options["out"]) if options.get("out")
+               else ckpt.parent / f"{ckpt.stem}-{fmt}")
         aligner = load_from_checkpoint(ckpt, options.get("model"))
         name = options.get("model") or _registered_name(aligner)
         for path in export_aligner(aligner, fmt, out, name):
@@ -93,11 +87,6 @@ def main(argv: list[str]) -> int:
         print(f"skelagnostic export: error: {error}", file=sys.stderr)
         return 2
     return 0
-
-
-def _path(text: str) -> Path:
-    """A path option with ``~`` and ``$VARS`` expanded."""
-    return Path(os.path.expandvars(os.path.expanduser(text)))
 
 
 def _registered_name(aligner: object) -> str:
