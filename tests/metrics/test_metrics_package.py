@@ -12,6 +12,10 @@ import pytest
 MODULES = [
     "skelagnostic.metrics",
     "skelagnostic.metrics.functional",
+    "skelagnostic.metrics.functional.positions",
+    "skelagnostic.metrics.functional.lafan",
+    "skelagnostic.metrics.functional.manifold",
+    "skelagnostic.metrics.functional.point_cloud",
     "skelagnostic.metrics.positions",
     "skelagnostic.metrics.lafan",
     "skelagnostic.metrics.manifold",
