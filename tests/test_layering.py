@@ -10,6 +10,7 @@ light packages are imported in a fresh interpreter to see what they really pull 
 from __future__ import annotations
 
 import ast
+import json
 import os
 import subprocess
 import sys
@@ -28,6 +29,7 @@ FRAMEWORK = REPO / "src" / "skelagnostic"
 #: but not from the third-party rules below. A new unit must be placed here.
 LAYERS: dict[str, int] = {
     "skelagnostic.errors": 0,
+    "skelagnostic.lazy": 0,
     "skelagnostic.core": 1,
     "skelagnostic.io": 2,
     "skelagnostic.baselines": 3,
@@ -275,3 +277,28 @@ def test_light_packages_import_no_framework_at_run_time(package):
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]", f"import {package} pulls in {result.stdout.strip()}"
+
+
+@pytest.mark.parametrize(
+    "plugin", ["skelagnostic_humot", "skelagnostic_pcmrl", "skelagnostic_vqpae"]
+)
+def test_method_packages_import_lazily(plugin):
+    """``import skelagnostic_<method>`` loads no submodule (no torch) until a name is used."""
+    code = (
+        "import importlib, json, sys\n"
+        f"package = importlib.import_module({plugin!r})\n"
+        "loaded = sorted(m for m in sys.modules if m.startswith(package.__name__ + '.')\n"
+        "                or m.split('.')[0] in ('torch', 'lightning'))\n"
+        "names = {n: getattr(package, n).__module__ for n in package.__all__}\n"
+        "print(json.dumps({'loaded': loaded, 'names': names, 'dir': dir(package)}))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=180, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["loaded"] == [], f"import {plugin} loads {out['loaded']}"
+    assert out["names"], f"{plugin}.__all__ is empty"
+    for name, module in out["names"].items():
+        assert module.startswith(f"{plugin}."), (name, module)
+        assert name in out["dir"]
