@@ -252,6 +252,19 @@ def test_the_scan_sees_every_kind_of_import(tmp_path):
     }
 
 
+def _python(code: str) -> subprocess.CompletedProcess[str]:
+    """Run ``code`` in a fresh interpreter that finds the modules this process finds."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=180,
+        check=False,
+    )
+
+
 @pytest.mark.parametrize("package", LIGHT)
 def test_light_packages_import_no_framework_at_run_time(package):
     if not (FRAMEWORK / package.split(".")[1]).is_dir():
@@ -261,20 +274,7 @@ def test_light_packages_import_no_framework_at_run_time(package):
         f"import sys, {package}\n"
         f"print(sorted({{m.split('.')[0] for m in sys.modules}} & {set(heavy)!r}))\n"
     )
-    env = {
-        **os.environ,
-        "PYTHONPATH": os.pathsep.join(
-            [str(REPO / "src"), *filter(None, [os.environ.get("PYTHONPATH")])]
-        ),
-    }
-    result = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=120,
-        check=False,
-    )
+    result = _python(code)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]", f"import {package} pulls in {result.stdout.strip()}"
 
@@ -292,9 +292,7 @@ def test_method_packages_import_lazily(plugin):
         "names = {n: getattr(package, n).__module__ for n in package.__all__}\n"
         "print(json.dumps({'loaded': loaded, 'names': names, 'dir': dir(package)}))\n"
     )
-    result = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=180, check=False
-    )
+    result = _python(code)
     assert result.returncode == 0, result.stderr
     out = json.loads(result.stdout)
     assert out["loaded"] == [], f"import {plugin} loads {out['loaded']}"
