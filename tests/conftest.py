@@ -1,9 +1,18 @@
-"""Shared fixtures: the real clips in ../shared/data and seeded RNGs."""
+"""Shared fixtures: the real clips in ../shared/data, an isolated window cache, method plugins.
+
+The method plugins' packages (``skelagnostic_humot``, ``skelagnostic_pcmrl``,
+``skelagnostic_vqpae``) ship in the distribution, so the tests import them like
+users do; their shared fixtures (a plugin manager per method, small network
+sizes) live here, once.
+"""
 
 from __future__ import annotations
 
+import importlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 # Tests run in 2 xdist workers on 2-core machines: one intra-op thread per worker
 # (and per subprocess, through the environment) avoids oversubscription, which
@@ -12,6 +21,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import pytest
 import torch
+
+if TYPE_CHECKING:
+    from skelagnostic.plugins import PluginManager
 
 torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 
@@ -44,3 +56,80 @@ def shared_data() -> Path:
 def lafan_clip(shared_data: Path) -> Path:
     """The short LaFAN1 clip (391 frames, 30 fps)."""
     return shared_data / "human" / "lafan1" / "Lafan1_example.bvh"
+
+
+@pytest.fixture(scope="session")
+def _session_window_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One window cache per test session (per xdist worker)."""
+    return tmp_path_factory.mktemp("window-cache")
+
+
+@pytest.fixture(autouse=True)
+def _isolated_window_cache(
+    monkeypatch: pytest.MonkeyPatch, _session_window_cache: Path
+) -> Iterator[None]:
+    """Point ``$SKELAGNOSTIC_CACHE`` at a temporary directory for every test.
+
+    Data modules built without ``cache_dir`` (and CLI runs without
+    ``data.cache_dir``, subprocesses included) would otherwise write into the
+    user's ``~/.cache/skelagnostic``. A test may still set its own.
+    """
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(_session_window_cache))
+    yield
+
+
+# --------------------------------------------------------------------------- method plugins
+
+#: A small HuMoT network for fast tests (the paper's sizes are checked separately).
+HUMOT_SMALL = {"dim": 32, "latent": 16, "blocks": 1, "heads": 4, "kernel_size": 3}
+#: A small PC-MRL stage-1 network for fast tests (the paper's sizes are checked separately).
+PCMRL_TINY = {
+    "dim": 8,
+    "stages": 2,
+    "point_heads": 2,
+    "temporal_dim": 16,
+    "temporal_layers": 1,
+    "temporal_heads": 2,
+    "num_source_points": 64,
+    "num_target_points": 128,
+}
+
+
+def method_plugin_manager(name: str) -> PluginManager:
+    """A plugin manager with the built-ins and the method plugin ``name`` (no entry points)."""
+    from skelagnostic.plugins import PluginManager
+
+    plugin = importlib.import_module(f"skelagnostic_{name}.plugin")
+    pm = PluginManager(load_entrypoints=False)
+    pm.register(plugin, name, source=f"skelagnostic-{name}")
+    return pm
+
+
+@pytest.fixture
+def humot_pm() -> PluginManager:
+    """A plugin manager with the built-ins and HuMoT."""
+    return method_plugin_manager("humot")
+
+
+@pytest.fixture
+def pcmrl_pm() -> PluginManager:
+    """A plugin manager with the built-ins and PC-MRL."""
+    return method_plugin_manager("pcmrl")
+
+
+@pytest.fixture
+def vqpae_pm() -> PluginManager:
+    """A plugin manager with the built-ins and VQ-PAE."""
+    return method_plugin_manager("vqpae")
+
+
+@pytest.fixture
+def humot_small() -> dict[str, int]:
+    """Constructor arguments of a small HuMoT network (a fresh copy per test)."""
+    return dict(HUMOT_SMALL)
+
+
+@pytest.fixture
+def pcmrl_tiny() -> dict[str, int]:
+    """Constructor arguments of a small PC-MRL stage-1 network (a fresh copy per test)."""
+    return dict(PCMRL_TINY)

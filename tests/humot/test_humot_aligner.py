@@ -7,7 +7,6 @@ from skelagnostic_humot.aligner import HumotAligner, infer_units, leg_length
 from skelagnostic_humot.data import HumotDataModule
 
 import skelagnostic as sa
-from conftest import SMALL
 from skelagnostic.data import ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 
@@ -26,9 +25,9 @@ def test_bad_hyper_parameters_are_named():
         HumotAligner(lr_min=1e-3, lr_max=1e-4)
 
 
-def test_training_lowers_the_loss_on_a_batch():
+def test_training_lowers_the_loss_on_a_batch(humot_small):
     torch.manual_seed(0)
-    model = HumotAligner(**SMALL)
+    model = HumotAligner(**humot_small)
     motion = sa.procedural.generate("biped22", "walk", seconds=2.0, fps=30)[0]
     world = motion.global_positions().float()[None, :30] / 100
     world = torch.cat([world, motion.global_positions().float()[None, 30:60] / 100])
@@ -45,9 +44,9 @@ def test_training_lowers_the_loss_on_a_batch():
     assert losses[-1] < 0.5 * losses[0]
 
 
-def test_subsampled_loss_is_finite_and_differentiable():
+def test_subsampled_loss_is_finite_and_differentiable(humot_small):
     torch.manual_seed(0)
-    model = HumotAligner(**SMALL).train()
+    model = HumotAligner(**humot_small).train()
     motion = sa.procedural.generate("biped31", "run", seconds=1.0, fps=30)[0]
     out = model.chunk_loss(motion.global_positions().float()[None, :30].expand(4, -1, -1, -1)
                            / 100, model.topology(motion.skeleton))
@@ -55,8 +54,8 @@ def test_subsampled_loss_is_finite_and_differentiable():
     out["loss"].backward()
 
 
-def test_cyclic_learning_rate(tmp_path):
-    model = HumotAligner(**SMALL, lr_period_epochs=2)
+def test_cyclic_learning_rate(tmp_path, humot_small):
+    model = HumotAligner(**humot_small, lr_period_epochs=2)
     dm = _datamodule(tmp_path)
     trainer = L.Trainer(max_epochs=4, accelerator="cpu", logger=False, enable_checkpointing=False,
                         enable_progress_bar=False, limit_val_batches=0, default_root_dir=tmp_path)
@@ -74,9 +73,9 @@ def test_cyclic_learning_rate(tmp_path):
     assert lrs[2 * per_epoch] == pytest.approx(1e-5)  # full period: 2 epochs
 
 
-def test_cyclic_learning_rate_with_max_steps(tmp_path):
+def test_cyclic_learning_rate_with_max_steps(tmp_path, humot_small):
     """``max_steps`` without ``max_epochs``: the period still counts the loader's batches."""
-    model = HumotAligner(**SMALL, lr_period_epochs=2)
+    model = HumotAligner(**humot_small, lr_period_epochs=2)
     dm = _datamodule(tmp_path, batch_size=4)
     trainer = L.Trainer(max_steps=3, accelerator="cpu", logger=False, enable_checkpointing=False,
                         enable_progress_bar=False, limit_val_batches=0, default_root_dir=tmp_path)
@@ -87,9 +86,9 @@ def test_cyclic_learning_rate_with_max_steps(tmp_path):
     assert scheduler.total_size == 2 * per_epoch  # one full period = 2 epochs of batches
 
 
-def test_save_and_load(tmp_path):
+def test_save_and_load(tmp_path, humot_small):
     torch.manual_seed(0)
-    model = HumotAligner(**SMALL)
+    model = HumotAligner(**humot_small)
     dm = _datamodule(tmp_path)
     trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, enable_progress_bar=False,
                         limit_train_batches=1, limit_val_batches=1, default_root_dir=tmp_path)
@@ -128,10 +127,11 @@ def test_leg_length():
     ("cmu/131_01.bvh", "lafan1/Lafan1_example.bvh", 120),  # 1 s at 120 fps, CMU units -> cm
     ("lafan1/Lafan1_example.bvh", "xia_cmu/angry_13_000.bvh", 30),  # 1 s at 30 fps, cm -> CMU
 ])
-def test_retarget_between_real_skeletons(shared_data, tmp_path, source, target, frames):
+def test_retarget_between_real_skeletons(shared_data, tmp_path, source, target, frames,
+                                         humot_small):
     """``retarget(motion, skeleton)`` alone (what ``skelagnostic retarget`` calls) on real rigs."""
     torch.manual_seed(0)
-    model = HumotAligner(**SMALL).eval()
+    model = HumotAligner(**humot_small).eval()
     src = sa.read_bvh(shared_data / "human" / source)[:frames]
     dst = sa.read_bvh(shared_data / "human" / target).skeleton
     out = model.retarget(src, dst)
@@ -150,9 +150,9 @@ def test_retarget_between_real_skeletons(shared_data, tmp_path, source, target, 
                           atol=1e-2)
 
 
-def test_retarget_scales_the_trajectory_by_leg_length(monkeypatch):
+def test_retarget_scales_the_trajectory_by_leg_length(monkeypatch, humot_small):
     torch.manual_seed(0)
-    model = HumotAligner(**SMALL).eval()
+    model = HumotAligner(**humot_small).eval()
     motion = sa.procedural.generate("biped22", "walk", seconds=2.0)[0]
     latent = model.encode(motion, units="cm")
     # a decoder that outputs centred zeros leaves only the (scaled) chunk centres
@@ -172,8 +172,8 @@ def test_retarget_scales_the_trajectory_by_leg_length(monkeypatch):
                           atol=1e-4)
 
 
-def test_upsample_joints_rejects_foreign_joints():
-    model = HumotAligner(**SMALL).eval()
+def test_upsample_joints_rejects_foreign_joints(humot_small):
+    model = HumotAligner(**humot_small).eval()
     motion = sa.procedural.generate("biped17", "walk", seconds=0.5)[0]
     other = sa.procedural.generate("biped22", "walk", seconds=0.5)[0].skeleton
     with pytest.raises(SkelagnosticError, match="not in the full skeleton"):

@@ -6,17 +6,16 @@ from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.evaluate import chunks_of, reconstruction
 
 import skelagnostic as sa
-from conftest import SMALL
 
 
-def test_reconstruction_baselines_on_a_rigidly_translated_pose():
+def test_reconstruction_baselines_on_a_rigidly_translated_pose(humot_small):
     """A frozen pose sliding at constant speed: only the trajectory baseline is exact."""
     motion = sa.procedural.generate("biped22", "walk", seconds=1.0, fps=30)[0]
     pose = motion.global_positions().float()[:1] / 100  # [1, J, 3] metres
     shift = torch.zeros(30, 1, 3)
     shift[:, 0, 2] = torch.linspace(0, 0.9, 30)  # 0.9 m forward along Z (the skeleton's facing)
     chunks = (pose + shift)[None]
-    model = HumotAligner(**SMALL).eval()
+    model = HumotAligner(**humot_small).eval()
     out = reconstruction(model, chunks, model.topology(motion.skeleton), "y")
     assert out["mean_pose_on_trajectory_cm"] < 1e-4
     expected = 100 * (shift[:, 0, 2] - shift[:, 0, 2].mean()).abs().mean()
@@ -82,11 +81,11 @@ def test_motion_error_of_a_translation():
     assert err["root_aligned_mpjpe"] < 1e-6
 
 
-def test_retargeting_procedural_uses_paired_ground_truth():
+def test_retargeting_procedural_uses_paired_ground_truth(humot_small):
     from skelagnostic_humot.evaluate import retargeting_procedural
 
     torch.manual_seed(0)
-    model = HumotAligner(**SMALL).eval()
+    model = HumotAligner(**humot_small).eval()
     out = retargeting_procedural(model, kinds=("biped22", "biped17"), gaits=("walk",),
                                  clips_per_gait=1, seconds=1.0)
     assert set(out) == {"biped22->biped17", "biped17->biped22", "mean"}
@@ -100,10 +99,10 @@ def test_retargeting_procedural_uses_paired_ground_truth():
                        + out["biped17->biped22"]["humot_mpjpe"]) / 2) < 1e-9
 
 
-def test_upsampling_curve_counts_removed_joints():
+def test_upsampling_curve_counts_removed_joints(humot_small):
     from skelagnostic_humot.evaluate import upsampling_curve
 
-    model = HumotAligner(**SMALL).eval()
+    model = HumotAligner(**humot_small).eval()
     motion = sa.procedural.generate("biped22", "walk", seconds=2.0, fps=30)[0]
     chunks = chunks_of(motion)
     out = upsampling_curve(model, chunks, model.topology(motion.skeleton),
@@ -112,11 +111,11 @@ def test_upsampling_curve_counts_removed_joints():
     assert len(out["mpjpe_cm"]) == 3 and all(e > 0 for e in out["mpjpe_cm"])
 
 
-def test_evaluate_cli_writes_json_and_plots(tmp_path):
+def test_evaluate_cli_writes_json_and_plots(tmp_path, humot_small):
     from skelagnostic_humot.evaluate import main
 
     torch.manual_seed(0)
-    ckpt = _checkpoint(HumotAligner(**SMALL), tmp_path / "model.ckpt")
+    ckpt = _checkpoint(HumotAligner(**humot_small), tmp_path / "model.ckpt")
     a = sa.procedural.generate("biped31", "walk", seconds=2.0, fps=30, seed=7)[0]
     b = sa.procedural.generate("biped17", "run", seconds=1.5, fps=60, seed=8)[0]
     sa.write_bvh(a, tmp_path / "a.bvh")

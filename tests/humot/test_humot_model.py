@@ -7,7 +7,6 @@ from skelagnostic_humot.model import (
     temporal_positional_encoding,
 )
 
-from conftest import SMALL
 from skelagnostic.metrics.functional import bone_length_consistency
 
 PAPER_PARAMETERS = 2_475_511
@@ -19,16 +18,16 @@ def test_parameter_count_matches_the_paper_within_ten_percent():
 
 
 @pytest.mark.parametrize(("src", "dst"), [(22, 31), (31, 17), (17, 17)])
-def test_shapes_with_different_joint_counts(src, dst):
-    net = HuMoT(**SMALL)
+def test_shapes_with_different_joint_counts(src, dst, humot_small):
+    net = HuMoT(**humot_small)
     z = net.encoder(torch.randn(2, 30, src, 3), torch.randn(2, src, 3))
-    assert z.shape == (2, 30, SMALL["latent"])
+    assert z.shape == (2, 30, humot_small["latent"])
     assert net.decoder(z, torch.randn(2, dst, 3)).shape == (2, 30, dst, 3)
 
 
-def test_latent_is_independent_of_padding():
+def test_latent_is_independent_of_padding(humot_small):
     torch.manual_seed(0)
-    net = HuMoT(**SMALL).eval()
+    net = HuMoT(**humot_small).eval()
     x, t = torch.randn(1, 12, 5, 3), torch.randn(1, 5, 3)
     xp = torch.cat([x, torch.randn(1, 12, 2, 3)], dim=2)
     tp = torch.cat([t, torch.randn(1, 2, 3)], dim=1)
@@ -40,16 +39,16 @@ def test_latent_is_independent_of_padding():
     assert out[:, :, 5:].abs().max() == 0
 
 
-def test_mask_must_put_valid_joints_first():
-    net = HuMoT(**SMALL)
+def test_mask_must_put_valid_joints_first(humot_small):
+    net = HuMoT(**humot_small)
     with pytest.raises(ValueError, match="first"):
         net.encoder(torch.randn(1, 4, 3, 3), torch.randn(1, 3, 3), torch.tensor([[1, 0, 1]]))
 
 
-def test_joint_order_matters_only_through_local_interaction():
+def test_joint_order_matters_only_through_local_interaction(humot_small):
     """XCA and the joint-wise layers are order-free; the LPI convs see joint neighbours."""
     torch.manual_seed(0)
-    net = HuMoT(**SMALL).eval()
+    net = HuMoT(**humot_small).eval()
     x, t = torch.randn(1, 10, 6, 3), torch.randn(1, 6, 3)
     perm = torch.tensor([5, 4, 3, 2, 1, 0])
     z = net.encoder(x, t)
@@ -62,9 +61,9 @@ def test_joint_order_matters_only_through_local_interaction():
     assert torch.allclose(net.decoder(z, t[:, perm]), out[:, :, perm], atol=1e-5)
 
 
-def test_gradients_reach_every_parameter():
+def test_gradients_reach_every_parameter(humot_small):
     torch.manual_seed(0)
-    net = HuMoT(**SMALL)
+    net = HuMoT(**humot_small)
     x, t = torch.randn(2, 8, 5, 3), torch.randn(2, 5, 3)
     mask = torch.tensor([[True] * 5, [True] * 3 + [False] * 2])
     pred = net(x, t, t[:, :4], mask, torch.tensor([[True] * 4, [True] * 2 + [False] * 2]))

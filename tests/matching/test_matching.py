@@ -1,6 +1,4 @@
 import math
-import subprocess
-import sys
 
 import pytest
 import torch
@@ -178,14 +176,3 @@ class TestBadInput:
             frequency_scaled_motion_matching(db, query, frequency="hz")
         with pytest.raises(MatchingError, match="no candidate window"):
             motion_matching(db, query, 500)
-
-
-def test_import_pulls_no_framework():
-    code = (
-        "import sys, skelagnostic.matching; "
-        "names = ('lightning', 'pytorch_lightning', 'hydra', 'pluggy'); "
-        "bad = [m for m in names if m in sys.modules]; "
-        "print(bad)"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"

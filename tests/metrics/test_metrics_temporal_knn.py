@@ -84,13 +84,13 @@ def test_identical_clouds_score_zero_and_gradient():
 
 
 def test_chunked_time_accumulation(monkeypatch):
-    from skelagnostic.metrics import functional
+    from skelagnostic.metrics.functional import point_cloud
 
     gen = torch.Generator().manual_seed(3)
     target = torch.randn(2, 7, 6, 3, generator=gen, dtype=torch.float64)
     preds = torch.randn(2, 7, 5, 3, generator=gen, dtype=torch.float64)
     whole = temporal_knn_distance(preds, target, k=2)
-    monkeypatch.setattr(functional, "_KNN_CHUNK_ELEMENTS", 1)  # one frame at a time
+    monkeypatch.setattr(point_cloud, "_KNN_CHUNK_ELEMENTS", 1)  # one frame at a time
     assert temporal_knn_distance(preds, target, k=2).item() == pytest.approx(whole.item())
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from skelagnostic.plugins import PluginManager
 from skelagnostic.testing import AlignerContract, ContractRun
 
-#: The tiny stage-1 network of conftest.TINY (``from conftest import`` is ambiguous across dirs).
+#: PCMRL_TINY of tests/conftest.py as overrides (class attributes cannot take fixtures).
 TINY = {"dim": 8, "stages": 2, "point_heads": 2, "temporal_dim": 16, "temporal_layers": 1,
         "temporal_heads": 2, "num_source_points": 64, "num_target_points": 128}
 

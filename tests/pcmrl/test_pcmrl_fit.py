@@ -8,7 +8,6 @@ from pathlib import Path
 import torch
 from skelagnostic_pcmrl.recon import PcmrlReconstruction
 
-from conftest import TINY
 from skelagnostic import procedural
 from skelagnostic.cli import app
 
@@ -16,8 +15,7 @@ REPO = Path(__file__).resolve().parents[2]
 FAST = ["threads=1", "data.kinds=[biped22]", "data.gaits=[walk]", "data.clips_per_gait=2",
         "data.seconds=1.5", "data.window=12", "data.stride=12", "data.batch_size=2",
         "data.val_fraction=0.5", "trainer.max_epochs=1", "trainer.limit_train_batches=2",
-        "trainer.limit_val_batches=1", "trainer.enable_model_summary=false", "logger=csv",
-        *(f"model.{k}={v}" for k, v in TINY.items())]
+        "trainer.limit_val_batches=1", "trainer.enable_model_summary=false", "logger=csv"]
 
 
 def test_default_config_is_registered(pcmrl_pm, tmp_path) -> None:
@@ -38,9 +36,11 @@ def test_default_config_is_registered(pcmrl_pm, tmp_path) -> None:
     assert bvh.data.target == "biped31" and bvh.data.source == "bvh"
 
 
-def test_tiny_fit_writes_a_checkpoint_that_reloads(pcmrl_pm, tmp_path) -> None:
+def test_tiny_fit_writes_a_checkpoint_that_reloads(pcmrl_pm, pcmrl_tiny, tmp_path) -> None:
+    tiny = [f"model.{k}={v}" for k, v in pcmrl_tiny.items()]
     cfg = app.compose(["model=pcmrl", f"run_dir={tmp_path}",
-                       f"data.cache_dir={tmp_path / 'cache'}", *FAST], plugin_manager=pcmrl_pm)
+                       f"data.cache_dir={tmp_path / 'cache'}", *FAST, *tiny],
+                      plugin_manager=pcmrl_pm)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         metrics = app.run(cfg, plugin_manager=pcmrl_pm)

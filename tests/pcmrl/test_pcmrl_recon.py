@@ -9,17 +9,16 @@ from skelagnostic_pcmrl.points import ZeroLengthBoneWarning, sample_layout
 from skelagnostic_pcmrl.recon import PcmrlReconstruction, end_effector_pairs
 
 import skelagnostic as sa
-from conftest import TINY
 from skelagnostic import procedural
 from skelagnostic.core import quaternion as Q
 from skelagnostic.errors import SkelagnosticError
 
 
 @pytest.fixture
-def model() -> PcmrlReconstruction:
+def model(pcmrl_tiny) -> PcmrlReconstruction:
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning, match="LHipJoint, RHipJoint, LowerBack"):
-        return PcmrlReconstruction(target="biped31", chunk=16, **TINY).eval()
+        return PcmrlReconstruction(target="biped31", chunk=16, **pcmrl_tiny).eval()
 
 
 def test_paper_sized_encoder_pools_256_points_to_one_1024_vector() -> None:
@@ -136,10 +135,10 @@ def test_reconstruction_outputs_unit_quaternions_and_consistent_positions(model)
     assert cos > 0.9  # 64 points, limbs mid-swing: within ~25 degrees
 
 
-def test_without_canonical_yaw_the_untrained_network_stands_in_the_rest_pose() -> None:
+def test_without_canonical_yaw_the_untrained_network_stands_in_the_rest_pose(pcmrl_tiny) -> None:
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning):
-        model = PcmrlReconstruction(target="biped31", canonical_yaw=False, **TINY).eval()
+        model = PcmrlReconstruction(target="biped31", canonical_yaw=False, **pcmrl_tiny).eval()
     motion = procedural.generate("biped22", "walk", seconds=0.5)[0].convert_units("m")
     layout = sample_layout(motion.skeleton, 64, 0.05, batch=(1,))
     pts = layout.points(motion.global_rotations().float()[None],
@@ -150,7 +149,7 @@ def test_without_canonical_yaw_the_untrained_network_stands_in_the_rest_pose() -
     assert torch.allclose(centred, rest - rest[0], atol=0.1)
 
 
-def test_canonical_yaw_makes_the_reconstruction_heading_equivariant(model) -> None:
+def test_canonical_yaw_makes_the_reconstruction_heading_equivariant(model, pcmrl_tiny) -> None:
     """Turning the source about the up axis turns the reconstruction by the same angle."""
     motion = procedural.generate("biped22", "walk", seconds=1.0)[0].convert_units("m")
     angle = torch.tensor(1.1)
@@ -166,14 +165,16 @@ def test_canonical_yaw_makes_the_reconstruction_heading_equivariant(model) -> No
     # without it the untrained network is not equivariant
     with pytest.warns(ZeroLengthBoneWarning):
         plain = PcmrlReconstruction(target="biped31", canonical_yaw=False, chunk=16,
-                                    **TINY).eval()
+                                    **pcmrl_tiny).eval()
     plain.load_state_dict(model.state_dict())
     a = plain.retarget(motion, model.target_skeleton).global_positions().float()
     b = plain.retarget(turned, model.target_skeleton).global_positions().float()
     assert not torch.allclose(b, Q.rotate(turn, a), atol=1e-2)
 
 
-def test_centre_up_makes_the_reconstruction_independent_of_the_floor_height(model) -> None:
+def test_centre_up_makes_the_reconstruction_independent_of_the_floor_height(
+    model, pcmrl_tiny
+) -> None:
     """Raising the source by 0.7 m raises the reconstruction by 0.7 m and changes nothing else."""
     motion = procedural.generate("biped22", "walk", seconds=1.0)[0].convert_units("m")
     lift = torch.tensor([0.0, 0.7, 0.0])
@@ -190,7 +191,8 @@ def test_centre_up_makes_the_reconstruction_independent_of_the_floor_height(mode
     assert torch.allclose(zb.extras["centre"], za.extras["centre"] + lift, atol=1e-4)
     # without it the encoder sees another cloud
     with pytest.warns(ZeroLengthBoneWarning):
-        plain = PcmrlReconstruction(target="biped31", centre_up=False, chunk=16, **TINY).eval()
+        plain = PcmrlReconstruction(target="biped31", centre_up=False, chunk=16,
+                                    **pcmrl_tiny).eval()
     plain.load_state_dict(model.state_dict())
     za, zb = plain.encode(motion), plain.encode(raised)
     assert not torch.allclose(za.z, zb.z, atol=1e-2)
@@ -233,12 +235,12 @@ def test_retarget_returns_a_valid_motion_on_the_target(model, tmp_path) -> None:
                           atol=1e-3)
 
 
-def test_retarget_between_real_skeletons(lafan_clip, shared_data) -> None:
+def test_retarget_between_real_skeletons(lafan_clip, shared_data, pcmrl_tiny) -> None:
     cmu = shared_data / "human" / "cmu" / "131_01.bvh"
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning, match="lowerback"):
         model = PcmrlReconstruction(target=str(cmu), target_units="cmu", chunk=16,
-                                    **TINY).eval()
+                                    **pcmrl_tiny).eval()
     source = sa.read_bvh(lafan_clip)[:40]
     target = sa.read_bvh(cmu).skeleton
     result = model.retarget(source, target)
@@ -253,14 +255,14 @@ def test_retarget_between_real_skeletons(lafan_clip, shared_data) -> None:
         "spine", "left_arm", "right_arm", "left_leg", "right_leg"}
 
 
-def test_wrong_target_and_stage_are_clear_errors(model) -> None:
+def test_wrong_target_and_stage_are_clear_errors(model, pcmrl_tiny) -> None:
     latent = model.encode(procedural.generate("biped22", "walk", seconds=0.5)[0])
     with pytest.raises(SkelagnosticError, match="trained target"):
         model.decode(latent, procedural.skeleton("biped17"))
     with pytest.raises(SkelagnosticError, match="pcmrl_interp"):
         PcmrlReconstruction(stage="interpolation")
     with pytest.raises(SkelagnosticError, match="no target skeleton"):
-        PcmrlReconstruction(**TINY).heads(torch.zeros(1, 2, 32))
+        PcmrlReconstruction(**pcmrl_tiny).heads(torch.zeros(1, 2, 32))
 
 
 def test_a_few_steps_reduce_the_knn_loss(model) -> None:

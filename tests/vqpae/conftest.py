@@ -1,8 +1,10 @@
-"""Make the in-repo ``skelagnostic_vqpae`` importable; plugin manager and a trained model."""
+"""VQ-PAE fixtures: a window cache, small data/trainer helpers and a trained model.
+
+The plugin manager (``vqpae_pm``) is shared with the other methods in tests/conftest.py.
+"""
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -10,24 +12,8 @@ from typing import Any
 import lightning as L
 import pytest
 
-PLUGIN_SRC = Path(__file__).resolve().parents[2] / "plugins" / "vqpae" / "src"
-if str(PLUGIN_SRC) not in sys.path:
-    sys.path.insert(0, str(PLUGIN_SRC))
-
 #: Frame rate of the small test datasets (windows of FPS + 1 frames).
 FPS = 20
-
-
-@pytest.fixture
-def vqpae_pm():
-    """A plugin manager with the built-ins and the vqpae plugin registered explicitly."""
-    from skelagnostic_vqpae import plugin
-
-    from skelagnostic.plugins import PluginManager
-
-    pm = PluginManager(load_entrypoints=False)
-    pm.register(plugin, "vqpae", source="tests")
-    return pm
 
 
 @pytest.fixture

@@ -9,11 +9,11 @@ from torch import Tensor
 from torchmetrics import Metric
 
 from skelagnostic.metrics._checks import check_choice, fail
-from skelagnostic.metrics.functional import (
+from skelagnostic.metrics.functional._utils import _mean_compute
+from skelagnostic.metrics.functional.lafan import (
     NPSS_POWERS,
     _l2p_update,
     _l2q_update,
-    _mean_compute,
     _npss_update,
 )
 from skelagnostic.metrics.positions import _SumCountMetric

@@ -10,7 +10,10 @@ from torch import Tensor
 from torchmetrics import Metric
 
 from skelagnostic.metrics._checks import check_positive_int, fail
-from skelagnostic.metrics.functional import _manifold_overlap_compute, _manifold_overlap_update
+from skelagnostic.metrics.functional.manifold import (
+    _manifold_overlap_compute,
+    _manifold_overlap_update,
+)
 
 __all__ = ["ManifoldOverlap"]
 

@@ -8,7 +8,8 @@ from typing import Any
 from torch import Tensor
 
 from skelagnostic.metrics._checks import check_choice, check_positive_int
-from skelagnostic.metrics.functional import REDUCTIONS, _temporal_knn_update
+from skelagnostic.metrics.functional._utils import REDUCTIONS
+from skelagnostic.metrics.functional.point_cloud import _temporal_knn_update
 from skelagnostic.metrics.positions import _SumCountMetric
 
 __all__ = ["TemporalKNNDistance"]

@@ -15,12 +15,11 @@ from skelagnostic.metrics._checks import (
     check_indices,
     fail,
 )
-from skelagnostic.metrics.functional import (
+from skelagnostic.metrics.functional._utils import REDUCTIONS, _mean_compute
+from skelagnostic.metrics.functional.positions import (
     MPJPE_MODES,
-    REDUCTIONS,
     _bone_length_consistency_update,
     _end_effector_update,
-    _mean_compute,
     _mpjpe_update,
 )
 

@@ -7,11 +7,29 @@ Registered as ``model=humot`` through the ``skelagnostic`` entry-point group
 :mod:`~skelagnostic_humot.data` (chunks, joint subsampling, data module),
 :mod:`~skelagnostic_humot.aligner` (training and inference),
 :mod:`~skelagnostic_humot.evaluate` (paper evaluations).
+Imports are lazy: ``import skelagnostic_humot`` loads no model code until one of
+the names below is used.
 """
 
-from skelagnostic_humot.aligner import HumotAligner
-from skelagnostic_humot.data import HumotDataModule
-from skelagnostic_humot.model import HuMoT
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from skelagnostic.lazy import lazy_exports
 
 __all__ = ["HuMoT", "HumotAligner", "HumotDataModule"]
 __version__ = "0.1.0"
+
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "HuMoT": "skelagnostic_humot.model",
+        "HumotAligner": "skelagnostic_humot.aligner",
+        "HumotDataModule": "skelagnostic_humot.data",
+    },
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from skelagnostic_humot.aligner import HumotAligner
+    from skelagnostic_humot.data import HumotDataModule
+    from skelagnostic_humot.model import HuMoT

@@ -15,19 +15,21 @@ Imports are lazy: ``import skelagnostic_pcmrl`` loads no model code.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
+
+from skelagnostic.lazy import lazy_exports
 
 __all__ = ["PcmrlReconDataModule", "PcmrlReconstruction"]
 __version__ = "0.1.0"
 
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "PcmrlReconDataModule": "skelagnostic_pcmrl.recon_data",
+        "PcmrlReconstruction": "skelagnostic_pcmrl.recon",
+    },
+)
 
-def __getattr__(name: str) -> Any:
-    if name == "PcmrlReconstruction":
-        from skelagnostic_pcmrl.recon import PcmrlReconstruction
-
-        return PcmrlReconstruction
-    if name == "PcmrlReconDataModule":
-        from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
-
-        return PcmrlReconDataModule
-    raise AttributeError(f"module 'skelagnostic_pcmrl' has no attribute {name!r}")
+if TYPE_CHECKING:  # pragma: no cover
+    from skelagnostic_pcmrl.recon import PcmrlReconstruction
+    from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule

@@ -1,3 +1,33 @@
-"""VQ-PAE (WalkTheDog, Li et al. 2024): a phase manifold shared by characters of any skeleton."""
+"""VQ-PAE (WalkTheDog, Li et al. 2024): a phase manifold shared by characters of any skeleton.
 
+Registered as ``model=vqpae`` through the ``skelagnostic`` entry-point group
+(:mod:`skelagnostic_vqpae.plugin`). Modules: :mod:`~skelagnostic_vqpae.model`
+(the periodic autoencoder), :mod:`~skelagnostic_vqpae.codebook` (the shared
+codebook), :mod:`~skelagnostic_vqpae.data` (frame windows, data module),
+:mod:`~skelagnostic_vqpae.aligner` (training and inference),
+:mod:`~skelagnostic_vqpae.embed` (clip embeddings, retrieval) and
+:mod:`~skelagnostic_vqpae.transfer` (frequency-scaled motion matching).
+Imports are lazy: ``import skelagnostic_vqpae`` loads no model code until one of
+the names below is used.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from skelagnostic.lazy import lazy_exports
+
+__all__ = ["VQPAEAligner", "VQPAEDataModule"]
 __version__ = "0.1.0"
+
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "VQPAEAligner": "skelagnostic_vqpae.aligner",
+        "VQPAEDataModule": "skelagnostic_vqpae.data",
+    },
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from skelagnostic_vqpae.aligner import VQPAEAligner
+    from skelagnostic_vqpae.data import VQPAEDataModule
