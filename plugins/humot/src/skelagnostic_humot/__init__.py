@@ -9,9 +9,11 @@ Registered as ``model=humot`` through the ``skelagnostic`` entry-point group
 :mod:`~skelagnostic_humot.evaluate` (paper evaluations).
 """
 
+from skelagnostic.version import distribution_version
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.data import HumotDataModule
 from skelagnostic_humot.model import HuMoT
 
 __all__ = ["HuMoT", "HumotAligner", "HumotDataModule"]
-__version__ = "0.1.0"
+#: Version of the distribution that ships this plugin (built-in: skelagnostic's).
+__version__ = distribution_version("skelagnostic")

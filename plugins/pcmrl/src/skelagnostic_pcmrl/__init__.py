@@ -17,8 +17,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from skelagnostic.version import distribution_version
+
 __all__ = ["PcmrlReconDataModule", "PcmrlReconstruction"]
-__version__ = "0.1.0"
+#: Version of the distribution that ships this plugin (built-in: skelagnostic's).
+__version__ = distribution_version("skelagnostic")
 
 
 def __getattr__(name: str) -> Any:
