@@ -1,9 +1,10 @@
 """``skelagnostic fit|validate|test|predict``: a pure :func:`run` under a thin Hydra wrapper.
 
-The config tree ships inside the package (``pkg://skelagnostic.conf``), so an
-installed ``skelagnostic`` works from any directory. Each registered aligner's
-default config becomes ``model/<name>`` in Hydra's ConfigStore, and plugin
-config paths are added to Hydra's search path. The command is re-entrant from
+The config tree (the repository's ``conf/``) is installed as the package
+``skelagnostic.conf``, so an installed ``skelagnostic`` works from any directory.
+Plugin config paths, which hold each aligner's ``model/<name>.yaml``, are added to
+Hydra's search path; :func:`register_model_configs` stores the rest of each aligner's
+configuration in Hydra's ConfigStore. The command is re-entrant from
 ``sys.argv`` alone, which Lightning's DDP launcher relies on: it re-executes
 the same command line (plus ``hydra.run.dir=...``) for every extra rank.
 """
