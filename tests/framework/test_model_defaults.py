@@ -138,3 +138,20 @@ def test_a_target_naming_another_class_is_refused(pm: PluginManager) -> None:
     other.register(Plugin(), "wrong")
     with pytest.warns(plugins_api.PluginLoadWarning, match="does not name the registered module"):
         assert "wrong" not in other.aligners
+
+
+def test_plugin_experiments_are_named_after_their_method(pm: PluginManager) -> None:
+    experiments = {
+        info.name: [p.split(":", 1)[1] for p in info.provides if p.startswith("experiment:")]
+        for info in pm.plugins()
+    }
+    assert experiments["skelagnostic"] == ["smoke"]  # the framework's own, for any model
+    shipped = {name: names for name, names in experiments.items() if name != "skelagnostic"}
+    assert all(shipped[name] for name in PLUGINS)
+    wrong = [
+        (plugin, n)
+        for plugin, names in shipped.items()
+        for n in names
+        if not n.startswith(f"{plugin}_")
+    ]
+    assert wrong == []

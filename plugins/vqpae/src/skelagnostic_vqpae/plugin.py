@@ -59,5 +59,5 @@ def register_datasets(register: Callable[..., Any]) -> None:
 
 @hookimpl
 def register_config_paths(register: Callable[..., Any]) -> None:
-    """Ship ``experiment=human_dog`` and ``experiment=stylized``."""
+    """Ship ``experiment=vqpae_human_dog`` and ``experiment=vqpae_stylized``."""
     register(f"pkg://{CONFIG_PACKAGE}")
