@@ -155,3 +155,26 @@ def test_plugin_experiments_are_named_after_their_method(pm: PluginManager) -> N
         if not n.startswith(f"{plugin}_")
     ]
     assert wrong == []
+
+
+def test_a_checkpoint_keeps_its_own_hyperparameters(
+    pm: PluginManager, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A checkpoint trained with the former CPU defaults of PC-MRL still loads as trained."""
+    import lightning as L
+
+    monkeypatch.setattr(plugins_api, "get_plugin_manager", lambda: pm)
+    old = {"dim": 16, "temporal_dim": 128, "lr": 1e-3, "target": "biped31"}  # before the YAML
+    trained = pm.aligner("pcmrl").module(**old)
+    path = tmp_path / "old.ckpt"
+    checkpoint = {
+        "state_dict": trained.state_dict(),
+        "hyper_parameters": dict(trained.hparams),
+        "pytorch-lightning_version": L.__version__,
+    }
+    trained.on_save_checkpoint(checkpoint)  # what Lightning adds (PC-MRL: the target skeleton)
+    torch.save(checkpoint, path)
+    loaded = plugins_api.load_aligner("pcmrl", checkpoint=path)
+    assert (loaded.hparams.dim, loaded.hparams.temporal_dim, loaded.hparams.lr) == (16, 128, 1e-3)
+    for key, value in trained.state_dict().items():
+        assert torch.equal(loaded.state_dict()[key], value)
