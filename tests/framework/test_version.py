@@ -17,8 +17,8 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def test_package_version_is_the_distribution_version() -> None:
-    assert skelagnostic.__version__ == metadata.version("skelagnostic")
     assert "__version__" in dir(skelagnostic)
+    assert skelagnostic.__version__ == metadata.version("skelagnostic")
 
 
 def test_no_source_file_spells_the_version() -> None:
