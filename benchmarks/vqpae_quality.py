@@ -16,7 +16,7 @@ and the R^2 of a line fitted to the unwrapped phase over time (pass: >= 0.98).
 
 ``human_dog``: trains on LaFAN1 + MANN dog from ``$SKELAGNOSTIC_TEST_DATA`` (else
 ``../shared/data``), K = 32, 60 fps, batch 32 per dataset, with the objective of
-``experiment=human_dog`` (no phase-rate loss unless ``--lambda-phase-rate``), and
+``experiment=vqpae_human_dog`` (no phase-rate loss unless ``--lambda-phase-rate``), and
 reports codebook usage and manifold overlap (paper Table 2) of the per-frame
 embeddings of every clip; run it with ``--no-reinit`` for the ablation. Prints a
 JSON summary. ``sweep`` trains like ``human_dog`` once per codebook size.
@@ -180,7 +180,7 @@ def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
     """Codebook usage and manifold overlap of the per-frame embeddings (Table 2)."""
     L.seed_everything(0, verbose=False)
     dm = _human_dog_module(human_files)
-    options = {"lambda_phase_rate": 0.0, **options}  # experiment=human_dog's objective
+    options = {"lambda_phase_rate": 0.0, **options}  # experiment=vqpae_human_dog's objective
     model = VQPAEAligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
                          restart_period=10_000, **options)
     curve = [OverlapCurve(eval_every, num_codes, human_files)] if eval_every else []
@@ -212,7 +212,7 @@ def check_sweep(codes: list[int], steps: int, lr: float, options: dict[str, Any]
                 human_files: list[str] | None = None) -> dict[str, object]:
     """Tables 1-2 shape: overlap and pose MPJPE for every codebook size in ``codes``."""
     rows = []
-    options = {"lambda_phase_rate": 0.0, **options}  # experiment=human_dog's objective
+    options = {"lambda_phase_rate": 0.0, **options}  # experiment=vqpae_human_dog's objective
     for num_codes in codes:
         L.seed_everything(0, verbose=False)
         dm = _human_dog_module(human_files)
@@ -261,7 +261,7 @@ def main() -> None:
                         help="model.lambda_phase_rate (0: the paper, frequency trained by "
                              "the reconstruction only; default: the model's 1 for "
                              "procedural, 0 for human_dog and sweep like "
-                             "experiment=human_dog)")
+                             "experiment=vqpae_human_dog)")
     parser.add_argument("--eval-seeds", type=int, nargs="+", default=[1000, 1001, 1002],
                         help="procedural: seeds of the held-out clips (one clip per gait each)")
     parser.add_argument("--clips-per-gait", type=int, default=4,

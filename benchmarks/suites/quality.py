@@ -31,7 +31,7 @@ reports, each next to a baseline measured in the same run:
   protocol (temporal KNN distance, 1024 points, K = 8, x100 in metres) at
   sigma 0 and 0.05 on held-out procedural biped22 walk and run clips retargeted
   onto the biped31 skeleton, unpaired (``skelagnostic_pcmrl.evaluate``), for
-  the registered CPU default ``model=pcmrl``, against the naive joint-name
+  the CPU-sized network ``experiment=pcmrl_cpu``, against the naive joint-name
   copy; the floor (a second cloud drawn on the source motion) is reported too.
   The LaFAN1 -> CMU setting of the paper is in docs/methods/pcmrl.md (20 CPU
   minutes of training, too long for this suite).
@@ -175,7 +175,7 @@ def pcmrl_interp(steps: int) -> dict[str, Any]:
 
 
 def pcmrl_recon(steps: int) -> dict[str, Any]:
-    """Train the default ``model=pcmrl`` for ``steps`` steps; Table 2 on held-out clips."""
+    """Train ``experiment=pcmrl_cpu`` for ``steps`` steps; Table 2 on held-out clips."""
     _one_thread()
     _plugin("pcmrl")
     from skelagnostic_pcmrl.evaluate import evaluate_clips
@@ -183,7 +183,7 @@ def pcmrl_recon(steps: int) -> dict[str, Any]:
 
     from skelagnostic import procedural
 
-    model = _fit_pcmrl(["model=pcmrl"], steps, PcmrlReconstruction)
+    model = _fit_pcmrl(["experiment=pcmrl_cpu"], steps, PcmrlReconstruction)
     clips = [procedural.generate("biped22", gait, seconds=4.0, seed=100 + i)[0]
              for i, gait in enumerate(["walk", "run"])]
     return evaluate_clips(clips, procedural.skeleton("biped31"), model, sigmas=(0.0, 0.05))

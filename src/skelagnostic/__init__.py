@@ -6,14 +6,16 @@ stays fast and pulls in torch only when a core name is first used::
     import skelagnostic as sa
     motion = sa.read_bvh("walk.bvh")
     positions = motion.global_positions()
+
+``skelagnostic.__version__`` is the installed distribution's version
+(:func:`skelagnostic.version.distribution_version`), read on first access; from
+sources that are not installed it is ``"0+unknown"``.
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING, Any
-
-__version__ = "0.1.0.dev0"
 
 _LAZY: dict[str, tuple[str, str | None]] = {
     "Skeleton": ("skelagnostic.core.skeleton", "Skeleton"),
@@ -65,8 +67,15 @@ if TYPE_CHECKING:  # pragma: no cover
     from skelagnostic.io.bvh import parse_bvh, read_bvh, write_bvh
     from skelagnostic.plugins import load_aligner
 
+    __version__: str
+
 
 def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        from skelagnostic.version import distribution_version
+
+        version = globals()["__version__"] = distribution_version("skelagnostic")
+        return version
     try:
         module_name, attr = _LAZY[name]
     except KeyError:
@@ -84,4 +93,4 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_LAZY) | {"__version__"})

@@ -43,7 +43,8 @@ def test_compose_defaults(example_plugin: Path) -> None:
 
 def test_every_packaged_option_composes(example_plugin: Path) -> None:
     options = group_options()
-    assert {g for g, _ in options} == {"data", "trainer", "callbacks", "logger", "experiment"}
+    assert {g for g, _ in options} == {"data", "trainer", "callbacks", "logger", "experiment",
+                                       "debug"}
     for group, option in options:
         cfg = app.compose(["model=example", "run_dir=/tmp/x", f"{group}={option}"])
         if group == "data":

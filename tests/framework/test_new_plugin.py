@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -9,6 +10,7 @@ import venv
 from pathlib import Path
 
 import pytest
+import yaml
 
 from skelagnostic.cli import new_plugin
 from skelagnostic.plugins import LOAD_PLUGINS_ENV
@@ -22,6 +24,7 @@ def test_files_are_named_after_the_plugin() -> None:
         "pyproject.toml", "README.md", "src/skelagnostic_tiny_net/__init__.py",
         "src/skelagnostic_tiny_net/plugin.py", "src/skelagnostic_tiny_net/aligner.py",
         "src/skelagnostic_tiny_net/conf/__init__.py",
+        "src/skelagnostic_tiny_net/conf/model/tiny_net.yaml",
         "src/skelagnostic_tiny_net/conf/experiment/tiny_net_quick.yaml",
         "tests/test_tiny_net.py",
     }
@@ -29,6 +32,21 @@ def test_files_are_named_after_the_plugin() -> None:
     assert "class TinyNetAligner(Aligner):" in layout["src/skelagnostic_tiny_net/aligner.py"]
     for text in layout.values():
         assert "__NAME__" not in text and "__PKG__" not in text and "__CLASS__" not in text
+    assert 'distribution_version("skelagnostic-tiny_net")' in layout[
+        "src/skelagnostic_tiny_net/__init__.py"]
+
+
+def test_generated_model_yaml_equals_the_generated_constructor_defaults() -> None:
+    layout = new_plugin.files("tiny_net")
+    config = yaml.safe_load(layout["src/skelagnostic_tiny_net/conf/model/tiny_net.yaml"])
+    assert config.pop("_target_") == "skelagnostic_tiny_net.aligner.TinyNetAligner"
+    tree = ast.parse(layout["src/skelagnostic_tiny_net/aligner.py"])
+    (init,) = [node for cls in tree.body if isinstance(cls, ast.ClassDef)
+               and cls.name == "TinyNetAligner" for node in cls.body
+               if isinstance(node, ast.FunctionDef) and node.name == "__init__"]
+    names = [a.arg for a in init.args.args[1:]]
+    defaults = [ast.literal_eval(d) for d in init.args.defaults]
+    assert dict(zip(names, defaults, strict=True)) == config
 
 
 @pytest.mark.parametrize("name", ["Tiny", "1net", "tiny-net", ""])
@@ -80,6 +98,8 @@ def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> 
     assert ckpt.stat().st_size > 0
     listed = run(*command, "plugins", "tiny")
     assert "aligner tiny (plugin tiny 0.1.0, skelagnostic-tiny)" in listed.stdout
+    version = run(py, "-c", "import skelagnostic_tiny; print(skelagnostic_tiny.__version__)")
+    assert version.stdout.strip() == "0.1.0", version.stderr[-2000:]
     own = run(py, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tmp_path / "pkg" / "tests"))
     assert own.returncode == 0, own.stdout[-3000:]
     assert "4 passed" in own.stdout

@@ -27,9 +27,13 @@ def test_default_config_is_registered(pcmrl_pm, tmp_path) -> None:
     assert cfg.model.temporal_heads == 4
     assert cfg.data.source == "procedural" and list(cfg.data.kinds) == ["biped22"]
     assert cfg.data.target == "biped31"
+    # the defaults are the paper's sizes; experiment=pcmrl_cpu is the CPU-sized network
+    assert cfg.model.dim == 64 and cfg.model.temporal_dim is None and cfg.model.lr == 1e-4
     paper = app.compose(["model=pcmrl", "experiment=pcmrl_paper", f"run_dir={tmp_path}"],
                         plugin_manager=pcmrl_pm)
     assert paper.model.dim == 64 and paper.model.temporal_dim is None
+    cpu = app.compose(["experiment=pcmrl_cpu", f"run_dir={tmp_path}"], plugin_manager=pcmrl_pm)
+    assert cpu.model.name == "pcmrl" and cpu.model.dim == 16 and cpu.model.temporal_dim == 128
     # data=... keeps the target skeleton option of the aligner
     bvh = app.compose(["model=pcmrl", "data=bvh", "data.paths=[x]", f"run_dir={tmp_path}"],
                       plugin_manager=pcmrl_pm)

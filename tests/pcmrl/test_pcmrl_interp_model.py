@@ -10,7 +10,6 @@ import lightning as L
 import pytest
 import torch
 from skelagnostic_pcmrl.interp import (
-    INTERP_CONFIG,
     InterpolationAligner,
     key_brackets,
     lerp_keys,
@@ -27,6 +26,7 @@ from skelagnostic_pcmrl.interp_eval import lerp_slerp
 from skelagnostic import Motion, procedural
 from skelagnostic.core import quaternion as Q
 from skelagnostic.errors import MotionError, SkelagnosticError
+from skelagnostic.plugins import read_model_config
 
 TINY = {"dim": 16, "heads": 2, "layers": 1, "ff_mult": 2, "max_relative": 16}
 
@@ -44,10 +44,11 @@ def _tiny(residual: bool = False, window: int = 32, **options: object) -> Interp
 
 
 def test_paper_defaults() -> None:
-    assert INTERP_CONFIG["dim"] == 512 and INTERP_CONFIG["heads"] == 8
-    assert INTERP_CONFIG["layers"] == 6 and INTERP_CONFIG["lr"] == 1e-4
-    assert INTERP_CONFIG["warmup_steps"] == 10000 and INTERP_CONFIG["w_fk"] == 0.1
-    assert INTERP_CONFIG["w_quat"] == 0.1 and INTERP_CONFIG["residual"] is False
+    config = read_model_config("skelagnostic_pcmrl.conf", "pcmrl_interp")
+    assert config["dim"] == 512 and config["heads"] == 8
+    assert config["layers"] == 6 and config["lr"] == 1e-4
+    assert config["warmup_steps"] == 10000 and config["w_fk"] == 0.1
+    assert config["w_quat"] == 0.1 and config["residual"] is False
 
 
 def test_key_brackets_by_hand() -> None:

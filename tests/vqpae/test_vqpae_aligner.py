@@ -242,8 +242,8 @@ def test_cli_run_with_ema_averages_every_network(vqpae_pm, tmp_path: Path,
     assert len(ckpt["state_dict"]) > 10
 
 
-@pytest.mark.parametrize(("experiment", "codes", "source"), [("human_dog", 32, "human_dog"),
-                                                             ("stylized", 64, "styles")])
+@pytest.mark.parametrize(("experiment", "codes", "source"),
+                         [("vqpae_human_dog", 32, "human_dog"), ("vqpae_stylized", 64, "styles")])
 def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, source: str) -> None:
     from skelagnostic.cli.app import build_datamodule, compose
 

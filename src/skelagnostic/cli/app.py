@@ -1,9 +1,10 @@
 """``skelagnostic fit|validate|test|predict``: a pure :func:`run` under a thin Hydra wrapper.
 
-The config tree ships inside the package (``pkg://skelagnostic.conf``), so an
-installed ``skelagnostic`` works from any directory. Each registered aligner's
-default config becomes ``model/<name>`` in Hydra's ConfigStore, and plugin
-config paths are added to Hydra's search path. The command is re-entrant from
+The config tree (the repository's ``conf/``) is installed as the package
+``skelagnostic.conf``, so an installed ``skelagnostic`` works from any directory.
+Plugin config paths, which hold each aligner's ``model/<name>.yaml``, are added to
+Hydra's search path; :func:`register_model_configs` stores the rest of each aligner's
+configuration in Hydra's ConfigStore. The command is re-entrant from
 ``sys.argv`` alone, which Lightning's DDP launcher relies on: it re-executes
 the same command line (plus ``hydra.run.dir=...``) for every extra rank.
 """
@@ -57,7 +58,8 @@ from skelagnostic.cli.runs import (
 )
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.plugins import PluginManager, get_plugin_manager
+from skelagnostic.plugins import PluginManager, get_plugin_manager, target_of
+from skelagnostic.plugins.manager import config_names
 
 #: The verbs :func:`run` accepts as ``cfg.task``.
 TASKS = ("fit", "validate", "test", "predict")
@@ -71,6 +73,8 @@ SIGTERM_EXIT_CODE = 143
 _CKPT_ALIASES = ("last", "best", "hpc", "registry")
 #: Provider name of the configs this module puts into Hydra's ConfigStore.
 _PROVIDER = "skelagnostic"
+#: Config group of the per-aligner ``model.name``, data and trainer options (internal).
+ALIGNER_GROUP = "_aligner"
 #: Trainer options Lightning takes without checking, then divides by.
 _POSITIVE_TRAINER_KEYS = ("accumulate_grad_batches", "check_val_every_n_epoch")
 #: Data-config keys that are not options of the data module or the dataset source.
@@ -374,7 +378,7 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     if recorded is not None and hasattr(datamodule, "recorded_splits"):
         datamodule.recorded_splits = recorded  # never evaluate on the run's training clips
     model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
-                    if k != "name"}
+                    if k not in ("name", "_target_")}
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
     saved: dict[str, Any] = {}
@@ -425,30 +429,44 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
 
 # ----------------------------------------------------------------- composition
 def register_model_configs(pm: PluginManager) -> None:
-    """Store each registered aligner's default config as ``model/<name>`` in the ConfigStore.
+    """Store each registered aligner's configs in Hydra's ConfigStore.
+
+    For every aligner ``<name>``:
+
+    * ``model/<name>``: ``_target_`` and the registered defaults, unless a
+      registered config path ships ``model/<name>.yaml`` (Hydra reads that file,
+      from which the plugin read its defaults);
+    * ``_aligner/<name>`` (global package, selected by ``_aligner: ${model}`` in
+      ``config.yaml``): ``model.name`` and the aligner's ``data_options`` and
+      ``trainer_options``;
+    * ``data/<name>`` (selected by ``data: ${model}`` unless the command line or an
+      experiment names ``data=``): the aligner's default data, else ``procedural``.
 
     Hydra's ConfigStore is one per process: the entries stored for an earlier
     plugin manager (tagged with the provider ``skelagnostic``) are removed
     first, so it lists exactly the aligners of ``pm``.
     """
     store = ConfigStore.instance()
-    for group in ("model", "data"):
+    for group in ("model", "data", ALIGNER_GROUP):
         nodes = store.repo.get(group, {})
         for key in [k for k, v in nodes.items() if getattr(v, "provider", None) == _PROVIDER]:
             del nodes[key]
+    shipped = {name for url in pm.config_paths for name in config_names(url, "model")}
     for name, spec in pm.aligners.items():
-        node: dict[str, Any] = {"model": {"name": name, **dict(spec.config)}}
-        if spec.data:
-            # The aligner's default data: selected unless the command line names data=...
-            store.store(group="data", name=name,
-                        node={"defaults": ["/data_defaults@_here_", "_self_"], **dict(spec.data)},
+        if name not in shipped:
+            store.store(group="model", name=name,
+                        node={"_target_": target_of(spec.module), **dict(spec.config)},
                         provider=_PROVIDER)
-            node["defaults"] = [{"override /data": name}, "_self_"]
+        data: dict[str, Any] = dict(spec.data) if spec.data else {}
+        base = "/data_defaults@_here_" if data else "/data/procedural@_here_"
+        store.store(group="data", name=name, node={"defaults": [base, "_self_"], **data},
+                    provider=_PROVIDER)
+        node: dict[str, Any] = {"model": {"name": name}}
         if spec.data_options:
             node["data"] = dict(spec.data_options)
         if spec.trainer_options:
             node["trainer"] = dict(spec.trainer_options)
-        store.store(group="model", name=name, node=node, package="_global_",
+        store.store(group=ALIGNER_GROUP, name=name, node=node, package="_global_",
                     provider=_PROVIDER)
 
 

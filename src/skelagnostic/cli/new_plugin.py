@@ -59,18 +59,22 @@ $ skelagnostic fit model=__NAME__ experiment=__NAME___quick
 $ pytest tests                          # the skelagnostic.testing contract
 ```
 
-Edit `src/__PKG__/aligner.py` (the network, losses, `encode`/`decode`) and the
-defaults in `src/__PKG__/plugin.py`. See "Write your own aligner" in the
+Edit `src/__PKG__/aligner.py` (the network, losses, `encode`/`decode`); its
+defaults are `src/__PKG__/conf/model/__NAME__.yaml`, which must equal the
+constructor's default values. See "Write your own aligner" in the
 skelagnostic documentation.
 '''
 
 _INIT = '''\
 """__NAME__: a skelagnostic aligner plugin (``model=__NAME__``)."""
 
+from skelagnostic.version import distribution_version
+
 from __PKG__.aligner import __CLASS__Aligner, __CLASS__DataModule
 
 __all__ = ["__CLASS__Aligner", "__CLASS__DataModule"]
-__version__ = "0.1.0"
+#: Version of the distribution that ships this plugin (pyproject.toml is the one source).
+__version__ = distribution_version("skelagnostic-__NAME__")
 '''
 
 _PLUGIN = '''\
@@ -86,10 +90,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from skelagnostic.plugins import hookimpl
+from skelagnostic.plugins import hookimpl, read_model_config
 
-#: Default hyper-parameters: the ``model/__NAME__`` config (``model.hidden=128`` overrides).
-DEFAULT_CONFIG: dict[str, Any] = {"hidden": 64, "latent": 16, "lr": 3e-3}
+#: The plugin's Hydra configs: ``model/__NAME__.yaml`` (the defaults, ``model.hidden=128``
+#: overrides) and ``experiment/``.
+CONFIG_PACKAGE = "__PKG__.conf"
 
 
 @hookimpl
@@ -101,15 +106,15 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "__NAME__",
         __CLASS__Aligner,
         __CLASS__DataModule,
-        config=DEFAULT_CONFIG,
+        config=read_model_config(CONFIG_PACKAGE, "__NAME__"),
         description="__NAME__: per-joint MLP autoencoder over root-local positions",
     )
 
 
 @hookimpl
 def register_config_paths(register: Callable[..., Any]) -> None:
-    """Ship ``experiment=__NAME___quick`` (``conf/`` is a package: it has an ``__init__.py``)."""
-    register("pkg://__PKG__.conf")
+    """Ship ``model/__NAME__`` and ``experiment=__NAME___quick`` (``conf/`` is a package)."""
+    register(f"pkg://{CONFIG_PACKAGE}")
 '''
 
 _ALIGNER = '''\
@@ -267,6 +272,15 @@ _CONF_INIT = '''\
 """Hydra configs of the __NAME__ plugin (``pkg://__PKG__.conf``)."""
 '''
 
+_MODEL = '''\
+# model=__NAME__: the defaults of __CLASS__Aligner, every constructor argument with its
+# default value (keep them equal to the signature's).
+_target_: __PKG__.aligner.__CLASS__Aligner
+hidden: 64
+latent: 16
+lr: 0.003
+'''
+
 _EXPERIMENT = '''\
 # @package _global_
 # skelagnostic fit model=__NAME__ experiment=__NAME___quick: a small model, seconds on a CPU.
@@ -312,6 +326,7 @@ def files(name: str) -> dict[str, str]:
         f"src/{pkg}/plugin.py": _PLUGIN,
         f"src/{pkg}/aligner.py": _ALIGNER,
         f"src/{pkg}/conf/__init__.py": _CONF_INIT,
+        f"src/{pkg}/conf/model/{name}.yaml": _MODEL,
         f"src/{pkg}/conf/experiment/{name}_quick.yaml": _EXPERIMENT,
         f"tests/test_{name}.py": _TEST,
     }

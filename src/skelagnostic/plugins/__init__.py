@@ -31,6 +31,8 @@ from skelagnostic.plugins.manager import (
     PluginManager,
     RepresentationSpec,
     hookimpl,
+    read_model_config,
+    target_of,
 )
 
 if TYPE_CHECKING:
@@ -52,6 +54,8 @@ __all__ = [
     "list_datasets",
     "list_representations",
     "load_aligner",
+    "read_model_config",
+    "target_of",
 ]
 
 

@@ -36,7 +36,12 @@ def register_aligners(register: Callable[..., Any]) -> None:
     ``datamodule`` a :class:`~skelagnostic.data.MotionDataModule` subclass that
     produces the batches the aligner trains on, and ``config`` a mapping of
     default keyword arguments for ``module``. ``config`` becomes the Hydra
-    config ``model/<name>``.
+    config ``model/<name>``. Keep the defaults in one place: ship them as
+    ``conf/model/<name>.yaml`` in the plugin's config package (``_target_``
+    naming ``module``, then every constructor argument with its default value)
+    and pass ``config=read_model_config("my_plugin.conf", name)``
+    (:func:`skelagnostic.plugins.read_model_config`). A ``_target_`` key is
+    checked against ``module`` and is not a keyword argument.
 
     ``data`` (optional) is the aligner's default data config, with a ``source``
     key: it becomes ``data/<name>`` and is used when the command line names no

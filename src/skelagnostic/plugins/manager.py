@@ -12,6 +12,7 @@ as ``failed``; two contributions with the same name raise :class:`PluginError`.
 from __future__ import annotations
 
 import difflib
+import importlib
 import importlib.util
 import inspect
 import os
@@ -363,8 +364,8 @@ class PluginManager:
                 config_urls.insert(0, "pkg://skelagnostic.conf")
             presets = [*(f"data/{spec.name}" for spec in mine.aligners if spec.data)]
             for url in config_urls:
-                provides += [f"experiment:{n}" for n in _config_names(url, "experiment")]
-                presets += [f"data/{n}" for n in _config_names(url, "data")]
+                provides += [f"experiment:{n}" for n in config_names(url, "experiment")]
+                presets += [f"data/{n}" for n in config_names(url, "data")]
             provides += [f"data_preset:{p.split('/', 1)[1]}" for p in dict.fromkeys(presets)]
             self._infos[name] = replace(info, error=None, provides=tuple(provides))
         self._collected = total
@@ -377,7 +378,7 @@ def _first_line(doc: str | None) -> str:
     return lines[0].strip().replace("``", "") if lines else ""
 
 
-def _config_names(url: str, group: str) -> list[str]:
+def config_names(url: str, group: str) -> list[str]:
     """Names of the ``<group>/*.yaml`` configs under a Hydra search-path URL (sorted).
 
     Files starting with ``_`` (shared bases) are left out; an unreadable location
@@ -466,6 +467,67 @@ def _config_urls(path: str, plugin_name: str) -> list[str]:
     return [Path(location).resolve().as_uri() for location in spec.submodule_search_locations]
 
 
+def read_model_config(package: str, name: str) -> dict[str, Any]:
+    """Read ``model/<name>.yaml`` of a plugin's config package: an aligner's defaults.
+
+    The file holds ``_target_`` (the dotted path of the aligner class) and every
+    constructor argument with its default; it is both the Hydra config
+    ``model/<name>`` (when ``package`` is registered with ``register_config_paths``)
+    and the ``config=`` a plugin passes to ``register_aligners``, so the defaults
+    live in one place.
+
+    Args:
+        package: The config package, e.g. ``"skelagnostic_humot.conf"``.
+        name: The aligner name (the file's stem).
+
+    Returns:
+        The file's mapping, ``_target_`` included.
+
+    Raises:
+        PluginError: The file is missing, is not valid YAML, is not a mapping or has
+            no ``_target_``; the message names the file.
+    """
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+    from yaml import YAMLError
+
+    where = f"{package}/model/{name}.yaml"
+    try:
+        text = resources.files(package).joinpath("model", f"{name}.yaml").read_text("utf-8")
+    except (ImportError, OSError) as exc:
+        raise PluginError(f"model config {where}: cannot be read ({_error_text(exc)})") from exc
+    try:
+        node = OmegaConf.create(text) if text.strip() else None
+    except (YAMLError, OmegaConfBaseException) as exc:
+        raise PluginError(f"model config {where}: invalid YAML ({_error_text(exc)})") from exc
+    if node is None or not OmegaConf.is_dict(node):
+        raise PluginError(f"model config {where}: expected a mapping of constructor arguments")
+    config: dict[str, Any] = OmegaConf.to_container(node, resolve=False)  # type: ignore[assignment]
+    if not isinstance(config.get("_target_"), str):
+        raise PluginError(f"model config {where}: needs '_target_', the dotted path of the "
+                          "aligner class (e.g. 'my_plugin.aligner.MyAligner')")
+    return config
+
+
+def target_of(cls: type) -> str:
+    """The ``_target_`` naming ``cls``: ``"<module>.<qualname>"``."""
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
+def _check_target(name: str, target: Any, module: type) -> None:
+    """Raise :class:`PluginError` when a config's ``_target_`` does not name ``module``."""
+    resolved: Any = None
+    if isinstance(target, str) and "." in target:
+        module_name, _, attr = target.rpartition(".")
+        try:
+            resolved = getattr(importlib.import_module(module_name), attr, None)
+        except ImportError:
+            resolved = None
+    if resolved is not module:
+        raise PluginError(f"aligner {name!r}: config _target_={target!r} does not name the "
+                          f"registered module {target_of(module)!r}")
+
+
 def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
     if name not in table:
         known = ", ".join(sorted(table)) or "none"
@@ -501,6 +563,8 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
                 f"got {datamodule!r}"
             )
         config = dict(config or {})
+        if "_target_" in config:
+            _check_target(name, config.pop("_target_"), module)
         if "name" in config:
             raise PluginError(f"aligner {name!r}: config key 'name' is reserved")
         data = dict(data or {})

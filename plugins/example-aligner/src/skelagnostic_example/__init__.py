@@ -1,6 +1,8 @@
 """A minimal third-party skelagnostic aligner (entry point ``example``)."""
 
+from skelagnostic.version import distribution_version
 from skelagnostic_example.aligner import ExampleAligner, ExampleDataModule
 
 __all__ = ["ExampleAligner", "ExampleDataModule"]
-__version__ = "0.1.0"
+#: Version of the distribution that ships this plugin (its own).
+__version__ = distribution_version("skelagnostic-example-aligner")

@@ -8,7 +8,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from skelagnostic.plugins import hookimpl
+from skelagnostic.plugins import hookimpl, read_model_config
+
+#: The plugin's Hydra config package: ``model/example.yaml`` (the aligner's defaults,
+#: with ``_target_``) and ``experiment/``.
+CONFIG_PACKAGE = "skelagnostic_example.conf"
 
 
 @hookimpl
@@ -20,7 +24,7 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "example",
         ExampleAligner,
         ExampleDataModule,
-        config={"hidden": 64, "latent": 16, "lr": 3e-3},
+        config=read_model_config(CONFIG_PACKAGE, "example"),
         description="per-joint GRU autoencoder over root-local positions (tutorial example)",
     )
 
@@ -28,4 +32,4 @@ def register_aligners(register: Callable[..., Any]) -> None:
 @hookimpl
 def register_config_paths(register: Callable[..., Any]) -> None:
     """Ship ``experiment=example_quick``."""
-    register("pkg://skelagnostic_example.conf")
+    register(f"pkg://{CONFIG_PACKAGE}")

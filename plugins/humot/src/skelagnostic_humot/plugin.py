@@ -8,27 +8,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from skelagnostic.plugins import hookimpl
+from skelagnostic.plugins import hookimpl, read_model_config
 
-#: The paper's hyper-parameters (App. A.3-A.5): the ``model/humot`` config.
-DEFAULT_CONFIG: dict[str, Any] = {
-    "dim": 128,
-    "latent": 128,
-    "blocks": 4,
-    "heads": 8,
-    "kernel_size": 5,
-    "mlp_ratio": 4.0,
-    "layer_scale": 1.0,
-    "lambda_blc": 0.5,
-    "subsampling": True,
-    "p_major": 0.1,
-    "p_other": 0.5,
-    "lr_min": 1e-5,
-    "lr_max": 1e-4,
-    "lr_period_epochs": 10.0,
-    "betas": [0.9, 0.999],
-    "chunk": 30,
-}
+#: The plugin's Hydra config package: ``model/`` (the aligners' defaults, with
+#: ``_target_``), ``experiment/``.
+CONFIG_PACKAGE = "skelagnostic_humot.conf"
 
 #: ``data/humot``, the default data of ``skelagnostic fit model=humot`` (no ``data=``):
 #: procedural humans of three topologies (22, 31 and 17 joints), walking and running, 4 clips
@@ -66,7 +50,7 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "humot",
         HumotAligner,
         HumotDataModule,
-        config=DEFAULT_CONFIG,
+        config=read_model_config(CONFIG_PACKAGE, "humot"),
         description="HuMoT: topology-agnostic XCiT autoencoder for human retargeting",
         data=DEFAULT_DATA,
         data_options=DATA_OPTIONS,
@@ -77,4 +61,4 @@ def register_aligners(register: Callable[..., Any]) -> None:
 @hookimpl
 def register_config_paths(register: Callable[..., Any]) -> None:
     """Ship ``experiment=humot_quick``."""
-    register("pkg://skelagnostic_humot.conf")
+    register(f"pkg://{CONFIG_PACKAGE}")

@@ -18,9 +18,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from skelagnostic.lazy import lazy_exports
+from skelagnostic.version import distribution_version
 
 __all__ = ["PcmrlReconDataModule", "PcmrlReconstruction"]
-__version__ = "0.1.0"
+#: Version of the distribution that ships this plugin (built-in: skelagnostic's).
+__version__ = distribution_version("skelagnostic")
 
 __getattr__, __dir__ = lazy_exports(
     __name__,

@@ -28,8 +28,9 @@ skeleton. It follows CITL (Mo et al., CVPR 2023) with PC-MRL's changes:
   fast spin), AdamW with linear warm-up.
 
 :class:`InterpolationAligner` wraps it as an :class:`~skelagnostic.aligners.Aligner`
-with ``interpolate(motion, keyframes)``. :data:`INTERP_CONFIG` holds the authors'
-settings; ``experiment=pcmrl_interp_cpu`` a smaller CPU configuration.
+with ``interpolate(motion, keyframes)``. Its constructor defaults are the authors'
+settings (also ``conf/model/pcmrl_interp.yaml``); ``experiment=pcmrl_interp_cpu`` is a
+smaller CPU configuration.
 """
 
 from __future__ import annotations
@@ -53,7 +54,6 @@ from skelagnostic_pcmrl.points import group_of_joints, heading_frames
 from skelagnostic_pcmrl.rpa import bone_tails
 
 __all__ = [
-    "INTERP_CONFIG",
     "INTERP_DATA_DEFAULTS",
     "INTERP_DATA_OPTIONS",
     "CITLInterpolator",
@@ -70,26 +70,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-#: The authors' settings (paper Sec. 3.4 / METHODS.md): the ``model/pcmrl_interp`` config.
-INTERP_CONFIG: dict[str, Any] = {
-    "dim": 512,
-    "heads": 8,
-    "layers": 6,
-    "ff_mult": 4,
-    "max_relative": 128,
-    "residual": False,
-    "residual_space": "foq",
-    "interm_tokens": "zero",
-    "canonical_heading": False,
-    "lr": 1e-4,
-    "weight_decay": 0.01,
-    "warmup_steps": 10000,
-    "w_root": 1.0,
-    "w_foq": 1.0,
-    "w_fk": 0.1,
-    "w_quat": 0.1,
-}
 
 #: Default data of ``model=pcmrl_interp``: procedural CMU-31-topology bipeds (no files needed).
 INTERP_DATA_DEFAULTS: dict[str, Any] = {

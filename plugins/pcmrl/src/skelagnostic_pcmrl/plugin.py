@@ -17,43 +17,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from skelagnostic.plugins import hookimpl
+from skelagnostic.plugins import hookimpl, read_model_config
 
-#: Default ``model/pcmrl`` config: the paper's method at a CPU-sized width (the paper's
-#: sizes are ``experiment=pcmrl_paper``): point encoder 16 -> 256 channels over 4 stages
-#: (paper 64 -> 1024), temporal transformer 128 wide (paper: 1024), 6 layers, 4 heads.
-DEFAULT_CONFIG: dict[str, Any] = {
-    "stage": "reconstruction",
-    "num_source_points": 256,
-    "num_target_points": 1024,
-    "sigma": 0.05,
-    "dim": 16,
-    "stages": 4,
-    "point_heads": 4,
-    "group_k": 8,
-    "point_attention": "full",
-    "attention_k": 16,
-    "layer_scale": None,
-    "temporal_dim": 128,
-    "temporal_layers": 6,
-    "temporal_heads": 4,
-    "dropout": 0.0,
-    "knn_k": 8,
-    "knn_variant": "paper",
-    "knn_reduction": "mean",
-    "lambda_q": 0.01,
-    "lambda_end": 0.0,
-    "lr": 1e-3,
-    "weight_decay": 0.0,
-    "centre": True,
-    "centre_up": True,
-    "canonical_yaw": True,
-    "yaw_window": 15,
-    "chunk": None,
-    "target": None,
-    "target_units": None,
-    "sample_seed": 0,
-}
+#: The plugin's Hydra config package: ``model/`` (the aligners' defaults, with
+#: ``_target_``), ``experiment/``.
+CONFIG_PACKAGE = "skelagnostic_pcmrl.conf"
 
 #: Default data of ``model=pcmrl`` (``skelagnostic fit model=pcmrl`` with no ``data=``):
 #: procedural biped22 clips as the source ...
@@ -92,7 +60,7 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "pcmrl",
         PcmrlReconstruction,
         PcmrlReconDataModule,
-        config=DEFAULT_CONFIG,
+        config=read_model_config(CONFIG_PACKAGE, "pcmrl"),
         description="PC-MRL stage 1: unsupervised point-cloud reconstruction onto a target "
         "skeleton (model=pcmrl_interp: stage 2)",
         data=DEFAULT_DATA,
@@ -100,7 +68,6 @@ def register_aligners(register: Callable[..., Any]) -> None:
         trainer_options=TRAINER_OPTIONS,
     )
     from skelagnostic_pcmrl.interp import (
-        INTERP_CONFIG,
         INTERP_DATA_DEFAULTS,
         INTERP_DATA_OPTIONS,
         InterpolationAligner,
@@ -111,7 +78,7 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "pcmrl_interp",
         InterpolationAligner,
         InterpolationDataModule,
-        config=INTERP_CONFIG,
+        config=read_model_config(CONFIG_PACKAGE, "pcmrl_interp"),
         description="PC-MRL stage 2: FOQ keyframe interpolation on the target skeleton",
         data=INTERP_DATA_DEFAULTS,
         data_options=INTERP_DATA_OPTIONS,
@@ -122,4 +89,4 @@ def register_aligners(register: Callable[..., Any]) -> None:
 @hookimpl
 def register_config_paths(register: Callable[..., Any]) -> None:
     """Ship ``experiment=pcmrl_quick``, ``pcmrl_paper`` and ``pcmrl_lafan1_cmu``."""
-    register("pkg://skelagnostic_pcmrl.conf")
+    register(f"pkg://{CONFIG_PACKAGE}")

@@ -145,7 +145,7 @@ class VQPAEAligner(Aligner):
         beta: Commitment weight (0.25).
         lambda_vq: Weight of the codebook loss (1).
         lambda_phase_rate: Weight of the phase-rate loss (1; not in the paper; 0
-            turns it off, as ``experiment=human_dog`` does): the L1 distance, in
+            turns it off, as ``experiment=vqpae_human_dog`` does): the L1 distance, in
             Hz, between the predicted frequency of a training window (and of its
             partner ``data.pair_seconds`` later) and the rate at which the
             predicted pivot phase advances from the one to the other, the phase

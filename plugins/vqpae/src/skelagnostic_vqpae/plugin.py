@@ -8,40 +8,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from skelagnostic.plugins import hookimpl
+from skelagnostic.plugins import hookimpl, read_model_config
 
-#: Default ``model=vqpae`` config: the authors' settings (METHODS.md "VQ-PAE"), plus the
-#: phase-rate loss (``lambda_phase_rate``, not in the paper; docs/methods/vqpae.md).
-DEFAULT_CONFIG: dict[str, Any] = {
-    "latent": 10,
-    "num_codes": 32,
-    "kernel_size": 23,
-    "freq_layers": 5,
-    "amp_layers": 5,
-    "decoder_centering": False,
-    "spectrum": "normalized",
-    "padding_mode": "replicate",
-    "frequency_head": "mlp",
-    "center_windows": True,
-    "beta": 0.25,
-    "lambda_vq": 1.0,
-    "lambda_phase_rate": 1.0,
-    "phase_rate_grad": "network",
-    "reinit": True,
-    "reinit_decay": 0.99,
-    "reinit_eps": 1e-3,
-    "reinit_squared_distance": False,
-    "seed": 0,
-    "lr": 1e-4,
-    "weight_decay": 1e-4,
-    "restart_period": 10,
-    "restart_mult": 2,
-    "pose_mlp": "detached",
-    "pose_layers": 8,
-    "pose_lr": 1e-3,
-    "datasets": None,
-}
-
+#: The plugin's Hydra config package: ``model/`` (the aligners' defaults, with
+#: ``_target_``), ``experiment/``, ``data/``.
+CONFIG_PACKAGE = "skelagnostic_vqpae.conf"
 
 #: ``data/vqpae``, the default data of ``skelagnostic fit model=vqpae`` (no ``data=``):
 #: procedural humans (LaFAN1-like, 22 joints) and quadrupeds (a dog, 21 joints), one dataset
@@ -70,7 +41,7 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "vqpae",
         VQPAEAligner,
         VQPAEDataModule,
-        config=DEFAULT_CONFIG,
+        config=read_model_config(CONFIG_PACKAGE, "vqpae"),
         description="WalkTheDog VQ-PAE: phase manifold shared across characters (human, dog, ...)",
         data=DEFAULT_DATA,
         data_options=DATA_OPTIONS,
@@ -88,5 +59,5 @@ def register_datasets(register: Callable[..., Any]) -> None:
 
 @hookimpl
 def register_config_paths(register: Callable[..., Any]) -> None:
-    """Ship ``experiment=human_dog`` and ``experiment=stylized``."""
-    register("pkg://skelagnostic_vqpae.conf")
+    """Ship ``experiment=vqpae_human_dog`` and ``experiment=vqpae_stylized``."""
+    register(f"pkg://{CONFIG_PACKAGE}")

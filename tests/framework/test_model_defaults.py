@@ -1,0 +1,180 @@
+"""One source of truth for aligner defaults: ``conf/model/<name>.yaml`` == constructor defaults.
+
+Every registered aligner (the built-ins and the example third-party plugin) reads its
+defaults from the YAML file its plugin ships; the constructor's signature defaults must be
+the same values, so that ``load_aligner(name)``, ``skelagnostic fit model=<name>`` and
+``Class()`` build the same network.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import torch
+from omegaconf import OmegaConf
+
+import skelagnostic.plugins as plugins_api
+from skelagnostic.cli import app
+from skelagnostic.plugins import PluginError, PluginManager, read_model_config, target_of
+
+REPO = Path(__file__).resolve().parents[2]
+PLUGINS = {  # entry-point name -> (source directory, plugin module)
+    "humot": ("humot", "skelagnostic_humot.plugin"),
+    "pcmrl": ("pcmrl", "skelagnostic_pcmrl.plugin"),
+    "vqpae": ("vqpae", "skelagnostic_vqpae.plugin"),
+    "example": ("example-aligner", "skelagnostic_example.plugin"),
+}
+ALIGNERS = ["example", "humot", "pcmrl", "pcmrl_interp", "vqpae"]
+
+
+@pytest.fixture(scope="module")
+def pm() -> Iterator[PluginManager]:
+    """A plugin manager with the built-in plugins and the example plugin, from the sources."""
+    added = [str(REPO / "plugins" / folder / "src") for folder, _ in PLUGINS.values()]
+    sys.path[:0] = added
+    try:
+        manager = PluginManager(load_entrypoints=False)
+        for name, (_, module) in PLUGINS.items():
+            manager.register(importlib.import_module(module), name)
+        yield manager
+    finally:
+        for path in added:
+            sys.path.remove(path)
+
+
+def _plain(hparams: Any) -> dict[str, Any]:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in dict(hparams).items()}
+
+
+def _signature_defaults(cls: type) -> dict[str, Any]:
+    params = inspect.signature(cls.__init__).parameters.values()
+    out = {}
+    for p in params:
+        if p.name == "self" or p.kind not in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
+            continue
+        assert p.default is not p.empty, f"{cls.__qualname__}({p.name}) has no default"
+        out[p.name] = list(p.default) if isinstance(p.default, tuple) else p.default
+    return out
+
+
+def test_every_builtin_and_the_example_are_registered(pm: PluginManager) -> None:
+    assert set(ALIGNERS) <= set(pm.aligners)
+
+
+@pytest.mark.parametrize("name", ALIGNERS)
+def test_config_defaults_equal_signature_defaults(pm: PluginManager, name: str) -> None:
+    spec = pm.aligner(name)
+    assert dict(spec.config) == _signature_defaults(spec.module)
+
+
+@pytest.mark.parametrize("name", ALIGNERS)
+def test_the_yaml_file_is_the_registered_config(pm: PluginManager, name: str) -> None:
+    spec = pm.aligner(name)
+    package = f"{spec.module.__module__.split('.')[0]}.conf"
+    config = read_model_config(package, name)
+    assert config.pop("_target_") == target_of(spec.module)
+    assert config == dict(spec.config)
+
+
+@pytest.mark.parametrize("name", ALIGNERS)
+def test_hydra_composes_the_same_defaults(pm: PluginManager, name: str, tmp_path: Path) -> None:
+    cfg = app.compose([f"model={name}", f"run_dir={tmp_path}"], plugin_manager=pm)
+    model = OmegaConf.to_container(cfg.model, resolve=True)
+    assert model.pop("name") == name
+    assert model.pop("_target_") == target_of(pm.aligner(name).module)
+    assert model == dict(pm.aligner(name).config)
+
+
+@pytest.mark.parametrize("name", ALIGNERS)
+def test_load_aligner_builds_the_class_default_network(
+    pm: PluginManager, name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(plugins_api, "get_plugin_manager", lambda: pm)
+    loaded = plugins_api.load_aligner(name)
+    plain = pm.aligner(name).module()
+    assert type(loaded) is type(plain)
+    shapes = {k: tuple(v.shape) for k, v in loaded.state_dict().items()}
+    assert shapes == {k: tuple(v.shape) for k, v in plain.state_dict().items()}
+    # YAML has lists where a signature has tuples (HuMoT's betas): equal as sequences
+    assert _plain(loaded.hparams) == _plain(plain.hparams)
+    assert all(isinstance(v, torch.Tensor) for v in loaded.state_dict().values())
+
+
+def test_missing_model_file_names_the_file() -> None:
+    with pytest.raises(PluginError, match=r"skelagnostic\.conf/model/nope\.yaml"):
+        read_model_config("skelagnostic.conf", "nope")
+
+
+def test_model_file_without_target_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    package = tmp_path / "cfgless_plugin_conf"
+    (package / "model").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    (package / "model" / "mine.yaml").write_text("hidden: 3\n")
+    (package / "model" / "list.yaml").write_text("- 1\n- 2\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(PluginError, match=r"conf/model/mine\.yaml: needs '_target_'"):
+        read_model_config("cfgless_plugin_conf", "mine")
+    with pytest.raises(PluginError, match=r"list\.yaml: expected a mapping"):
+        read_model_config("cfgless_plugin_conf", "list")
+
+
+def test_a_target_naming_another_class_is_refused(pm: PluginManager) -> None:
+    humot = pm.aligner("humot").module
+
+    class Plugin:
+        @plugins_api.hookimpl
+        def register_aligners(self, register: Any) -> None:
+            register("wrong", humot, config={"_target_": "skelagnostic.aligners.Aligner"})
+
+    other = PluginManager(load_entrypoints=False)
+    other.register(Plugin(), "wrong")
+    with pytest.warns(plugins_api.PluginLoadWarning, match="does not name the registered module"):
+        assert "wrong" not in other.aligners
+
+
+def test_plugin_experiments_are_named_after_their_method(pm: PluginManager) -> None:
+    experiments = {
+        info.name: [p.split(":", 1)[1] for p in info.provides if p.startswith("experiment:")]
+        for info in pm.plugins()
+    }
+    assert experiments["skelagnostic"] == ["smoke"]  # the framework's own, for any model
+    shipped = {name: names for name, names in experiments.items() if name != "skelagnostic"}
+    assert all(shipped[name] for name in PLUGINS)
+    wrong = [
+        (plugin, n)
+        for plugin, names in shipped.items()
+        for n in names
+        if not n.startswith(f"{plugin}_")
+    ]
+    assert wrong == []
+
+
+def test_a_checkpoint_keeps_its_own_hyperparameters(
+    pm: PluginManager, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A checkpoint trained with the former CPU defaults of PC-MRL still loads as trained."""
+    import lightning as L
+
+    monkeypatch.setattr(plugins_api, "get_plugin_manager", lambda: pm)
+    old = {"dim": 16, "temporal_dim": 128, "lr": 1e-3, "target": "biped31"}  # before the YAML
+    trained = pm.aligner("pcmrl").module(**old)
+    path = tmp_path / "old.ckpt"
+    checkpoint = {
+        "state_dict": trained.state_dict(),
+        "hyper_parameters": dict(trained.hparams),
+        "pytorch-lightning_version": L.__version__,
+    }
+    trained.on_save_checkpoint(checkpoint)  # what Lightning adds (PC-MRL: the target skeleton)
+    torch.save(checkpoint, path)
+    loaded = plugins_api.load_aligner("pcmrl", checkpoint=path)
+    assert (loaded.hparams.dim, loaded.hparams.temporal_dim, loaded.hparams.lr) == (16, 128, 1e-3)
+    for key, value in trained.state_dict().items():
+        assert torch.equal(loaded.state_dict()[key], value)
