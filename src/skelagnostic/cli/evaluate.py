@@ -1,0 +1,106 @@
+"""``skelagnostic evaluate``: a registered protocol on the held-out clips of a run.
+
+``skelagnostic evaluate ckpt_path=RUN_OR_CKPT [protocol=NAME] [overrides]`` takes
+the model and data of the checkpoint's run (as ``validate`` and ``test`` do),
+loads the weights, collects the run's test clips (else its validation clips),
+runs the protocol (default: the model's default protocol) and writes
+``evaluation.json``, ``evaluation.md`` and plots into its own run directory
+(``runs/<model>/evaluate/<time>``); see :mod:`skelagnostic.evaluation`.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from skelagnostic.aligners.checkpoints import architecture_mismatch
+from skelagnostic.evaluation import MODEL, held_out, write_evaluation
+from skelagnostic.plugins import PluginManager
+
+__all__ = ["evaluate_checkpoint", "main", "print_evaluation"]
+
+
+def evaluate_checkpoint(
+    cfg: DictConfig,
+    pm: PluginManager,
+    model: Any,
+    datamodule: Any,
+    ckpt: str,
+    checkpoint: Mapping[str, Any],
+) -> dict[str, float]:
+    """Load the weights into ``model``, run the protocol of ``cfg.protocol`` and write its report.
+
+    Args:
+        cfg: The composed config (``model``, ``data``, ``protocol``, ``run_dir``).
+        pm: Where the protocol is looked up.
+        model: The aligner built from ``cfg.model``.
+        datamodule: The data module built from ``cfg.data``.
+        ckpt: The checkpoint file.
+        checkpoint: Its content (:func:`~skelagnostic.aligners.checkpoints.read_checkpoint`).
+
+    Returns:
+        The model's mean figures, ``model/<metric>``.
+
+    Raises:
+        PluginError: Unknown protocol, or one of another model (the message lists the
+            model's protocols).
+        EvaluationError: No held-out split, or the protocol found nothing to evaluate.
+    """
+    protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
+    saved = dict(checkpoint.get("hyper_parameters") or {})
+    with architecture_mismatch(ckpt, saved, dict(model.hparams), "ckpt_path"):
+        model.on_load_checkpoint(dict(checkpoint))
+        model.load_state_dict(checkpoint["state_dict"])
+    model.eval()
+    held = held_out(datamodule)
+    run_dir = Path(cfg.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with torch.no_grad():
+        result = protocol.function(model, held, run_dir)
+    data = OmegaConf.to_container(cfg.data, resolve=True)
+    report = write_evaluation(
+        result,
+        run_dir,
+        protocol=protocol.name,
+        model=cfg.model.name,
+        description=protocol.description,
+        checkpoint=ckpt,
+        data=data,
+        held=held,
+    )  # type: ignore[arg-type]
+    print_evaluation(report, run_dir)
+    return {f"{MODEL}/{k}": v for k, v in report["mean"][MODEL].items()}
+
+
+def print_evaluation(report: Mapping[str, Any], run_dir: Path) -> None:
+    """The mean table of an ``evaluation.json`` report, as one Rich table on stdout."""
+    from rich.console import Console
+    from rich.table import Table
+
+    data = report["data"]
+    table = Table(
+        title=f"skelagnostic evaluate: {report['protocol']} on the "
+        f"{data['split_name']}, {len(data['clips'])} clips",
+        title_justify="left",
+    )
+    table.add_column("metric", style="bold")
+    for method in report["methods"]:
+        table.add_column(method, justify="right")
+    for metric, text in report["metrics"].items():
+        cells = [report["mean"].get(m, {}).get(metric) for m in report["methods"]]
+        table.add_row(f"{metric} ({text})", *("-" if c is None else f"{c:.4g}" for c in cells))
+    console = Console(file=sys.stdout, width=max(100, 30 * (len(report["methods"]) + 1)))
+    console.print(table)
+    console.print(f"report: {run_dir / 'evaluation.md'}")
+
+
+def main(argv: Sequence[str]) -> int:
+    """``skelagnostic evaluate ckpt_path=... [protocol=NAME] [overrides]``."""
+    from skelagnostic.cli.app import main as app_main
+
+    return app_main("evaluate", argv)
