@@ -87,7 +87,7 @@ def humot(steps: int) -> dict[str, Any]:
     _plugin("humot")
     import lightning as L
     from skelagnostic_humot import HumotAligner, HumotDataModule
-    from skelagnostic_humot.evaluate import HUMAN_KINDS, evaluate_procedural
+    from skelagnostic_humot.evaluation import HUMAN_KINDS, evaluate_procedural
 
     from skelagnostic.data import ProceduralSource
 
