@@ -13,7 +13,7 @@ own training distribution. The last line and ``--json`` hold the final figures.
 
 Model and data options are passed as ``key=value`` (YAML values), e.g.::
 
-    python plugins/pcmrl/scripts/interp_probe.py \
+    python benchmarks/pcmrl_interp_probe.py \
         --train ../shared/data/human/lafan1/walk4_subject1.bvh \
         --test ../shared/data/human/lafan1/obstacles1_subject5.bvh --units cm --minutes 7 \
         --model interm_tokens=lerp canonical_heading=true lr=3e-3 \
@@ -33,7 +33,7 @@ import torch
 import yaml
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "plugins" / "pcmrl" / "src"))
 
 #: The CPU configuration of experiment=pcmrl_interp_cpu / pcmrl_interp_cmu.
 CPU_MODEL = {"dim": 64, "heads": 4, "layers": 2, "lr": 1e-3, "warmup_steps": 100,

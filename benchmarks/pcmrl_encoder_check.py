@@ -9,7 +9,7 @@ layers (MSE). Prints the mean joint error on held-out frames every 100 steps.
 
 Usage::
 
-    python plugins/pcmrl/scripts/encoder_check.py ../shared/data/human/lafan1 --encoder full \
+    python benchmarks/pcmrl_encoder_check.py ../shared/data/human/lafan1 --encoder full \
         --test-pattern subject5 --units cm
 """
 
@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "plugins" / "pcmrl" / "src"))
 
 ENCODERS = ("full", "vector", "none", "pointnet")
 
