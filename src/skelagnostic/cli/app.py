@@ -388,7 +388,7 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             from skelagnostic.cli.evaluate import evaluate_checkpoint
 
             _save_config(cfg, run_dir)
-            return evaluate_checkpoint(cfg, pm, model, datamodule, ckpt, checkpoint)
+            return evaluate_checkpoint(cfg, pm, spec.module, datamodule, ckpt)
         del checkpoint
     if task == "test":
         _require_test_split(datamodule)

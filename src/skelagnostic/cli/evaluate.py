@@ -18,7 +18,7 @@ from typing import Any
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from skelagnostic.aligners.checkpoints import architecture_mismatch
+from skelagnostic.aligners.checkpoints import load_checkpoint
 from skelagnostic.evaluation import MODEL, held_out, write_evaluation
 from skelagnostic.plugins import PluginManager
 
@@ -26,22 +26,20 @@ __all__ = ["evaluate_checkpoint", "main", "print_evaluation"]
 
 
 def evaluate_checkpoint(
-    cfg: DictConfig,
-    pm: PluginManager,
-    model: Any,
-    datamodule: Any,
-    ckpt: str,
-    checkpoint: Mapping[str, Any],
+    cfg: DictConfig, pm: PluginManager, module: type, datamodule: Any, ckpt: str
 ) -> dict[str, float]:
-    """Load the weights into ``model``, run the protocol of ``cfg.protocol`` and write its report.
+    """Load the checkpoint, run the protocol of ``cfg.protocol`` and write its report.
+
+    The aligner is rebuilt from the checkpoint as the inference verbs do
+    (:func:`~skelagnostic.aligners.checkpoints.load_checkpoint`: its saved
+    hyperparameters, which include the layers an aligner builds from its data).
 
     Args:
         cfg: The composed config (``model``, ``data``, ``protocol``, ``run_dir``).
         pm: Where the protocol is looked up.
-        model: The aligner built from ``cfg.model``.
+        module: The aligner class of ``cfg.model.name``.
         datamodule: The data module built from ``cfg.data``.
         ckpt: The checkpoint file.
-        checkpoint: Its content (:func:`~skelagnostic.aligners.checkpoints.read_checkpoint`).
 
     Returns:
         The model's mean figures, ``model/<metric>``.
@@ -52,16 +50,12 @@ def evaluate_checkpoint(
         EvaluationError: No held-out split, or the protocol found nothing to evaluate.
     """
     protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
-    saved = dict(checkpoint.get("hyper_parameters") or {})
-    with architecture_mismatch(ckpt, saved, dict(model.hparams), "ckpt_path"):
-        model.on_load_checkpoint(dict(checkpoint))
-        model.load_state_dict(checkpoint["state_dict"])
-    model.eval()
+    aligner = load_checkpoint(module, ckpt, option="ckpt_path", plugin_manager=pm).eval()
     held = held_out(datamodule)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     with torch.no_grad():
-        result = protocol.function(model, held, run_dir)
+        result = protocol.function(aligner, held, run_dir)
     data = OmegaConf.to_container(cfg.data, resolve=True)
     report = write_evaluation(
         result,
@@ -70,9 +64,9 @@ def evaluate_checkpoint(
         model=cfg.model.name,
         description=protocol.description,
         checkpoint=ckpt,
-        data=data,
+        data=data,  # type: ignore[arg-type]
         held=held,
-    )  # type: ignore[arg-type]
+    )
     print_evaluation(report, run_dir)
     return {f"{MODEL}/{k}": v for k, v in report["mean"][MODEL].items()}
 
