@@ -184,3 +184,13 @@ def test_mean_rows_skips_missing_and_nan_values() -> None:
     ]
     assert mean_rows(rows) == {"model": {"x": 2.0, "y": 2.0}, "base": {"x": 5.0}}
     assert Evaluation({"x": ""}, rows).methods == ["model", "base"]
+
+
+def test_protocols_are_listed_with_their_plugin(example_plugin: Path) -> None:
+    pm = get_plugin_manager()
+    spec = pm.evaluations["example.reconstruction"]
+    assert (spec.model, spec.default, spec.plugin) == ("example", True, "example")
+    assert spec.description.startswith("Encode-decode pose error")
+    info = {i.name: i for i in pm.plugins()}["example"]
+    assert "evaluation:example.reconstruction" in info.provides
+    assert "register_evaluations" in info.hooks
