@@ -67,7 +67,7 @@ class TestKeyframes:
 
     def test_frame_zero_must_be_a_key(self) -> None:
         with pytest.raises(ValueError, match="frame 0"):
-            key_brackets(torch.tensor([[False, True]]))
+            lerp_slerp(self._motion(), [3, 10])
 
     def test_keys_exact_and_in_between_closed_form(self) -> None:
         m = self._motion()
@@ -184,3 +184,16 @@ class TestPrimal:
             pos = out.global_positions()[f].numpy()
             np.testing.assert_allclose(pos[1], a, atol=1e-9)
             np.testing.assert_allclose(pos[3], b, atol=1e-9)
+
+
+def test_baselines_stay_in_the_core_layer() -> None:
+    """``skelagnostic.baselines`` imports no lightning, hydra or pluggy (core: numpy + torch)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, skelagnostic.baselines\n"
+        "print([m for m in ('lightning', 'hydra', 'pluggy') if m in sys.modules])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
