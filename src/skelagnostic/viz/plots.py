@@ -354,10 +354,10 @@ def plot_method_comparison(
     for ax, metric in zip(axes, metrics, strict=True):
         shown = [(k, m, values[m].get(metric)) for k, m in enumerate(methods)]
         shown = [(k, m, float(v)) for k, m, v in shown if v is not None and np.isfinite(v)]
-        ax.bar(range(len(shown)), [v for _, _, v in shown],
-               color=[f"C{k}" for k, _, _ in shown])
-        ax.set_xticks(range(len(shown)), [m for _, m, _ in shown], rotation=30, ha="right",
-                      fontsize=8)
+        ax.bar(range(len(shown)), [v for _, _, v in shown], color=[f"C{k}" for k, _, _ in shown])
+        ax.set_xticks(
+            range(len(shown)), [m for _, m, _ in shown], rotation=30, ha="right", fontsize=8
+        )
         ax.set_title(metric, fontsize=9)
         ax.grid(alpha=0.3, axis="y")
     if title:

@@ -35,8 +35,9 @@ def reconstruction(aligner: Any, held_out: Any, out_dir: Any) -> Any:
     """Encode-decode pose error on held-out clips, beside the mean-pose baselines."""
     from skelagnostic.evaluation import RECONSTRUCTION_METRICS, Evaluation, reconstruction_rows
 
-    rows = reconstruction_rows(held_out.clips,
-                               lambda m: aligner.decode(aligner.encode(m), m.skeleton))
+    rows = reconstruction_rows(
+        held_out.clips, lambda m: aligner.decode(aligner.encode(m), m.skeleton)
+    )
     return Evaluation(dict(RECONSTRUCTION_METRICS), rows)
 
 

@@ -92,8 +92,9 @@ def evaluate_pair(
         SkelagnosticError: The frame counts differ.
     """
     if result.num_frames != source.num_frames:
-        raise SkelagnosticError(f"evaluate: result has {result.num_frames} frames, source "
-                                f"{source.num_frames}")
+        raise SkelagnosticError(
+            f"evaluate: result has {result.num_frames} frames, source {source.num_frames}"
+        )
     res, src = metres(result).double(), metres(source).double()
     src_rot, src_pos = src.global_rotations()[::stride], src.global_positions()[::stride]
     res_rot, res_pos = res.global_rotations()[::stride], res.global_positions()[::stride]
@@ -107,8 +108,9 @@ def evaluate_pair(
         knn = temporal_knn_distance(pb, pa, preds_groups=sb.groups, target_groups=sa.groups, k=k)
         out[f"knn@{sigma:g}"] = 100.0 * float(knn)
     pairs = end_effector_pairs(src.skeleton, res.skeleton)
-    end = end_effector_error(res_pos, src_pos, preds_indices=[b for _, b in pairs],
-                             target_indices=[a for a, _ in pairs])
+    end = end_effector_error(
+        res_pos, src_pos, preds_indices=[b for _, b in pairs], target_indices=[a for a, _ in pairs]
+    )
     out["end"] = 100.0 * float(end)
     return out
 
@@ -137,8 +139,9 @@ def evaluate_clips(
     for motion in clips:
         rows = {}
         if baselines or aligner is None:
-            rows["original"] = evaluate_pair(motion, motion, **{
-                **options, "seed": options.get("seed", 0) + 2}) | {"end": 0.0}
+            rows["original"] = evaluate_pair(
+                motion, motion, **{**options, "seed": options.get("seed", 0) + 2}
+            ) | {"end": 0.0}
             for name, baseline in BASELINES.items():
                 rows[name] = evaluate_pair(baseline(motion, target), motion, **options)
         if aligner is not None:
@@ -146,19 +149,28 @@ def evaluate_clips(
         per_clip.append({"frames": motion.num_frames, "rows": rows})
     names = list(per_clip[0]["rows"]) if per_clip else []
     metrics = list(per_clip[0]["rows"][names[0]]) if names else []
-    mean = {r: {m: sum(c["rows"][r][m] for c in per_clip) / len(per_clip) for m in metrics}
-            for r in names}
-    return {"rows": mean, "per_clip": per_clip,
-            "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}}
+    mean = {
+        r: {m: sum(c["rows"][r][m] for c in per_clip) / len(per_clip) for m in metrics}
+        for r in names
+    }
+    return {
+        "rows": mean,
+        "per_clip": per_clip,
+        "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()},
+    }
 
 
 def format_table(result: dict[str, Any]) -> str:
     """A Markdown table of :func:`evaluate_clips` rows (values x100, metres)."""
     rows = result["rows"]
     metrics = list(next(iter(rows.values())))
-    head = "| model | " + " | ".join(
-        f"KNN sigma={m.split('@')[1]}" if m.startswith("knn@") else "L_end" for m in metrics
-    ) + " |"
+    head = (
+        "| model | "
+        + " | ".join(
+            f"KNN sigma={m.split('@')[1]}" if m.startswith("knn@") else "L_end" for m in metrics
+        )
+        + " |"
+    )
     lines = [head, "|" + "---|" * (len(metrics) + 1)]
     for name, values in rows.items():
         lines.append(f"| {name} | " + " | ".join(f"{values[m]:.4f}" for m in metrics) + " |")
@@ -168,8 +180,11 @@ def format_table(result: dict[str, Any]) -> str:
 # ------------------------------------------------------------------ protocols
 #: Metric descriptions of the Table 2 protocol.
 TABLE2_METRICS = {
-    **{f"knn@{s:g}": f"temporal KNN distance x100 (m), points offset by sigma={s:g} m, K=8, "
-                     "lower is better" for s in SIGMAS},
+    **{
+        f"knn@{s:g}": f"temporal KNN distance x100 (m), points offset by sigma={s:g} m, K=8, "
+        "lower is better"
+        for s in SIGMAS
+    },
     "end": "end-effector error x100 (m), summed over hands, feet and head, lower is better",
 }
 
@@ -183,9 +198,15 @@ def reconstruction_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evalu
         values = {MODEL: per["rows"]["pcmrl"]}
         values |= {k: v for k, v in per["rows"].items() if k != "pcmrl"}
         rows.append({"clip": str(clip.name), "frames": per["frames"], "values": values})
-    return Evaluation(dict(TABLE2_METRICS), rows, extra={"options": result["options"]}, notes=[
-        f"target skeleton: {target.name or f'{target.num_joints} joints'}; 'original' is an "
-        "independent cloud on the source motion (the best reachable KNN value)"])
+    return Evaluation(
+        dict(TABLE2_METRICS),
+        rows,
+        extra={"options": result["options"]},
+        notes=[
+            f"target skeleton: {target.name or f'{target.num_joints} joints'}; 'original' is an "
+            "independent cloud on the source motion (the best reachable KNN value)"
+        ],
+    )
 
 
 def interpolation_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
@@ -193,21 +214,30 @@ def interpolation_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evalua
     window = int(getattr(held.datamodule, "window", None) or 128)
     stride = max(1, window // 2)
     clips = [c for c in held.clips if c.num_frames >= window]
-    notes = [f"windows of {window} frames every {stride}; L2P normalised with the statistics "
-             "of all evaluated windows; L2P/L2Q over non-key frames, NPSS over the window"]
+    notes = [
+        f"windows of {window} frames every {stride}; L2P normalised with the statistics "
+        "of all evaluated windows; L2P/L2Q over non-key frames, NPSS over the window"
+    ]
     short = [str(c.name) for c in held.clips if c.num_frames < window]
     if short:
-        notes.append(f"skipped {len(short)} clip(s) shorter than {window} frames: "
-                     f"{', '.join(short)}")
+        notes.append(
+            f"skipped {len(short)} clip(s) shorter than {window} frames: {', '.join(short)}"
+        )
     stats = position_stats(windows(clips, window, stride)) if clips else None
     methods = {MODEL: aligner.interpolate, "lerp_slerp": lerp_slerp}
     rows = []
     for clip in clips:
         report = evaluate(methods, [clip], window, stride, GAPS, stats)
-        values = {m: {f"{k}@{g}": v for g, per in gaps.items() for k, v in per.items()}
-                  for m, gaps in report["results"].items()}
-        rows.append({"clip": str(clip.name), "windows": report["protocol"]["windows"],
-                     "values": values})
-    metrics = {f"{k}@{g}": f"{name} with a key every {g} frames, lower is better"
-               for k, name in (("l2p", "L2P"), ("l2q", "L2Q"), ("npss", "NPSS")) for g in GAPS}
+        values = {
+            m: {f"{k}@{g}": v for g, per in gaps.items() for k, v in per.items()}
+            for m, gaps in report["results"].items()
+        }
+        rows.append(
+            {"clip": str(clip.name), "windows": report["protocol"]["windows"], "values": values}
+        )
+    metrics = {
+        f"{k}@{g}": f"{name} with a key every {g} frames, lower is better"
+        for k, name in (("l2p", "L2P"), ("l2q", "L2Q"), ("npss", "NPSS"))
+        for g in GAPS
+    }
     return Evaluation(metrics, rows, notes=notes)

@@ -97,6 +97,11 @@ def register_evaluations(register: Callable[..., Any]) -> None:
     """Register ``vqpae.manifold`` (the default of ``model=vqpae``)."""
     from skelagnostic_vqpae.evaluation import manifold_protocol
 
-    register("vqpae.manifold", manifold_protocol, model="vqpae", default=True,
-             description="shared codes (vs chance), phase linearity and average-pose error "
-                         "(vs the mean pose) of held-out clips; codebook usage and overlap")
+    register(
+        "vqpae.manifold",
+        manifold_protocol,
+        model="vqpae",
+        default=True,
+        description="shared codes (vs chance), phase linearity and average-pose error "
+        "(vs the mean pose) of held-out clips; codebook usage and overlap",
+    )
