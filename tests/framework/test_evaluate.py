@@ -194,3 +194,11 @@ def test_protocols_are_listed_with_their_plugin(example_plugin: Path) -> None:
     info = {i.name: i for i in pm.plugins()}["example"]
     assert "evaluation:example.reconstruction" in info.provides
     assert "register_evaluations" in info.hooks
+
+
+def test_help_lists_the_protocols(example_plugin: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["evaluate", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert "Evaluation protocols (protocol=NAME; * = the model's default):" in out
+    assert "* example.reconstruction" in out and "model=example" in out
+    assert "ckpt_path" in out  # Hydra's help follows

@@ -22,7 +22,7 @@ from skelagnostic.aligners.checkpoints import load_checkpoint
 from skelagnostic.evaluation import MODEL, held_out, write_evaluation
 from skelagnostic.plugins import PluginManager
 
-__all__ = ["evaluate_checkpoint", "main", "print_evaluation"]
+__all__ = ["evaluate_checkpoint", "main", "print_evaluation", "protocols_text"]
 
 
 def evaluate_checkpoint(
@@ -93,8 +93,31 @@ def print_evaluation(report: Mapping[str, Any], run_dir: Path) -> None:
     console.print(f"report: {run_dir / 'evaluation.md'}")
 
 
+def protocols_text(pm: PluginManager) -> str:
+    """The registered protocols, one line each: name, model, description (``*``: default)."""
+    specs = sorted(pm.evaluations.values(), key=lambda e: (e.model, not e.default, e.name))
+    if not specs:
+        return (
+            "Evaluation protocols: none registered (a plugin registers them with "
+            "register_evaluations)."
+        )
+    width = max(len(e.name) for e in specs) + 2
+    lines = ["Evaluation protocols (protocol=NAME; * = the model's default):"]
+    for e in specs:
+        mark = "*" if e.default else " "
+        lines.append(f"  {mark} {e.name:<{width}} model={e.model}: {e.description}")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: Sequence[str]) -> int:
-    """``skelagnostic evaluate ckpt_path=... [protocol=NAME] [overrides]``."""
+    """``skelagnostic evaluate ckpt_path=... [protocol=NAME] [overrides]``.
+
+    ``--help`` lists the registered protocols before Hydra's help.
+    """
     from skelagnostic.cli.app import main as app_main
 
+    if any(a in ("--help", "-h") for a in argv):
+        from skelagnostic.plugins import get_plugin_manager
+
+        print(protocols_text(get_plugin_manager()))
     return app_main("evaluate", argv)
