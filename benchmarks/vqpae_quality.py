@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import tempfile
@@ -38,15 +37,14 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
 
 import lightning as L  # noqa: E402
-import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from skelagnostic_vqpae.aligner import VQPAEAligner  # noqa: E402
 from skelagnostic_vqpae.data import MultiSource, VQPAEDataModule  # noqa: E402
 from skelagnostic_vqpae.embed import embed_clip  # noqa: E402
+from skelagnostic_vqpae.evaluation import code_overlap, phase_line  # noqa: E402
 
 from skelagnostic import procedural  # noqa: E402
 from skelagnostic.data import BVHSource, ProceduralSource  # noqa: E402
-from skelagnostic.metrics.functional import manifold_overlap  # noqa: E402
 
 
 def _train(dm: VQPAEDataModule, model: VQPAEAligner, steps: int,
@@ -68,16 +66,7 @@ def _train(dm: VQPAEDataModule, model: VQPAEAligner, steps: int,
 
 def phase_linearity(phase: torch.Tensor) -> float:
     """R^2 of a least-squares line through the unwrapped phase (cycles) over frames."""
-    return _phase_line(phase)[0]
-
-
-def _phase_line(phase: torch.Tensor) -> tuple[float, float]:
-    """``(R^2, slope in cycles per frame)`` of a line through the unwrapped phase."""
-    unwrapped = np.unwrap(phase.double().numpy() * 2 * math.pi) / (2 * math.pi)
-    t = np.arange(len(unwrapped), dtype=np.float64)
-    slope, intercept = np.polyfit(t, unwrapped, 1)
-    residual = unwrapped - (slope * t + intercept)
-    return float(1 - residual.var() / max(unwrapped.var(), 1e-12)), float(slope)
+    return phase_line(phase)[0]
 
 
 def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any],
@@ -106,7 +95,7 @@ def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any],
         inner = slice(half, len(emb) - half)  # frames whose window lies inside the clip
         freq = float(emb.frequency[inner].median())
         truth = float(info["frequency"])
-        r2, slope = _phase_line(emb.phase[inner])
+        r2, slope = phase_line(emb.phase[inner])
         clips.append({"clip": f"{kind}/{gait}", "seed": seed, "true_hz": round(truth, 4),
                       "predicted_hz": round(freq, 4),
                       "rel_error": round(abs(freq - truth) / truth, 4),
@@ -144,13 +133,12 @@ def _human_dog_module(human_files: list[str] | None = None) -> VQPAEDataModule:
 def overlap_of_clips(model: VQPAEAligner, num_codes: int,
                      human_files: list[str] | None = None) -> dict[str, Any]:
     """Usage and overlap (Table 2) of the per-frame codes of every human and dog clip."""
-    codes = []
+    codes = {}
     with torch.no_grad():
         for src in _human_dog_sources(human_files):
-            codes.append(torch.cat([embed_clip(model, src.load(c)).code for c in src.clips()]))
-    overlap = manifold_overlap(codes, num_codes)
-    return {**{k: (v.tolist() if torch.is_tensor(v) else v) for k, v in overlap.items()},
-            "codes_used": [int(c.unique().numel()) for c in codes]}
+            codes[src.name] = torch.cat([embed_clip(model, src.load(c)).code
+                                         for c in src.clips()])
+    return code_overlap(codes, num_codes)
 
 
 class OverlapCurve(L.Callback):

@@ -42,6 +42,7 @@ LAYERS: dict[str, int] = {
     "skelagnostic.aligners": 6,
     "skelagnostic.data": 6,
     "skelagnostic.callbacks": 6,
+    "skelagnostic.evaluation": 6,
     "skelagnostic.export": 7,
     "skelagnostic.plugins": 8,
     "skelagnostic_humot": 9,

@@ -30,7 +30,7 @@ reports, each next to a baseline measured in the same run:
 * PC-MRL reconstruction (``quality_pcmrl_recon``): the paper's Table 2
   protocol (temporal KNN distance, 1024 points, K = 8, x100 in metres) at
   sigma 0 and 0.05 on held-out procedural biped22 walk and run clips retargeted
-  onto the biped31 skeleton, unpaired (``skelagnostic_pcmrl.evaluate``), for
+  onto the biped31 skeleton, unpaired (``skelagnostic_pcmrl.evaluation``), for
   the CPU-sized network ``experiment=pcmrl_cpu``, against the naive joint-name
   copy; the floor (a second cloud drawn on the source motion) is reported too.
   The LaFAN1 -> CMU setting of the paper is in docs/methods/pcmrl.md (20 CPU
@@ -87,7 +87,7 @@ def humot(steps: int) -> dict[str, Any]:
     _plugin("humot")
     import lightning as L
     from skelagnostic_humot import HumotAligner, HumotDataModule
-    from skelagnostic_humot.evaluate import HUMAN_KINDS, evaluate_procedural
+    from skelagnostic_humot.evaluation import HUMAN_KINDS, evaluate_procedural
 
     from skelagnostic.data import ProceduralSource
 
@@ -163,9 +163,10 @@ def pcmrl_interp(steps: int) -> dict[str, Any]:
     _one_thread()
     _plugin("pcmrl")
     from skelagnostic_pcmrl.interp import InterpolationAligner
-    from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, lerp_slerp
+    from skelagnostic_pcmrl.interp_eval import GAPS, evaluate
 
     from skelagnostic import procedural
+    from skelagnostic.baselines import lerp_slerp
 
     model = _fit_pcmrl(["model=pcmrl_interp", "experiment=pcmrl_interp_cpu"], steps,
                        InterpolationAligner)
@@ -178,7 +179,7 @@ def pcmrl_recon(steps: int) -> dict[str, Any]:
     """Train ``experiment=pcmrl_cpu`` for ``steps`` steps; Table 2 on held-out clips."""
     _one_thread()
     _plugin("pcmrl")
-    from skelagnostic_pcmrl.evaluate import evaluate_clips
+    from skelagnostic_pcmrl.evaluation import evaluate_clips
     from skelagnostic_pcmrl.recon import PcmrlReconstruction
 
     from skelagnostic import procedural

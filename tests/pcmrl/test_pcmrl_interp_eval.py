@@ -1,26 +1,21 @@
-"""PC-MRL Table 1 protocol (interp_eval): reference values and the command line."""
+"""PC-MRL Table 1 protocol (interp_eval): reference values and the pcmrl.interpolation protocol."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import lightning as L
 import pytest
 import torch
+from skelagnostic_pcmrl.evaluation import interpolation_protocol
 from skelagnostic_pcmrl.interp import InterpolationAligner
 from skelagnostic_pcmrl.interp_data import InterpolationDataModule
-from skelagnostic_pcmrl.interp_eval import (
-    evaluate,
-    format_table,
-    lerp_slerp,
-    load_motions,
-    main,
-    position_stats,
-    windows,
-)
+from skelagnostic_pcmrl.interp_eval import evaluate, format_table, position_stats, windows
 
 from skelagnostic import Motion, procedural
+from skelagnostic.baselines import lerp_slerp
+from skelagnostic.evaluation import HeldOut
 
 
 def _clips() -> list[Motion]:
@@ -62,7 +57,7 @@ def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
     assert "| oracle | 0.0000" in table
 
 
-def test_cli_writes_json_and_table(tmp_path: Path) -> None:
+def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
     L.seed_everything(0)
     dm = InterpolationDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=8)
     model = InterpolationAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=16,
@@ -71,27 +66,25 @@ def test_cli_writes_json_and_table(tmp_path: Path) -> None:
                         enable_progress_bar=False, enable_model_summary=False,
                         limit_val_batches=0)
     trainer.fit(model, datamodule=dm)
-    ckpt = tmp_path / "tiny.ckpt"
-    trainer.save_checkpoint(ckpt)
-    out = tmp_path / "eval" / "table1.json"
-    assert main(["--ckpt", str(ckpt), "--procedural", "1", "--procedural-seconds", "2.2",
-                 "--window", "32", "--stride", "32", "--out", str(out)]) == 0
-    report = json.loads(out.read_text())
-    res = report["procedural"]["results"]
-    assert set(res) == {"LERP", "PC-MRL"}
-    assert set(res["PC-MRL"]) == {"5", "15", "30"}
-    for method in res.values():
-        for scores in method.values():
-            assert all(v >= 0 and v == v for v in scores.values())
-    assert report["procedural"]["protocol"]["fps"] == 30.0
-    assert "| PC-MRL |" in out.with_suffix(".md").read_text()
-
-
-def test_load_motions_converts_units(shared_data: Path) -> None:
-    clip = shared_data / "human" / "xia_cmu" / "angry_13_000.bvh"
-    (m,) = load_motions([clip], fps=60, units="cmu")
-    assert m.fps == 60 and m.name == "angry_13_000.bvh"
-    assert 1.2 < m.skeleton.height() < 2.2  # metres
+    model.eval()
+    clips = _clips()
+    clips[0].name, clips[1].name = "walk", "run"
+    short = clips[1][:20]
+    short.name = "short"
+    held = HeldOut("test", [*clips, short], SimpleNamespace(window=32))
+    with torch.no_grad():
+        out = interpolation_protocol(model, held, tmp_path)
+    assert [r["clip"] for r in out.rows] == ["walk", "run"]
+    assert any("short" in n for n in out.notes)
+    assert out.methods == ["model", "lerp_slerp"]
+    assert set(out.metrics) == {f"{k}@{g}" for k in ("l2p", "l2q", "npss") for g in (5, 15, 30)}
+    # the same figures as the Table 1 function on the clip, with the shared statistics
+    stats = position_stats(windows(clips, 32, 16))
+    direct = evaluate({"LERP": lerp_slerp}, clips[:1], 32, 16, stats=stats)
+    assert out.rows[0]["values"]["lerp_slerp"]["l2p@15"] == pytest.approx(
+        direct["results"]["LERP"]["15"]["l2p"])
+    for values in out.rows[1]["values"].values():
+        assert all(v >= 0 and v == v for v in values.values())
 
 
 def test_evaluate_needs_long_enough_clips() -> None:

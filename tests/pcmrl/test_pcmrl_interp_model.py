@@ -21,9 +21,9 @@ from skelagnostic_pcmrl.interp_data import (
     random_keys,
     regular_keys,
 )
-from skelagnostic_pcmrl.interp_eval import lerp_slerp
 
 from skelagnostic import Motion, procedural
+from skelagnostic.baselines import lerp_slerp
 from skelagnostic.core import quaternion as Q
 from skelagnostic.errors import MotionError, SkelagnosticError
 from skelagnostic.plugins import read_model_config

@@ -1,4 +1,4 @@
-"""The stage-2 training probe script (plugins/pcmrl/scripts/interp_probe.py) on a real clip."""
+"""The stage-2 training probe (benchmarks/pcmrl_interp_probe.py) on a real clip."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "plugins" / "pcmrl" / "scripts" / "interp_probe.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "pcmrl_interp_probe.py"
 
 
 def _probe():  # type: ignore[no-untyped-def]

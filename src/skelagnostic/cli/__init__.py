@@ -18,6 +18,8 @@ VERBS: dict[str, tuple[str, str, str]] = {
     "validate": ("skelagnostic.cli.app", "validate", "evaluate on the validation split"),
     "test": ("skelagnostic.cli.app", "test", "evaluate on the test split"),
     "predict": ("skelagnostic.cli.app", "predict", "aligner outputs -> predictions.pt"),
+    "evaluate": ("skelagnostic.cli.evaluate", "main",
+                 "a plugin's protocol on held-out clips: model vs baselines -> evaluation.json"),
     "plugins": ("skelagnostic.cli.plugins", "main",
                 "list plugins and what they provide; plugins NAME: an aligner's defaults"),
     "new-plugin": ("skelagnostic.cli.new_plugin", "main",
@@ -46,7 +48,7 @@ def _usage() -> str:
 
 
 #: Verbs that are one Hydra application (flags, overrides, shell completion).
-HYDRA_VERBS = ("fit", "validate", "test", "predict")
+HYDRA_VERBS = ("fit", "validate", "test", "predict", "evaluate")
 
 
 def _complete(args: list[str]) -> int:

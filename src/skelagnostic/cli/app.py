@@ -62,7 +62,7 @@ from skelagnostic.plugins import PluginManager, get_plugin_manager, target_of
 from skelagnostic.plugins.manager import config_names
 
 #: The verbs :func:`run` accepts as ``cfg.task``.
-TASKS = ("fit", "validate", "test", "predict")
+TASKS = ("fit", "validate", "test", "predict", "evaluate")
 #: Package holding the primary config ``config.yaml``.
 CONFIG_MODULE = "skelagnostic.conf"
 #: Set to ``1`` (or pass ``--debug``) for full tracebacks on configuration errors.
@@ -365,6 +365,9 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         source_run = find_run_dir(ckpt)  # a run directory stands for its best/last checkpoint
         ckpt = str(checkpoint_of(ckpt))
         checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path", plugin_manager=pm)
+    if task == "evaluate" and checkpoint is None:
+        raise ConfigError("evaluate: give ckpt_path=<checkpoint or run directory> of the "
+                          "trained model")
     if cfg.seed is not None and (not isinstance(cfg.seed, int) or isinstance(cfg.seed, bool)):
         raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
     threads = cfg.get("threads")
@@ -385,6 +388,11 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     if checkpoint is not None:  # fail before the Trainer starts when the weights cannot fit
         check_architecture(ckpt, checkpoint, model, "ckpt_path")
         saved = dict(checkpoint.get("hyper_parameters") or {})
+        if task == "evaluate":  # no trainer: a protocol on the held-out clips
+            from skelagnostic.cli.evaluate import evaluate_checkpoint
+
+            _save_config(cfg, run_dir)
+            return evaluate_checkpoint(cfg, pm, spec.module, datamodule, ckpt)
         del checkpoint
     if task == "test":
         _require_test_split(datamodule)
@@ -707,8 +715,8 @@ def main(task: str, argv: Sequence[str]) -> int:
             kept = "".join(_discard_failed_run(d) for d in run_dirs)
             print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
             return SIGTERM_EXIT_CODE
-        for run_dir, metrics, ckpt in results:
-            summary_table(task, run_dir, metrics, checkpoint=ckpt)
+        for run_dir, metrics, ckpt in results:  # evaluate printed its own table
+            summary_table(task, run_dir, {} if task == "evaluate" else metrics, checkpoint=ckpt)
     except (SkelagnosticError, HydraException, OmegaConfBaseException,
             MisconfigurationException) as exc:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)

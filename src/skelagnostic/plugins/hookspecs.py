@@ -93,3 +93,23 @@ def register_config_paths(register: Callable[..., Any]) -> None:
     Args:
         register: The registration callback.
     """
+
+
+@hookspec
+def register_evaluations(register: Callable[..., Any]) -> None:
+    """Contribute evaluation protocols, run by ``skelagnostic evaluate protocol=<name>``.
+
+    Call ``register(name, function, model, description="", default=False)``
+    once per protocol, where ``name`` reads ``<method>.<what>`` (for example
+    ``humot.reconstruction``), ``model`` is the aligner name the protocol
+    evaluates, and ``function(aligner, held_out, out_dir)`` returns an
+    :class:`~skelagnostic.evaluation.Evaluation`: ``aligner`` is the trained
+    aligner (weights loaded, eval mode), ``held_out`` the
+    :class:`~skelagnostic.evaluation.HeldOut` clips of the run's data, and
+    ``out_dir`` the directory for the protocol's plots. ``default=True`` marks
+    the protocol ``evaluate`` runs when the command line names none (one per
+    model).
+
+    Args:
+        register: The registration callback.
+    """

@@ -1,4 +1,4 @@
-"""Plugin discovery and the registry of aligners, representations, datasets and config paths.
+"""Plugin discovery and the registry of aligners, representations, datasets, configs, protocols.
 
 :class:`PluginManager` wraps a :class:`pluggy.PluginManager` (project name
 ``skelagnostic``). It registers the built-in plugin, then every entry point of
@@ -40,7 +40,7 @@ BUILTIN_NAME = "skelagnostic"
 hookimpl = pluggy.HookimplMarker(ENTRY_POINT_GROUP)
 
 _HOOKS = ("register_aligners", "register_representations", "register_datasets",
-          "register_config_paths")
+          "register_config_paths", "register_evaluations")
 
 
 class PluginError(SkelagnosticError):
@@ -139,12 +139,35 @@ class DatasetSpec:
     plugin: str = ""
 
 
+@dataclass(frozen=True)
+class EvaluationSpec:
+    """An evaluation protocol contributed through ``register_evaluations``.
+
+    Attributes:
+        name: The ``protocol=<name>`` of ``skelagnostic evaluate`` (``<method>.<what>``).
+        function: ``function(aligner, held_out, out_dir)`` returning an
+            :class:`~skelagnostic.evaluation.Evaluation`.
+        model: The aligner (``model=<name>``) it evaluates.
+        description: One line for ``skelagnostic plugins`` and the outputs.
+        default: The protocol ``evaluate`` runs for ``model`` when none is named.
+        plugin: Name of the plugin that registered it.
+    """
+
+    name: str
+    function: Callable[..., Any]
+    model: str
+    description: str = ""
+    default: bool = False
+    plugin: str = ""
+
+
 @dataclass
 class _Contributions:
     aligners: list[AlignerSpec] = field(default_factory=list)
     representations: list[RepresentationSpec] = field(default_factory=list)
     datasets: list[DatasetSpec] = field(default_factory=list)
     config_paths: list[tuple[str, str]] = field(default_factory=list)
+    evaluations: list[EvaluationSpec] = field(default_factory=list)
 
 
 def _allowed_plugins() -> frozenset[str] | None:
@@ -313,6 +336,35 @@ class PluginManager:
         """Hydra search-path URLs registered by plugins, in plugin order."""
         return [path for path, _ in self._collect().config_paths]
 
+    @property
+    def evaluations(self) -> Mapping[str, EvaluationSpec]:
+        """Registered evaluation protocols by name."""
+        return MappingProxyType({s.name: s for s in self._collect().evaluations})
+
+    def evaluation(self, name: str | None, model: str) -> EvaluationSpec:
+        """The protocol ``name`` of aligner ``model`` (None: ``model``'s default protocol).
+
+        Raises:
+            PluginError: Unknown protocol, a protocol of another model, or no
+                (default) protocol for ``model``; the message lists ``model``'s protocols.
+        """
+        mine = sorted(s.name for s in self._collect().evaluations if s.model == model)
+        listed = ", ".join(mine) or "none"
+        if name is None:
+            default = [s for s in self._collect().evaluations if s.model == model and s.default]
+            if not default:
+                raise PluginError(f"model={model} has no default evaluation protocol; give "
+                                  f"protocol=NAME (protocols of model={model}: {listed})")
+            return default[0]
+        spec = self.evaluations.get(name)
+        if spec is None:
+            raise PluginError(f"unknown evaluation protocol {name!r}; protocols of "
+                              f"model={model}: {listed}")
+        if spec.model != model:
+            raise PluginError(f"protocol {name!r} evaluates model={spec.model}, not "
+                              f"model={model}; protocols of model={model}: {listed}")
+        return spec
+
     def aligner(self, name: str) -> AlignerSpec:
         """The aligner registered as ``name``; :class:`PluginError` lists the known ones."""
         return _lookup(self.aligners, name, "aligner")
@@ -345,6 +397,7 @@ class PluginManager:
                 ("aligner", mine.aligners),
                 ("representation", mine.representations),
                 ("dataset", mine.datasets),
+                ("evaluation", mine.evaluations),
             ):
                 for item in items:
                     if (kind, item.name) in owners:
@@ -359,6 +412,7 @@ class PluginManager:
             total.representations += mine.representations
             total.datasets += mine.datasets
             total.config_paths += mine.config_paths
+            total.evaluations += mine.evaluations
             config_urls = [path for path, _ in mine.config_paths]
             if name == BUILTIN_NAME:
                 config_urls.insert(0, "pkg://skelagnostic.conf")
@@ -601,8 +655,22 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
         for url in _config_urls(path, plugin_name):
             out.config_paths.append((url, plugin_name))
 
+    def register_evaluation(name: str, function: Callable[..., Any], model: str,
+                            description: str = "", default: bool = False) -> None:
+        if not callable(function):
+            raise PluginError(f"evaluation {name!r}: function must be callable, got {function!r}")
+        if not isinstance(model, str) or not model:
+            raise PluginError(f"evaluation {name!r}: model must be an aligner name, got {model!r}")
+        if default and any(e.default and e.model == model for e in out.evaluations):
+            raise PluginError(f"evaluation {name!r}: model={model} already has a default "
+                              "protocol")
+        out.evaluations.append(EvaluationSpec(name, function, model, description or
+                                              _first_line(function.__doc__), bool(default),
+                                              plugin_name))
+
     callbacks = {
         "register_aligners": register_aligner,
+        "register_evaluations": register_evaluation,
         "register_representations": register_representation,
         "register_datasets": register_dataset,
         "register_config_paths": register_config_path,

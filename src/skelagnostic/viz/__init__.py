@@ -12,6 +12,7 @@ from skelagnostic.viz.camera import Camera
 from skelagnostic.viz.html import to_html
 from skelagnostic.viz.plots import (
     plot_codebook_usage,
+    plot_method_comparison,
     plot_metric_curves,
     plot_phase_manifold,
     plot_phase_over_time,
@@ -37,6 +38,7 @@ __all__ = [
     "StickFigure",
     "contact_sheet",
     "plot_codebook_usage",
+    "plot_method_comparison",
     "plot_metric_curves",
     "plot_phase_manifold",
     "plot_phase_over_time",

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "plot_codebook_usage",
+    "plot_method_comparison",
     "plot_metric_curves",
     "plot_phase_manifold",
     "plot_phase_over_time",
@@ -316,6 +317,51 @@ def plot_metric_curves(
         ax.set_yscale("log")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
+    return _finish(figure, out)
+
+
+def plot_method_comparison(
+    values: Mapping[str, Mapping[str, float | None]],
+    *,
+    title: str | None = None,
+    out: str | Path | None = None,
+) -> Figure:
+    """One bar panel per metric: a model's figure beside its baselines'.
+
+    Args:
+        values: ``method -> metric -> value`` (``None`` or a missing metric: no bar).
+        title: Optional title of the figure.
+        out: Optional path to save the figure to.
+
+    Returns:
+        The figure.
+
+    Raises:
+        RenderError: If ``values`` holds no finite value.
+
+    Examples:
+        >>> from skelagnostic.viz import plot_method_comparison
+        >>> fig = plot_method_comparison({"model": {"mpjpe": 2.0}, "mean_pose": {"mpjpe": 9.0}})
+        >>> [round(b.get_height(), 1) for b in fig.axes[0].patches]
+        [2.0, 9.0]
+    """
+    metrics = list(dict.fromkeys(m for row in values.values() for m in row))
+    if not metrics:
+        raise RenderError("values: needs at least one method with one metric")
+    figure = _figure((min(3.2 * len(metrics), 16.0), 3.6))
+    axes = figure.subplots(1, len(metrics), squeeze=False)[0]
+    methods = list(values)
+    for ax, metric in zip(axes, metrics, strict=True):
+        shown = [(k, m, values[m].get(metric)) for k, m in enumerate(methods)]
+        shown = [(k, m, float(v)) for k, m, v in shown if v is not None and np.isfinite(v)]
+        ax.bar(range(len(shown)), [v for _, _, v in shown], color=[f"C{k}" for k, _, _ in shown])
+        ax.set_xticks(
+            range(len(shown)), [m for _, m, _ in shown], rotation=30, ha="right", fontsize=8
+        )
+        ax.set_title(metric, fontsize=9)
+        ax.grid(alpha=0.3, axis="y")
+    if title:
+        figure.suptitle(title, fontsize=10)
     return _finish(figure, out)
 
 

@@ -33,3 +33,19 @@ def register_aligners(register: Callable[..., Any]) -> None:
 def register_config_paths(register: Callable[..., Any]) -> None:
     """Ship ``experiment=example_quick``."""
     register(f"pkg://{CONFIG_PACKAGE}")
+
+
+def reconstruction(aligner: Any, held_out: Any, out_dir: Any) -> Any:
+    """Encode-decode pose error on held-out clips, beside the mean-pose baselines."""
+    from skelagnostic.evaluation import RECONSTRUCTION_METRICS, Evaluation, reconstruction_rows
+
+    rows = reconstruction_rows(
+        held_out.clips, lambda m: aligner.decode(aligner.encode(m), m.skeleton)
+    )
+    return Evaluation(dict(RECONSTRUCTION_METRICS), rows)
+
+
+@hookimpl
+def register_evaluations(register: Callable[..., Any]) -> None:
+    """Register ``protocol=example.reconstruction`` (the default of ``model=example``)."""
+    register("example.reconstruction", reconstruction, model="example", default=True)

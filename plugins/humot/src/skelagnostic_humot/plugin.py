@@ -62,3 +62,25 @@ def register_aligners(register: Callable[..., Any]) -> None:
 def register_config_paths(register: Callable[..., Any]) -> None:
     """Ship ``experiment=humot_quick``."""
     register(f"pkg://{CONFIG_PACKAGE}")
+
+
+@hookimpl
+def register_evaluations(register: Callable[..., Any]) -> None:
+    """Register ``humot.reconstruction`` (the default) and ``humot.retarget``."""
+    from skelagnostic_humot.evaluation import reconstruction_protocol, retarget_protocol
+
+    register(
+        "humot.reconstruction",
+        reconstruction_protocol,
+        model="humot",
+        default=True,
+        description="Table 2 reconstruction of held-out clips beside mean-pose baselines; "
+        "denoising and joint-upsampling curves (Fig. 8, 9)",
+    )
+    register(
+        "humot.retarget",
+        retarget_protocol,
+        model="humot",
+        description="cycle retargeting error of held-out clips via another rig beside "
+        "name-copy and primal-copy baselines; paired procedural retargeting",
+    )

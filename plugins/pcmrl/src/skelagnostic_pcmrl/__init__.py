@@ -9,7 +9,7 @@ and ``model=pcmrl_interp`` (stage 2, keyframe interpolation). Stage-1 modules:
 :mod:`~skelagnostic_pcmrl.temporal` (temporal transformer),
 :mod:`~skelagnostic_pcmrl.losses` (Eq. 5-6, unit norm),
 :mod:`~skelagnostic_pcmrl.recon` (the aligner), :mod:`~skelagnostic_pcmrl.recon_data`
-(data module), :mod:`~skelagnostic_pcmrl.evaluate` (paper Table 2 protocol).
+(data module), :mod:`~skelagnostic_pcmrl.evaluation` (paper Table 2 and the protocols).
 Imports are lazy: ``import skelagnostic_pcmrl`` loads no model code.
 """
 

@@ -45,6 +45,13 @@ import torch
 from torch import Tensor, nn
 
 from skelagnostic.aligners.base import Aligner, Latent
+from skelagnostic.baselines.keyframes import (
+    gather_frames,
+    key_brackets,
+    lerp_keys,
+    slerp_keys,
+    surrounding_keys,
+)
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
@@ -154,69 +161,6 @@ def sign_invariant_l1(pred: Tensor, target: Tensor) -> Tensor:
     return torch.minimum(plus, minus).mean() / 4.0
 
 
-def _surrounding_keys(keys: Tensor) -> tuple[Tensor, Tensor]:
-    """Per frame, the last key at or before it (-1: none) and the first at or after (T: none).
-
-    Written as a masked max/min over a ``[T, T]`` comparison instead of
-    ``cummax``/``cummin``, which ONNX has no operator for; the result is the same.
-
-    Args:
-        keys: ``[B, T]`` boolean keyframe mask.
-
-    Returns:
-        ``(prev [B, T], next [B, T])`` long frame indices.
-    """
-    num_t = keys.shape[-1]
-    frames = torch.arange(num_t, device=keys.device)
-    key_s = keys[:, None, :]  # [B, t, s]: is frame s a key
-    before = (frames[None, :] <= frames[:, None]) & key_s  # key s at or before t
-    after = (frames[None, :] >= frames[:, None]) & key_s  # key s at or after t
-    prev = torch.where(before, frames, torch.full_like(frames, -1)).amax(dim=-1)
-    nxt = torch.where(after, frames, torch.full_like(frames, num_t)).amin(dim=-1)
-    return prev, nxt
-
-
-def key_brackets(keys: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-    """Previous key, next key and the linear weight of every frame.
-
-    Args:
-        keys: ``[B, T]`` boolean keyframe mask; frame 0 must be a key.
-
-    Returns:
-        ``(prev [B, T], next [B, T], w [B, T])``: frames after the last key use the
-        last key on both sides (weight 0).
-    """
-    num_t = keys.shape[-1]
-    frames = torch.arange(num_t, device=keys.device).expand_as(keys)
-    prev, nxt = _surrounding_keys(keys)
-    nxt = torch.where(nxt >= num_t, prev, nxt)
-    prev = prev.clamp_min(0)
-    span = (nxt - prev).clamp_min(1)
-    w = torch.where(nxt > prev, (frames - prev).float() / span.float(), torch.zeros_like(span,
-                    dtype=torch.float32))
-    return prev, nxt, w
-
-
-def _gather_t(x: Tensor, index: Tensor) -> Tensor:
-    """``x[b, index[b, t]]`` for ``x`` of shape ``[B, T, ...]``."""
-    shape = index.shape + x.shape[2:]
-    idx = index.reshape(*index.shape, *([1] * (x.dim() - 2))).expand(shape)
-    return torch.gather(x, 1, idx)
-
-
-def lerp_keys(x: Tensor, keys: Tensor) -> Tensor:
-    """Linear interpolation of ``[B, T, ...]`` values between keyframes."""
-    prev, nxt, w = key_brackets(keys)
-    w = w.to(x.dtype).reshape(*w.shape, *([1] * (x.dim() - 2)))
-    return torch.lerp(_gather_t(x, prev), _gather_t(x, nxt), w)
-
-
-def slerp_keys(q: Tensor, keys: Tensor) -> Tensor:
-    """Spherical linear interpolation of ``[B, T, J, 4]`` quaternions between keyframes."""
-    prev, nxt, w = key_brackets(keys)
-    return Q.slerp(_gather_t(q, prev), _gather_t(q, nxt), w.to(q.dtype)[..., None])
-
-
 def window_heading(
     global_rotations: Tensor,
     root: Tensor,
@@ -253,9 +197,9 @@ def _key_continuity(q: Tensor, keys: Tensor) -> Tensor:
     Sign flips are removed from key to key, so the result does not depend on
     the (unknown) frames between keys.
     """
-    prev_incl = _surrounding_keys(keys)[0]
+    prev_incl = surrounding_keys(keys)[0]
     prev = torch.cat([torch.full_like(prev_incl[:, :1], -1), prev_incl[:, :-1]], dim=1)
-    before = _gather_t(q, prev.clamp_min(0))
+    before = gather_frames(q, prev.clamp_min(0))
     flip = keys[..., None] & (prev >= 0)[..., None] & ((q * before).sum(-1) < 0)
     parity = torch.cumsum(flip.to(torch.int64), dim=1) % 2
     sign = 1.0 - 2.0 * parity.to(q.dtype)

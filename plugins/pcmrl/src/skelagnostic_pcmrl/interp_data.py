@@ -460,11 +460,16 @@ class InterpolationDataModule(MotionDataModule):
             return [CachedClip(f"{n}:mirror" if mirror else n, self._entry(src, ref, mirror))
                     for n, src, ref in items]
 
+        val = [rest[i] for i in sorted(val_idx)]
         self.clips = {
             "train": clips(train) + (clips(train, mirror=True) if self.mirror else []),
-            "val": clips([rest[i] for i in sorted(val_idx)]),
+            "val": clips(val),
             "test": clips(test),
         }
+        # the split of the source clips, for split.json and skelagnostic evaluate
+        for part, items in (("train", train), ("val", val), ("test", test)):
+            self.assigned_splits.update((ref.id, part) for _, src, ref in items
+                                        if src is not extra)
         self.skeletons = {"target": self.skeleton}
         self.train_set = TrainWindows(self.clips["train"], self.window, self.min_keys,
                                       self.max_keys, self.rpa_range, self.rpa_prob,

@@ -6,7 +6,8 @@ each method fills the other frames:
 
 * ``LERP``: the baseline of the paper, linear interpolation of the root position
   and spherical linear interpolation (SLERP) of every joint's local rotation
-  between the surrounding keys, then forward kinematics;
+  between the surrounding keys, then forward kinematics
+  (:func:`skelagnostic.baselines.lerp_slerp`);
 * ``PC-MRL``: :meth:`InterpolationAligner.interpolate
   <skelagnostic_pcmrl.interp.InterpolationAligner.interpolate>`.
 
@@ -17,63 +18,34 @@ windows; the JSON says which); L2Q on global quaternions; both averaged over
 the generated (non-key) frames. NPSS on global quaternions over the whole
 window with the squared-magnitude spectrum (``power="abs"``, as CITL/PC-MRL).
 
-Run ``python -m skelagnostic_pcmrl.interp_eval --help``.
+``skelagnostic evaluate`` runs it on a run's held-out clips as protocol
+``pcmrl.interpolation`` (:func:`skelagnostic_pcmrl.evaluation.interpolation_protocol`).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import logging
-import sys
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 import torch
 
-from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.metrics.functional import l2p, l2q, npss
-from skelagnostic_pcmrl.interp import lerp_keys, slerp_keys
 from skelagnostic_pcmrl.interp_data import gap_keys
 
 __all__ = [
     "GAPS",
     "evaluate",
     "format_table",
-    "lerp_slerp",
-    "load_motions",
-    "main",
     "position_stats",
     "windows",
 ]
-
-log = logging.getLogger(__name__)
 
 #: Keyframe gaps of Table 1.
 GAPS = (5, 15, 30)
 
 Interpolator = Callable[[Motion, Sequence[int]], Motion]
-
-
-def lerp_slerp(motion: Motion, keyframes: Sequence[int]) -> Motion:
-    """The LERP baseline: root LERP and local-rotation SLERP between keyframes.
-
-    Args:
-        motion: The motion (only its keyframes are read).
-        keyframes: Increasing frame indices, the first 0 and the last the final frame.
-
-    Returns:
-        The interpolated motion (same skeleton, fps, name and units).
-    """
-    keys = torch.zeros(1, motion.num_frames, dtype=torch.bool)
-    keys[0, list(keyframes)] = True
-    rot = Q.continuity(motion.rotations, dim=-3)[None]
-    root = lerp_keys(motion.root_positions[None], keys)[0]
-    local = slerp_keys(rot, keys)[0]
-    return Motion(motion.skeleton, local, root, motion.fps, name=motion.name, units=motion.units)
 
 
 def windows(motions: Sequence[Motion], window: int, stride: int) -> list[Motion]:
@@ -181,99 +153,3 @@ def format_table(report: dict[str, Any]) -> str:
         cells = [f"{per_gap[str(g)][m]:.4f}" for m in ("l2p", "l2q", "npss") for g in gaps]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
-
-
-def load_motions(paths: Sequence[str | Path], fps: float, units: str | None) -> list[Motion]:
-    """Read BVH files (or directories of them), convert to metres and resample to ``fps``."""
-    from skelagnostic.data.sources import BVHSource
-
-    source = BVHSource(paths=list(paths), units=units)
-    out = []
-    for ref in source.clips():
-        motion = source.load(ref)
-        if motion.fps != fps:
-            motion = motion.resample(fps)
-        motion.name = Path(ref.id).name
-        out.append(motion)
-    return out
-
-
-def _procedural(kind: str, clips: int, fps: float, seed: int, seconds: float) -> list[Motion]:
-    from skelagnostic.data.sources import ProceduralSource
-
-    source = ProceduralSource(kinds=(kind,), gaits=("walk", "run"), clips_per_gait=clips,
-                              seconds=seconds, seed=seed, name="procedural_eval")
-    out = []
-    for ref in source.clips():
-        motion = source.load(ref)
-        if motion.fps != fps:
-            motion = motion.resample(fps)
-        motion.name = ref.id
-        out.append(motion)
-    return out
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: evaluate a checkpoint (and LERP) and write JSON + a Markdown table."""
-    parser = argparse.ArgumentParser(
-        prog="python -m skelagnostic_pcmrl.interp_eval",
-        description="PC-MRL Table 1 protocol (L2P/L2Q/NPSS at keyframe gaps) vs LERP/SLERP.",
-    )
-    parser.add_argument("--ckpt", help="pcmrl_interp checkpoint (omit for LERP only)")
-    parser.add_argument("--data", nargs="*", default=[], help="held-out BVH files/directories")
-    parser.add_argument("--units", default=None, help="units of the BVH files (e.g. cmu, cm)")
-    parser.add_argument("--train-data", nargs="*", default=[],
-                        help="training BVH files for the L2P statistics (default: test windows)")
-    parser.add_argument("--procedural", type=int, default=0,
-                        help="also/instead evaluate N procedural clips per gait (walk, run)")
-    parser.add_argument("--procedural-kind", default="biped31")
-    parser.add_argument("--procedural-seed", type=int, default=777,
-                        help="seed of the procedural test clips (keep it apart from training)")
-    parser.add_argument("--procedural-seconds", type=float, default=8.0)
-    parser.add_argument("--fps", type=float, default=None,
-                        help="frame rate (default: the checkpoint's, else 30)")
-    parser.add_argument("--window", type=int, default=128)
-    parser.add_argument("--stride", type=int, default=64)
-    parser.add_argument("--gaps", type=int, nargs="+", default=list(GAPS))
-    parser.add_argument("--out", required=True, help="output JSON path (.md table next to it)")
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-
-    methods: dict[str, Interpolator] = {"LERP": lerp_slerp}
-    fps = args.fps
-    if args.ckpt:
-        from skelagnostic.aligners.checkpoints import load_checkpoint
-        from skelagnostic_pcmrl.interp import InterpolationAligner
-
-        model = load_checkpoint(InterpolationAligner, args.ckpt, option="--ckpt").eval()
-        methods["PC-MRL"] = model.interpolate
-        fps = fps or model.hparams.fps
-    fps = float(fps or 30.0)
-    report: dict[str, Any] = {}
-    sets: list[tuple[str, list[Motion], list[Motion]]] = []
-    if args.data:
-        train = load_motions(args.train_data, fps, args.units) if args.train_data else []
-        sets.append(("bvh", load_motions(args.data, fps, args.units), train))
-    if args.procedural:
-        sets.append(("procedural", _procedural(args.procedural_kind, args.procedural, fps,
-                                               args.procedural_seed,
-                                               args.procedural_seconds), []))
-    if not sets:
-        parser.error("give --data and/or --procedural")
-    tables = []
-    for label, motions, train in sets:
-        stats = position_stats(windows(train, args.window, args.stride)) if train else None
-        result = evaluate(methods, motions, args.window, args.stride, args.gaps, stats)
-        report[label] = result
-        tables.append(f"### {label} ({result['protocol']['windows']} windows of "
-                      f"{args.window} frames at {fps:g} fps)\n\n{format_table(result)}")
-        log.info("%s\n%s", label, format_table(result))
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(report, indent=2))
-    out.with_suffix(".md").write_text("\n\n".join(tables) + "\n")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

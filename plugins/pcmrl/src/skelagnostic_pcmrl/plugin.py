@@ -90,3 +90,26 @@ def register_aligners(register: Callable[..., Any]) -> None:
 def register_config_paths(register: Callable[..., Any]) -> None:
     """Ship ``experiment=pcmrl_quick``, ``pcmrl_paper`` and ``pcmrl_lafan1_cmu``."""
     register(f"pkg://{CONFIG_PACKAGE}")
+
+
+@hookimpl
+def register_evaluations(register: Callable[..., Any]) -> None:
+    """Register ``pcmrl.reconstruction`` and ``pcmrl.interpolation`` (one default per stage)."""
+    from skelagnostic_pcmrl.evaluation import interpolation_protocol, reconstruction_protocol
+
+    register(
+        "pcmrl.reconstruction",
+        reconstruction_protocol,
+        model="pcmrl",
+        default=True,
+        description="Table 2: temporal KNN and end-effector error of held-out clips "
+        "retargeted onto the target, beside name-copy and primal-copy",
+    )
+    register(
+        "pcmrl.interpolation",
+        interpolation_protocol,
+        model="pcmrl_interp",
+        default=True,
+        description="Table 1: L2P, L2Q, NPSS at keyframe gaps 5/15/30 of held-out clips, "
+        "beside LERP/SLERP",
+    )

@@ -61,3 +61,18 @@ def register_datasets(register: Callable[..., Any]) -> None:
 def register_config_paths(register: Callable[..., Any]) -> None:
     """Ship ``experiment=vqpae_human_dog`` and ``experiment=vqpae_stylized``."""
     register(f"pkg://{CONFIG_PACKAGE}")
+
+
+@hookimpl
+def register_evaluations(register: Callable[..., Any]) -> None:
+    """Register ``vqpae.manifold`` (the default of ``model=vqpae``)."""
+    from skelagnostic_vqpae.evaluation import manifold_protocol
+
+    register(
+        "vqpae.manifold",
+        manifold_protocol,
+        model="vqpae",
+        default=True,
+        description="shared codes (vs chance), phase linearity and average-pose error "
+        "(vs the mean pose) of held-out clips; codebook usage and overlap",
+    )

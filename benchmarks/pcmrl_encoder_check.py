@@ -9,7 +9,7 @@ layers (MSE). Prints the mean joint error on held-out frames every 100 steps.
 
 Usage::
 
-    python plugins/pcmrl/scripts/encoder_check.py ../shared/data/human/lafan1 --encoder full \
+    python benchmarks/pcmrl_encoder_check.py ../shared/data/human/lafan1 --encoder full \
         --test-pattern subject5 --units cm
 """
 
@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "plugins" / "pcmrl" / "src"))
 
 ENCODERS = ("full", "vector", "none", "pointnet")
 
@@ -34,8 +34,13 @@ class PointNet(nn.Module):
 
     def __init__(self, in_channels: int, dim: int) -> None:
         super().__init__()
-        self.mlp = nn.Sequential(nn.Linear(in_channels, dim), nn.ReLU(), nn.Linear(dim, 2 * dim),
-                                 nn.ReLU(), nn.Linear(2 * dim, 16 * dim))
+        self.mlp = nn.Sequential(
+            nn.Linear(in_channels, dim),
+            nn.ReLU(),
+            nn.Linear(dim, 2 * dim),
+            nn.ReLU(),
+            nn.Linear(2 * dim, 16 * dim),
+        )
         self.out_channels = 16 * dim
 
     def forward(self, points: torch.Tensor) -> torch.Tensor:
@@ -62,8 +67,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--lr", type=float, default=1e-3)
     parser.add_argument("--steps", type=int, default=600)
     parser.add_argument("--batch", type=int, default=32)
-    parser.add_argument("--horizontal-only", action="store_true",
-                        help="remove only the horizontal centroid (model.centre_up=false)")
+    parser.add_argument(
+        "--horizontal-only",
+        action="store_true",
+        help="remove only the horizontal centroid (model.centre_up=false)",
+    )
     args = parser.parse_args(argv)
     torch.manual_seed(0)
     torch.set_num_threads(1)
@@ -72,8 +80,9 @@ def main(argv: list[str] | None = None) -> None:
     test = [m for f, m in motions.items() if re.search(args.test_pattern, f.name)]
     train = [m for f, m in motions.items() if not re.search(args.test_pattern, f.name)]
     if not test or not train:
-        raise SkelagnosticError(f"{args.root}: --test-pattern {args.test_pattern!r} must match "
-                                "some clips and not all")
+        raise SkelagnosticError(
+            f"{args.root}: --test-pattern {args.test_pattern!r} must match some clips and not all"
+        )
     skeleton = train[0].skeleton
     up = "xyz".index(skeleton.up_axis)
     offsets = skeleton.offsets.float()
@@ -86,8 +95,8 @@ def main(argv: list[str] | None = None) -> None:
         for _ in range(size):
             r, p = clips[int(torch.randint(len(clips), (1,), generator=gen))]
             t = int(torch.randint(r.shape[0], (1,), generator=gen))
-            rot.append(r[t:t + 1])
-            pos.append(p[t:t + 1])
+            rot.append(r[t : t + 1])
+            pos.append(p[t : t + 1])
         rot_b, pos_b = torch.stack(rot), torch.stack(pos)
         points = layout.points(rot_b, pos_b, offsets)
         centre = points.mean(dim=2)
@@ -102,11 +111,13 @@ def main(argv: list[str] | None = None) -> None:
     if args.encoder == "pointnet":
         encoder: nn.Module = PointNet(8, args.dim)
     else:
-        encoder = PointTransformerEncoder(5, args.dim, 4, 4, 8, attention=args.encoder,
-                                          layer_scale=args.layer_scale)
+        encoder = PointTransformerEncoder(
+            5, args.dim, 4, 4, 8, attention=args.encoder, layer_scale=args.layer_scale
+        )
     joints = skeleton.num_joints
-    net = nn.Sequential(encoder, nn.Linear(encoder.out_channels, 256), nn.ReLU(),
-                        nn.Linear(256, 3 * joints))
+    net = nn.Sequential(
+        encoder, nn.Linear(encoder.out_channels, 256), nn.ReLU(), nn.Linear(256, 3 * joints)
+    )
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr)
     gen = torch.Generator().manual_seed(1)
     x_test, y_test = batch(test_fk, 512, torch.Generator().manual_seed(2))
@@ -123,11 +134,15 @@ def main(argv: list[str] | None = None) -> None:
         opt.step()
         if step % 100 == 0 or step == args.steps:
             with torch.no_grad():
-                print(f"step {step}: test {error(y_test, net(x_test)):.3f} m, training batch "
-                      f"{error(y, net(x)):.3f} m, {time.perf_counter() - start:.0f} s",
-                      flush=True)
-    print(f"mean pose of the last training batch: "
-          f"{error(y_test, y.mean(0, keepdim=True).expand_as(y_test)):.3f} m")
+                print(
+                    f"step {step}: test {error(y_test, net(x_test)):.3f} m, training batch "
+                    f"{error(y, net(x)):.3f} m, {time.perf_counter() - start:.0f} s",
+                    flush=True,
+                )
+    print(
+        f"mean pose of the last training batch: "
+        f"{error(y_test, y.mean(0, keepdim=True).expand_as(y_test)):.3f} m"
+    )
 
 
 if __name__ == "__main__":

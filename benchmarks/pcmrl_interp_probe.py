@@ -13,7 +13,7 @@ own training distribution. The last line and ``--json`` hold the final figures.
 
 Model and data options are passed as ``key=value`` (YAML values), e.g.::
 
-    python plugins/pcmrl/scripts/interp_probe.py \
+    python benchmarks/pcmrl_interp_probe.py \
         --train ../shared/data/human/lafan1/walk4_subject1.bvh \
         --test ../shared/data/human/lafan1/obstacles1_subject5.bvh --units cm --minutes 7 \
         --model interm_tokens=lerp canonical_heading=true lr=3e-3 \
@@ -33,13 +33,17 @@ import torch
 import yaml
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "plugins" / "pcmrl" / "src"))
 
 #: The CPU configuration of experiment=pcmrl_interp_cpu / pcmrl_interp_cmu.
-CPU_MODEL = {"dim": 64, "heads": 4, "layers": 2, "lr": 1e-3, "warmup_steps": 100,
-             "residual": True}
-CPU_DATA = {"window": 128, "batch_size": 8, "samples_per_epoch": 512, "val_fraction": 0.0,
-            "mirror": True}
+CPU_MODEL = {"dim": 64, "heads": 4, "layers": 2, "lr": 1e-3, "warmup_steps": 100, "residual": True}
+CPU_DATA = {
+    "window": 128,
+    "batch_size": 8,
+    "samples_per_epoch": 512,
+    "val_fraction": 0.0,
+    "mirror": True,
+}
 PROBE_GAPS = (15, 30)
 
 
@@ -85,24 +89,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", nargs="*", default=[], help="model options key=value")
     parser.add_argument("--data", nargs="*", default=[], help="data options key=value")
     parser.add_argument("--json", default=None, help="write the trajectory here")
-    parser.add_argument("--ema", type=float, default=None,
-                        help="also probe an EMA of the weights with this decay (e.g. 0.999)")
+    parser.add_argument(
+        "--ema",
+        type=float,
+        default=None,
+        help="also probe an EMA of the weights with this decay (e.g. 0.999)",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     torch.manual_seed(args.seed)
 
     model_opts = {**CPU_MODEL, **_options(args.model, "--model")}
-    data_opts = {**CPU_DATA, "fps": args.fps, "seed": args.seed,
-                 **_options(args.data, "--data")}
-    train = InterpolationDataModule(sources=[BVHSource(paths=args.train, units=args.units)],
-                                    **data_opts)
+    data_opts = {**CPU_DATA, "fps": args.fps, "seed": args.seed, **_options(args.data, "--data")}
+    train = InterpolationDataModule(
+        sources=[BVHSource(paths=args.train, units=args.units)], **data_opts
+    )
     train.setup("fit")
-    test = InterpolationDataModule(sources=[BVHSource(paths=args.test, units=args.units)],
-                                   fps=args.fps, window=data_opts["window"], val_fraction=0.0)
+    test = InterpolationDataModule(
+        sources=[BVHSource(paths=args.test, units=args.units)],
+        fps=args.fps,
+        window=data_opts["window"],
+        val_fraction=0.0,
+    )
     test.setup("fit")
     assert train.skeleton is not None and train.train_set is not None
-    common = {"skeleton": train.skeleton.to_dict(), "fps": args.fps,
-              "window": data_opts["window"]}
+    common = {"skeleton": train.skeleton.to_dict(), "fps": args.fps, "window": data_opts["window"]}
     model = InterpolationAligner(**model_opts, **common)
     baseline_opts = {**model_opts, "residual": True, "interm_tokens": "zero"}
     baseline = InterpolationAligner(**baseline_opts, **common).eval()  # zero residual = LERP
@@ -110,13 +121,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.ema is not None:
         if not 0.0 < args.ema < 1.0:
             raise SystemExit(f"--ema: the decay must lie in (0, 1), got {args.ema}")
-        averaged = AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(args.ema),
-                                 use_buffers=True)
+        averaged = AveragedModel(
+            model, multi_avg_fn=get_ema_multi_avg_fn(args.ema), use_buffers=True
+        )
     optimisers = model.configure_optimizers()
     opt, sched = optimisers["optimizer"], optimisers["lr_scheduler"]["scheduler"]
-    probe = {gap: list(torch.utils.data.DataLoader(
-        FixedWindows(test.clips["train"], data_opts["window"], 64, gap), batch_size=32))
-        for gap in PROBE_GAPS}
+    probe = {
+        gap: list(
+            torch.utils.data.DataLoader(
+                FixedWindows(test.clips["train"], data_opts["window"], 64, gap), batch_size=32
+            )
+        )
+        for gap in PROBE_GAPS
+    }
     if not any(probe.values()):
         raise SystemExit(f"--test: no clip has {data_opts['window']} frames at {args.fps} fps")
 
@@ -130,8 +147,11 @@ def main(argv: list[str] | None = None) -> int:
                     e, n = _position_error(net, batch)
                     b, _ = _position_error(baseline, batch)
                     err, base, count = err + e, base + b, count + n
-                out[str(gap)] = {"model_m": err / count, "lerp_m": base / count,
-                                 "ratio": err / base}
+                out[str(gap)] = {
+                    "model_m": err / count,
+                    "lerp_m": base / count,
+                    "ratio": err / base,
+                }
         net.train()
         return out
 
@@ -167,24 +187,42 @@ def main(argv: list[str] | None = None) -> int:
         base_avg = base_loss if base_avg is None else 0.98 * base_avg + 0.02 * base_loss
         if step % args.every == 0:
             figures = evaluate_all()
-            trajectory.append({"step": step, "seconds": time.perf_counter() - start,
-                               "train_ratio": loss_avg / base_avg, **figures})
-            cells = " | ".join(f"gap {g}: {f['model_m'] * 100:.2f} cm vs LERP "
-                               f"{f['lerp_m'] * 100:.2f} cm ({f['ratio']:.3f})"
-                               for g, f in figures["probe"].items())
+            trajectory.append(
+                {
+                    "step": step,
+                    "seconds": time.perf_counter() - start,
+                    "train_ratio": loss_avg / base_avg,
+                    **figures,
+                }
+            )
+            cells = " | ".join(
+                f"gap {g}: {f['model_m'] * 100:.2f} cm vs LERP "
+                f"{f['lerp_m'] * 100:.2f} cm ({f['ratio']:.3f})"
+                for g, f in figures["probe"].items()
+            )
             if averaged is not None:
-                cells += " | EMA " + " ".join(f"gap {g}: {f['ratio']:.3f}"
-                                              for g, f in figures["probe_ema"].items())
-            print(f"step {step} ({time.perf_counter() - start:.0f} s) train loss / LERP "
-                  f"{loss_avg / base_avg:.3f} | {cells}", flush=True)
+                cells += " | EMA " + " ".join(
+                    f"gap {g}: {f['ratio']:.3f}" for g, f in figures["probe_ema"].items()
+                )
+            print(
+                f"step {step} ({time.perf_counter() - start:.0f} s) train loss / LERP "
+                f"{loss_avg / base_avg:.3f} | {cells}",
+                flush=True,
+            )
     final = evaluate_all()
     trajectory.append({"step": step, "seconds": time.perf_counter() - start, **final})
     for key, figures in final.items():
-        print("final", "EMA" if key == "probe_ema" else "model", "step", step,
-              " ".join(f"gap {g}: {f['ratio']:.4f}" for g, f in figures.items()))
+        print(
+            "final",
+            "EMA" if key == "probe_ema" else "model",
+            "step",
+            step,
+            " ".join(f"gap {g}: {f['ratio']:.4f}" for g, f in figures.items()),
+        )
     if args.json:
-        Path(args.json).write_text(json.dumps({"model": model_opts, "data": data_opts,
-                                               "trajectory": trajectory}, indent=2))
+        Path(args.json).write_text(
+            json.dumps({"model": model_opts, "data": data_opts, "trajectory": trajectory}, indent=2)
+        )
     return 0
 
 

@@ -1,0 +1,525 @@
+"""HuMoT evaluations (Sec. 4) on 1 s chunks of held-out clips, and its two protocols.
+
+Protocols (``skelagnostic evaluate model=humot ckpt_path=... [protocol=...]``):
+
+* ``humot.reconstruction`` (the default, :func:`reconstruction_protocol`): per
+  held-out human clip, :func:`reconstruction` (Table 2: encode-decode MPJPE on
+  the clip's own template) beside the mean-pose baselines of
+  :mod:`skelagnostic.baselines`; the denoising (Fig. 8) and joint-upsampling
+  (Fig. 9) curves over all chunks go into ``extra`` and two plots.
+* ``humot.retarget`` (:func:`retarget_protocol`): per held-out human clip, the
+  cycle error (source -> a procedural rig of another topology -> source) of
+  HuMoT beside the :func:`~skelagnostic.baselines.name_copy` and
+  :func:`~skelagnostic.baselines.primal_copy` baselines; ``extra`` adds
+  :func:`retargeting_procedural` (paired procedural ground truth).
+
+Functions:
+
+* :func:`reconstruction` (Table 2): MPJPE (cm) and MPJPE / height of
+  encode-decode on the clip's own template, with three baselines that use
+  the ground truth: the chunk's mean pose, the neutral template at the chunk
+  centre, and the chunk's mean root-relative pose carried along the true root
+  trajectory (which leaves only the limb motion to explain).
+* :func:`denoising_curve` (Fig. 8): Gaussian noise of standard deviation
+  ``sigma`` added to every coordinate; MPJPE of the noisy input and of its
+  reconstruction, both against the clean chunk.
+* :func:`upsampling_curve` (Fig. 9): a random share of joints is kept (at
+  least two), encoded with the subset template and decoded with the full one;
+  MPJPE on all joints, against the share kept and the number removed.
+* :func:`retargeting_procedural` (Sec. 4.2; the paper's Tables 3-5 need
+  paired data the project does not have): the procedural generator plays the
+  same gait with the same parameters (seed) on every human topology, so the
+  clip generated on the target topology is the ground truth of retargeting the
+  clip generated on the source topology. MPJPE of :meth:`HumotAligner.retarget`
+  (positions -> rotations by IK, what a user gets) divided by the target's
+  height, next to the name-copy and primal-copy baselines. Caveat: the
+  procedural ground truth is itself made by driving corresponding joints with
+  the same local rotations, so the name copy is exact between procedural rigs
+  whose names match (biped22 <-> biped31) and only the topology with other
+  names (biped17) tests it.
+* :func:`cycle_error`: for real clips without paired ground truth,
+  source -> other rig -> source, MPJPE / height, for HuMoT and the baselines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from skelagnostic import procedural
+from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory, name_copy, primal_copy
+from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import SkelagnosticError
+from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
+from skelagnostic_humot.aligner import HumotAligner, infer_units
+from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks
+
+__all__ = [
+    "BASELINES",
+    "chunks_of",
+    "cycle_error",
+    "denoising_curve",
+    "evaluate_clips",
+    "evaluate_procedural",
+    "reconstruction",
+    "reconstruction_protocol",
+    "retarget_protocol",
+    "retargeting_procedural",
+    "upsampling_curve",
+]
+
+#: Procedural human topologies (22, 31 and 17 joints).
+HUMAN_KINDS: tuple[str, ...] = ("biped22", "biped31", "biped17")
+
+#: Base seed of held-out procedural clips: training uses seeds 0 up to the clip count.
+HELD_OUT_SEED = 1000
+
+
+def chunks_of(motion: Motion, chunk: int = 30, units: str | None = None) -> torch.Tensor:
+    """Non-overlapping ``[C, chunk, J, 3]`` world positions (metres) of a motion at 30 fps."""
+    unit = infer_units(motion.skeleton, units or motion.units)
+    if motion.fps != 30.0:
+        motion = motion.resample(30.0)
+    pos = motion.global_positions().float() * UNITS[unit]
+    count = pos.shape[0] // chunk
+    return pos[: count * chunk].reshape(count, chunk, *pos.shape[1:])
+
+
+def _mpjpe(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Per-chunk MPJPE ``[C]``."""
+    return (a - b).norm(dim=-1).mean(dim=(1, 2))
+
+
+@torch.no_grad()
+def _run(
+    model: HumotAligner,
+    pos: torch.Tensor,
+    src_tmpl: torch.Tensor,
+    dst_tmpl: torch.Tensor,
+    batch: int = 16,
+    src_mask: torch.Tensor | None = None,
+) -> torch.Tensor:
+    outs = []
+    for i in range(0, len(pos), batch):
+        sl = slice(i, i + batch)
+        m = None if src_mask is None else src_mask[sl]
+        outs.append(model.net(pos[sl], src_tmpl[sl], dst_tmpl[sl], m))
+    return torch.cat(outs)
+
+
+def reconstruction(
+    model: HumotAligner, chunks: torch.Tensor, topology: Topology, up_axis: str = "y"
+) -> dict[str, float]:
+    """Encode-decode MPJPE on the chunks' own templates, with static baselines.
+
+    Returns:
+        ``mpjpe_cm``, ``mpjpe_std_cm`` (over chunks), ``mpjpe_over_height``, the
+        baselines ``mean_pose_cm`` (the chunk's temporal mean pose), ``template_cm``
+        (the template at the chunk centre) and ``mean_pose_on_trajectory_cm`` (the
+        temporal mean of the root-relative pose plus the true root position of each
+        frame), ``chunks``.
+    """
+    pos, tmpl = prepare_chunks(chunks, topology, up_axis)
+    rec = _run(model, pos, tmpl, tmpl)
+    err = _mpjpe(rec, pos)
+    static = mean_pose(pos)
+    centre = (
+        pos[:, :, topology.major].mean(dim=(1, 2), keepdim=True)
+        if bool(topology.major.any())
+        else pos.mean(dim=(1, 2), keepdim=True)
+    )
+    tmpl_pose = (tmpl - tmpl[:, topology.major].mean(dim=1, keepdim=True))[:, None] + centre
+    on_trajectory = mean_pose_on_trajectory(pos)
+    height = float((tmpl[..., 2].amax(-1) - tmpl[..., 2].amin(-1)).mean())
+    return {
+        "mpjpe_cm": 100 * float(err.mean()),
+        "mpjpe_std_cm": 100 * float(err.std()) if len(err) > 1 else 0.0,
+        "mpjpe_over_height": float(err.mean()) / height,
+        "mean_pose_cm": 100 * float(_mpjpe(static, pos).mean()),
+        "template_cm": 100 * float(_mpjpe(tmpl_pose.expand_as(pos), pos).mean()),
+        "mean_pose_on_trajectory_cm": 100 * float(_mpjpe(on_trajectory, pos).mean()),
+        "chunks": len(pos),
+    }
+
+
+def denoising_curve(
+    model: HumotAligner,
+    chunks: torch.Tensor,
+    topology: Topology,
+    sigmas_cm: Sequence[float] = (0, 1, 2, 4, 6, 8, 10),
+    up_axis: str = "y",
+    seed: int = 0,
+) -> dict[str, list[float]]:
+    """Fig. 8: MPJPE (cm) of noisy inputs and of their reconstructions, per noise level."""
+    pos, tmpl = prepare_chunks(chunks, topology, up_axis)
+    gen = torch.Generator().manual_seed(seed)
+    noisy_err, out_err = [], []
+    for sigma in sigmas_cm:
+        noisy = pos + torch.randn(pos.shape, generator=gen) * sigma / 100
+        noisy_err.append(100 * float(_mpjpe(noisy, pos).mean()))
+        out_err.append(100 * float(_mpjpe(_run(model, noisy, tmpl, tmpl), pos).mean()))
+    return {
+        "sigma_cm": list(map(float, sigmas_cm)),
+        "input_mpjpe_cm": noisy_err,
+        "output_mpjpe_cm": out_err,
+    }
+
+
+def upsampling_curve(
+    model: HumotAligner,
+    chunks: torch.Tensor,
+    topology: Topology,
+    fractions: Sequence[float] = (1.0, 0.8, 0.6, 0.5, 0.4, 0.3, 0.2),
+    up_axis: str = "y",
+    seed: int = 0,
+) -> dict[str, list[float]]:
+    """Fig. 9: MPJPE (cm) on all joints when only a random share of joints is encoded."""
+    pos, tmpl = prepare_chunks(chunks, topology, up_axis)
+    gen = torch.Generator().manual_seed(seed)
+    num = pos.shape[2]
+    errors = []
+    for frac in fractions:
+        keep_n = max(2, round(frac * num))
+        keep = torch.zeros(len(pos), num, dtype=torch.bool)
+        for i in range(len(pos)):
+            keep[i, torch.randperm(num, generator=gen)[:keep_n]] = True
+        sub = gather_subset(keep, topology.skeleton.parents)
+        out = _run(model, sub.take(pos, 2), sub.take(tmpl, 1), tmpl, src_mask=sub.mask)
+        errors.append(100 * float(_mpjpe(out, pos).mean()))
+    removed = [num - max(2, round(f * num)) for f in fractions]
+    return {"fraction": list(map(float, fractions)), "removed_joints": removed, "mpjpe_cm": errors}
+
+
+# ------------------------------------------------------------------ retargeting
+#: Retargeting baselines of :mod:`skelagnostic.baselines`: ``name -> f(motion, target,
+#: source_units, target_units)``; the source is resampled to HuMoT's 30 fps first.
+BASELINES: dict[str, Callable[..., Motion]] = {"name_copy": name_copy, "primal_copy": primal_copy}
+
+
+def _at_30fps(motion: Motion) -> Motion:
+    return motion if motion.fps == 30.0 else motion.resample(30.0)
+
+
+def _motion_error(pred: Motion, truth: Motion) -> dict[str, float]:
+    """MPJPE (truth's units) and MPJPE / height, globally and with the roots aligned."""
+    if pred.skeleton.joint_names != truth.skeleton.joint_names:
+        raise SkelagnosticError(
+            "retargeting error: prediction and ground truth have different joints"
+        )
+    frames = min(pred.num_frames, truth.num_frames)
+    a = pred.global_positions()[:frames].double()
+    b = truth.global_positions()[:frames].double()
+    height = truth.skeleton.height()
+    err = float((a - b).norm(dim=-1).mean())
+    local = float(((a - a[:, :1]) - (b - b[:, :1])).norm(dim=-1).mean())
+    return {
+        "mpjpe": err,
+        "mpjpe_over_height": err / height,
+        "root_aligned_mpjpe": local,
+        "root_aligned_over_height": local / height,
+    }
+
+
+def retargeting_procedural(
+    model: HumotAligner,
+    kinds: Sequence[str] = HUMAN_KINDS,
+    gaits: Sequence[str] = ("walk", "run"),
+    clips_per_gait: int = 2,
+    seconds: float = 6.0,
+    seed: int = HELD_OUT_SEED,
+) -> dict[str, dict[str, float]]:
+    """Retargeting error between procedural topologies against generated ground truth (cm).
+
+    For every ordered pair ``A -> B`` of ``kinds`` and every (gait, clip) the
+    clip generated on ``A`` is retargeted onto the skeleton of the clip
+    generated with the same gait and seed (so the same body size, frequency,
+    amplitudes, phase and turn rate) on ``B``, which is the ground truth.
+
+    Returns:
+        ``"A->B" -> {humot_*, name_copy_*, primal_copy_*}`` with the keys of the error (``mpjpe``
+        in cm, ``mpjpe_over_height``, ``root_aligned_mpjpe``,
+        ``root_aligned_over_height``), averaged over clips, plus ``clips``;
+        and ``"mean"``, the average over pairs.
+    """
+    clips = {
+        k: procedural.dataset(
+            kinds=(k,),
+            gaits=tuple(gaits),
+            clips_per_gait=clips_per_gait,
+            seconds=seconds,
+            seed=seed,
+        )
+        for k in kinds
+    }
+    out: dict[str, dict[str, float]] = {}
+    for a in kinds:
+        for b in kinds:
+            if a == b:
+                continue
+            sums: dict[str, float] = {}
+            for (src, _), (truth, _) in zip(clips[a], clips[b], strict=True):
+                preds = {"humot": model.retarget(src, truth.skeleton, "cm", "cm")}
+                preds |= {
+                    n: f(_at_30fps(src), truth.skeleton, "cm", "cm") for n, f in BASELINES.items()
+                }
+                for method, pred in preds.items():
+                    for key, value in _motion_error(pred, truth).items():
+                        sums[f"{method}_{key}"] = sums.get(f"{method}_{key}", 0.0) + value
+            count = len(clips[a])
+            out[f"{a}->{b}"] = {k: v / count for k, v in sums.items()} | {"clips": count}
+    keys = [k for k in next(iter(out.values())) if k != "clips"]
+    out["mean"] = {k: sum(r[k] for r in out.values()) / len(out) for k in keys}
+    return out
+
+
+def cycle_error(
+    model: HumotAligner,
+    motion: Motion,
+    via: Skeleton,
+    units: str | None = None,
+    via_units: str | None = None,
+) -> dict[str, float]:
+    """Source -> ``via`` -> source retargeting error, for HuMoT and the :data:`BASELINES`.
+
+    Real clips have no paired ground truth on another rig; the cycle back to
+    the source rig has. The reference is the source clip at 30 fps.
+
+    Returns:
+        ``humot_*``, ``name_copy_*`` and ``primal_copy_*`` errors (see
+        :func:`retargeting_procedural`;
+        ``mpjpe`` in the source's units).
+    """
+    unit = infer_units(motion.skeleton, units or motion.units)
+    truth = motion.resample(30.0) if motion.fps != 30.0 else motion
+    results: dict[str, float] = {}
+    humot = model.retarget(
+        model.retarget(motion, via, unit, via_units), motion.skeleton, via_units, unit
+    )
+    preds = {"humot": humot}
+    for name, f in BASELINES.items():
+        there = f(_at_30fps(motion), via, unit, via_units)
+        preds[name] = f(there, motion.skeleton, there.units, unit)
+    for method, pred in preds.items():
+        for key, value in _motion_error(pred, truth).items():
+            results[f"{method}_{key}"] = value
+    return results
+
+
+def evaluate_clips(
+    model: HumotAligner,
+    groups: dict[str, list[Motion]],
+    cycle_via: Sequence[Skeleton] = (),
+    units: dict[str, str] | None = None,
+) -> dict[str, Any]:
+    """Reconstruction and both curves for each named group of clips (one topology per group).
+
+    Args:
+        model: The model.
+        groups: ``name -> clips`` of one skeleton topology.
+        cycle_via: Also measure :func:`cycle_error` of every clip through the first of
+            these skeletons whose topology differs from the group's.
+        units: ``name -> length unit`` of a group's files (default: guessed).
+
+    Raises:
+        SkelagnosticError: A group is empty or mixes topologies.
+    """
+    results: dict[str, Any] = {}
+    for name, motions in groups.items():
+        if not motions:
+            raise SkelagnosticError(f"group {name!r}: no clips")
+        sk = motions[0].skeleton
+        for m in motions[1:]:
+            if m.skeleton.topology_key() != sk.topology_key():
+                raise SkelagnosticError(
+                    f"group {name!r}: clip {m.name!r} has another topology "
+                    f"than {motions[0].name!r}; one topology per group"
+                )
+        unit = (units or {}).get(name)
+        chunks = torch.cat([chunks_of(m, model.hparams.chunk, unit) for m in motions])
+        topo = model.topology(sk)
+        results[name] = {
+            "joints": sk.num_joints,
+            "clips": [m.name for m in motions],
+            "reconstruction": reconstruction(model, chunks, topo, sk.up_axis),
+            "denoising": denoising_curve(model, chunks, topo, up_axis=sk.up_axis),
+            "upsampling": upsampling_curve(model, chunks, topo, up_axis=sk.up_axis),
+        }
+        via = next((v for v in cycle_via if v.topology_key() != sk.topology_key()), None)
+        if via is not None:
+            cycles = [cycle_error(model, m, via, unit) for m in motions]
+            results[name]["cycle"] = {k: sum(c[k] for c in cycles) / len(cycles) for k in cycles[0]}
+            results[name]["cycle"]["via"] = via.name or f"{via.num_joints} joints"
+    return results
+
+
+def evaluate_procedural(
+    model: HumotAligner,
+    kinds: Sequence[str] = HUMAN_KINDS,
+    clips_per_gait: int = 2,
+    seconds: float = 6.0,
+    seed: int = HELD_OUT_SEED,
+) -> dict[str, Any]:
+    """Held-out procedural clips (walk and run, seeds from ``seed``): every evaluation.
+
+    Returns:
+        ``{"kinds": <evaluate_clips result per kind>, "retargeting":
+        <retargeting_procedural result>}``.
+    """
+    groups = {
+        k: [
+            m
+            for m, _ in procedural.dataset(
+                kinds=(k,),
+                gaits=("walk", "run"),
+                clips_per_gait=clips_per_gait,
+                seconds=seconds,
+                seed=seed,
+            )
+        ]
+        for k in kinds
+    }
+    return {
+        "kinds": evaluate_clips(model, groups, units=dict.fromkeys(kinds, "cm")),
+        "retargeting": retargeting_procedural(
+            model, kinds, clips_per_gait=clips_per_gait, seconds=seconds, seed=seed
+        ),
+    }
+
+
+def plot_results(results: dict[str, Any], out_dir: Path) -> list[Path]:
+    """Write ``denoising.png`` and ``upsampling.png`` (one line per group)."""
+    from skelagnostic.viz import plot_metric_curves
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    den = {
+        f"{n} (output)": (r["denoising"]["input_mpjpe_cm"], r["denoising"]["output_mpjpe_cm"])
+        for n, r in results.items()
+    }
+    first = next(iter(results.values()))["denoising"]["input_mpjpe_cm"]
+    den["identity (no denoising)"] = (first, first)
+    plot_metric_curves(
+        None,
+        den,
+        xlabel="MPJPE of noisy input (cm)",
+        ylabel="MPJPE after HuMoT (cm)",
+        title="Denoising (paper Fig. 8)",
+        out=out_dir / "denoising.png",
+    )
+    up = {n: (r["upsampling"]["fraction"], r["upsampling"]["mpjpe_cm"]) for n, r in results.items()}
+    plot_metric_curves(
+        None,
+        up,
+        xlabel="proportion of input joints",
+        ylabel="MPJPE (cm)",
+        title="Joint upsampling (paper Fig. 9)",
+        out=out_dir / "upsampling.png",
+    )
+    return [out_dir / "denoising.png", out_dir / "upsampling.png"]
+
+
+# ------------------------------------------------------------------ protocols
+def _humans(held: HeldOut, notes: list[str]) -> list[Motion]:
+    """The held-out clips HuMoT models (bipeds); the others are named in ``notes``."""
+    humans = [c for c in held.clips if c.skeleton.morphology == "biped"]
+    others = [str(c.name) for c in held.clips if c.skeleton.morphology != "biped"]
+    if others:
+        notes.append(f"skipped {len(others)} non-human clip(s): {', '.join(others)}")
+    return humans
+
+
+def reconstruction_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path) -> Evaluation:
+    """``humot.reconstruction``: Table 2 per held-out clip, plus the curves of Fig. 8 and 9."""
+    notes = [
+        "baselines use the ground truth: mean_pose is the chunk's temporal mean pose, "
+        "template the neutral template at the chunk centre, mean_pose_on_trajectory "
+        "the chunk's mean root-relative pose along the true root path"
+    ]
+    rows: list[dict[str, Any]] = []
+    groups: dict[tuple[Any, ...], tuple[str, list[torch.Tensor], Skeleton]] = {}
+    for clip in _humans(held, notes):
+        chunks = chunks_of(clip, aligner.hparams.chunk)
+        if not len(chunks):
+            notes.append(
+                f"skipped {clip.name}: shorter than one {aligner.hparams.chunk}-frame "
+                "chunk at 30 fps"
+            )
+            continue
+        sk = clip.skeleton
+        rec = reconstruction(aligner, chunks, aligner.topology(sk), sk.up_axis)
+        rows.append(
+            {
+                "clip": str(clip.name),
+                "chunks": rec["chunks"],
+                "values": {
+                    MODEL: {
+                        "mpjpe_cm": rec["mpjpe_cm"],
+                        "mpjpe_over_height": rec["mpjpe_over_height"],
+                    },
+                    "mean_pose": {"mpjpe_cm": rec["mean_pose_cm"]},
+                    "template": {"mpjpe_cm": rec["template_cm"]},
+                    "mean_pose_on_trajectory": {"mpjpe_cm": rec["mean_pose_on_trajectory_cm"]},
+                },
+            }
+        )
+        name = sk.name or f"{sk.num_joints} joints"
+        groups.setdefault(sk.topology_key(), (name, [], sk))[1].append(chunks)
+    curves = {}
+    for name, chunk_list, sk in groups.values():
+        chunks, topo = torch.cat(chunk_list), aligner.topology(sk)
+        curves[name] = {
+            "denoising": denoising_curve(aligner, chunks, topo, up_axis=sk.up_axis),
+            "upsampling": upsampling_curve(aligner, chunks, topo, up_axis=sk.up_axis),
+        }
+    plots = [p.name for p in plot_results(curves, out_dir)] if curves else []
+    return Evaluation(
+        {
+            "mpjpe_cm": "MPJPE of 1 s chunks decoded on their own template, cm, lower is better",
+            "mpjpe_over_height": "MPJPE / skeleton height, lower is better",
+        },
+        rows,
+        extra={"curves": curves},
+        plots=plots,
+        notes=notes,
+    )
+
+
+def retarget_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path) -> Evaluation:
+    """``humot.retarget``: cycle error of held-out clips via another rig, beside the baselines."""
+    notes = [
+        "cycle: source -> a procedural human rig of another topology -> source, compared "
+        "with the source at 30 fps; baselines: name_copy and primal_copy "
+        "(skelagnostic.baselines)"
+    ]
+    rows: list[dict[str, Any]] = []
+    for clip in _humans(held, notes):
+        via_kind = next(
+            k
+            for k in HUMAN_KINDS
+            if procedural.skeleton(k).topology_key() != clip.skeleton.topology_key()
+        )
+        cyc = cycle_error(aligner, clip, procedural.skeleton(via_kind), via_units="cm")
+        values = {}
+        for method, prefix in (
+            (MODEL, "humot"),
+            ("name_copy", "name_copy"),
+            ("primal_copy", "primal_copy"),
+        ):
+            values[method] = {
+                "cycle_over_height": cyc[f"{prefix}_mpjpe_over_height"],
+                "cycle_root_aligned_over_height": cyc[f"{prefix}_root_aligned_over_height"],
+            }
+        rows.append({"clip": str(clip.name), "via": via_kind, "values": values})
+    paired = retargeting_procedural(aligner, clips_per_gait=1, seconds=4.0)
+    return Evaluation(
+        {
+            "cycle_over_height": "MPJPE after the cycle / source height, lower is better",
+            "cycle_root_aligned_over_height": "the same with the roots aligned, lower is better",
+        },
+        rows,
+        extra={"procedural_paired_retargeting": paired},
+        notes=notes,
+    )

@@ -1,0 +1,123 @@
+"""``skelagnostic evaluate``: a registered protocol on the held-out clips of a run.
+
+``skelagnostic evaluate ckpt_path=RUN_OR_CKPT [protocol=NAME] [overrides]`` takes
+the model and data of the checkpoint's run (as ``validate`` and ``test`` do),
+loads the weights, collects the run's test clips (else its validation clips),
+runs the protocol (default: the model's default protocol) and writes
+``evaluation.json``, ``evaluation.md`` and plots into its own run directory
+(``runs/<model>/evaluate/<time>``); see :mod:`skelagnostic.evaluation`.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from skelagnostic.aligners.checkpoints import load_checkpoint
+from skelagnostic.evaluation import MODEL, held_out, write_evaluation
+from skelagnostic.plugins import PluginManager
+
+__all__ = ["evaluate_checkpoint", "main", "print_evaluation", "protocols_text"]
+
+
+def evaluate_checkpoint(
+    cfg: DictConfig, pm: PluginManager, module: type, datamodule: Any, ckpt: str
+) -> dict[str, float]:
+    """Load the checkpoint, run the protocol of ``cfg.protocol`` and write its report.
+
+    The aligner is rebuilt from the checkpoint as the inference verbs do
+    (:func:`~skelagnostic.aligners.checkpoints.load_checkpoint`: its saved
+    hyperparameters, which include the layers an aligner builds from its data).
+
+    Args:
+        cfg: The composed config (``model``, ``data``, ``protocol``, ``run_dir``).
+        pm: Where the protocol is looked up.
+        module: The aligner class of ``cfg.model.name``.
+        datamodule: The data module built from ``cfg.data``.
+        ckpt: The checkpoint file.
+
+    Returns:
+        The model's mean figures, ``model/<metric>``.
+
+    Raises:
+        PluginError: Unknown protocol, or one of another model (the message lists the
+            model's protocols).
+        EvaluationError: No held-out split, or the protocol found nothing to evaluate.
+    """
+    protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
+    aligner = load_checkpoint(module, ckpt, option="ckpt_path", plugin_manager=pm).eval()
+    held = held_out(datamodule)
+    run_dir = Path(cfg.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with torch.no_grad():
+        result = protocol.function(aligner, held, run_dir)
+    data = OmegaConf.to_container(cfg.data, resolve=True)
+    report = write_evaluation(
+        result,
+        run_dir,
+        protocol=protocol.name,
+        model=cfg.model.name,
+        description=protocol.description,
+        checkpoint=ckpt,
+        data=data,  # type: ignore[arg-type]
+        held=held,
+    )
+    print_evaluation(report, run_dir)
+    return {f"{MODEL}/{k}": v for k, v in report["mean"][MODEL].items()}
+
+
+def print_evaluation(report: Mapping[str, Any], run_dir: Path) -> None:
+    """The mean table of an ``evaluation.json`` report, as one Rich table on stdout."""
+    from rich.console import Console
+    from rich.table import Table
+
+    data = report["data"]
+    table = Table(
+        title=f"skelagnostic evaluate: {report['protocol']} on the "
+        f"{data['split_name']}, {len(data['clips'])} clips",
+        title_justify="left",
+    )
+    table.add_column("metric", style="bold")
+    for method in report["methods"]:
+        table.add_column(method, justify="right")
+    for metric, text in report["metrics"].items():
+        cells = [report["mean"].get(m, {}).get(metric) for m in report["methods"]]
+        table.add_row(f"{metric} ({text})", *("-" if c is None else f"{c:.4g}" for c in cells))
+    console = Console(file=sys.stdout, width=max(100, 30 * (len(report["methods"]) + 1)))
+    console.print(table)
+    console.print(f"report: {run_dir / 'evaluation.md'}")
+
+
+def protocols_text(pm: PluginManager) -> str:
+    """The registered protocols, one line each: name, model, description (``*``: default)."""
+    specs = sorted(pm.evaluations.values(), key=lambda e: (e.model, not e.default, e.name))
+    if not specs:
+        return (
+            "Evaluation protocols: none registered (a plugin registers them with "
+            "register_evaluations)."
+        )
+    width = max(len(e.name) for e in specs) + 2
+    lines = ["Evaluation protocols (protocol=NAME; * = the model's default):"]
+    for e in specs:
+        mark = "*" if e.default else " "
+        lines.append(f"  {mark} {e.name:<{width}} model={e.model}: {e.description}")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str]) -> int:
+    """``skelagnostic evaluate ckpt_path=... [protocol=NAME] [overrides]``.
+
+    ``--help`` lists the registered protocols before Hydra's help.
+    """
+    from skelagnostic.cli.app import main as app_main
+
+    if any(a in ("--help", "-h") for a in argv):
+        from skelagnostic.plugins import get_plugin_manager
+
+        print(protocols_text(get_plugin_manager()))
+    return app_main("evaluate", argv)

@@ -1,0 +1,336 @@
+"""Evaluation protocols: held-out clips in, every figure beside its baselines out.
+
+A plugin registers protocols through the ``register_evaluations`` hook (see
+:mod:`skelagnostic.plugins.hookspecs`); ``skelagnostic evaluate`` builds the
+run's aligner and data, loads the checkpoint, collects the held-out clips
+(:func:`held_out`), calls the protocol and writes its :class:`Evaluation` with
+:func:`write_evaluation`:
+
+* ``evaluation.json``: the protocol, the data (config, split, clip names), the
+  checkpoint, the metric descriptions, per-clip rows and their mean for the
+  model and every baseline computed in the same run;
+* ``evaluation.md``: the same as Markdown tables;
+* ``evaluation.png``: the mean figures, model beside baselines, plus the
+  protocol's own plots.
+
+A protocol is a plain function ``protocol(aligner, held_out, out_dir) -> Evaluation``,
+so tests and benchmarks call it without the command line.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory
+from skelagnostic.core.motion import Motion
+from skelagnostic.core.units import infer_units
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = [
+    "MODEL",
+    "RECONSTRUCTION_METRICS",
+    "Evaluation",
+    "EvaluationError",
+    "HeldOut",
+    "held_out",
+    "markdown",
+    "mean_rows",
+    "metres",
+    "reconstruction_rows",
+    "write_evaluation",
+]
+
+#: The method name of the evaluated aligner in every :class:`Evaluation`.
+MODEL = "model"
+#: Version of the layout of ``evaluation.json``.
+SCHEMA_VERSION = 1
+
+
+class EvaluationError(SkelagnosticError):
+    """An evaluation that cannot run (no held-out split, no clip long enough, ...)."""
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """The clips of a run that the model never trained on.
+
+    Attributes:
+        split: ``"test"`` when the run's data has a test split, else ``"val"``.
+        clips: The clips, resampled to the data module's fps, named by their clip id.
+        datamodule: The run's data module (after ``setup``), for its options
+            (``fps``, ``window``, its training datasets for normalisation statistics).
+    """
+
+    split: str
+    clips: list[Motion]
+    datamodule: Any = None
+
+    @property
+    def names(self) -> list[str]:
+        """The clip ids, in order."""
+        return [str(c.name) for c in self.clips]
+
+
+def held_out(datamodule: Any) -> HeldOut:
+    """The test clips of a data module, else its validation clips.
+
+    The data module is set up (``setup("test")``), then every clip its
+    ``assigned_splits`` places in the chosen split is loaded again from its
+    source and resampled to ``datamodule.fps``.
+
+    Args:
+        datamodule: A :class:`~skelagnostic.data.MotionDataModule` (or any object
+            with ``sources``, ``assigned_splits`` and ``fps``).
+
+    Returns:
+        The held-out clips.
+
+    Raises:
+        EvaluationError: Neither split holds a clip.
+    """
+    datamodule.setup("test")
+    assigned: Mapping[str, str] = getattr(datamodule, "assigned_splits", {}) or {}
+    split = next((s for s in ("test", "val") if s in assigned.values()), None)
+    if split is None:
+        raise EvaluationError(
+            "evaluate: the data has neither a test nor a validation split (data.test_fraction=0 "
+            "and data.val_fraction=0, and no clip matches a test pattern); set "
+            "data.test_fraction>0 or data.val_fraction>0 so the model is evaluated on clips it "
+            "did not train on"
+        )
+    fps = float(datamodule.fps)
+    clips = []
+    for source in datamodule.sources:
+        for ref in source.clips():
+            if assigned.get(ref.id) != split:
+                continue
+            motion = source.load(ref)
+            if motion.fps != fps:
+                motion = motion.resample(fps)
+            motion.name = ref.id
+            clips.append(motion)
+    return HeldOut(split, clips, datamodule)
+
+
+@dataclass
+class Evaluation:
+    """What a protocol returns.
+
+    Attributes:
+        metrics: ``metric key -> description`` (unit, and whether lower is better).
+        rows: One row per clip (or window): ``{"clip": id, "values": {method: {metric:
+            value}}}``; the first method is :data:`MODEL`, the others baselines computed
+            on the same clips. A method may leave a metric out (no value).
+        extra: More JSON-able results (curves, per-setting tables).
+        plots: File names of the plots the protocol wrote into its ``out_dir``.
+        notes: Sentences for the report (what the baselines are, caveats).
+    """
+
+    metrics: dict[str, str]
+    rows: list[dict[str, Any]]
+    extra: dict[str, Any] = field(default_factory=dict)
+    plots: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def methods(self) -> list[str]:
+        """The methods of the rows, :data:`MODEL` first."""
+        names = dict.fromkeys(m for row in self.rows for m in row["values"])
+        return sorted(names, key=lambda m: (m != MODEL, list(names).index(m)))
+
+
+def metres(motion: Motion) -> Motion:
+    """``motion`` in metres (its ``units``, else the guess of ``infer_units``)."""
+    if motion.units == "m":
+        return motion
+    return motion.convert_units("m", from_=infer_units(motion.skeleton, motion.units))
+
+
+#: Metrics of :func:`reconstruction_rows`.
+RECONSTRUCTION_METRICS = {
+    "mpjpe_cm": "MPJPE of global joint positions, cm, lower is better",
+    "mpjpe_over_height": "MPJPE / skeleton height, lower is better",
+}
+
+
+def reconstruction_rows(
+    clips: Sequence[Motion], reconstruct: Callable[[Motion], Motion]
+) -> list[dict[str, Any]]:
+    """Per-clip pose error of ``reconstruct(clip)`` beside the static baselines.
+
+    Methods: :data:`MODEL`, ``mean_pose`` (the clip's temporal mean pose) and
+    ``mean_pose_on_trajectory`` (its mean root-relative pose along the true root
+    path), see :mod:`skelagnostic.baselines`. Positions are compared in metres
+    over the frames both motions have (at the clip's frame rate).
+
+    Args:
+        clips: The held-out clips.
+        reconstruct: The model's output for a clip, on the clip's skeleton.
+
+    Returns:
+        Rows for :class:`Evaluation` with :data:`RECONSTRUCTION_METRICS`.
+    """
+    rows = []
+    for clip in clips:
+        pred = reconstruct(clip)
+        if pred.fps != clip.fps:
+            pred = pred.resample(clip.fps)
+        truth_m, pred_m = metres(clip), metres(pred)
+        frames = min(truth_m.num_frames, pred_m.num_frames)
+        truth = truth_m.global_positions()[:frames].double()
+        height = truth_m.skeleton.height()
+        values = {}
+        for method, guess in (
+            (MODEL, pred_m.global_positions()[:frames].double()),
+            ("mean_pose", mean_pose(truth)),
+            ("mean_pose_on_trajectory", mean_pose_on_trajectory(truth)),
+        ):
+            err = float((guess - truth).norm(dim=-1).mean())
+            values[method] = {"mpjpe_cm": 100.0 * err, "mpjpe_over_height": err / height}
+        rows.append({"clip": str(clip.name), "frames": frames, "values": values})
+    return rows
+
+
+def mean_rows(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
+    """``method -> metric -> mean`` over the rows that have the value (NaN values skipped)."""
+    sums: dict[str, dict[str, list[float]]] = {}
+    for row in rows:
+        for method, values in row["values"].items():
+            for metric, value in values.items():
+                if value is not None and math.isfinite(float(value)):
+                    sums.setdefault(method, {}).setdefault(metric, []).append(float(value))
+    return {m: {k: sum(v) / len(v) for k, v in per.items()} for m, per in sums.items()}
+
+
+def _check(result: Evaluation, protocol: str) -> None:
+    if not isinstance(result, Evaluation):
+        raise EvaluationError(
+            f"protocol {protocol!r} returned {type(result).__name__}, not an Evaluation"
+        )
+    if not result.rows:
+        raise EvaluationError(
+            f"protocol {protocol!r}: no held-out clip could be evaluated "
+            "(too short for the protocol?)"
+        )
+    if MODEL not in result.methods:
+        raise EvaluationError(f"protocol {protocol!r}: no row has values of {MODEL!r}")
+    for row in result.rows:
+        unknown = {k for v in row["values"].values() for k in v} - set(result.metrics)
+        if unknown:
+            raise EvaluationError(
+                f"protocol {protocol!r}: clip {row.get('clip')!r} has metrics "
+                f"without a description: {sorted(unknown)}"
+            )
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
+def markdown(report: Mapping[str, Any]) -> str:
+    """``evaluation.md``: the header, the mean table (metrics x methods) and per-clip rows."""
+    methods = report["methods"]
+    lines = [
+        f"# Evaluation: {report['protocol']}",
+        "",
+        report.get("description", ""),
+        "",
+        f"- model: `{report['model']}`, checkpoint `{report['checkpoint']}`",
+        f"- data: `{report['data']['source']}`, {report['data']['split_name']} "
+        f"({len(report['data']['clips'])} clips)",
+        "",
+        "## Mean over held-out clips",
+        "",
+        "| metric | " + " | ".join(methods) + " |",
+        "|---" * (len(methods) + 1) + "|",
+    ]
+    for metric, text in report["metrics"].items():
+        cells = [_fmt(report["mean"].get(m, {}).get(metric)) for m in methods]
+        lines.append(f"| {metric} ({text}) | " + " | ".join(cells) + " |")
+    if report.get("notes"):
+        lines += ["", *(f"- {n}" for n in report["notes"])]
+    lines += ["", "## Per clip", ""]
+    metrics = list(report["metrics"])
+    lines.append("| clip | method | " + " | ".join(metrics) + " |")
+    lines.append("|---" * (len(metrics) + 2) + "|")
+    for row in report["per_clip"]:
+        for method in methods:
+            if method in row["values"]:
+                cells = [_fmt(row["values"][method].get(k)) for k in metrics]
+                lines.append(f"| {row['clip']} | {method} | " + " | ".join(cells) + " |")
+    if report.get("plots"):
+        lines += ["", "## Plots", "", *(f"![{p}]({p})" for p in report["plots"])]
+    return "\n".join(lines) + "\n"
+
+
+_SPLIT_NAMES = {"test": "test split", "val": "validation split (the data has no test split)"}
+
+
+def write_evaluation(
+    result: Evaluation,
+    out_dir: str | Path,
+    *,
+    protocol: str,
+    model: str,
+    description: str,
+    checkpoint: str,
+    data: Mapping[str, Any],
+    held: HeldOut,
+) -> dict[str, Any]:
+    """Write ``evaluation.json``, ``evaluation.md`` and ``evaluation.png`` into ``out_dir``.
+
+    Args:
+        result: What the protocol returned.
+        out_dir: The run directory.
+        protocol: The protocol name.
+        model: The aligner name.
+        description: The protocol's description.
+        checkpoint: The evaluated checkpoint file.
+        data: The run's data config (plain values).
+        held: The held-out clips the protocol received.
+
+    Returns:
+        The report written to ``evaluation.json``.
+
+    Raises:
+        EvaluationError: The result is malformed (no rows, no model values, a metric
+            without description).
+    """
+    from skelagnostic import __version__
+    from skelagnostic.viz import plot_method_comparison
+
+    _check(result, protocol)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    mean = mean_rows(result.rows)
+    plot_method_comparison(mean, title=protocol, out=out / "evaluation.png")
+    report = {
+        "schema": SCHEMA_VERSION,
+        "skelagnostic_version": __version__,
+        "protocol": protocol,
+        "description": description,
+        "model": model,
+        "checkpoint": str(checkpoint),
+        "data": {
+            "source": data.get("source"),
+            "split": held.split,
+            "split_name": _SPLIT_NAMES[held.split],
+            "clips": held.names,
+            "config": dict(data),
+        },
+        "methods": result.methods,
+        "metrics": dict(result.metrics),
+        "mean": mean,
+        "per_clip": result.rows,
+        "extra": result.extra,
+        "plots": ["evaluation.png", *result.plots],
+        "notes": list(result.notes),
+    }
+    (out / "evaluation.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    (out / "evaluation.md").write_text(markdown(report), encoding="utf-8")
+    return report

@@ -1,0 +1,204 @@
+"""skelagnostic evaluate: protocols registered by plugins, run on a run's held-out clips."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from skelagnostic import cli
+from skelagnostic.data import MotionDataModule, ProceduralSource
+from skelagnostic.evaluation import Evaluation, EvaluationError, held_out, mean_rows
+from skelagnostic.plugins import LOAD_PLUGINS_ENV, get_plugin_manager
+
+FIT = [
+    "model=example",
+    "experiment=smoke",
+    "model.hidden=8",
+    "model.latent=4",
+    "data.seconds=2.0",
+    "data.clips_per_gait=2",
+    "data.window=16",
+    "data.stride=8",
+    "threads=1",
+]
+
+# Another aligner (same network, another name) with a protocol of its own.
+OTHER = '''
+from skelagnostic.plugins import hookimpl
+from skelagnostic_example.aligner import ExampleAligner, ExampleDataModule
+
+
+class Other(ExampleAligner):
+    def __init__(self, hidden=8, latent=4, lr=3e-3, depth=1):
+        super().__init__(hidden, latent, lr)
+
+
+def nothing(aligner, held_out, out_dir):
+    """A protocol of model=other."""
+    raise AssertionError("never run in these tests")
+
+
+@hookimpl
+def register_aligners(register):
+    register("other", Other, ExampleDataModule, config={"hidden": 8, "latent": 4})
+
+
+@hookimpl
+def register_evaluations(register):
+    register("other.nothing", nothing, model="other", default=True)
+'''
+
+
+def _fit(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], *extra: str
+) -> Path:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    assert cli.main(["fit", *FIT, *extra]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    (run,) = (tmp_path / "runs" / "example" / "fit").iterdir()
+    return run
+
+
+def _evaluation_dir(tmp_path: Path) -> Path:
+    (run,) = (tmp_path / "runs" / "example" / "evaluate").iterdir()
+    return run
+
+
+def test_evaluate_writes_the_report_on_the_test_split(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    fitted = _fit(tmp_path, monkeypatch, capsys, "data.test_fraction=0.3")
+    assert cli.main(["evaluate", f"ckpt_path={fitted}"]) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    run = _evaluation_dir(tmp_path)
+    report = json.loads((run / "evaluation.json").read_text())
+    split = json.loads((fitted / "split.json").read_text())["clips"]
+    assert report["protocol"] == "example.reconstruction"  # the model's default
+    assert report["model"] == "example"
+    assert report["checkpoint"] == str(fitted / "checkpoints" / "best.ckpt")
+    assert report["data"]["split"] == "test" and report["data"]["source"] == "procedural"
+    assert report["data"]["clips"] == sorted(k for k, v in split.items() if v == "test")
+    assert report["data"]["config"]["window"] == 16  # the run's data config
+    assert report["methods"] == ["model", "mean_pose", "mean_pose_on_trajectory"]
+    assert set(report["metrics"]) == {"mpjpe_cm", "mpjpe_over_height"}
+    assert [r["clip"] for r in report["per_clip"]] == report["data"]["clips"]
+    for method in report["methods"]:
+        for metric in report["metrics"]:
+            values = [r["values"][method][metric] for r in report["per_clip"]]
+            assert report["mean"][method][metric] == pytest.approx(sum(values) / len(values))
+    # the root-trajectory baseline is exact on the root, so it beats the static mean pose
+    assert (
+        report["mean"]["mean_pose_on_trajectory"]["mpjpe_cm"]
+        < report["mean"]["mean_pose"]["mpjpe_cm"]
+    )
+    assert report["plots"] == ["evaluation.png"] and (run / "evaluation.png").stat().st_size
+    markdown = (run / "evaluation.md").read_text()
+    assert "# Evaluation: example.reconstruction" in markdown and "test split" in markdown
+    assert "| mpjpe_cm (" in markdown
+    assert "example.reconstruction on the test split" in out and "mean_pose" in out
+    assert (run / "config.yaml").is_file()
+
+
+def test_evaluate_falls_back_to_the_validation_split(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    fitted = _fit(tmp_path, monkeypatch, capsys)
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "protocol=example.reconstruction"]) == 0, (
+        capsys.readouterr().err
+    )
+    report = json.loads((_evaluation_dir(tmp_path) / "evaluation.json").read_text())
+    assert report["data"]["split"] == "val"
+    assert "no test split" in report["data"]["split_name"]
+    assert "validation split" in capsys.readouterr().out
+
+
+def test_evaluate_errors_name_the_way_out(
+    example_plugin: Path,
+    add_plugin,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    fitted = _fit(tmp_path, monkeypatch, capsys)
+    add_plugin("other", OTHER)
+    monkeypatch.setenv(LOAD_PLUGINS_ENV, "example,other")
+    get_plugin_manager.cache_clear()
+    cases = {
+        ("protocol=example.nope",): "unknown evaluation protocol 'example.nope'; protocols of "
+        "model=example: example.reconstruction",
+        ("protocol=other.nothing",): "protocol 'other.nothing' evaluates model=other, not "
+        "model=example",
+        ("model=other",): "is a checkpoint of model=example, this is model=other",
+    }
+    for extra, message in cases.items():
+        assert cli.main(["evaluate", f"ckpt_path={fitted}", *extra]) == 1
+        err = capsys.readouterr().err
+        assert message in err, err
+    assert cli.main(["evaluate", "model=example"]) == 1
+    assert "evaluate: give ckpt_path=" in capsys.readouterr().err
+    assert not (tmp_path / "runs" / "example" / "evaluate").exists() or not any(
+        (tmp_path / "runs" / "example" / "evaluate").rglob("evaluation.json")
+    )
+
+
+def test_held_out_refuses_data_without_a_held_out_split(tmp_path: Path) -> None:
+    dm = MotionDataModule(
+        ProceduralSource(kinds=("biped22",), clips_per_gait=1, seconds=2.0),
+        window=16,
+        stride=8,
+        val_fraction=0.0,
+        cache_dir=tmp_path,
+    )
+    with pytest.raises(EvaluationError, match="neither a test nor a validation split"):
+        held_out(dm)
+
+
+def test_held_out_loads_the_validation_clips_at_the_data_fps(tmp_path: Path) -> None:
+    dm = MotionDataModule(
+        ProceduralSource(kinds=("biped22",), clips_per_gait=2, seconds=2.0),
+        fps=20.0,
+        window=16,
+        stride=8,
+        val_fraction=0.3,
+        cache_dir=tmp_path,
+    )
+    held = held_out(dm)
+    assert held.split == "val"
+    assert held.names == sorted(k for k, v in dm.assigned_splits.items() if v == "val")
+    assert all(c.fps == 20.0 for c in held.clips)
+
+
+def test_mean_rows_skips_missing_and_nan_values() -> None:
+    rows = [
+        {"clip": "a", "values": {"model": {"x": 1.0, "y": float("nan")}}},
+        {"clip": "b", "values": {"model": {"x": 3.0, "y": 2.0}, "base": {"x": 5.0}}},
+    ]
+    assert mean_rows(rows) == {"model": {"x": 2.0, "y": 2.0}, "base": {"x": 5.0}}
+    assert Evaluation({"x": ""}, rows).methods == ["model", "base"]
+
+
+def test_protocols_are_listed_with_their_plugin(example_plugin: Path) -> None:
+    pm = get_plugin_manager()
+    spec = pm.evaluations["example.reconstruction"]
+    assert (spec.model, spec.default, spec.plugin) == ("example", True, "example")
+    assert spec.description.startswith("Encode-decode pose error")
+    info = {i.name: i for i in pm.plugins()}["example"]
+    assert "evaluation:example.reconstruction" in info.provides
+    assert "register_evaluations" in info.hooks
+
+
+def test_help_lists_the_protocols(example_plugin: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["evaluate", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert "Evaluation protocols (protocol=NAME; * = the model's default):" in out
+    assert "* example.reconstruction" in out and "model=example" in out
+    assert "ckpt_path" in out  # Hydra's help follows
