@@ -45,6 +45,7 @@ from torch import Tensor, nn
 
 from skelagnostic.aligners.base import Aligner, Latent
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import fk_from_global, global_from_local, local_from_global
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import MotionError, SkelagnosticError
@@ -68,6 +69,9 @@ __all__ = [
     "window_features",
     "window_heading",
 ]
+
+#: Former name of :func:`skelagnostic.core.kinematics.local_from_global`, kept for existing imports.
+global_to_local = local_from_global
 
 log = logging.getLogger(__name__)
 
@@ -124,47 +128,7 @@ INTERP_DATA_OPTIONS: dict[str, Any] = {
 }
 
 
-# --------------------------------------------------------------------------- geometry helpers
-
-
-def fk_from_global(
-    global_rotations: Tensor, root: Tensor, offsets: Tensor, parents: Sequence[int]
-) -> Tensor:
-    """Global joint positions from *global* rotations (differentiable).
-
-    Args:
-        global_rotations: ``[B, T, J, 4]``.
-        root: ``[B, T, 3]`` root positions.
-        offsets: ``[B, J, 3]`` or ``[J, 3]`` rest offsets.
-        parents: Parent index per joint.
-
-    Returns:
-        ``[B, T, J, 3]`` positions.
-    """
-    if offsets.dim() == 2:
-        offsets = offsets.unsqueeze(0).expand(global_rotations.shape[0], -1, -1)
-    offsets = offsets.to(global_rotations)
-    pos: list[Tensor] = [root]
-    for j in range(1, len(parents)):
-        p = parents[j]
-        off = offsets[:, None, j].expand_as(root)
-        pos.append(pos[p] + Q.rotate(global_rotations[:, :, p], off))
-    return torch.stack(pos, dim=2)
-
-
-def global_to_local(global_rotations: Tensor, parents: Sequence[int]) -> Tensor:
-    """Local rotations ``inv(q_parent) * q`` from ``[..., J, 4]`` global rotations."""
-    idx = torch.tensor(list(parents[1:]), dtype=torch.long, device=global_rotations.device)
-    child = Q.mul(Q.inv(global_rotations[..., idx, :]), global_rotations[..., 1:, :])
-    return torch.cat([global_rotations[..., :1, :], child], dim=-2)
-
-
-def global_from_local(local_rotations: Tensor, parents: Sequence[int]) -> Tensor:
-    """Global rotations ``[..., J, 4]`` from local ones (the rotation half of FK)."""
-    out: list[Tensor] = [local_rotations[..., 0, :]]
-    for j in range(1, len(parents)):
-        out.append(Q.mul(out[parents[j]], local_rotations[..., j, :]))
-    return torch.stack(out, dim=-2)
+# --------------------------------------------------------------------------- losses and keys
 
 
 def sign_invariant_l1(pred: Tensor, target: Tensor) -> Tensor:
@@ -325,7 +289,7 @@ def window_features(
     raw = Q.mul(global_rotations, Q.inv(q0)[:, None])
     foq = Q.continuity(raw, dim=1)
     foq_keys = _key_continuity(raw, keys)
-    local_keys = _key_continuity(global_to_local(global_rotations, parents), keys)
+    local_keys = _key_continuity(local_from_global(global_rotations, parents), keys)
     norms = tails.norm(dim=-1, keepdim=True)
     unit = torch.where(norms > 1e-6, tails / norms.clamp_min(1e-6), torch.zeros_like(tails))
     direction = Q.rotate(q0, unit.to(q0))  # [B, J, 3]
@@ -965,7 +929,7 @@ class InterpolationAligner(Aligner):
             out_global[start:end + 1] = chunk_global[0]
             out_root[start:end + 1] = chunk_root[0]
             start, ki = end, end_i
-        local = global_to_local(out_global, skeleton.parents)
+        local = local_from_global(out_global, skeleton.parents)
         local[keys] = work.rotations[keys]
         out_root[keys] = root[keys]
         result = Motion(work.skeleton, local.cpu(), out_root.cpu(), motion.fps,
@@ -988,5 +952,5 @@ class InterpolationAligner(Aligner):
     def decode(self, latent: Latent, skeleton: Skeleton) -> Motion:
         """Rebuild a motion on ``skeleton`` from :meth:`encode` output (FOQ decoding)."""
         grot = Q.mul(latent.z, latent.extras["q0"])
-        local = global_to_local(grot, skeleton.parents)
+        local = local_from_global(grot, skeleton.parents)
         return Motion(skeleton, local, latent.extras["root"], latent.fps)
