@@ -80,10 +80,10 @@ class ClipSource(ABC):
 
 
 def _to_metres(motion: Motion, units: str | None) -> Motion:
-    units = units or motion.units
-    if units is None or units == "m":
+    """``motion`` in metres when its unit is known (``units`` or ``motion.units``), else as is."""
+    if (units or motion.units) is None:
         return motion
-    return motion.convert_units("m", from_=units)
+    return motion.to_metres(units)
 
 
 def reroot(motion: Motion, joint: str) -> Motion:

@@ -365,11 +365,10 @@ class HumotAligner(Aligner):
     # ------------------------------------------------------------------ aligner
     def _motion_positions(self, motion: Motion, units: str | None) -> torch.Tensor:
         """``[T, J, 3]`` positions of the motion at 30 fps, in metres, model frame."""
-        unit = infer_units(motion.skeleton, units or motion.units)
+        motion = motion.to_metres(units)
         if motion.fps != 30.0:
             motion = motion.resample(30.0)
-        pos = motion.global_positions().float() * UNITS[unit]
-        return to_model_frame(pos, motion.skeleton.up_axis)
+        return to_model_frame(motion.global_positions().float(), motion.skeleton.up_axis)
 
     @torch.no_grad()
     def encode_positions(self, positions: torch.Tensor, skeleton: Skeleton) -> Latent:

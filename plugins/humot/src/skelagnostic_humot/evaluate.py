@@ -78,10 +78,10 @@ HELD_OUT_SEED = 1000
 
 def chunks_of(motion: Motion, chunk: int = 30, units: str | None = None) -> torch.Tensor:
     """Non-overlapping ``[C, chunk, J, 3]`` world positions (metres) of a motion at 30 fps."""
-    unit = infer_units(motion.skeleton, units or motion.units)
+    motion = motion.to_metres(units)
     if motion.fps != 30.0:
         motion = motion.resample(30.0)
-    pos = motion.global_positions().float() * UNITS[unit]
+    pos = motion.global_positions().float()
     count = pos.shape[0] // chunk
     return pos[: count * chunk].reshape(count, chunk, *pos.shape[1:])
 

@@ -53,10 +53,6 @@ __all__ = [
 SIGMAS = (0.0, 0.01, 0.05, 0.1, 0.2)
 
 
-def _metric(motion: Motion) -> Motion:
-    if motion.units == "m":
-        return motion
-    return motion.convert_units("m", from_=infer_units(motion.skeleton, motion.units))
 
 
 def _key(name: str) -> str:
@@ -105,7 +101,7 @@ def name_copy(motion: Motion, target: Skeleton) -> Motion:
     Returns:
         A motion on ``target`` in the target's units.
     """
-    src = _metric(motion)
+    src = motion.to_metres()
     units = infer_units(target)
     mapping = name_copy_mapping(src.skeleton, target)
     rot = torch.zeros(src.num_frames, target.num_joints, 4, dtype=src.rotations.dtype)
@@ -146,7 +142,7 @@ def evaluate_pair(
     if result.num_frames != source.num_frames:
         raise SkelagnosticError(f"evaluate: result has {result.num_frames} frames, source "
                                 f"{source.num_frames}")
-    res, src = _metric(result).double(), _metric(source).double()
+    res, src = result.to_metres().double(), source.to_metres().double()
     src_rot, src_pos = src.global_rotations()[::stride], src.global_positions()[::stride]
     res_rot, res_pos = res.global_rotations()[::stride], res.global_positions()[::stride]
     out: dict[str, float] = {}

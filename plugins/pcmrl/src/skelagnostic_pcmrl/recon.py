@@ -456,13 +456,6 @@ class PcmrlReconstruction(Aligner):
         return {"source": motion, "pcmrl": result}
 
     # -------------------------------------------------------------- inference
-    @staticmethod
-    def to_metres(motion: Motion) -> Motion:
-        """``motion`` in metres (units from ``motion.units`` or guessed from the height)."""
-        if motion.units == "m":
-            return motion
-        return motion.convert_units("m", from_=infer_units(motion.skeleton, motion.units))
-
     @torch.no_grad()
     def encode(self, motion: Motion) -> Latent:
         """Per-frame Point Transformer features of a 256-point cloud on ``motion``.
@@ -473,7 +466,7 @@ class PcmrlReconstruction(Aligner):
             the predicted root is relative to, and the heading the cloud was encoded without
             (identity if ``canonical_yaw`` is off).
         """
-        metric = self.to_metres(motion).to(torch.float32, self.device)
+        metric = motion.to_metres().to(torch.float32, self.device)
         warn_zero_length_bones(metric.skeleton, "source skeleton")
         gen = torch.Generator().manual_seed(self.hparams.sample_seed)
         layout = sample_layout(metric.skeleton, self.hparams.num_source_points,
