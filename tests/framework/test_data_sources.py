@@ -120,7 +120,7 @@ def test_plugin_data_modules_forward_the_base_options(tmp_path: Path) -> None:
         HumotDataModule(bogus=1)
     with pytest.raises(SkelagnosticError, match="always per element"):
         VQPAEDataModule(per_element_stats=False)
-    with pytest.raises(SkelagnosticError, match="data.fps must be > 0"):
+    with pytest.raises(SkelagnosticError, match=r"data\.fps must be > 0"):
         InterpolationDataModule(fps=0)
 
 

@@ -8,6 +8,7 @@ from skelagnostic_humot.data import HumotDataModule
 
 import skelagnostic as sa
 from conftest import SMALL
+from skelagnostic.callbacks import FitSummary
 from skelagnostic.data import ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 
@@ -92,7 +93,8 @@ def test_save_and_load(tmp_path):
     model = HumotAligner(**SMALL)
     dm = _datamodule(tmp_path)
     trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, enable_progress_bar=False,
-                        limit_train_batches=1, limit_val_batches=1, default_root_dir=tmp_path)
+                        limit_train_batches=1, limit_val_batches=1, default_root_dir=tmp_path,
+                        callbacks=[FitSummary(name="humot")])  # what `skelagnostic fit` adds
     trainer.fit(model, datamodule=dm)
     ckpt = tmp_path / "model.ckpt"
     trainer.save_checkpoint(ckpt)

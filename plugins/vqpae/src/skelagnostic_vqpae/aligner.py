@@ -24,18 +24,17 @@ and, with a pose MLP, ``val/pose_mpjpe/<dataset>`` in metres at the pivot frames
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import torch
-from lightning.pytorch.utilities import rank_zero_info, rank_zero_only
+from lightning.pytorch.utilities import rank_zero_info
 from torch import Tensor, nn
 
-from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners import Aligner, Latent, steps_per_epoch
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
@@ -51,6 +50,11 @@ from skelagnostic_vqpae.model import (
     phase_advance_rate,
     phase_manifold,
 )
+
+if TYPE_CHECKING:
+    import lightning as L
+
+    from skelagnostic.callbacks import SummaryContent
 
 __all__ = ["DatasetSpec", "VQPAEAligner"]
 
@@ -521,68 +525,44 @@ class VQPAEAligner(Aligner):
         # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
         fused = all(p.device.type in ("cpu", "cuda") for p in main)
         optimizer = torch.optim.AdamW(groups, fused=fused, foreach=None if fused else True)
-        steps = self._steps_per_epoch()
+        steps = steps_per_epoch(self._trainer)
         scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
             optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult)
         return {"optimizer": optimizer,
                 "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
 
-    def _steps_per_epoch(self) -> int:
-        dm = self.trainer.datamodule
-        if dm is None or not dm.datasets["train"]:
-            return 1
-        longest = max(len(ds) for ds in dm.datasets["train"].values())
-        return max(1, math.ceil(longest / dm.batch_size))
+    def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
+        """The manifold figures and pictures of the fit summary.
 
-    def on_fit_end(self) -> None:
-        """Write what a person looks at after training, into the run directory.
-
-        * ``vqpae_metrics.json``: the last logged metrics, and the manifold
-          overlap (usage, overlap, per-dataset share, codes used per dataset) of
-          the per-frame codes of the validation clips (``"split": "val"``; the
-          training clips without a validation split), and under ``"train"`` the
-          same figures for the training clips (the paper's Table 2 measures the
-          training data);
+        * metrics (in ``vqpae_metrics.json``): the manifold overlap (usage,
+          overlap, per-dataset share, codes used per dataset) of the per-frame
+          codes of the validation clips (``"split": "val"``; the training clips
+          without a validation split), and under ``"train"`` the same figures
+          for the training clips (the paper's Table 2 measures the training data);
         * ``vqpae_manifold.png``: the phase manifold (PCA of the codebook
           ellipses, one panel per character, its frames' points; paper Fig. 1);
         * ``vqpae_timing.png``: phase, frequency and code over time for the
           first clip of every character.
         """
-        self._write_fit_outputs()
-
-    @rank_zero_only
-    def _write_fit_outputs(self) -> None:
-        trainer = self.trainer
         dm = trainer.datamodule
         if dm is None or self.codebook is None:
-            return
+            return {}
         splits = [name for name in ("val", "train")
                   if any(len(d) for d in dm.datasets.get(name, {}).values())]
         if not splits:
-            return
-        was_training = self.training
-        self.eval()
-        try:
-            embeddings = {name: self.embed_windows(dm.datasets[name], dm.fps) for name in splits}
-        finally:
-            self.train(was_training)
-        run_dir = Path(trainer.default_root_dir)
-        run_dir.mkdir(parents=True, exist_ok=True)
+            return {}
+        embeddings = {name: self.embed_windows(dm.datasets[name], dm.fps) for name in splits}
         figures = {name: self._overlap_figures(embeddings[name]) for name in splits}
         metrics = {"split": splits[0], **figures[splits[0]],
-                   **({"train": figures["train"]} if splits[0] != "train" else {}),
-                   "logged": {k: float(v) for k, v in trainer.callback_metrics.items()}}
-        (run_dir / "vqpae_metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+                   **({"train": figures["train"]} if splits[0] != "train" else {})}
         shown = {n: embs for n, embs in embeddings[splits[0]].items() if embs}
         if not shown:
-            return
-        import matplotlib.pyplot as plt
-
+            return {"metrics": metrics}
         from skelagnostic_vqpae.embed import plot_clip_timing, plot_manifold
 
-        plt.close(plot_manifold(self, shown, run_dir / "vqpae_manifold.png"))
-        plt.close(plot_clip_timing({n: embs[0] for n, embs in shown.items()},
-                                   run_dir / "vqpae_timing.png"))
+        return {"metrics": metrics,
+                "figures": {"manifold": plot_manifold(self, shown),
+                            "timing": plot_clip_timing({n: embs[0] for n, embs in shown.items()})}}
 
     def _overlap_figures(self, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
         """Manifold overlap (Table 2) of per-clip embeddings of every dataset."""
