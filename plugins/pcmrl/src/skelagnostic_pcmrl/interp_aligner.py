@@ -106,9 +106,15 @@ class InterpolationAligner(Aligner):
         window: int = 128,
     ) -> None:
         super().__init__()
-        for arg, value in (("dim", dim), ("heads", heads), ("layers", layers),
-                           ("ff_mult", ff_mult), ("max_relative", max_relative), ("lr", lr),
-                           ("window", window)):
+        for arg, value in (
+            ("dim", dim),
+            ("heads", heads),
+            ("layers", layers),
+            ("ff_mult", ff_mult),
+            ("max_relative", max_relative),
+            ("lr", lr),
+            ("window", window),
+        ):
             if value <= 0:
                 raise SkelagnosticError(f"model.{arg} must be positive, got {value}")
         if warmup_steps < 0:
@@ -136,17 +142,34 @@ class InterpolationAligner(Aligner):
         self.register_buffer("tails", bone_tails(skeleton).tails.float(), persistent=False)
         self.register_buffer("groups", group_of_joints(skeleton), persistent=False)
         interm = 10 * num_j + 3 if hp.interm_tokens == "lerp" else 0
-        self.net = CITLInterpolator(10 * num_j + 1, 4 * num_j + 3, hp.dim, hp.heads, hp.layers,
-                                    hp.ff_mult, hp.max_relative, zero_output=hp.residual,
-                                    interm_features=interm)
+        self.net = CITLInterpolator(
+            10 * num_j + 1,
+            4 * num_j + 3,
+            hp.dim,
+            hp.heads,
+            hp.layers,
+            hp.ff_mult,
+            hp.max_relative,
+            zero_output=hp.residual,
+            interm_features=interm,
+        )
 
-    def features(self, global_rotations: Tensor, root: Tensor, offsets: Tensor, tails: Tensor,
-                 keys: Tensor) -> dict[str, Tensor]:
+    def features(
+        self, global_rotations: Tensor, root: Tensor, offsets: Tensor, tails: Tensor, keys: Tensor
+    ) -> dict[str, Tensor]:
         """:func:`window_features` with what this model's options need (nothing more)."""
         hp = self.hparams
-        return window_features(global_rotations, root, offsets, tails, keys, self.parents,
-                               baseline=bool(hp.residual), interm=hp.interm_tokens == "lerp",
-                               max_relative=int(hp.max_relative))
+        return window_features(
+            global_rotations,
+            root,
+            offsets,
+            tails,
+            keys,
+            self.parents,
+            baseline=bool(hp.residual),
+            interm=hp.interm_tokens == "lerp",
+            max_relative=int(hp.max_relative),
+        )
 
     def configure_model(self) -> None:
         """Build the network from the data module's target skeleton.
@@ -166,8 +189,9 @@ class InterpolationAligner(Aligner):
         self.hparams["window"] = int(dm.window)
         self._build(skeleton)
 
-    def canonical(self, global_rotations: Tensor, root: Tensor,
-                  offsets: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    def canonical(
+        self, global_rotations: Tensor, root: Tensor, offsets: Tensor
+    ) -> tuple[Tensor, Tensor, Tensor]:
         """Windows turned into the heading-free frame (``canonical_heading``).
 
         Args:
@@ -184,8 +208,9 @@ class InterpolationAligner(Aligner):
             turn = Q.identity(root.shape[0], dtype=root.dtype, device=root.device)
             return global_rotations, root, turn
         assert self.skeleton is not None  # built together with the network
-        turn = window_heading(global_rotations, root, offsets, self.groups, self.parents,
-                              self.skeleton.up_index)
+        turn = window_heading(
+            global_rotations, root, offsets, self.groups, self.parents, self.skeleton.up_index
+        )
         back = Q.inv(turn)
         return Q.mul(back[:, None, None], global_rotations), Q.rotate(back[:, None], root), turn
 
@@ -241,8 +266,9 @@ class InterpolationAligner(Aligner):
         grot, root, _ = self.canonical(batch["global_rotations"], batch["root"], batch["offsets"])
         feats = self.features(grot, root, batch["offsets"], batch["tails"], keys)
         pred = self.predict_window(feats, keys)
-        pos = fk_from_global(pred["global"], pred["root"] + feats["center"], batch["offsets"],
-                             self.parents)
+        pos = fk_from_global(
+            pred["global"], pred["root"] + feats["center"], batch["offsets"], self.parents
+        )
         return feats, pred, pos
 
     def _losses(self, batch: Mapping[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
@@ -254,8 +280,12 @@ class InterpolationAligner(Aligner):
             "fk": (pos - feats["positions"]).abs().mean(),
             "quat": sign_invariant_l1(pred["global"], feats["global"]),
         }
-        loss = (hp.w_root * parts["root"] + hp.w_foq * parts["foq"] + hp.w_fk * parts["fk"]
-                + hp.w_quat * parts["quat"])
+        loss = (
+            hp.w_root * parts["root"]
+            + hp.w_foq * parts["foq"]
+            + hp.w_fk * parts["fk"]
+            + hp.w_quat * parts["quat"]
+        )
         return loss, parts
 
     def on_train_epoch_start(self) -> None:
@@ -328,8 +358,9 @@ class InterpolationAligner(Aligner):
         ratio = math.log(trained / own)
         return min(UNITS.values(), key=lambda f: abs(math.log(f) - ratio))
 
-    def interpolate_window(self, global_rotations: Tensor, root: Tensor, keys: Tensor,
-                           offsets: Tensor, tails: Tensor) -> tuple[Tensor, Tensor]:
+    def interpolate_window(
+        self, global_rotations: Tensor, root: Tensor, keys: Tensor, offsets: Tensor, tails: Tensor
+    ) -> tuple[Tensor, Tensor]:
         """Fill one window between its keys (what :meth:`interpolate` does per chunk).
 
         Args:
@@ -349,8 +380,10 @@ class InterpolationAligner(Aligner):
         pred_global = Q.mul(turn[:, None, None], pred["global"])
         pred_root = Q.rotate(turn[:, None], pred["root"] + feats["center"])
         key = keys[..., None]
-        return (torch.where(key[..., None], global_rotations, pred_global),
-                torch.where(key, root, pred_root))
+        return (
+            torch.where(key[..., None], global_rotations, pred_global),
+            torch.where(key, root, pred_root),
+        )
 
     def export_graphs(self) -> list[ExportGraph]:
         """The interpolation network on one window: keyframes -> full window.
@@ -372,40 +405,54 @@ class InterpolationAligner(Aligner):
         keys[:, [0, 4, num_t - 1]] = True
         offsets = skeleton.offsets.float()[None].expand(num_b, -1, -1).contiguous()
         tails = self.tails.float()[None].expand(num_b, -1, -1).contiguous()
-        return [ExportGraph(
-            "interpolation", Method(self, "interpolate_window"),
-            (rotations, torch.randn(num_b, num_t, 3), keys, offsets, tails),
-            ("global_rotations", "root", "keys", "offsets", "tails"),
-            ("out_global_rotations", "out_root"),
-            {"global_rotations": {0: "batch", 1: "time"}, "root": {0: "batch", 1: "time"},
-             "keys": {0: "batch", 1: "time"}, "offsets": {0: "batch"}, "tails": {0: "batch"},
-             "out_global_rotations": {0: "batch", 1: "time"},
-             "out_root": {0: "batch", 1: "time"}},
-            description=(
-                f"a window of the target skeleton ({num_j} joints): global unit quaternions "
-                "(w, x, y, z) [B, T, J, 4] and root positions [B, T, 3] (metres; only the "
-                "keyframes are read), the keyframe mask [B, T] (frame 0 a key), rest offsets "
-                "and bone tails [B, J, 3] -> the window with the frames between the keys "
-                "generated"),
-            fixed_axes={"joints": f"{num_j}: the network's input and output layers are per "
-                                  "joint of the trained skeleton"},
-            metadata={
-                "skeleton": skeleton.to_dict(),
-                "offsets": skeleton.offsets.float(),
-                "tails": self.tails,
-                "units": "m (the training data's)",
-                "fps": hp.fps,
-                "training_window": int(hp.window),
-                "max_relative": int(hp.max_relative),
-                "canonical_heading": bool(hp.canonical_heading),
-                "preprocess": (
-                    "global rotations by forward kinematics of the local ones; pass the "
-                    "skeleton's offsets and tails (the values above for the trained skeleton)"),
-                "postprocess": (
-                    "local rotations: inverse(parent global) * global; clips longer than "
-                    "training_window: cut at keyframes into chained windows sharing their "
-                    "boundary key, as InterpolationAligner.interpolate does"),
-            })]
+        return [
+            ExportGraph(
+                "interpolation",
+                Method(self, "interpolate_window"),
+                (rotations, torch.randn(num_b, num_t, 3), keys, offsets, tails),
+                ("global_rotations", "root", "keys", "offsets", "tails"),
+                ("out_global_rotations", "out_root"),
+                {
+                    "global_rotations": {0: "batch", 1: "time"},
+                    "root": {0: "batch", 1: "time"},
+                    "keys": {0: "batch", 1: "time"},
+                    "offsets": {0: "batch"},
+                    "tails": {0: "batch"},
+                    "out_global_rotations": {0: "batch", 1: "time"},
+                    "out_root": {0: "batch", 1: "time"},
+                },
+                description=(
+                    f"a window of the target skeleton ({num_j} joints): global unit quaternions "
+                    "(w, x, y, z) [B, T, J, 4] and root positions [B, T, 3] (metres; only the "
+                    "keyframes are read), the keyframe mask [B, T] (frame 0 a key), rest offsets "
+                    "and bone tails [B, J, 3] -> the window with the frames between the keys "
+                    "generated"
+                ),
+                fixed_axes={
+                    "joints": f"{num_j}: the network's input and output layers are per "
+                    "joint of the trained skeleton"
+                },
+                metadata={
+                    "skeleton": skeleton.to_dict(),
+                    "offsets": skeleton.offsets.float(),
+                    "tails": self.tails,
+                    "units": "m (the training data's)",
+                    "fps": hp.fps,
+                    "training_window": int(hp.window),
+                    "max_relative": int(hp.max_relative),
+                    "canonical_heading": bool(hp.canonical_heading),
+                    "preprocess": (
+                        "global rotations by forward kinematics of the local ones; pass the "
+                        "skeleton's offsets and tails (the values above for the trained skeleton)"
+                    ),
+                    "postprocess": (
+                        "local rotations: inverse(parent global) * global; clips longer than "
+                        "training_window: cut at keyframes into chained windows sharing their "
+                        "boundary key, as InterpolationAligner.interpolate does"
+                    ),
+                },
+            )
+        ]
 
     @torch.no_grad()
     def interpolate(self, motion: Motion, keyframes: Sequence[int]) -> Motion:
@@ -448,8 +495,12 @@ class InterpolationAligner(Aligner):
             raise MotionError("interpolate: keyframes must be strictly increasing")
         fps = self.hparams.fps
         if fps is not None and abs(float(fps) - motion.fps) > 1e-6:
-            log.warning("interpolate: the model was trained at %.3g fps, motion %r is at %.3g fps",
-                        fps, motion.name, motion.fps)
+            log.warning(
+                "interpolate: the model was trained at %.3g fps, motion %r is at %.3g fps",
+                fps,
+                motion.name,
+                motion.fps,
+            )
         scale = self._scale_to_training(motion)
         work = motion.scaled(scale) if scale != 1.0 else motion
         work = work.to(dtype=torch.float32, device=self.device)
@@ -471,19 +522,29 @@ class InterpolationAligner(Aligner):
                 end_i += 1
             end = key_set[end_i]
             mask = torch.zeros(1, end - start + 1, dtype=torch.bool, device=self.device)
-            mask[0, [k - start for k in key_set[ki:end_i + 1]]] = True
+            mask[0, [k - start for k in key_set[ki : end_i + 1]]] = True
             # chunks share only their boundary keys, which the window keeps unchanged
             chunk_global, chunk_root = self.interpolate_window(
-                grot[None, start:end + 1], root[None, start:end + 1], mask, offsets[None],
-                tails[None])
-            out_global[start:end + 1] = chunk_global[0]
-            out_root[start:end + 1] = chunk_root[0]
+                grot[None, start : end + 1],
+                root[None, start : end + 1],
+                mask,
+                offsets[None],
+                tails[None],
+            )
+            out_global[start : end + 1] = chunk_global[0]
+            out_root[start : end + 1] = chunk_root[0]
             start, ki = end, end_i
         local = local_from_global(out_global, skeleton.parents)
         local[keys] = work.rotations[keys]
         out_root[keys] = root[keys]
-        result = Motion(work.skeleton, local.cpu(), out_root.cpu(), motion.fps,
-                        name=motion.name, units=work.units)
+        result = Motion(
+            work.skeleton,
+            local.cpu(),
+            out_root.cpu(),
+            motion.fps,
+            name=motion.name,
+            units=work.units,
+        )
         if scale != 1.0:
             result = result.scaled(1.0 / scale)
         return result.to(dtype=motion.dtype)

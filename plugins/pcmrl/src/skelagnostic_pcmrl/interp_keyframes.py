@@ -66,8 +66,11 @@ def key_brackets(keys: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     nxt = torch.where(nxt >= num_t, prev, nxt)
     prev = prev.clamp_min(0)
     span = (nxt - prev).clamp_min(1)
-    w = torch.where(nxt > prev, (frames - prev).float() / span.float(), torch.zeros_like(span,
-                    dtype=torch.float32))
+    w = torch.where(
+        nxt > prev,
+        (frames - prev).float() / span.float(),
+        torch.zeros_like(span, dtype=torch.float32),
+    )
     return prev, nxt, w
 
 
@@ -201,14 +204,20 @@ def window_features(
         "root": root - center,
     }
     if baseline or interm:
-        base_local, base_foq, base_root = lerp_baseline(local_keys, feats["root"], q0, keys,
-                                                        parents)
+        base_local, base_foq, base_root = lerp_baseline(
+            local_keys, feats["root"], q0, keys, parents
+        )
         feats.update(base_local=base_local, base_foq=base_foq, base_root=base_root)
     if interm:
         base_pos = fk_from_global(Q.mul(base_foq, q0[:, None]), base_root, offsets, parents)
         base_joint = torch.cat(
-            [base_pos, direction[:, None].expand(num_b, num_t, num_j, 3),
-             Q.continuity(base_foq, dim=1)], -1)
+            [
+                base_pos,
+                direction[:, None].expand(num_b, num_t, num_j, 3),
+                Q.continuity(base_foq, dim=1),
+            ],
+            -1,
+        )
         prev, nxt, w = key_brackets(keys)
         span = (nxt - prev).to(pos.dtype) / float(max_relative)
         w = w.to(pos.dtype)
@@ -217,8 +226,9 @@ def window_features(
     return feats
 
 
-def lerp_baseline(local_keys: Tensor, root: Tensor, q0: Tensor, keys: Tensor,
-                  parents: Sequence[int]) -> tuple[Tensor, Tensor, Tensor]:
+def lerp_baseline(
+    local_keys: Tensor, root: Tensor, q0: Tensor, keys: Tensor, parents: Sequence[int]
+) -> tuple[Tensor, Tensor, Tensor]:
     """The LERP baseline of a window from its keys: local rotations, FOQ and root.
 
     Local rotations are SLERPed between the surrounding keys (global rotations by

@@ -66,11 +66,13 @@ class Block(nn.Module):
         self.norm_m = nn.RMSNorm(dim)
         self.attn = RelativeAttention(dim, heads, max_relative)
         self.norm_ff = nn.RMSNorm(dim)
-        self.ff = nn.Sequential(nn.Linear(dim, dim * ff_mult), nn.GELU(),
-                                nn.Linear(dim * ff_mult, dim))
+        self.ff = nn.Sequential(
+            nn.Linear(dim, dim * ff_mult), nn.GELU(), nn.Linear(dim * ff_mult, dim)
+        )
 
-    def forward(self, x: Tensor, memory: Tensor | None = None,
-                key_mask: Tensor | None = None) -> Tensor:
+    def forward(
+        self, x: Tensor, memory: Tensor | None = None, key_mask: Tensor | None = None
+    ) -> Tensor:
         """Self-attention (``memory=None``) or cross-attention, then feed-forward."""
         q = self.norm_q(x)
         m = q if memory is None else self.norm_m(memory)
@@ -94,22 +96,34 @@ class CITLInterpolator(nn.Module):
             (``interm_tokens="lerp"``); 0: the tokens start at zero, as in CITL.
     """
 
-    def __init__(self, in_features: int, out_features: int, dim: int, heads: int, layers: int,
-                 ff_mult: int = 4, max_relative: int = 128, zero_output: bool = False,
-                 interm_features: int = 0) -> None:
+    def __init__(
+        self,
+        in_features: int,
+        out_features: int,
+        dim: int,
+        heads: int,
+        layers: int,
+        ff_mult: int = 4,
+        max_relative: int = 128,
+        zero_output: bool = False,
+        interm_features: int = 0,
+    ) -> None:
         super().__init__()
         self.embed = nn.Linear(in_features, dim)
         self.interm_embed = nn.Linear(interm_features, dim) if interm_features > 0 else None
-        self.encoder = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
-                                     for _ in range(layers))
-        self.interm = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
-                                    for _ in range(layers))
-        self.key_ff = nn.Sequential(nn.Linear(dim, dim * ff_mult), nn.GELU(),
-                                    nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim))
-        self.interm_ff = nn.Sequential(nn.Linear(dim, dim * ff_mult), nn.GELU(),
-                                       nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim))
-        self.decoder = nn.ModuleList(Block(dim, heads, ff_mult, max_relative)
-                                     for _ in range(layers))
+        self.encoder = nn.ModuleList(
+            Block(dim, heads, ff_mult, max_relative) for _ in range(layers)
+        )
+        self.interm = nn.ModuleList(Block(dim, heads, ff_mult, max_relative) for _ in range(layers))
+        self.key_ff = nn.Sequential(
+            nn.Linear(dim, dim * ff_mult), nn.GELU(), nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim)
+        )
+        self.interm_ff = nn.Sequential(
+            nn.Linear(dim, dim * ff_mult), nn.GELU(), nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim)
+        )
+        self.decoder = nn.ModuleList(
+            Block(dim, heads, ff_mult, max_relative) for _ in range(layers)
+        )
         self.head = nn.Linear(dim, out_features)
         if zero_output:
             nn.init.zeros_(self.head.weight)
