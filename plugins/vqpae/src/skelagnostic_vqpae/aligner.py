@@ -24,7 +24,6 @@ and, with a pose MLP, ``val/pose_mpjpe/<dataset>`` in metres at the pivot frames
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -40,7 +39,6 @@ from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph, Method
 from skelagnostic.metrics import ManifoldOverlap
-from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
 from skelagnostic_vqpae.model import (
@@ -532,52 +530,10 @@ class VQPAEAligner(Aligner):
                 "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
 
     def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
-        """The manifold figures and pictures of the fit summary.
+        """The manifold overlap and pictures of the fit summary (see :mod:`.fit_outputs`)."""
+        from skelagnostic_vqpae.fit_outputs import fit_summary
 
-        * metrics (in ``vqpae_metrics.json``): the manifold overlap (usage,
-          overlap, per-dataset share, codes used per dataset) of the per-frame
-          codes of the validation clips (``"split": "val"``; the training clips
-          without a validation split), and under ``"train"`` the same figures
-          for the training clips (the paper's Table 2 measures the training data);
-        * ``vqpae_manifold.png``: the phase manifold (PCA of the codebook
-          ellipses, one panel per character, its frames' points; paper Fig. 1);
-        * ``vqpae_timing.png``: phase, frequency and code over time for the
-          first clip of every character.
-        """
-        dm = trainer.datamodule
-        if dm is None or self.codebook is None:
-            return {}
-        splits = [name for name in ("val", "train")
-                  if any(len(d) for d in dm.datasets.get(name, {}).values())]
-        if not splits:
-            return {}
-        embeddings = {name: self.embed_windows(dm.datasets[name], dm.fps) for name in splits}
-        figures = {name: self._overlap_figures(embeddings[name]) for name in splits}
-        metrics = {"split": splits[0], **figures[splits[0]],
-                   **({"train": figures["train"]} if splits[0] != "train" else {})}
-        shown = {n: embs for n, embs in embeddings[splits[0]].items() if embs}
-        if not shown:
-            return {"metrics": metrics}
-        from skelagnostic_vqpae.embed import plot_clip_timing, plot_manifold
-
-        return {"metrics": metrics,
-                "figures": {"manifold": plot_manifold(self, shown),
-                            "timing": plot_clip_timing({n: embs[0] for n, embs in shown.items()})}}
-
-    def _overlap_figures(self, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
-        """Manifold overlap (Table 2) of per-clip embeddings of every dataset."""
-        codes = [torch.cat([e.code for e in embeddings.get(n, [])] or
-                           [torch.zeros(0, dtype=torch.long)]) for n in self.dataset_names]
-        overlap = manifold_overlap(codes, self._require_built().num_codes)
-        single = len(self.dataset_names) < 2  # overlap is not applicable: None, not a number
-        return {
-            "usage": overlap["usage"],
-            "overlap": None if single else overlap["overlap"],
-            "per_dataset": {n: None if single or math.isnan(v) else v for n, v in
-                            zip(self.dataset_names, overlap["per_dataset"], strict=True)},
-            "codes_used": {n: int(c.unique().numel()) for n, c in
-                           zip(self.dataset_names, codes, strict=True)},
-        }
+        return fit_summary(self, trainer)
 
     @torch.no_grad()
     def embed_windows(self, datasets: Mapping[str, Any], fps: float,
