@@ -32,15 +32,17 @@ class _Fixed(ClipSource):
         return [ClipRef("stick", f"{self.height}-{self.units}")]
 
     def load(self, clip: ClipRef) -> sa.Motion:
-        sk = sa.Skeleton(["hips", "spine", "head"], [-1, 0, 1],
-                         [[0, 0, 0], [0, self.height / 2, 0], [0, self.height / 2, 0]])
+        sk = sa.Skeleton(
+            ["hips", "spine", "head"],
+            [-1, 0, 1],
+            [[0, 0, 0], [0, self.height / 2, 0], [0, self.height / 2, 0]],
+        )
         rot = torch.tensor([[1.0, 0, 0, 0]]).expand(4, 3, 4)
         return sa.Motion(sk, rot, torch.zeros(4, 3), 30, units=self.units)
 
 
 def _procedural(name: str, kind: str) -> ProceduralSource:
-    return ProceduralSource(kinds=[kind], gaits=["walk"], clips_per_gait=2, seconds=2.0,
-                            name=name)
+    return ProceduralSource(kinds=[kind], gaits=["walk"], clips_per_gait=2, seconds=2.0, name=name)
 
 
 @pytest.mark.parametrize(
@@ -77,9 +79,13 @@ def test_multi_source_prefixes_ids_and_loads_from_its_parts() -> None:
 def test_any_data_module_makes_one_dataset_per_multi_source_part(tmp_path: Path) -> None:
     multi = MultiSource([_procedural("human", "biped22"), _procedural("dog", "quadruped")])
     assert [s.name for s in flatten_sources([multi, _procedural("x", "biped17")])] == [
-        "human", "dog", "x"]
-    dm = MotionDataModule(multi, window=16, stride=16, val_fraction=0.0,
-                          cache_dir=tmp_path / "cache")
+        "human",
+        "dog",
+        "x",
+    ]
+    dm = MotionDataModule(
+        multi, window=16, stride=16, val_fraction=0.0, cache_dir=tmp_path / "cache"
+    )
     dm.setup("fit")
     assert dm.dataset_names == ["human", "dog"]
     assert dm.skeletons["dog"].morphology == "quadruped"
@@ -94,8 +100,13 @@ def test_hooks_are_public_and_overridable(tmp_path: Path) -> None:
             if name == "human":
                 super().add_dataset(name, members)
 
-    dm = OnlyHumans([_procedural("human", "biped22"), _procedural("dog", "quadruped")],
-                    window=16, stride=16, val_fraction=0.5, cache_dir=tmp_path / "cache")
+    dm = OnlyHumans(
+        [_procedural("human", "biped22"), _procedural("dog", "quadruped")],
+        window=16,
+        stride=16,
+        val_fraction=0.5,
+        cache_dir=tmp_path / "cache",
+    )
     dm.setup("fit")
     assert seen == ["human", "dog"] and dm.dataset_names == ["human"]
     entry = dm.cache_entry(dm.sources[0], dm.sources[0].clips()[0])
@@ -126,8 +137,15 @@ def test_plugin_data_modules_forward_the_base_options(tmp_path: Path) -> None:
 
 def test_cli_routes_base_options_through_kwargs(tmp_path: Path) -> None:
     pm = sa.plugins.get_plugin_manager()
-    cfg = app.compose(["model=humot", "run_dir=/tmp/x", "data.split_seed=5",
-                       "data.test_fraction=0.25", f"data.cache_dir={tmp_path}"])
+    cfg = app.compose(
+        [
+            "model=humot",
+            "run_dir=/tmp/x",
+            "data.split_seed=5",
+            "data.test_fraction=0.25",
+            f"data.cache_dir={tmp_path}",
+        ]
+    )
     dm = app.build_datamodule(cfg, pm)
     assert (dm.split_seed, dm.test_fraction, dm.window) == (5, 0.25, 30)
     cfg = app.compose(["model=humot", "run_dir=/tmp/x", "data.test_fraction=abc"])

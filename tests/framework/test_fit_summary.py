@@ -16,8 +16,15 @@ from torch.utils.data import DataLoader, TensorDataset
 from skelagnostic.aligners import steps_per_epoch
 from skelagnostic.callbacks import FitSummary
 
-FAST = ["experiment=smoke", "data.seconds=2.0", "data.clips_per_gait=1", "data.window=16",
-        "data.stride=16", "trainer.max_epochs=1", "threads=1"]
+FAST = [
+    "experiment=smoke",
+    "data.seconds=2.0",
+    "data.clips_per_gait=1",
+    "data.window=16",
+    "data.stride=16",
+    "trainer.max_epochs=1",
+    "threads=1",
+]
 
 
 class _Tiny(L.LightningModule):
@@ -45,9 +52,16 @@ class _Tiny(L.LightningModule):
 
 def _fit(module: L.LightningModule, root: Path, batches: int = 6, **trainer: Any) -> L.Trainer:
     data = DataLoader(TensorDataset(torch.randn(batches * 2, 2)), batch_size=2)
-    options = {"max_epochs": 1, "accelerator": "cpu", "logger": False,
-               "enable_checkpointing": False, "enable_progress_bar": False,
-               "enable_model_summary": False, "default_root_dir": str(root), **trainer}
+    options = {
+        "max_epochs": 1,
+        "accelerator": "cpu",
+        "logger": False,
+        "enable_checkpointing": False,
+        "enable_progress_bar": False,
+        "enable_model_summary": False,
+        "default_root_dir": str(root),
+        **trainer,
+    }
     fitted = L.Trainer(**options)
     fitted.fit(module, data)
     return fitted
@@ -60,9 +74,12 @@ def test_fit_summary_writes_metrics_renders_figures_and_markdown(tmp_path: Path)
 
     stick = StickFigure(np.array([[[0.0, 0, 0], [0, 1, 0]]] * 3), parents=[-1, 0])
     figure = plt.figure()
-    content = {"metrics": {"usage": torch.tensor(0.25), "per": {"a": None}},
-               "renders": {"pose": [stick]}, "figures": {"curve": figure},
-               "notes": ["A note from the aligner."]}
+    content = {
+        "metrics": {"usage": torch.tensor(0.25), "per": {"a": None}},
+        "renders": {"pose": [stick]},
+        "figures": {"curve": figure},
+        "notes": ["A note from the aligner."],
+    }
     module = _Tiny(content)
     callback = FitSummary(name="tiny", size=(40, 40), sheet_frames=2)
     _fit(module, tmp_path, callbacks=[callback])
@@ -79,7 +96,12 @@ def test_fit_summary_writes_metrics_renders_figures_and_markdown(tmp_path: Path)
     assert "![pose](tiny_pose.gif)" in summary and "![curve](tiny_curve.png)" in summary
     assert "A note from the aligner." in summary
     assert {p.name for p in callback.written} == {
-        "tiny_metrics.json", "tiny_pose.gif", "tiny_pose.png", "tiny_curve.png", "summary.md"}
+        "tiny_metrics.json",
+        "tiny_pose.gif",
+        "tiny_pose.png",
+        "tiny_curve.png",
+        "summary.md",
+    }
 
 
 def test_fit_summary_without_content_or_name(tmp_path: Path) -> None:
@@ -100,17 +122,25 @@ def test_fit_summary_without_content_or_name(tmp_path: Path) -> None:
         (5, {"max_epochs": -1, "max_steps": 3}, 5),  # the trainer does not count: the loader
     ],
 )
-def test_steps_per_epoch(tmp_path: Path, batches: int, trainer: dict[str, Any],
-                         expected: int) -> None:
+def test_steps_per_epoch(
+    tmp_path: Path, batches: int, trainer: dict[str, Any], expected: int
+) -> None:
     module = _Tiny()
     if trainer.get("max_epochs") == -1:
+
         class _WithData(L.LightningDataModule):
             def train_dataloader(self) -> DataLoader:
                 return DataLoader(TensorDataset(torch.randn(batches * 2, 2)), batch_size=2)
 
-        fitted = L.Trainer(accelerator="cpu", logger=False, enable_checkpointing=False,
-                           enable_progress_bar=False, enable_model_summary=False,
-                           default_root_dir=str(tmp_path), **trainer)
+        fitted = L.Trainer(
+            accelerator="cpu",
+            logger=False,
+            enable_checkpointing=False,
+            enable_progress_bar=False,
+            enable_model_summary=False,
+            default_root_dir=str(tmp_path),
+            **trainer,
+        )
         fitted.fit(module, datamodule=_WithData())
     else:
         _fit(module, tmp_path, batches, **trainer)
@@ -119,7 +149,8 @@ def test_steps_per_epoch(tmp_path: Path, batches: int, trainer: dict[str, Any],
 
 
 def test_skelagnostic_fit_writes_the_summary_by_default(
-        fit_example: Callable[[Path, Sequence[str]], Path], tmp_path: Path) -> None:
+    fit_example: Callable[[Path, Sequence[str]], Path], tmp_path: Path
+) -> None:
     run_dir = fit_example(tmp_path, FAST)
     metrics = json.loads((run_dir / "example_metrics.json").read_text())
     assert "val/loss" in metrics

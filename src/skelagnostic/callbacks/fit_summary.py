@@ -161,12 +161,22 @@ class FitSummary(pl.Callback):
         written.append(summary)
         return written
 
-    def _markdown(self, trainer: pl.Trainer, logged: Mapping[str, Any], content: SummaryContent,
-                  metrics_file: Path, pictures: list[tuple[str, Path]]) -> str:
+    def _markdown(
+        self,
+        trainer: pl.Trainer,
+        logged: Mapping[str, Any],
+        content: SummaryContent,
+        metrics_file: Path,
+        pictures: list[tuple[str, Path]],
+    ) -> str:
         title = f"Fit summary: {self.name}" if self.name else "Fit summary"
-        lines = [f"# {title}", "",
-                 f"{trainer.current_epoch} epoch(s), {trainer.global_step} optimiser step(s). "
-                 f"Every figure is in `{metrics_file.name}`.", ""]
+        lines = [
+            f"# {title}",
+            "",
+            f"{trainer.current_epoch} epoch(s), {trainer.global_step} optimiser step(s). "
+            f"Every figure is in `{metrics_file.name}`.",
+            "",
+        ]
         if logged:
             lines += ["## Last logged metrics", "", "| metric | value |", "|---|---|"]
             lines += [f"| `{k}` | {_cell(v)} |" for k, v in sorted(logged.items())]
