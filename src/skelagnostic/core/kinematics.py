@@ -84,14 +84,7 @@ def forward_kinematics(
             f"forward_kinematics: {num_joints} parents but rotations have "
             f"{rotations.shape[-2]} joints and offsets {offsets.shape[-2]}"
         )
-    if (
-        num_joints == 0
-        or parents[0] >= 0
-        or any(not 0 <= p < j for j, p in enumerate(parents) if j > 0)
-    ):
-        raise MotionError(
-            "forward_kinematics: joint 0 must be the only root and parents must precede children"
-        )
+    _check_parents(parents, num_joints, "forward_kinematics")
     # [4, J, ...] and [3, ...]: one contiguous tensor per component
     comp = rotations.movedim(-1, 0).movedim(-1, 1).contiguous()
     root = root_positions.movedim(-1, 0)
