@@ -141,8 +141,9 @@ def test_units(walk):
 
 def _stick(height: float, units: str | None) -> sa.Motion:
     """A two-bone figure standing ``height`` tall (in its own units), one frame."""
-    sk = sa.Skeleton(["hips", "spine", "head"], [-1, 0, 1],
-                     [[0, 0, 0], [0, height / 2, 0], [0, height / 2, 0]])
+    sk = sa.Skeleton(
+        ["hips", "spine", "head"], [-1, 0, 1], [[0, 0, 0], [0, height / 2, 0], [0, height / 2, 0]]
+    )
     rot = torch.tensor([[[1.0, 0, 0, 0]] * 3])
     return sa.Motion(sk, rot, torch.tensor([[0.0, height / 2, 0]]), 30, units=units)
 
@@ -167,8 +168,12 @@ def test_to_metres(height, units, given, metres):
 def test_to_metres_errors():
     with pytest.raises(sa.SkelagnosticError, match="furlong"):
         _stick(1.0, None).to_metres("furlong")
-    flat = sa.Motion(sa.Skeleton(["a"], [-1], [[0.0, 0, 0]]), torch.tensor([[[1.0, 0, 0, 0]]]),
-                     torch.zeros(1, 3), 30)
+    flat = sa.Motion(
+        sa.Skeleton(["a"], [-1], [[0.0, 0, 0]]),
+        torch.tensor([[[1.0, 0, 0, 0]]]),
+        torch.zeros(1, 3),
+        30,
+    )
     with pytest.raises(sa.SkelagnosticError, match="height is 0"):
         flat.to_metres()
 
