@@ -8,7 +8,6 @@ from skelagnostic_humot.data import HumotDataModule
 
 import skelagnostic as sa
 from conftest import SMALL
-from skelagnostic.callbacks import FitSummary
 from skelagnostic.data import ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 
@@ -92,9 +91,11 @@ def test_save_and_load(tmp_path):
     torch.manual_seed(0)
     model = HumotAligner(**SMALL)
     dm = _datamodule(tmp_path)
+    from skelagnostic.callbacks import FitSummary  # what `skelagnostic fit` adds
+
     trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, enable_progress_bar=False,
                         limit_train_batches=1, limit_val_batches=1, default_root_dir=tmp_path,
-                        callbacks=[FitSummary(name="humot")])  # what `skelagnostic fit` adds
+                        callbacks=[FitSummary(name="humot")])
     trainer.fit(model, datamodule=dm)
     ckpt = tmp_path / "model.ckpt"
     trainer.save_checkpoint(ckpt)
