@@ -28,7 +28,6 @@ from typing import Any
 
 from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory
 from skelagnostic.core.motion import Motion
-from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = [
@@ -40,8 +39,7 @@ __all__ = [
     "held_out",
     "markdown",
     "mean_rows",
-    "metres",
-    "reconstruction_rows",
+        "reconstruction_rows",
     "write_evaluation",
 ]
 
@@ -144,13 +142,6 @@ class Evaluation:
         return sorted(names, key=lambda m: (m != MODEL, list(names).index(m)))
 
 
-def metres(motion: Motion) -> Motion:
-    """``motion`` in metres (its ``units``, else the guess of ``infer_units``)."""
-    if motion.units == "m":
-        return motion
-    return motion.convert_units("m", from_=infer_units(motion.skeleton, motion.units))
-
-
 #: Metrics of :func:`reconstruction_rows`.
 RECONSTRUCTION_METRICS = {
     "mpjpe_cm": "MPJPE of global joint positions, cm, lower is better",
@@ -180,7 +171,7 @@ def reconstruction_rows(
         pred = reconstruct(clip)
         if pred.fps != clip.fps:
             pred = pred.resample(clip.fps)
-        truth_m, pred_m = metres(clip), metres(pred)
+        truth_m, pred_m = clip.to_metres(), pred.to_metres()
         frames = min(truth_m.num_frames, pred_m.num_frames)
         truth = truth_m.global_positions()[:frames].double()
         height = truth_m.skeleton.height()

@@ -85,3 +85,83 @@ def test_depth_levels_and_errors():
         forward_kinematics(
             torch.zeros(1, 3, 4), torch.zeros(1, 3), torch.zeros(4, 3), [-1, 0, 1, 2]
         )
+
+
+# --------------------------------------------------------------- local/global maps, FK from global
+
+
+def _check_maps_against_forward_kinematics(motion: sa.Motion) -> None:
+    from skelagnostic.core.kinematics import fk_from_global, global_from_local, local_from_global
+
+    sk = motion.skeleton
+    grot_ref, gpos_ref = forward_kinematics(
+        motion.rotations, motion.root_positions, sk.offsets, sk.parents
+    )
+    grot = global_from_local(motion.rotations, sk.parents)
+    torch.testing.assert_close(grot, grot_ref, atol=1e-5, rtol=0)
+    gpos = fk_from_global(grot, motion.root_positions, sk.offsets, sk.parents)
+    scale = float(gpos_ref.abs().max())
+    torch.testing.assert_close(gpos, gpos_ref, atol=1e-5 * scale, rtol=0)
+    torch.testing.assert_close(
+        local_from_global(grot_ref, sk.parents), motion.rotations, atol=1e-5, rtol=0
+    )
+
+
+@pytest.mark.parametrize(("kind", "gait"), [("biped22", "walk"), ("quadruped", "trot")])
+def test_geometry_maps_match_forward_kinematics_on_procedural_motion(kind, gait):
+    from skelagnostic import procedural
+
+    _check_maps_against_forward_kinematics(procedural.generate(kind, gait, seconds=1.0)[0])
+
+
+@pytest.mark.parametrize("pattern", ["human/lafan1/*.bvh", "human/cmu/**/*.bvh", "dog/**/*.bvh"])
+def test_geometry_maps_match_forward_kinematics_on_real_clips(shared_data, pattern):
+    paths = sorted(shared_data.glob(pattern))
+    if not paths:
+        pytest.skip(f"no clip matches {pattern} in {shared_data}")
+    _check_maps_against_forward_kinematics(sa.read_bvh(paths[0])[:60])
+
+
+def test_local_from_global_against_scipy_matrices():
+    from skelagnostic.core.kinematics import local_from_global
+
+    gen = torch.Generator().manual_seed(3)
+    grot = Q.normalize(torch.randn(4, len(PARENTS), 4, generator=gen, dtype=torch.float64))
+    local = local_from_global(grot, PARENTS)
+    mats = Q.to_matrix(grot).numpy()
+    for j, p in enumerate(PARENTS):
+        want = mats[:, j] if p < 0 else np.swapaxes(mats[:, p], -1, -2) @ mats[:, j]
+        np.testing.assert_allclose(Q.to_matrix(local[:, j]).numpy(), want, atol=1e-12)
+
+
+def test_fk_from_global_per_batch_offsets_and_gradients():
+    from skelagnostic.core.kinematics import fk_from_global, global_from_local
+
+    gen = torch.Generator().manual_seed(4)
+    local = Q.normalize(torch.randn(2, 5, len(PARENTS), 4, generator=gen, dtype=torch.float64))
+    root = torch.randn(2, 5, 3, generator=gen, dtype=torch.float64)
+    offsets = torch.randn(2, len(PARENTS), 3, generator=gen, dtype=torch.float64)
+    grot = global_from_local(local, PARENTS).requires_grad_(True)
+    pos = fk_from_global(grot, root, offsets, PARENTS)
+    for b in range(2):
+        _, ref = forward_kinematics(local[b], root[b], offsets[b], PARENTS)
+        torch.testing.assert_close(pos[b], ref)
+    pos.square().sum().backward()
+    assert grot.grad is not None and grot.grad.abs().sum() > 0
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda k: k.local_from_global(torch.zeros(2, 3, 4), [-1, 0]),
+        lambda k: k.global_from_local(torch.zeros(2, 3, 4), [0, 0, 1]),
+        lambda k: k.fk_from_global(
+            torch.zeros(2, 3, 4), torch.zeros(2, 3), torch.zeros(2, 3), [-1, 0, 1]
+        ),
+    ],
+)
+def test_geometry_maps_reject_bad_hierarchies(call):
+    from skelagnostic.core import kinematics
+
+    with pytest.raises(sa.MotionError):
+        call(kinematics)

@@ -139,6 +139,45 @@ def test_units(walk):
         raw.convert_units("m")
 
 
+def _stick(height: float, units: str | None) -> sa.Motion:
+    """A two-bone figure standing ``height`` tall (in its own units), one frame."""
+    sk = sa.Skeleton(
+        ["hips", "spine", "head"], [-1, 0, 1], [[0, 0, 0], [0, height / 2, 0], [0, height / 2, 0]]
+    )
+    rot = torch.tensor([[[1.0, 0, 0, 0]] * 3])
+    return sa.Motion(sk, rot, torch.tensor([[0.0, height / 2, 0]]), 30, units=units)
+
+
+@pytest.mark.parametrize(
+    ("height", "units", "given", "metres"),
+    [
+        (170.0, "cm", None, 1.70),  # the motion's own unit
+        (1800.0, None, None, 1.80),  # guessed: mm
+        (1.65, None, None, 1.65),  # guessed: already metres
+        (68.0, None, "inch", 68 * 0.0254),  # given, not guessed (a guess would say cm)
+        (100.0, "cm", "cmu", 100 * 0.0254 / 0.45),  # given overrides the motion's unit
+    ],
+)
+def test_to_metres(height, units, given, metres):
+    out = _stick(height, units).to_metres(given)
+    assert out.units == "m"
+    assert out.skeleton.height() == pytest.approx(metres)
+    assert float(out.global_positions()[0, 2, 1]) == pytest.approx(metres * 1.5)
+
+
+def test_to_metres_errors():
+    with pytest.raises(sa.SkelagnosticError, match="furlong"):
+        _stick(1.0, None).to_metres("furlong")
+    flat = sa.Motion(
+        sa.Skeleton(["a"], [-1], [[0.0, 0, 0]]),
+        torch.tensor([[[1.0, 0, 0, 0]]]),
+        torch.zeros(1, 3),
+        30,
+    )
+    with pytest.raises(sa.SkelagnosticError, match="height is 0"):
+        flat.to_metres()
+
+
 def test_facing_matches_heading_of_turning_walk():
     m, _ = sa.procedural.generate("quadruped", "trot", seconds=2, fps=30, seed=0, turn_rate=45)
     h = m.facing()

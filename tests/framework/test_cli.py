@@ -36,8 +36,9 @@ def test_compose_defaults(example_plugin: Path) -> None:
     cfg = app.compose(["model=example", "run_dir=/tmp/x"])
     assert cfg.task == "fit" and cfg.model.name == "example" and cfg.model.hidden == 64
     assert cfg.data.source == "procedural" and cfg.trainer.accelerator == "cpu"
-    assert set(cfg.callbacks) == {"model_checkpoint", "rich_progress_bar"}
+    assert set(cfg.callbacks) == {"model_checkpoint", "rich_progress_bar", "fit_summary"}
     assert cfg.callbacks.model_checkpoint.dirpath == "/tmp/x/checkpoints"
+    assert cfg.callbacks.fit_summary.name == "example"
     assert set(cfg.logger) == {"csv"}
 
 

@@ -287,7 +287,7 @@ def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str,
                                   stages=3, point_heads=2, temporal_layers=1,
                                   temporal_heads=2, target="biped22").eval()
     export_aligner(aligner, fmt, tmp_path, "pcmrl")
-    metric = PcmrlReconstruction.to_metres(lafan).to(torch.float32)
+    metric = lafan.to_metres().to(torch.float32)
     layout = sample_layout(metric.skeleton, 64, 0.05, (), torch.Generator().manual_seed(1))
     cloud = layout.points(metric.global_rotations(), metric.global_positions(),
                           metric.skeleton.offsets.float())
@@ -312,11 +312,10 @@ def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str,
 def test_pcmrl_interpolation_matches_pytorch(lafan: sa.Motion, fmt: str,
                                              tmp_path: Path) -> None:
     from skelagnostic_pcmrl.interp import InterpolationAligner
-    from skelagnostic_pcmrl.recon import PcmrlReconstruction
     from skelagnostic_pcmrl.rpa import bone_tails
 
     torch.manual_seed(0)
-    metric = PcmrlReconstruction.to_metres(lafan).to(torch.float32)
+    metric = lafan.to_metres().to(torch.float32)
     skeleton = metric.skeleton
     aligner = InterpolationAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=8,
                                    skeleton=skeleton.to_dict(), fps=30.0, window=16).eval()

@@ -90,8 +90,11 @@ def test_save_and_load(tmp_path, humot_small):
     torch.manual_seed(0)
     model = HumotAligner(**humot_small)
     dm = _datamodule(tmp_path)
+    from skelagnostic.callbacks import FitSummary  # what `skelagnostic fit` adds
+
     trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, enable_progress_bar=False,
-                        limit_train_batches=1, limit_val_batches=1, default_root_dir=tmp_path)
+                        limit_train_batches=1, limit_val_batches=1, default_root_dir=tmp_path,
+                        callbacks=[FitSummary(name="humot")])
     trainer.fit(model, datamodule=dm)
     ckpt = tmp_path / "model.ckpt"
     trainer.save_checkpoint(ckpt)

@@ -36,7 +36,6 @@ def test_small_humot_overfits_two_windows(tmp_path: Path) -> None:
     trainer = L.Trainer(overfit_batches=1, max_epochs=500, accelerator="cpu", logger=False,
                         enable_checkpointing=False, enable_progress_bar=False,
                         enable_model_summary=False, limit_val_batches=0, callbacks=[Record()])
-    model.on_fit_end = lambda: None  # no render / metrics files
     trainer.fit(model, datamodule=dm)
     assert history[0] > 40.0  # an untrained network: tens of centimetres
     print("mpjpe every 50 steps:", [round(v, 1) for v in history[::50]], "last", history[-1])

@@ -106,7 +106,7 @@ def corpus_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[lis
         patch.setattr(BVHSource, "load", load_once)
         for clip in source.clips():
             for dm in modules:
-                dm._entry(dm.sources[0], clip)
+                dm.cache_entry(dm.sources[0], clip)
     yield files, cache
 
 

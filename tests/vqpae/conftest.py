@@ -57,7 +57,10 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     dm = make_datamodule(root / "cache")
     model = VQPAEAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000)
     before = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
+    from skelagnostic.callbacks import FitSummary
+
     trainer = make_trainer(root, 200, validate=False)
+    trainer.callbacks.append(FitSummary(name="vqpae"))  # what `skelagnostic fit` adds
     trainer.fit(model, datamodule=dm)
     after = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
     ckpt = root / "final.ckpt"

@@ -20,7 +20,7 @@ def test_fit_on_one_bvh_character_reports_overlap_not_applicable(
     run_dir = tmp_path / "run"
     cfg = compose(["model=vqpae", "data=bvh", f"data.paths=[{','.join(paths)}]",
                    "data.units=cm", "data.fps=20", "data.stride=8", f"run_dir={run_dir}",
-                   "experiment=smoke", "callbacks=none", "logger=none", "model.num_codes=8",
+                   "experiment=smoke", "callbacks=default", "logger=none", "model.num_codes=8",
                    "model.kernel_size=7", f"data.cache_dir={cache_dir}",
                    "trainer.max_epochs=1", "trainer.limit_train_batches=3"],
                   plugin_manager=vqpae_pm)

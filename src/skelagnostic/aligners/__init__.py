@@ -7,6 +7,7 @@ your own by subclassing :class:`Aligner` and registering it through the
 
 from skelagnostic.aligners.base import KNOWN_CAPABILITIES, Aligner, CapabilityError, Latent
 from skelagnostic.aligners.checkpoints import CheckpointError, read_checkpoint
+from skelagnostic.aligners.schedule import steps_per_epoch
 
 __all__ = ["KNOWN_CAPABILITIES", "Aligner", "CapabilityError", "CheckpointError", "Latent",
-           "read_checkpoint"]
+           "read_checkpoint", "steps_per_epoch"]

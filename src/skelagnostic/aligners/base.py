@@ -13,6 +13,7 @@ import torch
 from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
+    from skelagnostic.callbacks.fit_summary import SummaryContent
     from skelagnostic.core.motion import Motion
     from skelagnostic.core.skeleton import Skeleton
     from skelagnostic.export import ExportGraph
@@ -172,6 +173,27 @@ class Aligner(L.LightningModule, ABC):
             The graphs; empty when the aligner cannot be exported.
         """
         return []
+
+    def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
+        """What this aligner adds to the files written at the end of ``fit``.
+
+        :class:`~skelagnostic.callbacks.FitSummary` (on by default for
+        ``skelagnostic fit``) calls it once on global rank 0, in eval mode and
+        without gradients, and writes the result with the logged metrics into
+        the run directory: ``metrics`` merged into ``<name>_metrics.json``,
+        ``renders`` as GIF + contact sheet, ``figures`` as PNG, ``notes`` in
+        ``summary.md`` (see :class:`~skelagnostic.callbacks.SummaryContent`).
+        The default adds nothing; override it rather than writing files in
+        ``on_fit_end``.
+
+        Args:
+            trainer: The trainer that just fitted the aligner (its data module,
+                logged metrics, ...).
+
+        Returns:
+            A :class:`~skelagnostic.callbacks.SummaryContent` mapping (every key optional).
+        """
+        return {}
 
     def supports(self, capability: str) -> bool:
         """Whether the aligner declares ``capability``."""

@@ -3,13 +3,16 @@
 from skelagnostic.callbacks.checkpoint import FinalStepCheckpoint, LatestWithoutValidation
 from skelagnostic.callbacks.checkpoint_io import AtomicCheckpointIO
 from skelagnostic.callbacks.ema import EMAWeights
+from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 
 __all__ = [
     "AtomicCheckpointIO",
     "EMAWeights",
     "FinalStepCheckpoint",
+    "FitSummary",
     "LatestWithoutValidation",
     "RenderSampleSource",
     "RenderSamples",
+    "SummaryContent",
 ]

@@ -57,6 +57,7 @@ from skelagnostic.cli.runs import (
     summary_table,
 )
 from skelagnostic.core.paths import expand_home_in_override
+from skelagnostic.data.datamodule import datamodule_options
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import PluginManager, get_plugin_manager, target_of
 from skelagnostic.plugins.manager import config_names
@@ -100,9 +101,11 @@ def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModul
     spec = pm.aligner(cfg.model.name)
     data: dict[str, Any] = OmegaConf.to_container(cfg.data, resolve=True)  # type: ignore[assignment]
     dataset = pm.dataset(data["source"])
-    dm_params = inspect.signature(spec.datamodule).parameters
+    dm_params = datamodule_options(spec.datamodule)  # through the subclass's **kwargs
     dm_kwargs = {k: data.pop(k) for k in list(data) if k in dm_params and k not in _DATA_KEYS}
-    _check_options(dm_kwargs, spec.datamodule, "data", spec.datamodule.__name__)
+    for owner in dict.fromkeys(dm_params[k] for k in dm_kwargs):  # typed where declared
+        _check_options({k: v for k, v in dm_kwargs.items() if dm_params[k] is owner}, owner,
+                       "data", spec.datamodule.__name__)
     options = {k: v for k, v in data.items() if k not in _DATA_KEYS}
     factory_params = inspect.signature(dataset.factory).parameters
     if not any(p.kind is p.VAR_KEYWORD for p in factory_params.values()):

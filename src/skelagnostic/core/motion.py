@@ -13,19 +13,10 @@ import torch
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.kinematics import forward_kinematics
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import MotionError
 
 __all__ = ["UNITS", "Motion"]
-
-#: Length units and their size in metres (``"cmu"``: the CMU database unit, 1/0.45 inch).
-UNITS: dict[str, float] = {
-    "m": 1.0,
-    "cm": 0.01,
-    "mm": 0.001,
-    "inch": 0.0254,
-    "ft": 0.3048,
-    "cmu": 0.0254 / 0.45,
-}
 
 
 def _as_tensor(x: Any, name: str, dtype: torch.dtype | None) -> torch.Tensor:
@@ -409,3 +400,27 @@ class Motion:
         out = self.scaled(UNITS[src] / UNITS[to])
         out.units = to
         return out
+
+    def to_metres(self, units: str | None = None) -> Motion:
+        """The motion in metres: the one conversion path of the package.
+
+        The source unit is ``units`` if given, else :attr:`units`, else the
+        guess of :func:`~skelagnostic.core.units.infer_units` from the
+        skeleton's height (a human of about 1.7 m, a tailed quadruped of about
+        0.6 m). The result has ``units == "m"``.
+
+        Args:
+            units: Unit the motion is in (a key of :data:`UNITS`), overriding :attr:`units`.
+
+        Raises:
+            SkelagnosticError: ``units`` is unknown, or it must be guessed and the
+                skeleton has no height.
+
+        Example:
+            >>> from skelagnostic import procedural
+            >>> walk = procedural.generate("biped22", "walk", seconds=1.0)[0]  # in cm
+            >>> metres = walk.to_metres()
+            >>> metres.units, round(metres.skeleton.height() / walk.skeleton.height(), 6)
+            ('m', 0.01)
+        """
+        return self.convert_units("m", from_=infer_units(self.skeleton, units or self.units))

@@ -1,14 +1,28 @@
-"""Length units of motion data: the known units and a guess from a skeleton's height."""
+"""Length units of motion data: the known units and a guess from a skeleton's height.
+
+Converting a motion to metres goes through :meth:`Motion.to_metres
+<skelagnostic.core.motion.Motion.to_metres>`, which uses :func:`infer_units`
+when the unit is not known.
+"""
 
 from __future__ import annotations
 
 import math
 
-from skelagnostic.core.motion import UNITS
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = ["HUMAN_HEIGHT", "QUADRUPED_HEIGHT", "UNITS", "infer_units", "units_for_height"]
+
+#: Length units and their size in metres (``"cmu"``: the CMU database unit, 1/0.45 inch).
+UNITS: dict[str, float] = {
+    "m": 1.0,
+    "cm": 0.01,
+    "mm": 0.001,
+    "inch": 0.0254,
+    "ft": 0.3048,
+    "cmu": 0.0254 / 0.45,
+}
 
 #: Standing height (metres) of the person the unit guess assumes.
 HUMAN_HEIGHT = 1.7

@@ -8,15 +8,18 @@ Examples:
 """
 
 from skelagnostic.data.cache import CacheEntry, WindowCache, default_cache_dir
-from skelagnostic.data.datamodule import MotionDataModule, WindowDataset
+from skelagnostic.data.datamodule import MotionDataModule, WindowDataset, datamodule_options
 from skelagnostic.data.sources import (
     PRESETS,
     BVHSource,
     ClipRef,
     ClipSource,
     DatasetPreset,
+    MetresSource,
+    MultiSource,
     ProceduralSource,
     bvh_sources,
+    flatten_sources,
     preset_source,
     reroot,
 )
@@ -28,12 +31,16 @@ __all__ = [
     "ClipRef",
     "ClipSource",
     "DatasetPreset",
+    "MetresSource",
     "MotionDataModule",
+    "MultiSource",
     "ProceduralSource",
     "WindowCache",
     "WindowDataset",
     "bvh_sources",
+    "datamodule_options",
     "default_cache_dir",
+    "flatten_sources",
     "preset_source",
     "reroot",
 ]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import inspect
 import math
 import os
 from collections.abc import Iterator, Sequence
@@ -27,7 +28,7 @@ from skelagnostic.data.cache import (
     read_exactly,
     slot_key,
 )
-from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
+from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource, flatten_sources
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation
 
@@ -333,10 +334,17 @@ class MotionDataModule(L.LightningDataModule):
     one-entry dicts, dataset after dataset. Each batch is a dict of stacked
     :class:`WindowDataset` items.
 
-    Subclasses usually override :meth:`default_representation` only.
+    Extension points (public hooks, see the "Data modules of a method" section
+    of ``docs/data.md``): :meth:`default_representation` (what most subclasses
+    override), :meth:`cache_entry` (what is cached per clip),
+    :meth:`add_dataset` (how one topology's clips become datasets and
+    statistics) and :meth:`loaders` (the data loaders of a split). A subclass
+    declares only its own constructor arguments and forwards the others with
+    ``**kwargs``; :func:`datamodule_options` lists what a subclass accepts.
 
     Args:
-        sources: Clip sources (default: :class:`ProceduralSource` with its defaults).
+        sources: Clip sources (default: :class:`ProceduralSource` with its defaults);
+            a :class:`~skelagnostic.data.MultiSource` counts as its parts.
         representation: Features to compute (default: :meth:`default_representation`).
         fps: Frame rate the clips are resampled to.
         window: Frames per window.
@@ -380,9 +388,7 @@ class MotionDataModule(L.LightningDataModule):
                 f"data.val_fraction ({val_fraction}) and data.test_fraction ({test_fraction}) "
                 "must be in [0, 1) with a sum below 1"
             )
-        if sources is None:
-            sources = [ProceduralSource()]
-        self.sources = [sources] if isinstance(sources, ClipSource) else list(sources)
+        self.sources = flatten_sources(sources) or [ProceduralSource()]
         self.representation = representation or self.default_representation()
         self.fps = float(fps)
         self.window = int(window)
@@ -428,11 +434,22 @@ class MotionDataModule(L.LightningDataModule):
         }
 
     # ------------------------------------------------------------------ caching
-    def _entry(self, source: ClipSource, clip: ClipRef) -> CacheEntry:
-        """The clip's cache entry, built with :meth:`_encode` when missing or damaged.
+    def cache_entry(self, source: ClipSource, clip: ClipRef) -> CacheEntry:
+        """The clip's cache entry, built with :meth:`_encode` when missing or damaged (a hook).
 
-        A clip whose id is a file path keeps one entry per preprocessing: the
+        The entry is keyed by the clip's content key, :meth:`preprocessing` and
+        the source's :meth:`~skelagnostic.data.ClipSource.loading` options. A
+        clip whose id is a file path keeps one entry per preprocessing: the
         entry of an earlier version of the file is deleted (:meth:`WindowCache.track`).
+        Override it to cache something else per clip (PC-MRL's interpolation
+        data caches global rotations, and mirrored copies).
+
+        Args:
+            source: The source ``clip`` comes from.
+            clip: The clip.
+
+        Returns:
+            The cache entry (windows ``[N, T, E, C]`` and metadata).
         """
         key = cache_key(clip.key, {**self.preprocessing(), "loading": source.loading()})
         entry = self.cache.get(key)
@@ -467,7 +484,7 @@ class MotionDataModule(L.LightningDataModule):
         """Preprocess and cache every clip (runs once per node under DDP)."""
         for source in self.sources:
             for clip in source.clips():
-                self._entry(source, clip)
+                self.cache_entry(source, clip)
 
     # -------------------------------------------------------------------- setup
     def setup(self, stage: str | None = None) -> None:
@@ -477,7 +494,7 @@ class MotionDataModule(L.LightningDataModule):
         for source in self.sources:
             groups: dict[tuple[Any, ...], list[tuple[ClipRef, CacheEntry]]] = {}
             for clip in source.clips():
-                entry = self._entry(source, clip)
+                entry = self.cache_entry(source, clip)
                 if entry.num_windows == 0:
                     continue
                 sk = entry.meta["skeleton"]
@@ -491,7 +508,7 @@ class MotionDataModule(L.LightningDataModule):
                 groups.setdefault(topo, []).append((clip, entry))
             for members in groups.values():
                 name = self._dataset_name(source, members, len(groups))
-                self._add_dataset(name, members)
+                self.add_dataset(name, members)
                 if name in self.skeletons:
                     rank_zero_info(describe_dataset(name, members, self.assigned_splits))
         if not self.skeletons:
@@ -539,7 +556,25 @@ class MotionDataModule(L.LightningDataModule):
             self.assigned_splits.update((c.id, part) for c in members)
         return split
 
-    def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+    def add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+        """Split one topology's clips and register its datasets and statistics (a hook).
+
+        :meth:`setup` calls it once per (source, skeleton topology). The base
+        version splits the clips with :meth:`split_clips`, fills
+        ``datasets[split][name]`` with :class:`WindowDataset`, records the
+        skeleton in :attr:`skeletons` and fits a copy of the representation's
+        normalisation on the training windows (:attr:`representations`).
+        Override it to leave datasets out (HuMoT skips non-human skeletons:
+        return without registering) or to build other datasets (VQ-PAE).
+
+        Args:
+            name: Dataset name (the source's name, plus the skeleton's when a
+                source holds several topologies).
+            members: ``(clip, cache entry)`` of every clip of this topology.
+
+        Raises:
+            SkelagnosticError: Every clip is in the test split.
+        """
         entries = {clip.id: entry for clip, entry in members}
         split = self.split_clips([c for c, _ in members])
         if not split["train"]:
@@ -561,7 +596,21 @@ class MotionDataModule(L.LightningDataModule):
         self.representations[name] = rep
 
     # -------------------------------------------------------------- dataloaders
-    def _loaders(self, split: str, shuffle: bool) -> dict[str, DataLoader]:
+    def loaders(self, split: str, shuffle: bool) -> dict[str, DataLoader]:
+        """One plain data loader per dataset of ``split`` (a hook).
+
+        Validation, test and (with ``trainer.overfit_batches``) training use
+        them; the resumable training loaders of :meth:`train_dataloader` and
+        the predict loaders are built apart. Override it to change the loader
+        options (VQ-PAE gathers its batches itself: ``collate_fn``).
+
+        Args:
+            split: ``"train"``, ``"val"`` or ``"test"``.
+            shuffle: Whether to shuffle.
+
+        Returns:
+            ``{dataset name: DataLoader}``.
+        """
         return {
             name: DataLoader(
                 ds,
@@ -586,7 +635,7 @@ class MotionDataModule(L.LightningDataModule):
         """
         trainer = self.trainer
         if trainer is not None and getattr(trainer, "overfit_batches", 0):
-            return CombinedLoader(self._loaders("train", shuffle=False), mode="max_size_cycle")
+            return CombinedLoader(self.loaders("train", shuffle=False), mode="max_size_cycle")
         replicas, rank = (trainer.world_size, trainer.global_rank) if trainer else (1, 0)
         seed = int(os.environ.get("PL_GLOBAL_SEED", "0"))
         loaders = {
@@ -599,11 +648,11 @@ class MotionDataModule(L.LightningDataModule):
 
     def val_dataloader(self) -> CombinedLoader:
         """Every validation window once (``max_size``: exhausted datasets give ``None``)."""
-        return CombinedLoader(self._loaders("val", shuffle=False), mode="max_size")
+        return CombinedLoader(self.loaders("val", shuffle=False), mode="max_size")
 
     def test_dataloader(self) -> CombinedLoader:
         """Every test window once (``max_size``)."""
-        return CombinedLoader(self._loaders("test", shuffle=False), mode="max_size")
+        return CombinedLoader(self.loaders("test", shuffle=False), mode="max_size")
 
     def predict_dataloader(self) -> CombinedLoader:
         """The test windows (else the validation windows), one dataset after the other.
@@ -630,3 +679,35 @@ class MotionDataModule(L.LightningDataModule):
         for name, stats in state_dict.items():
             if name in self.representations:
                 self.representations[name].load_normalization_state(stats)
+
+
+def datamodule_options(cls: type) -> dict[str, type]:
+    """The constructor options a data-module class accepts, through its ``**kwargs`` too.
+
+    A subclass of :class:`MotionDataModule` declares its own arguments and
+    forwards the others with ``**kwargs``; this follows the ``**kwargs`` up the
+    class hierarchy (the first declaration of a name wins, so a subclass's
+    default shadows the base class's) until a constructor without them.
+
+    Args:
+        cls: A data-module class.
+
+    Returns:
+        ``{option name: the class whose constructor declares it}`` (``self``
+        and ``*args``/``**kwargs`` excluded).
+
+    Example:
+        >>> datamodule_options(MotionDataModule)["batch_size"].__name__
+        'MotionDataModule'
+    """
+    options: dict[str, type] = {}
+    for klass in cls.__mro__:
+        if "__init__" not in vars(klass):
+            continue
+        params = inspect.signature(vars(klass)["__init__"]).parameters
+        for name, p in params.items():
+            if name != "self" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
+                options.setdefault(name, klass)
+        if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+            break
+    return options

@@ -4,7 +4,12 @@ A :class:`ClipSource` lists its clips cheaply (:meth:`ClipSource.clips`, with a
 content key per clip used by the window cache) and loads one on demand
 (:meth:`ClipSource.load`). Sources are small picklable objects, safe to send to
 DDP ranks and data-loader workers. Motions with known units are converted to
-metres.
+metres (:meth:`Motion.to_metres <skelagnostic.core.motion.Motion.to_metres>`).
+
+Two sources wrap others: :class:`MultiSource` bundles several sources under
+one argument (a data module makes one dataset per part) and
+:class:`MetresSource` brings every clip to metres, guessing the unit of clips
+that do not know theirs.
 """
 
 from __future__ import annotations
@@ -30,8 +35,11 @@ __all__ = [
     "ClipRef",
     "ClipSource",
     "DatasetPreset",
+    "MetresSource",
+    "MultiSource",
     "ProceduralSource",
     "bvh_sources",
+    "flatten_sources",
     "preset_source",
     "reroot",
 ]
@@ -80,10 +88,107 @@ class ClipSource(ABC):
 
 
 def _to_metres(motion: Motion, units: str | None) -> Motion:
-    units = units or motion.units
-    if units is None or units == "m":
+    """``motion`` in metres when its unit is known (``units`` or ``motion.units``), else as is."""
+    if (units or motion.units) is None:
         return motion
-    return motion.convert_units("m", from_=units)
+    return motion.to_metres(units)
+
+
+@dataclass
+class MultiSource(ClipSource):
+    """Several clip sources given as one, e.g. the human and dog parts of ``data.source=human_dog``.
+
+    :class:`~skelagnostic.data.MotionDataModule` unpacks it: every part is a
+    source of its own and names its datasets. Used directly, its clip ids are
+    the part's ids prefixed by the part's name (``"dog:run1.bvh"``).
+
+    Args:
+        parts: The sources; their ``name`` labels the datasets.
+        name: Label of the bundle.
+
+    Raises:
+        SkelagnosticError: ``parts`` is empty or two parts share a name.
+
+    Example:
+        >>> a = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=1, name="a")
+        >>> b = ProceduralSource(kinds=["quadruped"], gaits=["trot"], clips_per_gait=1, name="b")
+        >>> [clip.id for clip in MultiSource([a, b]).clips()]
+        ['a:biped22_walk_0', 'b:quadruped_trot_0']
+    """
+
+    parts: Sequence[ClipSource]
+    name: str = "multi"
+
+    def __post_init__(self) -> None:
+        self.parts = list(self.parts)
+        names = [p.name for p in self.parts]
+        if not names:
+            raise SkelagnosticError("MultiSource: parts must hold at least one source")
+        if len(set(names)) != len(names):
+            raise SkelagnosticError(f"MultiSource: part names must differ, got {names}")
+
+    def clips(self) -> list[ClipRef]:
+        """Clips of every part, ids prefixed by the part name."""
+        return [ClipRef(f"{p.name}:{c.id}", c.key, c.split) for p in self.parts for c in p.clips()]
+
+    def load(self, clip: ClipRef) -> Motion:
+        """Load a clip from its part.
+
+        Raises:
+            SkelagnosticError: The id names no part.
+        """
+        part, _, inner = clip.id.partition(":")
+        for source in self.parts:
+            if source.name == part:
+                return source.load(ClipRef(inner, clip.key, clip.split))
+        raise SkelagnosticError(
+            f"MultiSource {self.name!r}: clip {clip.id!r} names no part "
+            f"(parts: {', '.join(p.name for p in self.parts)})"
+        )
+
+    def loading(self) -> dict[str, Any]:
+        """The loading options of every part, by part name."""
+        return {p.name: p.loading() for p in self.parts}
+
+
+class MetresSource(ClipSource):
+    """Wraps a clip source so that every clip comes in metres.
+
+    Each clip goes through :meth:`Motion.to_metres
+    <skelagnostic.core.motion.Motion.to_metres>`: clips that know their unit
+    (``motion.units``) are converted from it, the others from ``units``, or
+    from the unit guessed from their skeleton height when ``units`` is ``None``.
+
+    Args:
+        inner: The wrapped source (its ``name`` is kept).
+        units: Unit of the clips that do not know theirs (``None``: guess).
+    """
+
+    def __init__(self, inner: ClipSource, units: str | None = None) -> None:
+        self.inner = inner
+        self.units = units
+        self.name = inner.name
+
+    def clips(self) -> list[ClipRef]:
+        """The inner source's clips."""
+        return self.inner.clips()
+
+    def load(self, clip: ClipRef) -> Motion:
+        """The clip in metres."""
+        motion = self.inner.load(clip)
+        return motion.to_metres(motion.units or self.units)
+
+    def loading(self) -> dict[str, Any]:
+        """The inner source's loading options plus the fallback unit."""
+        return {**self.inner.loading(), "metres": True, "fallback_units": self.units}
+
+
+def flatten_sources(sources: ClipSource | Sequence[ClipSource] | None) -> list[ClipSource]:
+    """``sources`` as a list, every :class:`MultiSource` replaced by its parts."""
+    if sources is None:
+        return []
+    listed = [sources] if isinstance(sources, ClipSource) else list(sources)
+    return [part for s in listed for part in (s.parts if isinstance(s, MultiSource) else [s])]
 
 
 def reroot(motion: Motion, joint: str) -> Motion:

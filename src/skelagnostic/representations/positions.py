@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 import torch
 
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import local_from_global
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
@@ -97,7 +98,6 @@ def inverse_kinematics(
     identity = torch.zeros(*lead, 4, dtype=positions.dtype, device=positions.device)
     identity[..., 0] = 1.0
     glob: list[torch.Tensor] = []
-    local: list[torch.Tensor] = []
     for j in range(num):
         p = parents[j]
         g_parent = identity if p < 0 else glob[p]
@@ -113,8 +113,8 @@ def inverse_kinematics(
             target = positions[..., kids, :] - positions[..., j : j + 1, :]
             g = _best_rotation(_unit(offsets[kids]), _unit(target))
         glob.append(g)
-        local.append(g if p < 0 else Q.mul(Q.inv(g_parent), g))
-    return torch.stack(local, dim=-2), positions[..., 0, :].clone()
+    local = local_from_global(torch.stack(glob, dim=-2), parents)
+    return local, positions[..., 0, :].clone()
 
 
 class GlobalPositions(MotionRepresentation):

@@ -7,6 +7,7 @@ from typing import ClassVar
 import torch
 
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import local_from_global
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import MotionError, NotInvertibleError
@@ -113,6 +114,5 @@ class FirstFrameOffsetQuaternions(MotionRepresentation):
                 f"got {list(q0.shape)}"
             )
         grot = Q.mul(features[..., :4], q0.to(features.dtype).to(features.device))
-        parents = torch.tensor(skeleton.parents[1:], dtype=torch.long, device=grot.device)
-        local = torch.cat([grot[:, :1], Q.mul(Q.inv(grot[:, parents]), grot[:, 1:])], dim=1)
+        local = local_from_global(grot, skeleton.parents)
         return Motion(skeleton, local, features[:, 0, 4:], fps)

@@ -21,16 +21,12 @@ no twist about the bone axis, since positions do not determine it).
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Sequence
-from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import torch
-from lightning.pytorch.utilities import rank_zero_only
 
-from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners import Aligner, Latent, steps_per_epoch
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
@@ -40,6 +36,11 @@ from skelagnostic.representations import inverse_kinematics
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks, sample_keep
 from skelagnostic_humot.model import HuMoT, bone_length_consistency_loss, reconstruction_loss
 from skelagnostic_humot.template import from_model_frame, major_joints, to_model_frame
+
+if TYPE_CHECKING:
+    import lightning as L
+
+    from skelagnostic.callbacks import SummaryContent
 
 __all__ = ["HumotAligner", "infer_units", "leg_length"]
 
@@ -216,42 +217,13 @@ class HumotAligner(Aligner):
         """Adam with a per-step triangular cyclic learning rate (Smith 2017)."""
         hp = self.hparams
         optimizer = torch.optim.Adam(self.parameters(), lr=hp.lr_min, betas=tuple(hp.betas))
-        steps_per_epoch = self._steps_per_epoch()
-        half = max(1, round(hp.lr_period_epochs * steps_per_epoch / 2))
+        per_epoch = steps_per_epoch(self._trainer)
+        half = max(1, round(hp.lr_period_epochs * per_epoch / 2))
         scheduler = torch.optim.lr_scheduler.CyclicLR(
             optimizer, base_lr=hp.lr_min, max_lr=hp.lr_max, step_size_up=half,
             mode="triangular", cycle_momentum=False)
         return {"optimizer": optimizer,
                 "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
-
-    def _steps_per_epoch(self) -> int:
-        """Optimiser steps per epoch, for the epoch-based cyclic schedule.
-
-        From the trainer's estimate when it is bounded by epochs; otherwise (e.g.
-        ``max_steps`` with ``max_epochs=-1``) from the length of the training loader.
-        """
-        trainer = self._trainer
-        if trainer is None:
-            return 1
-        total = trainer.estimated_stepping_batches
-        epochs = trainer.max_epochs
-        if epochs is not None and epochs >= 1 and math.isfinite(total):
-            return max(1, int(total // epochs))
-        batches = trainer.num_training_batches
-        if isinstance(batches, (int, float)) and math.isfinite(batches) and batches >= 1:
-            return max(1, int(batches) // max(1, trainer.accumulate_grad_batches))
-        datamodule = getattr(trainer, "datamodule", None)
-        if datamodule is not None:
-            # a CombinedLoader (max_size_cycle): as many batches as its longest loader
-            loader = datamodule.train_dataloader()
-            iterables = getattr(loader, "iterables", loader)
-            loaders = iterables.values() if isinstance(iterables, dict) else [iterables]
-            try:
-                batches = max(len(x) for x in loaders)
-            except TypeError:  # an iterable without a length
-                return 1
-            return max(1, batches // max(1, trainer.accumulate_grad_batches))
-        return 1
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Any]:
@@ -275,38 +247,18 @@ class HumotAligner(Aligner):
                                fps=dm.fps, name=k, up_axis="z")
                 for k, (p, t) in figs.items()}
 
-    def on_fit_end(self) -> None:
-        """Write ``humot_metrics.json`` and ``humot_retarget.gif`` / ``.png``.
+    def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
+        """The render of the fit summary: ``humot_retarget.gif`` / ``.png``.
 
-        The render shows a validation chunk (input), its reconstruction and its
-        retargeting onto another topology of the data, side by side (GIF and a
-        contact sheet of 4 instants).
+        A validation chunk (input; a training chunk without validation data),
+        its reconstruction and its retargeting onto another topology of the
+        data, side by side (see :meth:`render_sample`).
         """
-        self._write_fit_outputs()
-
-    @rank_zero_only
-    def _write_fit_outputs(self) -> None:
-        trainer = self.trainer
-        run_dir = Path(trainer.default_root_dir)
-        run_dir.mkdir(parents=True, exist_ok=True)
-        metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
-        (run_dir / "humot_metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
         dm = trainer.datamodule
         split = "val" if dm.datasets["val"] else "train"
         name, dataset = next(iter(dm.datasets[split].items()))
-        item = dataset[0]
-        batch = {name: {"features": item["features"][None].to(self.device)}}
-        was_training = self.training
-        self.eval()
-        try:
-            from skelagnostic.viz import render_motion
-
-            figures = list(self.render_sample(batch).values())
-            render_motion(figures, run_dir / "humot_retarget.gif", size=(200, 200))
-            render_motion(figures, run_dir / "humot_retarget.png", size=(200, 200),
-                          sheet_frames=4)
-        finally:
-            self.train(was_training)
+        batch = {name: {"features": dataset[0]["features"][None].to(self.device)}}
+        return {"renders": {"retarget": list(self.render_sample(batch).values())}}
 
     # ------------------------------------------------------------------- export
     def export_graphs(self) -> list[ExportGraph]:
@@ -365,11 +317,10 @@ class HumotAligner(Aligner):
     # ------------------------------------------------------------------ aligner
     def _motion_positions(self, motion: Motion, units: str | None) -> torch.Tensor:
         """``[T, J, 3]`` positions of the motion at 30 fps, in metres, model frame."""
-        unit = infer_units(motion.skeleton, units or motion.units)
+        motion = motion.to_metres(units)
         if motion.fps != 30.0:
             motion = motion.resample(30.0)
-        pos = motion.global_positions().float() * UNITS[unit]
-        return to_model_frame(pos, motion.skeleton.up_axis)
+        return to_model_frame(motion.global_positions().float(), motion.skeleton.up_axis)
 
     @torch.no_grad()
     def encode_positions(self, positions: torch.Tensor, skeleton: Skeleton) -> Latent:

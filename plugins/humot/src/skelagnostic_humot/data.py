@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -204,29 +204,16 @@ class HumotDataModule(MotionDataModule):
 
     Args:
         sources: Clip sources.
-        representation: Features (default: world joint positions).
-        fps: Frame rate (paper: 30).
         window: Chunk length in frames (paper: 30).
         stride: Frames between chunk starts (paper: 6).
-        batch_size: Chunks per batch and topology (paper: 32).
-        num_workers: Data-loader workers.
-        val_fraction: Share of each topology's clips used for validation.
-        test_fraction: Share of clips used for testing.
-        split_seed: Seed of the clip split.
-        cache_dir: Window cache directory.
-        per_element_stats: Passed to the base class (HuMoT does not normalise features).
+        **kwargs: The other options of :class:`~skelagnostic.data.MotionDataModule`
+            (``fps``: paper 30, the default; ``batch_size``: paper 32, the default;
+            ``representation``: default world joint positions; ...).
     """
 
-    def __init__(self, sources: ClipSource | Sequence[ClipSource] | None = None,
-                 representation: MotionRepresentation | None = None, fps: float = 30.0,
-                 window: int = 30, stride: int = 6, batch_size: int = 32, num_workers: int = 0,
-                 val_fraction: float = 0.2, test_fraction: float = 0.0, split_seed: int = 0,
-                 cache_dir: str | Path | None = None, per_element_stats: bool = True) -> None:
-        super().__init__(sources, representation, fps=fps, window=window, stride=stride,
-                         batch_size=batch_size, num_workers=num_workers,
-                         val_fraction=val_fraction, test_fraction=test_fraction,
-                         split_seed=split_seed, cache_dir=cache_dir,
-                         per_element_stats=per_element_stats)
+    def __init__(self, sources: ClipSource | Sequence[ClipSource] | None = None, *,
+                 window: int = 30, stride: int = 6, **kwargs: Any) -> None:
+        super().__init__(sources, window=window, stride=stride, **kwargs)
         #: Datasets left out because their skeleton is not a biped.
         self.skipped: list[str] = []
 
@@ -234,14 +221,15 @@ class HumotDataModule(MotionDataModule):
         """World joint positions (centring happens per batch)."""
         return GlobalPositions()
 
-    def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+    def add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+        """As the base class, but a dataset of a non-biped skeleton is left out (and logged)."""
         skeleton = Skeleton.from_dict(members[0][1].meta["skeleton"])
         if skeleton.morphology != "biped":
             log.info("humot: skipping dataset %r (%s skeleton, HuMoT models humans)", name,
                      skeleton.morphology)
             self.skipped.append(name)
             return
-        super()._add_dataset(name, members)
+        super().add_dataset(name, members)
 
     def setup(self, stage: str | None = None) -> None:
         """As the base class, without non-human datasets.

@@ -51,11 +51,12 @@ import torch
 
 from skelagnostic import procedural
 from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory, name_copy, primal_copy
-from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
-from skelagnostic_humot.aligner import HumotAligner, infer_units
+from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks
 
 __all__ = [
@@ -81,10 +82,10 @@ HELD_OUT_SEED = 1000
 
 def chunks_of(motion: Motion, chunk: int = 30, units: str | None = None) -> torch.Tensor:
     """Non-overlapping ``[C, chunk, J, 3]`` world positions (metres) of a motion at 30 fps."""
-    unit = infer_units(motion.skeleton, units or motion.units)
+    motion = motion.to_metres(units)
     if motion.fps != 30.0:
         motion = motion.resample(30.0)
-    pos = motion.global_positions().float() * UNITS[unit]
+    pos = motion.global_positions().float()
     count = pos.shape[0] // chunk
     return pos[: count * chunk].reshape(count, chunk, *pos.shape[1:])
 

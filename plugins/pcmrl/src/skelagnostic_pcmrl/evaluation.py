@@ -41,7 +41,7 @@ from skelagnostic.baselines import lerp_slerp, name_copy, primal_copy
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.evaluation import MODEL, Evaluation, HeldOut, metres
+from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
 from skelagnostic.metrics.functional import end_effector_error, temporal_knn_distance
 from skelagnostic.representations import PointCloud
 from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, position_stats, windows
@@ -95,7 +95,7 @@ def evaluate_pair(
         raise SkelagnosticError(
             f"evaluate: result has {result.num_frames} frames, source {source.num_frames}"
         )
-    res, src = metres(result).double(), metres(source).double()
+    res, src = result.to_metres().double(), source.to_metres().double()
     src_rot, src_pos = src.global_rotations()[::stride], src.global_positions()[::stride]
     res_rot, res_pos = res.global_rotations()[::stride], res.global_positions()[::stride]
     out: dict[str, float] = {}

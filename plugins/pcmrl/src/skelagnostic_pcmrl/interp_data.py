@@ -27,7 +27,6 @@ import os
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -249,14 +248,12 @@ class InterpolationDataModule(MotionDataModule):
     Args:
         sources: Clip sources (default: procedural ``biped31``, the CMU-31 hierarchy).
         representation: Must be ``None`` (the model computes its own FOQ features).
-        fps: Frame rate the clips are resampled to.
         window: Frames per window (paper 128).
         stride: Frames between validation/test window starts.
         min_keys: Fewest keyframes of a training window (paper 5).
         max_keys: Most keyframes of a training window (paper 36).
         batch_size: Windows per batch.
         samples_per_epoch: Random training windows per epoch.
-        val_fraction: Share of the non-test clips used for validation.
         key_mode: Keyframes of the training windows: ``"random"`` (the paper: ``min_keys``
             to ``max_keys`` keys at random frames) or ``"regular"`` (not in the paper: a
             key every ``g`` frames, ``g`` uniform in ``[min_gap, max_gap]``, from a random
@@ -270,13 +267,14 @@ class InterpolationDataModule(MotionDataModule):
         procedural_kind: Add procedural clips of this kind (same hierarchy) to training.
         procedural_clips: How many per gait (walk, run).
         seed: Seed of the window/keyframe/RPA draws.
-        num_workers: Data-loader workers.
-        test_fraction: Share of the clips moved to the test split (besides the clips a
-            source marks as test, e.g. with ``data.test_pattern``).
-        split_seed: Seed of the clip split.
-        cache_dir: Window cache; every clip's global rotations and root are cached
-            there and read per window (:class:`CachedClip`), so memory does not grow
-            with the corpus.
+        **kwargs: The other options of :class:`~skelagnostic.data.MotionDataModule`:
+            ``fps`` (frame rate the clips are resampled to), ``val_fraction`` (share of
+            the non-test clips used for validation), ``test_fraction`` (share of the
+            clips moved to the test split, besides the clips a source marks as test,
+            e.g. with ``data.test_pattern``), ``split_seed``, ``num_workers`` and
+            ``cache_dir`` (every clip's global rotations and root are cached there and
+            read per window, :class:`CachedClip`, so memory does not grow with the
+            corpus).
 
     Raises:
         SkelagnosticError: On out-of-range options, clips of another hierarchy, or
@@ -287,7 +285,7 @@ class InterpolationDataModule(MotionDataModule):
         self,
         sources: ClipSource | Sequence[ClipSource] | None = None,
         representation: Any = None,
-        fps: float = 30.0,
+        *,
         window: int = 128,
         stride: int = 32,
         min_keys: int = 5,
@@ -297,7 +295,6 @@ class InterpolationDataModule(MotionDataModule):
         max_gap: int = 30,
         batch_size: int = 16,
         samples_per_epoch: int = 1024,
-        val_fraction: float = 0.2,
         val_gap: int = 15,
         rpa_range: float = 0.1,
         rpa_prob: float = 0.5,
@@ -305,16 +302,13 @@ class InterpolationDataModule(MotionDataModule):
         procedural_kind: str | None = None,
         procedural_clips: int = 0,
         seed: int = 0,
-        num_workers: int = 0,
-        test_fraction: float = 0.0,
-        split_seed: int = 0,
-        cache_dir: str | Path | None = None,
+        **kwargs: Any,
     ) -> None:
         if representation is not None:
             raise SkelagnosticError(
                 "data.representation is not used by pcmrl_interp (it computes FOQ features)"
             )
-        checks = (("fps", fps, 0), ("window", window, 2), ("stride", stride, 0),
+        checks = (("window", window, 2), ("stride", stride, 0),
                   ("batch_size", batch_size, 0), ("samples_per_epoch", samples_per_epoch, 0),
                   ("val_gap", val_gap, 0), ("min_keys", min_keys, 1))
         for arg, value, low in checks:
@@ -335,18 +329,14 @@ class InterpolationDataModule(MotionDataModule):
             raise SkelagnosticError("data.rpa_range must be >= 0 and data.rpa_prob in [0, 1]")
         if sources is None:
             sources = [ProceduralSource(kinds=("biped31",), gaits=("walk", "run"))]
-        super().__init__(sources=sources, representation=None, fps=fps, window=window,
-                         stride=stride, batch_size=batch_size, num_workers=num_workers,
-                         val_fraction=val_fraction, test_fraction=test_fraction,
-                         split_seed=split_seed, cache_dir=cache_dir)
-        self.fps, self.window, self.stride = float(fps), int(window), int(stride)
+        super().__init__(sources=sources, representation=None, window=window, stride=stride,
+                         batch_size=batch_size, **kwargs)
         self.min_keys, self.max_keys = int(min_keys), int(max_keys)
         self.key_mode, self.min_gap, self.max_gap = key_mode, int(min_gap), int(max_gap)
-        self.batch_size, self.samples_per_epoch = int(batch_size), int(samples_per_epoch)
-        self.val_fraction, self.val_gap = float(val_fraction), int(val_gap)
+        self.samples_per_epoch, self.val_gap = int(samples_per_epoch), int(val_gap)
         self.rpa_range, self.rpa_prob, self.mirror = float(rpa_range), float(rpa_prob), mirror
         self.procedural_kind, self.procedural_clips = procedural_kind, int(procedural_clips)
-        self.seed, self.num_workers = int(seed), int(num_workers)
+        self.seed = int(seed)
         self.skeleton: Skeleton | None = None
         self.clips: dict[str, list[Clip]] = {"train": [], "val": [], "test": []}
         self.train_set: TrainWindows | None = None
@@ -355,7 +345,7 @@ class InterpolationDataModule(MotionDataModule):
     def prepare_data(self) -> None:
         """Cache every clip's global rotations and root (runs once per node under DDP)."""
         for source, ref, mirror in self._refs():
-            self._entry(source, ref, mirror)
+            self.cache_entry(source, ref, mirror)
 
     @property
     def dataset_names(self) -> list[str]:
@@ -379,8 +369,12 @@ class InterpolationDataModule(MotionDataModule):
                 for mirror in ((False, True) if self.mirror and ref.split != "test"
                                else (False,))]
 
-    def _entry(self, source: ClipSource, clip: ClipRef, mirror: bool = False) -> CacheEntry:
-        """The cached frames of ``clip`` (resampled, mirrored if asked), built when missing."""
+    def cache_entry(self, source: ClipSource, clip: ClipRef, mirror: bool = False) -> CacheEntry:
+        """The cached frames of ``clip`` (resampled, mirrored if asked), built when missing.
+
+        Replaces the base hook: one ``[1, F, J + 1, 4]`` entry per clip holding the
+        global rotations and, as the last row, the root position (padded to 4).
+        """
         # what the source does to the clip's content when loading it (class, units, re-rooting)
         loading = {"class": f"{type(source).__module__}.{type(source).__qualname__}",
                    **source.loading()}
@@ -434,13 +428,13 @@ class InterpolationDataModule(MotionDataModule):
         rest: list[tuple[str, ClipSource, ClipRef]] = []
         for source in self.sources:
             for ref in source.clips():
-                self._check(self._entry(source, ref), ref.id)
+                self._check(self.cache_entry(source, ref), ref.id)
                 (test if ref.split == "test" else rest).append((ref.id, source, ref))
         extra = self._extra()
         procedural = []
         if extra is not None:
             for r in extra.clips():
-                self._check(self._entry(extra, r), r.id)
+                self._check(self.cache_entry(extra, r), r.id)
                 procedural.append((f"procedural:{r.id}", extra, r))
         if not rest and not procedural:
             raise SkelagnosticError("data: no training clips (every clip is in the test split)")
@@ -457,7 +451,7 @@ class InterpolationDataModule(MotionDataModule):
 
         def clips(items: list[tuple[str, ClipSource, ClipRef]],
                   mirror: bool = False) -> list[Clip]:
-            return [CachedClip(f"{n}:mirror" if mirror else n, self._entry(src, ref, mirror))
+            return [CachedClip(f"{n}:mirror" if mirror else n, self.cache_entry(src, ref, mirror))
                     for n, src, ref in items]
 
         val = [rest[i] for i in sorted(val_idx)]

@@ -15,9 +15,12 @@ This module adds what training needs on top of it:
   (Sec. 5); zero-length bones are never sampled and the global rotations of
   joints that carry no non-zero bone are not predicted
   (:func:`effective_joints`); :func:`warn_zero_length_bones` names them;
-* Eq. 1 from *global* quaternions (:func:`positions_from_global`), the map
-  the reconstruction network's output goes through, and the global-to-local
-  conversion for writing a :class:`~skelagnostic.Motion`;
+* Eq. 1 from *global* quaternions, the map the reconstruction network's
+  output goes through, and the global-to-local conversion for writing a
+  :class:`~skelagnostic.Motion`, are the core's
+  :func:`~skelagnostic.core.kinematics.fk_from_global` and
+  :func:`~skelagnostic.core.kinematics.local_from_global` (also importable
+  here under their former names ``positions_from_global`` and ``global_to_local``);
 * length units: the paper works in metres (Sec. 4.2); :func:`infer_units`
   guesses a human skeleton's units from its height;
 * facing: :func:`lateral_direction` / :func:`heading_frames` estimate a body's
@@ -36,6 +39,7 @@ from dataclasses import dataclass
 import torch
 
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import fk_from_global, local_from_global
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError, SkeletonError
@@ -57,6 +61,10 @@ __all__ = [
     "warn_zero_length_bones",
     "zero_length_bones",
 ]
+
+#: Former names of the core's geometry maps, kept so that existing imports work.
+positions_from_global = fk_from_global
+global_to_local = local_from_global
 
 #: Bones shorter than this (in the skeleton's units, relative to its height) count as zero-length.
 ZERO_LENGTH = 1e-6
@@ -247,54 +255,6 @@ def sample_layout(
         layout = PointLayout(*(t.to(device) for t in (layout.heads, layout.tails, layout.alpha,
                                                        layout.noise, layout.groups)), layout.sigma)
     return layout
-
-
-def ancestor_matrix(parents: Sequence[int]) -> torch.Tensor:
-    """``[J, J]`` with 1 where column ``k`` is ``j`` or an ancestor of row ``j`` (root excluded)."""
-    num = len(parents)
-    mat = torch.zeros(num, num)
-    for j in range(1, num):
-        k = j
-        while k > 0:
-            mat[j, k] = 1.0
-            k = parents[k]
-    return mat
-
-
-def positions_from_global(
-    global_rotations: torch.Tensor, root_positions: torch.Tensor, offsets: torch.Tensor,
-    parents: Sequence[int], ancestors: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """Joint positions from global rotations (PC-MRL Eq. 1), vectorised and differentiable.
-
-    ``p_n = p_m + QR(H_n, q_m)`` unrolled: every bone vector is the rest offset
-    rotated by its parent's global rotation, and a joint's position is the root
-    plus the sum of the bone vectors on its path (one matrix product).
-
-    Args:
-        global_rotations: ``[..., J, 4]`` global unit quaternions (w, x, y, z).
-        root_positions: ``[..., 3]``.
-        offsets: ``[J, 3]`` rest offsets.
-        parents: Parent per joint (``-1`` for the root).
-        ancestors: Optional precomputed :func:`ancestor_matrix`.
-
-    Returns:
-        ``[..., J, 3]`` global positions.
-    """
-    parent_idx = torch.tensor([max(p, 0) for p in parents], device=global_rotations.device)
-    bone = Q.rotate(global_rotations[..., parent_idx, :],
-                    offsets.to(global_rotations).expand(*global_rotations.shape[:-1], 3))
-    if ancestors is None:
-        ancestors = ancestor_matrix(parents)
-    ancestors = ancestors.to(global_rotations)
-    return root_positions.unsqueeze(-2) + torch.einsum("jk,...kc->...jc", ancestors, bone)
-
-
-def global_to_local(global_rotations: torch.Tensor, parents: Sequence[int]) -> torch.Tensor:
-    """Local rotations ``q_parent^-1 * q_joint`` from global ones, ``[..., J, 4]``."""
-    parent_idx = torch.tensor([max(p, 0) for p in parents], device=global_rotations.device)
-    local = Q.mul(Q.inv(global_rotations[..., parent_idx, :]), global_rotations)
-    return torch.cat([global_rotations[..., :1, :], local[..., 1:, :]], dim=-2)
 
 
 def end_effector_pairs(source: Skeleton, target: Skeleton) -> list[tuple[int, int]]:

@@ -6,7 +6,7 @@ m), encodes every frame with a Point Transformer
 (:mod:`~skelagnostic_pcmrl.point_transformer`), runs a temporal transformer
 (:mod:`~skelagnostic_pcmrl.temporal`) to the root position and global unit
 quaternions of the target skeleton, derives the target joints with Eq. 1
-(:func:`~skelagnostic_pcmrl.points.positions_from_global`), draws a 1024-point
+(:func:`~skelagnostic.core.kinematics.fk_from_global`), draws a 1024-point
 cloud on the reconstruction and minimises the temporal KNN loss per body group
 (Eq. 5), plus the optional end-effector loss (Eq. 6) and ``0.01 (|q| - 1)^2``.
 
@@ -26,7 +26,7 @@ import torch
 from skelagnostic.aligners import Aligner
 from skelagnostic.aligners.base import Latent
 from skelagnostic.core import quaternion as Q
-from skelagnostic.core.kinematics import forward_kinematics
+from skelagnostic.core.kinematics import fk_from_global, forward_kinematics, local_from_global
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
@@ -35,14 +35,11 @@ from skelagnostic.representations import POINT_GROUPS
 from skelagnostic_pcmrl.losses import end_effector_loss, temporal_knn_loss, unit_norm_penalty
 from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
 from skelagnostic_pcmrl.points import (
-    ancestor_matrix,
     effective_joints,
     end_effector_pairs,
-    global_to_local,
     group_of_joints,
     heading_frames,
     infer_units,
-    positions_from_global,
     sample_layout,
     warn_zero_length_bones,
 )
@@ -197,7 +194,6 @@ class PcmrlReconstruction(Aligner):
         for j, p in enumerate(skeleton.parents):
             source_of.append(slot[j] if j in slot else source_of[p])
         self.register_buffer("_source_of", torch.tensor(source_of), persistent=False)
-        self.register_buffer("_ancestors", ancestor_matrix(skeleton.parents), persistent=False)
         self.register_buffer("_target_offsets", skeleton.offsets.float(), persistent=False)
         rest_heading = heading_frames(skeleton.rest_positions().float()[None, None],
                                       group_of_joints(skeleton)[None],
@@ -330,8 +326,7 @@ class PcmrlReconstruction(Aligner):
         cloud, centre, heading = self.canonical(points, groups, up)
         root, raw = self.heads(self.encode_points(cloud, groups))
         root, rot = self.to_world(root, self.full_rotations(raw), centre, heading)
-        pos = positions_from_global(rot, root, self._target_offsets, target.parents,
-                                    self._ancestors)
+        pos = fk_from_global(rot, root, self._target_offsets, target.parents)
         return {"root": root, "raw": raw, "rotations": rot, "positions": pos}
 
     # ----------------------------------------------------------------- export
@@ -461,13 +456,6 @@ class PcmrlReconstruction(Aligner):
         return {"source": motion, "pcmrl": result}
 
     # -------------------------------------------------------------- inference
-    @staticmethod
-    def to_metres(motion: Motion) -> Motion:
-        """``motion`` in metres (units from ``motion.units`` or guessed from the height)."""
-        if motion.units == "m":
-            return motion
-        return motion.convert_units("m", from_=infer_units(motion.skeleton, motion.units))
-
     @torch.no_grad()
     def encode(self, motion: Motion) -> Latent:
         """Per-frame Point Transformer features of a 256-point cloud on ``motion``.
@@ -478,7 +466,7 @@ class PcmrlReconstruction(Aligner):
             the predicted root is relative to, and the heading the cloud was encoded without
             (identity if ``canonical_yaw`` is off).
         """
-        metric = self.to_metres(motion).to(torch.float32, self.device)
+        metric = motion.to_metres().to(torch.float32, self.device)
         warn_zero_length_bones(metric.skeleton, "source skeleton")
         gen = torch.Generator().manual_seed(self.hparams.sample_seed)
         layout = sample_layout(metric.skeleton, self.hparams.num_source_points,
@@ -551,7 +539,7 @@ class PcmrlReconstruction(Aligner):
                                   latent.extras["centre"].to(root), heading.to(root))
         rot = Q.continuity(rot, dim=-3)
         units = self._output_units(skeleton)
-        local = Q.normalize(global_to_local(rot, skeleton.parents))
+        local = Q.normalize(local_from_global(rot, skeleton.parents))
         return Motion(skeleton, local.cpu(), (root / UNITS[units]).cpu(), latent.fps, units=units)
 
 
@@ -568,5 +556,5 @@ class _ReconstructionGraph(torch.nn.Module):
         """Clouds ``[B, T, P, 3]``, groups ``[B, P]`` -> root, rotations (global, local), joints."""
         out = self.aligner.reconstruct(points, groups, self.up)
         parents = self.aligner._require_target().parents
-        local = Q.normalize(global_to_local(out["rotations"], parents))
+        local = Q.normalize(local_from_global(out["rotations"], parents))
         return out["root"], out["rotations"], local, out["positions"]

@@ -19,44 +19,15 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.motion import UNITS
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.data import ClipSource, MotionDataModule
-from skelagnostic.data.sources import ClipRef
+from skelagnostic.data import ClipSource, MetresSource, MotionDataModule, flatten_sources
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import LocalQuaternions, MotionRepresentation
 from skelagnostic_pcmrl.points import infer_units
 
+# MetresSource lives in skelagnostic.data now; importing it from here still works.
 __all__ = ["MetresSource", "PcmrlReconDataModule", "load_target_skeleton"]
-
-
-class MetresSource(ClipSource):
-    """Wraps a clip source so that every clip comes in metres.
-
-    Clips of known units (``motion.units``) are converted; others get
-    ``units`` or the unit guessed from the skeleton height.
-
-    Args:
-        inner: The wrapped source.
-        units: Units of clips that do not know theirs (``None``: guess).
-    """
-
-    def __init__(self, inner: ClipSource, units: str | None = None) -> None:
-        self.inner = inner
-        self.units = units
-        self.name = inner.name
-
-    def clips(self) -> list[ClipRef]:
-        """The inner source's clips."""
-        return self.inner.clips()
-
-    def load(self, clip: ClipRef) -> Motion:
-        """The clip in metres."""
-        motion = self.inner.load(clip)
-        if motion.units == "m":
-            return motion
-        units = motion.units or infer_units(motion.skeleton, self.units)
-        return motion.convert_units("m", from_=units)
 
 
 def load_target_skeleton(target: str, units: str | None = None) -> tuple[Skeleton, str]:
@@ -91,44 +62,38 @@ class PcmrlReconDataModule(MotionDataModule):
     """Windows of source clips (local quaternions, metres) plus a target skeleton.
 
     Args:
-        sources: Source clip sources (default: procedural ``biped22``).
-        representation: Features (default: :class:`LocalQuaternions`; the aligner
-            needs local rotations and translations).
+        sources: Source clip sources (default: procedural ``biped22``); each is
+            wrapped in a :class:`~skelagnostic.data.MetresSource`.
         target: Target skeleton: procedural kind or BVH path.
         target_units: Units of the target file (``None``: guessed).
         source_units: Units of source clips that do not know theirs (``None``: guessed).
-        fps, window, stride, batch_size, num_workers, val_fraction, test_fraction,
-        split_seed, cache_dir, per_element_stats: See :class:`MotionDataModule`.
+        batch_size: Windows per batch and dataset.
+        **kwargs: The other options of :class:`~skelagnostic.data.MotionDataModule`
+            (``representation``: default :class:`LocalQuaternions`, the only one the
+            aligner takes: it needs local rotations and translations; ``fps``,
+            ``window``, ``stride``, ...).
+
+    Raises:
+        SkelagnosticError: The representation is not :class:`LocalQuaternions`.
     """
 
     def __init__(
         self,
         sources: ClipSource | Sequence[ClipSource] | None = None,
-        representation: MotionRepresentation | None = None,
+        *,
         target: str = "biped31",
         target_units: str | None = None,
         source_units: str | None = None,
-        fps: float = 30.0,
-        window: int = 32,
-        stride: int = 16,
         batch_size: int = 8,
-        num_workers: int = 0,
-        val_fraction: float = 0.2,
-        test_fraction: float = 0.0,
-        split_seed: int = 0,
-        cache_dir: str | Path | None = None,
-        per_element_stats: bool = True,
+        **kwargs: Any,
     ) -> None:
         if sources is None:
             from skelagnostic.data.sources import ProceduralSource
 
             sources = [ProceduralSource(kinds=("biped22",))]
-        sources = [sources] if isinstance(sources, ClipSource) else list(sources)
-        super().__init__(
-            [MetresSource(s, source_units) for s in sources], representation, fps, window,
-            stride, batch_size, num_workers, val_fraction, test_fraction, split_seed, cache_dir,
-            per_element_stats,
-        )
+        sources = flatten_sources(sources)
+        super().__init__([MetresSource(s, source_units) for s in sources],
+                         batch_size=batch_size, **kwargs)
         if not isinstance(self.representation, LocalQuaternions):
             raise SkelagnosticError(
                 "model=pcmrl needs data.representation=local_quaternions (or null), got "

@@ -24,24 +24,21 @@ and, with a pose MLP, ``val/pose_mpjpe/<dataset>`` in metres at the pivot frames
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import torch
-from lightning.pytorch.utilities import rank_zero_info, rank_zero_only
+from lightning.pytorch.utilities import rank_zero_info
 from torch import Tensor, nn
 
-from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners import Aligner, Latent, steps_per_epoch
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph, Method
 from skelagnostic.metrics import ManifoldOverlap
-from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
 from skelagnostic_vqpae.model import (
@@ -51,6 +48,11 @@ from skelagnostic_vqpae.model import (
     phase_advance_rate,
     phase_manifold,
 )
+
+if TYPE_CHECKING:
+    import lightning as L
+
+    from skelagnostic.callbacks import SummaryContent
 
 __all__ = ["DatasetSpec", "VQPAEAligner"]
 
@@ -521,83 +523,17 @@ class VQPAEAligner(Aligner):
         # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
         fused = all(p.device.type in ("cpu", "cuda") for p in main)
         optimizer = torch.optim.AdamW(groups, fused=fused, foreach=None if fused else True)
-        steps = self._steps_per_epoch()
+        steps = steps_per_epoch(self._trainer)
         scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
             optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult)
         return {"optimizer": optimizer,
                 "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
 
-    def _steps_per_epoch(self) -> int:
-        dm = self.trainer.datamodule
-        if dm is None or not dm.datasets["train"]:
-            return 1
-        longest = max(len(ds) for ds in dm.datasets["train"].values())
-        return max(1, math.ceil(longest / dm.batch_size))
+    def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
+        """The manifold overlap and pictures of the fit summary (see :mod:`.fit_outputs`)."""
+        from skelagnostic_vqpae.fit_outputs import fit_summary
 
-    def on_fit_end(self) -> None:
-        """Write what a person looks at after training, into the run directory.
-
-        * ``vqpae_metrics.json``: the last logged metrics, and the manifold
-          overlap (usage, overlap, per-dataset share, codes used per dataset) of
-          the per-frame codes of the validation clips (``"split": "val"``; the
-          training clips without a validation split), and under ``"train"`` the
-          same figures for the training clips (the paper's Table 2 measures the
-          training data);
-        * ``vqpae_manifold.png``: the phase manifold (PCA of the codebook
-          ellipses, one panel per character, its frames' points; paper Fig. 1);
-        * ``vqpae_timing.png``: phase, frequency and code over time for the
-          first clip of every character.
-        """
-        self._write_fit_outputs()
-
-    @rank_zero_only
-    def _write_fit_outputs(self) -> None:
-        trainer = self.trainer
-        dm = trainer.datamodule
-        if dm is None or self.codebook is None:
-            return
-        splits = [name for name in ("val", "train")
-                  if any(len(d) for d in dm.datasets.get(name, {}).values())]
-        if not splits:
-            return
-        was_training = self.training
-        self.eval()
-        try:
-            embeddings = {name: self.embed_windows(dm.datasets[name], dm.fps) for name in splits}
-        finally:
-            self.train(was_training)
-        run_dir = Path(trainer.default_root_dir)
-        run_dir.mkdir(parents=True, exist_ok=True)
-        figures = {name: self._overlap_figures(embeddings[name]) for name in splits}
-        metrics = {"split": splits[0], **figures[splits[0]],
-                   **({"train": figures["train"]} if splits[0] != "train" else {}),
-                   "logged": {k: float(v) for k, v in trainer.callback_metrics.items()}}
-        (run_dir / "vqpae_metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-        shown = {n: embs for n, embs in embeddings[splits[0]].items() if embs}
-        if not shown:
-            return
-        import matplotlib.pyplot as plt
-
-        from skelagnostic_vqpae.embed import plot_clip_timing, plot_manifold
-
-        plt.close(plot_manifold(self, shown, run_dir / "vqpae_manifold.png"))
-        plt.close(plot_clip_timing({n: embs[0] for n, embs in shown.items()},
-                                   run_dir / "vqpae_timing.png"))
-
-    def _overlap_figures(self, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
-        """Manifold overlap (Table 2) of per-clip embeddings of every dataset."""
-        codes = [torch.cat([e.code for e in embeddings.get(n, [])] or
-                           [torch.zeros(0, dtype=torch.long)]) for n in self.dataset_names]
-        overlap = manifold_overlap(codes, self._require_built().num_codes)
-        single = len(self.dataset_names) < 2  # overlap is not applicable: None, not a number
-        return {
-            "usage": overlap["usage"],
-            "overlap": None if single else overlap["overlap"],
-            "per_dataset": {n: None if single or math.isnan(v) else v for n, v in
-                            zip(self.dataset_names, overlap["per_dataset"], strict=True)},
-            "codes_used": {n: int(c.unique().numel()) for n, c in
-                           zip(self.dataset_names, codes, strict=True)},
-        }
+        return fit_summary(self, trainer)
 
     @torch.no_grad()
     def embed_windows(self, datasets: Mapping[str, Any], fps: float,

@@ -20,7 +20,7 @@ Every clip also keeps its root-local joint positions (normalised the same way)
 for the average-pose MLP (Sec. 5.2).
 
 Several characters: one dataset per source and skeleton topology; training
-steps draw one batch from every dataset. :class:`MultiSource` bundles several
+steps draw one batch from every dataset. :class:`~skelagnostic.data.MultiSource` bundles several
 sources (a human and a dog directory, several style sets) into the one
 ``data.source`` the CLI passes; each part becomes its own dataset.
 """
@@ -30,7 +30,6 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +39,14 @@ from torch import Tensor
 from torch.utils.data import DataLoader, Dataset
 
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.data import BVHSource, ClipRef, ClipSource, MotionDataModule, preset_source
+from skelagnostic.data import (
+    BVHSource,
+    ClipRef,
+    ClipSource,
+    MotionDataModule,
+    MultiSource,
+    preset_source,
+)
 from skelagnostic.data.cache import CacheEntry, read_exactly
 from skelagnostic.data.datamodule import STATS_CHUNK_VALUES, check_statistics
 from skelagnostic.errors import SkelagnosticError
@@ -51,41 +57,6 @@ __all__ = ["CachedFrameWindows", "FrameWindows", "MultiSource", "VQPAEDataModule
 
 #: Version of the cached per-clip layout (velocities and root-local positions per frame).
 _LAYOUT = "vqpae-frames-1"
-
-
-@dataclass
-class MultiSource(ClipSource):
-    """Several clip sources that :class:`VQPAEDataModule` turns into separate datasets.
-
-    Args:
-        parts: The sources; their ``name`` labels the datasets.
-        name: Label of the bundle.
-
-    Raises:
-        SkelagnosticError: ``parts`` is empty or two parts share a name.
-    """
-
-    parts: Sequence[ClipSource]
-    name: str = "multi"
-    _index: dict[str, int] = field(default_factory=dict, init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        self.parts = list(self.parts)
-        names = [p.name for p in self.parts]
-        if not names:
-            raise SkelagnosticError("MultiSource: parts must hold at least one source")
-        if len(set(names)) != len(names):
-            raise SkelagnosticError(f"MultiSource: part names must differ, got {names}")
-
-    def clips(self) -> list[ClipRef]:
-        """Clips of every part, ids prefixed by the part name."""
-        return [ClipRef(f"{p.name}:{c.id}", c.key, c.split) for p in self.parts for c in p.clips()]
-
-    def load(self, clip: ClipRef) -> Any:
-        """Load a clip from its part."""
-        part, _, inner = clip.id.partition(":")
-        source = next(p for p in self.parts if p.name == part)
-        return source.load(ClipRef(inner, clip.key, clip.split))
 
 
 def human_dog_source(
@@ -345,17 +316,10 @@ class VQPAEDataModule(MotionDataModule):
 
     Args:
         sources: Clip sources (default: procedural biped + quadruped); a
-            :class:`MultiSource` gives one dataset per part.
-        representation: Input features (default :class:`RootLocalVelocities`).
+            :class:`~skelagnostic.data.MultiSource` gives one dataset per part.
         fps: Frame rate the clips are resampled to (the authors: 60).
         window: Frames per window, used only when ``window_seconds`` is ``None``; odd.
         stride: Frames between pivots (the authors: 1, every frame).
-        batch_size: Windows per batch and dataset (32).
-        num_workers: Data-loader workers.
-        val_fraction: Share of each dataset's clips used for validation.
-        test_fraction: Share of clips used for testing.
-        split_seed: Seed of the clip split.
-        cache_dir: Cache of the per-clip features.
         window_seconds: Window length in seconds (1.0): ``T = round(fps * window_seconds) + 1``,
             plus one if that is even.
         std_floor: Lower bound of every channel's standard deviation, as a fraction of
@@ -364,29 +328,33 @@ class VQPAEDataModule(MotionDataModule):
             (``max(1, round(fps * pair_seconds))`` frames; 0: none), which the
             aligner's phase-rate loss needs (``model.lambda_phase_rate``). 0.1 s
             keeps the phase advance between the two windows unambiguous up to 5 Hz.
+        **kwargs: The other options of :class:`~skelagnostic.data.MotionDataModule`
+            (``representation``: default :class:`RootLocalVelocities`; ``batch_size``:
+            windows per batch and dataset, 32; ``cache_dir``: cache of the per-clip
+            features; ...). Normalisation is always per element.
 
     Raises:
-        SkelagnosticError: The window length is even or not positive, or another argument is
-            out of range.
+        SkelagnosticError: The window length is even or not positive, another argument is
+            out of range, or ``per_element_stats`` is given.
     """
 
     def __init__(
         self,
         sources: ClipSource | Sequence[ClipSource] | None = None,
-        representation: MotionRepresentation | None = None,
+        *,
         fps: float = 30.0,
         window: int = 31,
         stride: int = 1,
-        batch_size: int = 32,
-        num_workers: int = 0,
-        val_fraction: float = 0.2,
-        test_fraction: float = 0.0,
-        split_seed: int = 0,
-        cache_dir: str | Path | None = None,
         window_seconds: float | None = 1.0,
         std_floor: float = 0.01,
         pair_seconds: float = 0.1,
+        **kwargs: Any,
     ) -> None:
+        if "per_element_stats" in kwargs:
+            raise SkelagnosticError(
+                "data.per_element_stats is not an option of VQPAEDataModule: its statistics "
+                "are always per element"
+            )
         if not pair_seconds >= 0:
             raise SkelagnosticError(f"data.pair_seconds must be >= 0, got {pair_seconds}")
         if not 0 <= std_floor < 1:
@@ -401,13 +369,7 @@ class VQPAEDataModule(MotionDataModule):
             raise SkelagnosticError(
                 f"data.window must be odd so the pivot frame is unique, got {window}"
             )
-        flat: list[ClipSource] = []
-        for s in ([] if sources is None else [sources] if isinstance(sources, ClipSource)
-                  else sources):
-            flat.extend(s.parts if isinstance(s, MultiSource) else [s])
-        super().__init__(flat or None, representation, fps, window, stride, batch_size,
-                         num_workers, val_fraction, test_fraction, split_seed, cache_dir,
-                         per_element_stats=True)
+        super().__init__(sources, fps=fps, window=window, stride=stride, **kwargs)
         self.window_seconds = window_seconds
         self.std_floor = float(std_floor)
         self.pair_seconds = float(pair_seconds)
@@ -446,7 +408,8 @@ class VQPAEDataModule(MotionDataModule):
                 "starts": [0] if long_enough else [], "fps": self.fps, "units": motion.units}
         return array, meta
 
-    def _add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+    def add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
+        """Per-clip frame datasets with velocity and pose statistics (floored by ``std_floor``)."""
         entries = {clip.id: entry for clip, entry in members}
         split = self.split_clips([c for c, _ in members])
         n_in = len(self.representation.channels)
@@ -475,7 +438,8 @@ class VQPAEDataModule(MotionDataModule):
         """Input channels ``C = J * 3`` of dataset ``name``."""
         return self.skeletons[name].num_joints * len(self.representation.channels)
 
-    def _loaders(self, split: str, shuffle: bool) -> dict[str, DataLoader]:
+    def loaders(self, split: str, shuffle: bool) -> dict[str, DataLoader]:
+        """The base class's loaders, with batches gathered by the datasets (``collate_fn``)."""
         return {
             name: DataLoader(
                 ds,

@@ -127,7 +127,7 @@ def fit_average_pose(aligner: VQPAEAligner, datamodule: Any, epochs: int = 1,
         raise SkelagnosticError(f"fit_average_pose: epochs must be positive, got {epochs}")
     aligner.eval()
     last: dict[str, float] = {}
-    for name, loader in datamodule._loaders("train", shuffle=True).items():
+    for name, loader in datamodule.loaders("train", shuffle=True).items():
         k = aligner.dataset_names.index(name)
         mlp = aligner.characters[k].pose
         opt = torch.optim.Adam(mlp.parameters(), lr=lr)

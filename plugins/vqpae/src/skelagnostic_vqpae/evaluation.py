@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from skelagnostic.baselines import mean_pose
-from skelagnostic.evaluation import MODEL, Evaluation, HeldOut, metres
+from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip, plot_manifold
 
@@ -82,7 +82,7 @@ def _pose_error(aligner: Any, clip: Any, emb: ClipEmbedding) -> dict[str, dict[s
 
     decoded = aligner.decode(Latent(emb.manifold, emb.fps), clip.skeleton)
     decoded.units = clip.units  # the pose MLP speaks the units of its training clips
-    truth_motion, decoded = metres(clip), metres(decoded)
+    truth_motion, decoded = clip.to_metres(), decoded.to_metres()
     if truth_motion.fps != emb.fps:
         truth_motion = truth_motion.resample(emb.fps)
     frames = min(len(emb), truth_motion.num_frames)

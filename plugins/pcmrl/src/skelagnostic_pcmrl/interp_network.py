@@ -1,0 +1,155 @@
+"""PC-MRL stage 2: the CITL-style interpolation transformer (Sec. 3.4).
+
+Shaw-style relative attention, the transformer block and
+:class:`CITLInterpolator` (keyframe encoder, intermediate tokens, decoder).
+See :mod:`~skelagnostic_pcmrl.interp` for the model as a whole.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from skelagnostic.errors import SkelagnosticError
+
+
+class RelativeAttention(nn.Module):
+    """Multi-head attention with Shaw et al. relative position embeddings (zero initialised).
+
+    Keys and values get a learned embedding of the clipped frame distance
+    ``clip(j - i, -K, K)`` shared by all heads.
+    """
+
+    def __init__(self, dim: int, heads: int, max_relative: int) -> None:
+        super().__init__()
+        if dim % heads:
+            raise SkelagnosticError(f"model.dim ({dim}) must be divisible by model.heads ({heads})")
+        self.heads, self.head_dim, self.max_relative = heads, dim // heads, max_relative
+        self.q = nn.Linear(dim, dim)
+        self.kv = nn.Linear(dim, 2 * dim)
+        self.out = nn.Linear(dim, dim)
+        self.rel_k = nn.Parameter(torch.zeros(2 * max_relative + 1, self.head_dim))
+        self.rel_v = nn.Parameter(torch.zeros(2 * max_relative + 1, self.head_dim))
+
+    def forward(self, x: Tensor, memory: Tensor, key_mask: Tensor | None = None) -> Tensor:
+        """Attend from ``x [B, T, D]`` to ``memory [B, T, D]`` (same frames).
+
+        Args:
+            x: Queries.
+            memory: Keys/values.
+            key_mask: ``[B, T]`` True where a frame may be attended to.
+        """
+        num_b, num_t, dim = x.shape
+        h, d = self.heads, self.head_dim
+        q = self.q(x).view(num_b, num_t, h, d).transpose(1, 2)
+        k, v = self.kv(memory).view(num_b, num_t, 2, h, d).permute(2, 0, 3, 1, 4)
+        frames = torch.arange(num_t, device=x.device)
+        rel = (frames[None, :] - frames[:, None]).clamp(-self.max_relative, self.max_relative)
+        rel = rel + self.max_relative
+        rk, rv = self.rel_k[rel], self.rel_v[rel]  # [T, T, d]
+        logits = (q @ k.transpose(-1, -2) + torch.einsum("bhid,ijd->bhij", q, rk)) / math.sqrt(d)
+        if key_mask is not None:
+            logits = logits.masked_fill(~key_mask[:, None, None, :], float("-inf"))
+        attn = logits.softmax(dim=-1)
+        out = attn @ v + torch.einsum("bhij,ijd->bhid", attn, rv)
+        return self.out(out.transpose(1, 2).reshape(num_b, num_t, dim))
+
+
+class Block(nn.Module):
+    """Pre-norm (RMSNorm) transformer block: relative attention then a GELU feed-forward."""
+
+    def __init__(self, dim: int, heads: int, ff_mult: int, max_relative: int) -> None:
+        super().__init__()
+        self.norm_q = nn.RMSNorm(dim)
+        self.norm_m = nn.RMSNorm(dim)
+        self.attn = RelativeAttention(dim, heads, max_relative)
+        self.norm_ff = nn.RMSNorm(dim)
+        self.ff = nn.Sequential(
+            nn.Linear(dim, dim * ff_mult), nn.GELU(), nn.Linear(dim * ff_mult, dim)
+        )
+
+    def forward(
+        self, x: Tensor, memory: Tensor | None = None, key_mask: Tensor | None = None
+    ) -> Tensor:
+        """Self-attention (``memory=None``) or cross-attention, then feed-forward."""
+        q = self.norm_q(x)
+        m = q if memory is None else self.norm_m(memory)
+        x = x + self.attn(q, m, key_mask)
+        return x + self.ff(self.norm_ff(x))
+
+
+class CITLInterpolator(nn.Module):
+    """CITL's keyframe encoder, intermediate-token module and decoder.
+
+    Args:
+        in_features: Per-frame input size (``10 J + 1``).
+        out_features: Per-frame output size (``4 J + 3``).
+        dim: Width.
+        heads: Attention heads.
+        layers: Blocks in each of the three stages.
+        ff_mult: Feed-forward expansion.
+        max_relative: Largest distinguished frame distance of the relative positions.
+        zero_output: Initialise the output layer to zero (for residual outputs).
+        interm_features: Size of the per-frame input of the intermediate tokens
+            (``interm_tokens="lerp"``); 0: the tokens start at zero, as in CITL.
+    """
+
+    def __init__(
+        self,
+        in_features: int,
+        out_features: int,
+        dim: int,
+        heads: int,
+        layers: int,
+        ff_mult: int = 4,
+        max_relative: int = 128,
+        zero_output: bool = False,
+        interm_features: int = 0,
+    ) -> None:
+        super().__init__()
+        self.embed = nn.Linear(in_features, dim)
+        self.interm_embed = nn.Linear(interm_features, dim) if interm_features > 0 else None
+        self.encoder = nn.ModuleList(
+            Block(dim, heads, ff_mult, max_relative) for _ in range(layers)
+        )
+        self.interm = nn.ModuleList(Block(dim, heads, ff_mult, max_relative) for _ in range(layers))
+        self.key_ff = nn.Sequential(
+            nn.Linear(dim, dim * ff_mult), nn.GELU(), nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim)
+        )
+        self.interm_ff = nn.Sequential(
+            nn.Linear(dim, dim * ff_mult), nn.GELU(), nn.Linear(dim * ff_mult, dim), nn.RMSNorm(dim)
+        )
+        self.decoder = nn.ModuleList(
+            Block(dim, heads, ff_mult, max_relative) for _ in range(layers)
+        )
+        self.head = nn.Linear(dim, out_features)
+        if zero_output:
+            nn.init.zeros_(self.head.weight)
+            nn.init.zeros_(self.head.bias)
+
+    def forward(self, inputs: Tensor, keys: Tensor, interm_inputs: Tensor | None = None) -> Tensor:
+        """``[B, T, in] -> [B, T, out]``.
+
+        Args:
+            inputs: Keyframe features (zeros on the other frames).
+            keys: ``[B, T]`` boolean keyframe mask.
+            interm_inputs: ``[B, T, interm_features]`` start of the intermediate tokens
+                (required when the network was built with ``interm_features``).
+        """
+        enc = self.embed(inputs)
+        for block in self.encoder:
+            enc = block(enc, key_mask=keys)
+        if self.interm_embed is None:
+            interm = torch.zeros_like(enc)
+        else:
+            if interm_inputs is None:
+                raise SkelagnosticError("CITLInterpolator: interm_inputs are required")
+            interm = self.interm_embed(interm_inputs)
+        for block in self.interm:
+            interm = block(interm, memory=enc, key_mask=keys)
+        manifold = torch.where(keys[..., None], self.key_ff(enc), self.interm_ff(interm))
+        for block in self.decoder:
+            manifold = block(manifold)
+        return self.head(manifold)
