@@ -68,8 +68,7 @@ def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> 
     work = tmp_path / "work"  # outside the repository
     work.mkdir()
     env = {k: v for k, v in os.environ.items() if k != LOAD_PLUGINS_ENV}
-    env.update(OMP_NUM_THREADS="1", SKELAGNOSTIC_CACHE=str(tmp_path / "cache"),
-               PYTHONPATH=str(REPO / "src"))
+    env.update(OMP_NUM_THREADS="1", SKELAGNOSTIC_CACHE=str(tmp_path / "cache"))
     # a throwaway venv on top of this interpreter's packages (torch, lightning, ...)
     env_dir = tmp_path / "env"
     venv.create(env_dir, system_site_packages=True, with_pip=False)
@@ -77,7 +76,10 @@ def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> 
     purelib = subprocess.run([py, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
                              capture_output=True, text=True, check=True).stdout.strip()
     deps = [p for p in sys.path if p.endswith("site-packages")]
-    Path(purelib, "deps.pth").write_text("\n".join(deps) + "\n")
+    # addsitedir (not a bare path) so that the .pth files there, e.g. the editable
+    # install's finder that maps skelagnostic.conf onto the top-level conf/, run too
+    Path(purelib, "deps.pth").write_text(
+        "".join(f"import site; site.addsitedir({p!r})\n" for p in deps))
     script = Path(sys.executable).with_name("skelagnostic")  # the installed console script
     command = [py, str(script)] if script.is_file() else [py, "-m", "skelagnostic.cli"]
 
