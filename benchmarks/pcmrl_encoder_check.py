@@ -1,6 +1,6 @@
 r"""Supervised per-frame pose regression from one point cloud: how fast does an encoder learn?
 
-A diagnostic for PC-MRL stage 1 (docs/methods/pcmrl.md, "What limits stage 1"):
+A diagnostic for PC-MRL stage 1 (docs/reports/pcmrl.md, "What limits stage 1"):
 every step draws 32 random frames of the training clips, one 256-point cloud
 per frame (PC-MRL Eq. 3), centres it (with its height unless
 ``--horizontal-only``), turns it to the heading-free frame, and regresses the

@@ -1,7 +1,7 @@
 r"""How fast does PC-MRL's stage-2 model learn beyond LERP? A training probe.
 
-A diagnostic for stage 2 (docs/methods/pcmrl.md, "Learning beyond LERP"):
-trains :class:`~skelagnostic_pcmrl.interp.InterpolationAligner` on the
+A diagnostic for stage 2 (docs/reports/pcmrl.md, "Learning beyond LERP"):
+trains :class:`~skelagnostic_pcmrl.interp.PcmrlInterpAligner` on the
 ``--train`` clips for ``--minutes`` (one thread, the training step of ``fit``
 without Lightning), and every ``--every`` steps prints, on the fixed windows of
 the held-out ``--test`` clips (128 frames, a key every 15 and every 30 frames),
@@ -73,8 +73,8 @@ def _position_error(model: Any, batch: dict[str, torch.Tensor]) -> tuple[float, 
 
 def main(argv: list[str] | None = None) -> int:
     """Command line (see the module docstring)."""
-    from skelagnostic_pcmrl.interp import InterpolationAligner
-    from skelagnostic_pcmrl.interp_data import FixedWindows, InterpolationDataModule
+    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp_data import FixedWindows, PcmrlInterpDataModule
 
     from skelagnostic.data.sources import BVHSource
 
@@ -101,11 +101,11 @@ def main(argv: list[str] | None = None) -> int:
 
     model_opts = {**CPU_MODEL, **_options(args.model, "--model")}
     data_opts = {**CPU_DATA, "fps": args.fps, "seed": args.seed, **_options(args.data, "--data")}
-    train = InterpolationDataModule(
+    train = PcmrlInterpDataModule(
         sources=[BVHSource(paths=args.train, units=args.units)], **data_opts
     )
     train.setup("fit")
-    test = InterpolationDataModule(
+    test = PcmrlInterpDataModule(
         sources=[BVHSource(paths=args.test, units=args.units)],
         fps=args.fps,
         window=data_opts["window"],
@@ -114,9 +114,9 @@ def main(argv: list[str] | None = None) -> int:
     test.setup("fit")
     assert train.skeleton is not None and train.train_set is not None
     common = {"skeleton": train.skeleton.to_dict(), "fps": args.fps, "window": data_opts["window"]}
-    model = InterpolationAligner(**model_opts, **common)
+    model = PcmrlInterpAligner(**model_opts, **common)
     baseline_opts = {**model_opts, "residual": True, "interm_tokens": "zero"}
-    baseline = InterpolationAligner(**baseline_opts, **common).eval()  # zero residual = LERP
+    baseline = PcmrlInterpAligner(**baseline_opts, **common).eval()  # zero residual = LERP
     averaged = None
     if args.ema is not None:
         if not 0.0 < args.ema < 1.0:

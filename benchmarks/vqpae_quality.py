@@ -38,8 +38,8 @@ sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
 
 import lightning as L  # noqa: E402
 import torch  # noqa: E402
-from skelagnostic_vqpae.aligner import VQPAEAligner  # noqa: E402
-from skelagnostic_vqpae.data import MultiSource, VQPAEDataModule  # noqa: E402
+from skelagnostic_vqpae.aligner import VqpaeAligner  # noqa: E402
+from skelagnostic_vqpae.data import MultiSource, VqpaeDataModule  # noqa: E402
 from skelagnostic_vqpae.embed import embed_clip  # noqa: E402
 from skelagnostic_vqpae.evaluation import code_overlap, phase_line  # noqa: E402
 
@@ -47,7 +47,7 @@ from skelagnostic import procedural  # noqa: E402
 from skelagnostic.data import BVHSource, ProceduralSource  # noqa: E402
 
 
-def _train(dm: VQPAEDataModule, model: VQPAEAligner, steps: int,
+def _train(dm: VqpaeDataModule, model: VqpaeAligner, steps: int,
            callbacks: list[L.Callback] | None = None, save: Path | None = None) -> float:
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as run_dir:
@@ -78,9 +78,9 @@ def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any],
     cache = Path(tempfile.gettempdir()) / "skelagnostic-quality-cache"
     source = ProceduralSource(kinds=["biped22", "quadruped"], clips_per_gait=clips_per_gait,
                               seconds=8.0)
-    dm = VQPAEDataModule(source, fps=fps, stride=1, batch_size=32, cache_dir=cache,
+    dm = VqpaeDataModule(source, fps=fps, stride=1, batch_size=32, cache_dir=cache,
                          window_seconds=window_seconds, pair_seconds=pair_seconds)
-    model = VQPAEAligner(num_codes=16, lr=lr, restart_period=10_000, pose_mlp="none",
+    model = VqpaeAligner(num_codes=16, lr=lr, restart_period=10_000, pose_mlp="none",
                          **options)
     seconds = _train(dm, model, steps)
     half = round(fps * window_seconds) // 2
@@ -124,13 +124,13 @@ def _human_dog_sources(human_files: list[str] | None = None) -> tuple[BVHSource,
             BVHSource([root / "dog" / "mann"], units="cm", name="dog"))
 
 
-def _human_dog_module(human_files: list[str] | None = None) -> VQPAEDataModule:
+def _human_dog_module(human_files: list[str] | None = None) -> VqpaeDataModule:
     cache = Path(tempfile.gettempdir()) / "skelagnostic-quality-cache"
-    return VQPAEDataModule(MultiSource(list(_human_dog_sources(human_files))), fps=60, stride=1,
+    return VqpaeDataModule(MultiSource(list(_human_dog_sources(human_files))), fps=60, stride=1,
                            batch_size=32, cache_dir=cache, val_fraction=0.0)
 
 
-def overlap_of_clips(model: VQPAEAligner, num_codes: int,
+def overlap_of_clips(model: VqpaeAligner, num_codes: int,
                      human_files: list[str] | None = None) -> dict[str, Any]:
     """Usage and overlap (Table 2) of the per-frame codes of every human and dog clip."""
     codes = {}
@@ -169,7 +169,7 @@ def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
     L.seed_everything(0, verbose=False)
     dm = _human_dog_module(human_files)
     options = {"lambda_phase_rate": 0.0, **options}  # experiment=vqpae_human_dog's objective
-    model = VQPAEAligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
+    model = VqpaeAligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
                          restart_period=10_000, **options)
     curve = [OverlapCurve(eval_every, num_codes, human_files)] if eval_every else []
     seconds = _train(dm, model, steps, curve, save)
@@ -180,7 +180,7 @@ def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
             "human_files": human_files, "curve": curve[0].points if curve else []}
 
 
-def pose_mpjpe_cm(model: VQPAEAligner, dm: VQPAEDataModule) -> dict[str, float]:
+def pose_mpjpe_cm(model: VqpaeAligner, dm: VqpaeDataModule) -> dict[str, float]:
     """Per-frame pose MPJPE (cm) of the average-pose MLPs over every training window."""
     sums = dict.fromkeys(model.dataset_names, 0.0)
     counts = dict.fromkeys(model.dataset_names, 0)
@@ -204,7 +204,7 @@ def check_sweep(codes: list[int], steps: int, lr: float, options: dict[str, Any]
     for num_codes in codes:
         L.seed_everything(0, verbose=False)
         dm = _human_dog_module(human_files)
-        model = VQPAEAligner(num_codes=num_codes, lr=lr, pose_mlp="detached",
+        model = VqpaeAligner(num_codes=num_codes, lr=lr, pose_mlp="detached",
                              restart_period=10_000, **options)
         seconds = _train(dm, model, steps)
         model.eval()

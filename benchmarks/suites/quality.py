@@ -33,7 +33,7 @@ reports, each next to a baseline measured in the same run:
   onto the biped31 skeleton, unpaired (``skelagnostic_pcmrl.evaluation``), for
   the CPU-sized network ``experiment=pcmrl_cpu``, against the naive joint-name
   copy; the floor (a second cloud drawn on the source motion) is reported too.
-  The LaFAN1 -> CMU setting of the paper is in docs/methods/pcmrl.md (20 CPU
+  The LaFAN1 -> CMU setting of the paper is in docs/reports/pcmrl.md (20 CPU
   minutes of training, too long for this suite).
 
 Sizes are training budgets: ``smoke`` checks that the protocols run (a few
@@ -162,14 +162,14 @@ def pcmrl_interp(steps: int) -> dict[str, Any]:
     """Train ``experiment=pcmrl_interp_cpu`` for ``steps`` steps; Table 1 on held-out clips."""
     _one_thread()
     _plugin("pcmrl")
-    from skelagnostic_pcmrl.interp import InterpolationAligner
+    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
     from skelagnostic_pcmrl.interp_eval import GAPS, evaluate
 
     from skelagnostic import procedural
     from skelagnostic.baselines import lerp_slerp
 
     model = _fit_pcmrl(["model=pcmrl_interp", "experiment=pcmrl_interp_cpu"], steps,
-                       InterpolationAligner)
+                       PcmrlInterpAligner)
     clips = [procedural.generate("biped31", gait, seconds=8.0, fps=30, seed=777 + k)[0]
              for gait in ("walk", "run") for k in range(2)]
     return evaluate({"model": model.interpolate, "lerp": lerp_slerp}, clips, gaps=GAPS)
@@ -180,11 +180,11 @@ def pcmrl_recon(steps: int) -> dict[str, Any]:
     _one_thread()
     _plugin("pcmrl")
     from skelagnostic_pcmrl.evaluation import evaluate_clips
-    from skelagnostic_pcmrl.recon import PcmrlReconstruction
+    from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
     from skelagnostic import procedural
 
-    model = _fit_pcmrl(["experiment=pcmrl_cpu"], steps, PcmrlReconstruction)
+    model = _fit_pcmrl(["experiment=pcmrl_cpu"], steps, PcmrlReconAligner)
     clips = [procedural.generate("biped22", gait, seconds=4.0, seed=100 + i)[0]
              for i, gait in enumerate(["walk", "run"])]
     return evaluate_clips(clips, procedural.skeleton("biped31"), model, sigmas=(0.0, 0.05))

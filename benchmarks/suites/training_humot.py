@@ -15,7 +15,7 @@ topologies (CMU-31 and LaFAN1-22 clips from ``$SKELAGNOSTIC_TEST_DATA`` or
   between the end of one step and the start of the next).
 
 No baseline column: no implementation of HuMoT is public. For orientation,
-docs/methods/humot.md measures 11-13 s per step with one thread on the
+docs/reports/humot.md measures 11-13 s per step with one thread on the
 project's busy 2-core machine (~0.4 TFLOP per step) and 8.6 s with two
 threads on a nearly idle one; the paper trained on an A100.
 """

@@ -40,9 +40,9 @@ def measure(stage: str, steps: int, accelerator: str = "cpu") -> dict[str, Any]:
     """Median step time and data share of ``steps`` steps of ``stage`` (recon or interp)."""
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "pcmrl" / "src"))
     import torch
-    from skelagnostic_pcmrl.interp import InterpolationAligner
-    from skelagnostic_pcmrl.interp_data import InterpolationDataModule
-    from skelagnostic_pcmrl.recon import PcmrlReconstruction
+    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
+    from skelagnostic_pcmrl.recon import PcmrlReconAligner
     from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
 
     from skelagnostic.data import BVHSource, ProceduralSource
@@ -64,7 +64,7 @@ def measure(stage: str, steps: int, accelerator: str = "cpu") -> dict[str, Any]:
         dm = PcmrlReconDataModule(source, target=target, target_units=target_units, fps=30.0,
                                   window=64, stride=16, batch_size=BATCH, val_fraction=0.0,
                                   cache_dir=cache)
-        model: Any = PcmrlReconstruction(lr=1e-4)
+        model: Any = PcmrlReconAligner(lr=1e-4)
     else:
         if root is not None:
             source = BVHSource([root / "human" / "cmu"], units="cmu", name="cmu")
@@ -72,8 +72,8 @@ def measure(stage: str, steps: int, accelerator: str = "cpu") -> dict[str, Any]:
         else:
             source = ProceduralSource(kinds=["biped31"], gaits=["walk", "run"], seconds=10.0)
             data = "procedural biped31"
-        dm = InterpolationDataModule(source, fps=30.0, batch_size=BATCH, val_fraction=0.0)
-        model = InterpolationAligner()
+        dm = PcmrlInterpDataModule(source, fps=30.0, batch_size=BATCH, val_fraction=0.0)
+        model = PcmrlInterpAligner()
     timing = time_fit(model, dm, steps, accelerator=accelerator)
     return {**timing, "data": data, "threads": torch.get_num_threads(),
             "parameters": sum(p.numel() for p in model.parameters())}

@@ -116,11 +116,11 @@ def test_hooks_are_public_and_overridable(tmp_path: Path) -> None:
 
 def test_plugin_data_modules_forward_the_base_options(tmp_path: Path) -> None:
     from skelagnostic_humot.data import HumotDataModule
-    from skelagnostic_pcmrl.interp_data import InterpolationDataModule
+    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
     from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
-    from skelagnostic_vqpae.data import VQPAEDataModule
+    from skelagnostic_vqpae.data import VqpaeDataModule
 
-    for cls in (HumotDataModule, VQPAEDataModule, PcmrlReconDataModule, InterpolationDataModule):
+    for cls in (HumotDataModule, VqpaeDataModule, PcmrlReconDataModule, PcmrlInterpDataModule):
         options = datamodule_options(cls)
         assert {"fps", "num_workers", "cache_dir", "split_seed", "test_fraction"} <= set(options)
         assert options["fps"] in (cls, MotionDataModule)
@@ -130,9 +130,9 @@ def test_plugin_data_modules_forward_the_base_options(tmp_path: Path) -> None:
     with pytest.raises(TypeError, match="bogus"):
         HumotDataModule(bogus=1)
     with pytest.raises(SkelagnosticError, match="always per element"):
-        VQPAEDataModule(per_element_stats=False)
+        VqpaeDataModule(per_element_stats=False)
     with pytest.raises(SkelagnosticError, match=r"data\.fps must be > 0"):
-        InterpolationDataModule(fps=0)
+        PcmrlInterpDataModule(fps=0)
 
 
 def test_cli_routes_base_options_through_kwargs(tmp_path: Path) -> None:

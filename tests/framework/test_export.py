@@ -231,7 +231,7 @@ def test_humot_encoder_and_decoder_match_pytorch(lafan: sa.Motion, fmt: str,
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
 def test_vqpae_encoder_and_pose_decoder_match_pytorch(lafan: sa.Motion, fmt: str,
                                                       tmp_path: Path) -> None:
-    from skelagnostic_vqpae.aligner import VQPAEAligner
+    from skelagnostic_vqpae.aligner import VqpaeAligner
 
     from skelagnostic.representations import RootLocalVelocities
 
@@ -239,7 +239,7 @@ def test_vqpae_encoder_and_pose_decoder_match_pytorch(lafan: sa.Motion, fmt: str
     skeleton = lafan.skeleton
     spec = {"channels": 3 * skeleton.num_joints, "window": 31, "fps": 30.0,
             "skeleton": skeleton.to_dict()}
-    aligner = VQPAEAligner(latent=4, num_codes=8, kernel_size=5, freq_layers=2, amp_layers=2,
+    aligner = VqpaeAligner(latent=4, num_codes=8, kernel_size=5, freq_layers=2, amp_layers=2,
                            pose_layers=2, datasets={"lafan human": spec}).eval()
     char = aligner.characters[0]
     feats = RootLocalVelocities().encode(lafan).float().flatten(1)
@@ -278,12 +278,12 @@ def test_vqpae_encoder_and_pose_decoder_match_pytorch(lafan: sa.Motion, fmt: str
 def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str,
                                               tmp_path: Path) -> None:
     from skelagnostic_pcmrl.points import global_to_local, sample_layout
-    from skelagnostic_pcmrl.recon import PcmrlReconstruction
+    from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
     from skelagnostic.core import quaternion as Q
 
     torch.manual_seed(0)
-    aligner = PcmrlReconstruction(num_source_points=64, num_target_points=64, dim=16,
+    aligner = PcmrlReconAligner(num_source_points=64, num_target_points=64, dim=16,
                                   stages=3, point_heads=2, temporal_layers=1,
                                   temporal_heads=2, target="biped22").eval()
     export_aligner(aligner, fmt, tmp_path, "pcmrl")
@@ -311,13 +311,13 @@ def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str,
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
 def test_pcmrl_interpolation_matches_pytorch(lafan: sa.Motion, fmt: str,
                                              tmp_path: Path) -> None:
-    from skelagnostic_pcmrl.interp import InterpolationAligner
+    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
     from skelagnostic_pcmrl.rpa import bone_tails
 
     torch.manual_seed(0)
     metric = lafan.to_metres().to(torch.float32)
     skeleton = metric.skeleton
-    aligner = InterpolationAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=8,
+    aligner = PcmrlInterpAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=8,
                                    skeleton=skeleton.to_dict(), fps=30.0, window=16).eval()
     export_aligner(aligner, fmt, tmp_path, "pcmrl_interp")
     grot, root = metric.global_rotations().float(), metric.root_positions.float()

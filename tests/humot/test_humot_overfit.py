@@ -3,7 +3,7 @@
 ``Trainer(overfit_batches=1)`` trains on one fixed batch; a network that cannot
 reconstruct it to about a centimetre has a bottleneck or a training bug. The
 paper-size network and the CPU presets are slower to get there (see
-``docs/methods/humot.md``, "Overfitting a few windows").
+``docs/reports/humot.md``, "Overfitting a few windows").
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ from skelagnostic_pcmrl.evaluation import (
     format_table,
     reconstruction_protocol,
 )
-from skelagnostic_pcmrl.recon import PcmrlReconstruction
+from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
 import skelagnostic as sa
 from skelagnostic.baselines import name_copy, name_match, primal_match
@@ -70,7 +70,7 @@ def test_baselines_lafan_to_cmu(lafan, shared_data) -> None:
 
 def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
     torch.manual_seed(0)
-    model = PcmrlReconstruction(dim=16, stages=1, target="biped31").eval()
+    model = PcmrlReconAligner(dim=16, stages=1, target="biped31").eval()
     lafan.name = "clip"
     with torch.no_grad():
         out = reconstruction_protocol(model, HeldOut("test", [lafan[:12]]), tmp_path)

@@ -6,7 +6,7 @@ import warnings
 from pathlib import Path
 
 import torch
-from skelagnostic_pcmrl.recon import PcmrlReconstruction
+from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
 from skelagnostic import procedural
 from skelagnostic.cli import app
@@ -54,7 +54,7 @@ def test_tiny_fit_writes_a_checkpoint_that_reloads(pcmrl_pm, pcmrl_tiny, tmp_pat
     assert ckpt.is_file()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = PcmrlReconstruction.load_from_checkpoint(ckpt, map_location="cpu").eval()
+        model = PcmrlReconAligner.load_from_checkpoint(ckpt, map_location="cpu").eval()
     assert model.target_skeleton.joint_names == procedural.skeleton("biped31").joint_names
     assert model.target_units == "cm" and model.window == 12
     source = procedural.generate("biped22", "walk", seconds=1.0, seed=5)[0]

@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import torch
-from skelagnostic_pcmrl.interp_data import CachedClip, Clip, InterpolationDataModule
+from skelagnostic_pcmrl.interp_data import CachedClip, Clip, PcmrlInterpDataModule
 
 
 def test_cached_clips_give_the_windows_of_in_memory_clips(tmp_path: Path) -> None:
-    dm = InterpolationDataModule(fps=20, window=32, stride=16, batch_size=4, samples_per_epoch=12,
+    dm = PcmrlInterpDataModule(fps=20, window=32, stride=16, batch_size=4, samples_per_epoch=12,
                                  mirror=True, procedural_kind="biped31", procedural_clips=1,
                                  cache_dir=tmp_path)
     dm.prepare_data()

@@ -9,8 +9,8 @@ import lightning as L
 import pytest
 import torch
 from skelagnostic_pcmrl.evaluation import interpolation_protocol
-from skelagnostic_pcmrl.interp import InterpolationAligner
-from skelagnostic_pcmrl.interp_data import InterpolationDataModule
+from skelagnostic_pcmrl.interp import PcmrlInterpAligner
+from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
 from skelagnostic_pcmrl.interp_eval import evaluate, format_table, position_stats, windows
 
 from skelagnostic import Motion, procedural
@@ -59,8 +59,8 @@ def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
 
 def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
     L.seed_everything(0)
-    dm = InterpolationDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=8)
-    model = InterpolationAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=16,
+    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=8)
+    model = PcmrlInterpAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=16,
                                  warmup_steps=1)
     trainer = L.Trainer(max_steps=2, accelerator="cpu", logger=False, default_root_dir=tmp_path,
                         enable_progress_bar=False, enable_model_summary=False,

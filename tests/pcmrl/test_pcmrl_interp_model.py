@@ -10,13 +10,13 @@ import lightning as L
 import pytest
 import torch
 from skelagnostic_pcmrl.interp import (
-    InterpolationAligner,
+    PcmrlInterpAligner,
     key_brackets,
     lerp_keys,
     slerp_keys,
 )
 from skelagnostic_pcmrl.interp_data import (
-    InterpolationDataModule,
+    PcmrlInterpDataModule,
     gap_keys,
     random_keys,
     regular_keys,
@@ -36,10 +36,10 @@ def _motion(seconds: float = 2.0, fps: float = 30.0, seed: int = 0) -> Motion:
     return motion.convert_units("m")
 
 
-def _tiny(residual: bool = False, window: int = 32, **options: object) -> InterpolationAligner:
+def _tiny(residual: bool = False, window: int = 32, **options: object) -> PcmrlInterpAligner:
     torch.manual_seed(0)
     skel = procedural.skeleton("biped31").scaled(0.01)
-    return InterpolationAligner(**TINY, residual=residual, skeleton=skel.to_dict(), fps=30.0,
+    return PcmrlInterpAligner(**TINY, residual=residual, skeleton=skel.to_dict(), fps=30.0,
                                 window=window, **options).eval()
 
 
@@ -121,10 +121,10 @@ def test_regular_keys_have_one_gap_per_window_and_a_random_phase() -> None:
 
 def test_key_mode_is_checked_and_used_by_the_training_windows() -> None:
     with pytest.raises(SkelagnosticError, match="key_mode"):
-        InterpolationDataModule(key_mode="every")
+        PcmrlInterpDataModule(key_mode="every")
     with pytest.raises(SkelagnosticError, match="min_gap"):
-        InterpolationDataModule(key_mode="regular", min_gap=10, max_gap=5)
-    dm = InterpolationDataModule(fps=30, window=64, batch_size=4, samples_per_epoch=16,
+        PcmrlInterpDataModule(key_mode="regular", min_gap=10, max_gap=5)
+    dm = PcmrlInterpDataModule(fps=30, window=64, batch_size=4, samples_per_epoch=16,
                                  key_mode="regular", min_gap=7, max_gap=7, rpa_prob=0.0)
     dm.setup("fit")
     for item in (dm.train_set[i] for i in range(16)):
@@ -186,7 +186,7 @@ def test_interpolate_rejects_bad_input() -> None:
     with pytest.raises(MotionError, match="hierarchy"):
         model.interpolate(other, [0, other.num_frames - 1])
     with pytest.raises(SkelagnosticError, match="no skeleton"):
-        InterpolationAligner(**TINY).interpolate(motion, [0, 30])
+        PcmrlInterpAligner(**TINY).interpolate(motion, [0, 30])
 
 
 def test_datamodule_checks_units_and_hierarchy(tmp_path: Path) -> None:
@@ -196,11 +196,11 @@ def test_datamodule_checks_units_and_hierarchy(tmp_path: Path) -> None:
         def load(self, clip):  # type: ignore[no-untyped-def]
             return self._generate()[clip.id]  # centimetres, not converted
 
-    dm = InterpolationDataModule(sources=[_Raw(kinds=("biped31",), gaits=("walk",))],
+    dm = PcmrlInterpDataModule(sources=[_Raw(kinds=("biped31",), gaits=("walk",))],
                                  window=32)
     with pytest.raises(SkelagnosticError, match="metres"):
         dm.setup("fit")
-    dm = InterpolationDataModule(sources=[ProceduralSource(kinds=("biped31", "biped22"),
+    dm = PcmrlInterpDataModule(sources=[ProceduralSource(kinds=("biped31", "biped22"),
                                                            gaits=("walk",))], window=32)
     with pytest.raises(SkelagnosticError, match="hierarchy"):
         dm.setup("fit")
@@ -208,9 +208,9 @@ def test_datamodule_checks_units_and_hierarchy(tmp_path: Path) -> None:
 
 def test_fit_a_few_steps_and_reload(tmp_path: Path) -> None:
     L.seed_everything(0)
-    dm = InterpolationDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
+    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
                                  min_keys=3, max_keys=8, rpa_prob=1.0, test_fraction=0.25)
-    model = InterpolationAligner(**TINY, lr=1e-3, warmup_steps=2)
+    model = PcmrlInterpAligner(**TINY, lr=1e-3, warmup_steps=2)
     trainer = L.Trainer(max_epochs=2, accelerator="cpu", logger=False,
                         default_root_dir=tmp_path, enable_progress_bar=False,
                         enable_model_summary=False)
@@ -220,7 +220,7 @@ def test_fit_a_few_steps_and_reload(tmp_path: Path) -> None:
     assert model.hparams.skeleton is not None and model.hparams.window == 32
     ckpt = tmp_path / "model.ckpt"
     trainer.save_checkpoint(ckpt)
-    loaded = InterpolationAligner.load_from_checkpoint(ckpt, map_location="cpu").eval()
+    loaded = PcmrlInterpAligner.load_from_checkpoint(ckpt, map_location="cpu").eval()
     model.eval()
     motion = dm.clips["val"][0]
     clip = Motion(dm.skeleton, _local(motion), motion.root, 30.0)[:40]
@@ -239,9 +239,9 @@ def test_ema_averages_the_network_built_from_the_data(tmp_path: Path) -> None:
     from skelagnostic.callbacks import EMAWeights
 
     L.seed_everything(0)
-    dm = InterpolationDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
+    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
                                  min_keys=3, max_keys=8, val_fraction=0.0)
-    model = InterpolationAligner(**TINY, residual=True, lr=1e-2, warmup_steps=1)
+    model = PcmrlInterpAligner(**TINY, residual=True, lr=1e-2, warmup_steps=1)
     trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, limit_val_batches=0,
                         default_root_dir=tmp_path, enable_progress_bar=False,
                         enable_model_summary=False,
@@ -254,7 +254,7 @@ def test_ema_averages_the_network_built_from_the_data(tmp_path: Path) -> None:
     net_keys = [k for k in raw if k.startswith("net.")]
     assert net_keys and set(net_keys) <= set(averaged)
     assert any(not torch.equal(averaged[k], raw[k]) for k in net_keys)
-    loaded = InterpolationAligner.load_from_checkpoint(ckpt_path, map_location="cpu")
+    loaded = PcmrlInterpAligner.load_from_checkpoint(ckpt_path, map_location="cpu")
     assert torch.equal(loaded.state_dict()["net.head.weight"], averaged["net.head.weight"])
 
 
@@ -267,11 +267,11 @@ def _local(clip) -> torch.Tensor:  # type: ignore[no-untyped-def]
 def test_training_reduces_the_loss() -> None:
     """A few dozen steps on one batch must fit it better than the start (not a no-op)."""
     torch.manual_seed(0)
-    dm = InterpolationDataModule(fps=30, window=32, batch_size=8, samples_per_epoch=8,
+    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=8, samples_per_epoch=8,
                                  rpa_prob=0.0)
     dm.setup("fit")
     batch = next(iter(dm.train_dataloader()))
-    model = InterpolationAligner(**TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32)
+    model = PcmrlInterpAligner(**TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32)
     opt = torch.optim.AdamW(model.parameters(), lr=3e-3)
     first = model._losses(batch)[0].item()
     for _ in range(40):
@@ -327,21 +327,21 @@ def test_window_heading_is_equivariant_and_needs_left_and_right() -> None:
     assert torch.allclose(same, Q.identity(1, dtype=same.dtype))
 
 
-def _reloaded(model: InterpolationAligner, tmp_path: Path) -> InterpolationAligner:
+def _reloaded(model: PcmrlInterpAligner, tmp_path: Path) -> PcmrlInterpAligner:
     """``model`` saved as a Lightning checkpoint and loaded back."""
     trainer = L.Trainer(accelerator="cpu", logger=False, default_root_dir=tmp_path,
                         enable_progress_bar=False, enable_model_summary=False)
     trainer.strategy.connect(model)
     ckpt = tmp_path / "model.ckpt"
     trainer.save_checkpoint(ckpt)
-    return InterpolationAligner.load_from_checkpoint(ckpt).eval()
+    return PcmrlInterpAligner.load_from_checkpoint(ckpt).eval()
 
 
 def test_canonical_heading_is_saved_with_the_checkpoint(tmp_path: Path) -> None:
     assert _tiny().hparams.canonical_heading is False  # the default (paper)
     torch.manual_seed(0)
     skel = procedural.skeleton("biped31").scaled(0.01)
-    model = InterpolationAligner(**TINY, canonical_heading=True, skeleton=skel.to_dict(),
+    model = PcmrlInterpAligner(**TINY, canonical_heading=True, skeleton=skel.to_dict(),
                                  fps=30.0, window=32).eval()
     loaded = _reloaded(model, tmp_path)
     assert loaded.hparams.canonical_heading is True

@@ -6,7 +6,7 @@ import pytest
 import torch
 from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder, VectorAttention
 from skelagnostic_pcmrl.points import ZeroLengthBoneWarning, sample_layout
-from skelagnostic_pcmrl.recon import PcmrlReconstruction, end_effector_pairs
+from skelagnostic_pcmrl.recon import PcmrlReconAligner, end_effector_pairs
 
 import skelagnostic as sa
 from skelagnostic import procedural
@@ -15,10 +15,10 @@ from skelagnostic.errors import SkelagnosticError
 
 
 @pytest.fixture
-def model(pcmrl_tiny) -> PcmrlReconstruction:
+def model(pcmrl_tiny) -> PcmrlReconAligner:
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning, match="LHipJoint, RHipJoint, LowerBack"):
-        return PcmrlReconstruction(target="biped31", chunk=16, **pcmrl_tiny).eval()
+        return PcmrlReconAligner(target="biped31", chunk=16, **pcmrl_tiny).eval()
 
 
 def test_paper_sized_encoder_pools_256_points_to_one_1024_vector() -> None:
@@ -138,7 +138,7 @@ def test_reconstruction_outputs_unit_quaternions_and_consistent_positions(model)
 def test_without_canonical_yaw_the_untrained_network_stands_in_the_rest_pose(pcmrl_tiny) -> None:
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning):
-        model = PcmrlReconstruction(target="biped31", canonical_yaw=False, **pcmrl_tiny).eval()
+        model = PcmrlReconAligner(target="biped31", canonical_yaw=False, **pcmrl_tiny).eval()
     motion = procedural.generate("biped22", "walk", seconds=0.5)[0].convert_units("m")
     layout = sample_layout(motion.skeleton, 64, 0.05, batch=(1,))
     pts = layout.points(motion.global_rotations().float()[None],
@@ -164,7 +164,7 @@ def test_canonical_yaw_makes_the_reconstruction_heading_equivariant(model, pcmrl
     assert torch.allclose(b, expected, atol=1e-3)
     # without it the untrained network is not equivariant
     with pytest.warns(ZeroLengthBoneWarning):
-        plain = PcmrlReconstruction(target="biped31", canonical_yaw=False, chunk=16,
+        plain = PcmrlReconAligner(target="biped31", canonical_yaw=False, chunk=16,
                                     **pcmrl_tiny).eval()
     plain.load_state_dict(model.state_dict())
     a = plain.retarget(motion, model.target_skeleton).global_positions().float()
@@ -191,7 +191,7 @@ def test_centre_up_makes_the_reconstruction_independent_of_the_floor_height(
     assert torch.allclose(zb.extras["centre"], za.extras["centre"] + lift, atol=1e-4)
     # without it the encoder sees another cloud
     with pytest.warns(ZeroLengthBoneWarning):
-        plain = PcmrlReconstruction(target="biped31", centre_up=False, chunk=16,
+        plain = PcmrlReconAligner(target="biped31", centre_up=False, chunk=16,
                                     **pcmrl_tiny).eval()
     plain.load_state_dict(model.state_dict())
     za, zb = plain.encode(motion), plain.encode(raised)
@@ -212,7 +212,7 @@ def test_checkpoints_from_before_canonical_yaw_and_centre_up_load_without_them(
         del ckpt["hyper_parameters"][option]
     torch.save(ckpt, path)
     with pytest.warns(ZeroLengthBoneWarning):
-        old = PcmrlReconstruction.load_from_checkpoint(path)
+        old = PcmrlReconAligner.load_from_checkpoint(path)
     assert old.hparams.canonical_yaw is False and old.hparams.centre_up is False
 
 
@@ -239,7 +239,7 @@ def test_retarget_between_real_skeletons(lafan_clip, shared_data, pcmrl_tiny) ->
     cmu = shared_data / "human" / "cmu" / "131_01.bvh"
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning, match="lowerback"):
-        model = PcmrlReconstruction(target=str(cmu), target_units="cmu", chunk=16,
+        model = PcmrlReconAligner(target=str(cmu), target_units="cmu", chunk=16,
                                     **pcmrl_tiny).eval()
     source = sa.read_bvh(lafan_clip)[:40]
     target = sa.read_bvh(cmu).skeleton
@@ -260,9 +260,9 @@ def test_wrong_target_and_stage_are_clear_errors(model, pcmrl_tiny) -> None:
     with pytest.raises(SkelagnosticError, match="trained target"):
         model.decode(latent, procedural.skeleton("biped17"))
     with pytest.raises(SkelagnosticError, match="pcmrl_interp"):
-        PcmrlReconstruction(stage="interpolation")
+        PcmrlReconAligner(stage="interpolation")
     with pytest.raises(SkelagnosticError, match="no target skeleton"):
-        PcmrlReconstruction(**pcmrl_tiny).heads(torch.zeros(1, 2, 32))
+        PcmrlReconAligner(**pcmrl_tiny).heads(torch.zeros(1, 2, 32))
 
 
 def test_a_few_steps_reduce_the_knn_loss(model) -> None:

@@ -32,12 +32,12 @@ SMALL, LARGE = 2, 25
 
 #: data module -> (import path, keyword arguments besides sources and cache_dir)
 MODULES: dict[str, tuple[str, dict[str, Any]]] = {
-    "vqpae": ("skelagnostic_vqpae.data:VQPAEDataModule",
+    "vqpae": ("skelagnostic_vqpae.data:VqpaeDataModule",
               {"fps": 30, "stride": 1, "batch_size": 32}),
     "humot": ("skelagnostic_humot.data:HumotDataModule", {"batch_size": 32}),
     "pcmrl_recon": ("skelagnostic_pcmrl.recon_data:PcmrlReconDataModule",
                     {"batch_size": 8, "target": "biped31"}),
-    "pcmrl_interp": ("skelagnostic_pcmrl.interp_data:InterpolationDataModule",
+    "pcmrl_interp": ("skelagnostic_pcmrl.interp_data:PcmrlInterpDataModule",
                      {"batch_size": 16}),
 }
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import lightning as L
 import pytest
 import torch
-from skelagnostic_vqpae.aligner import VQPAEAligner
-from skelagnostic_vqpae.data import VQPAEDataModule
+from skelagnostic_vqpae.aligner import VqpaeAligner
+from skelagnostic_vqpae.data import VqpaeDataModule
 
 from skelagnostic import procedural
 from skelagnostic.errors import SkelagnosticError
@@ -29,7 +29,7 @@ def test_short_training_lowers_the_reconstruction_loss(trained: dict) -> None:
 
 
 def test_networks_per_dataset_and_one_codebook(trained: dict) -> None:
-    model: VQPAEAligner = trained["model"]
+    model: VqpaeAligner = trained["model"]
     assert model.dataset_names == ["procedural/biped22", "procedural/quadruped"]
     assert model.codebook is not None and model.codebook.weight.shape == (8, 20)
     assert model.characters[0].pae.channels == 66 and model.characters[1].pae.channels == 63
@@ -52,7 +52,7 @@ def test_fit_writes_metrics_and_the_manifold_pictures(trained: dict) -> None:
     assert set(train) == {"usage", "overlap", "per_dataset", "codes_used"}
     assert 0.0 < train["usage"] <= 1.0
     # the written overlap is the metric of the validation clips' codes, recomputed here
-    model: VQPAEAligner = trained["model"]
+    model: VqpaeAligner = trained["model"]
     embeddings = model.embed_windows(trained["dm"].datasets["val"], FPS)
     for name in names:
         codes = torch.cat([e.code for e in embeddings[name]])
@@ -66,8 +66,8 @@ def test_fit_writes_metrics_and_the_manifold_pictures(trained: dict) -> None:
 
 
 def test_checkpoint_round_trip_encodes_identically(trained: dict) -> None:
-    model: VQPAEAligner = trained["model"]
-    loaded = VQPAEAligner.load_from_checkpoint(trained["ckpt"])
+    model: VqpaeAligner = trained["model"]
+    loaded = VqpaeAligner.load_from_checkpoint(trained["ckpt"])
     motion, _ = procedural.generate("quadruped", "trot", seconds=2.0, fps=30, seed=5)
     a, b = model.encode(motion), loaded.encode(motion)
     assert torch.equal(a.z, b.z)
@@ -81,21 +81,21 @@ def test_checkpoint_without_new_options_loads_with_the_papers_settings(
     ckpt["hyper_parameters"]["frequency_head"] = "centroid_residual"
     newer = tmp_path / "newer.ckpt"
     torch.save(ckpt, newer)
-    loaded = VQPAEAligner.load_from_checkpoint(newer)  # a saved option wins
+    loaded = VqpaeAligner.load_from_checkpoint(newer)  # a saved option wins
     assert all(char.pae.frequency_head == "centroid_residual" for char in loaded.characters)
     assert loaded.hparams["lambda_phase_rate"] == ckpt["hyper_parameters"]["lambda_phase_rate"]
     del ckpt["hyper_parameters"]["frequency_head"]
     del ckpt["hyper_parameters"]["lambda_phase_rate"]
     old = tmp_path / "old.ckpt"
     torch.save(ckpt, old)
-    loaded = VQPAEAligner.load_from_checkpoint(old)
+    loaded = VqpaeAligner.load_from_checkpoint(old)
     assert loaded.hparams["frequency_head"] == "mlp"
     assert all(char.pae.frequency_head == "mlp" for char in loaded.characters)
     assert loaded.hparams["lambda_phase_rate"] == 0.0  # trained without the phase-rate loss
 
 
 def test_encode_gives_one_embedding_per_frame(trained: dict) -> None:
-    model: VQPAEAligner = trained["model"]
+    model: VqpaeAligner = trained["model"]
     motion, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=40, seed=3)
     latent = model.encode(motion)
     frames = 2 * FPS + 1  # resampled to the dataset frame rate
@@ -108,7 +108,7 @@ def test_encode_gives_one_embedding_per_frame(trained: dict) -> None:
 
 
 def test_decode_gives_the_average_pose_on_the_skeleton(trained: dict) -> None:
-    model: VQPAEAligner = trained["model"]
+    model: VqpaeAligner = trained["model"]
     motion, _ = procedural.generate("quadruped", "trot", seconds=1.0, fps=FPS, seed=2)
     out = model.decode(model.encode(motion), motion.skeleton)
     assert out.skeleton is motion.skeleton
@@ -123,7 +123,7 @@ def test_unknown_skeleton_is_rejected(trained: dict) -> None:
 
 
 def test_untrained_pose_mlp_cannot_decode(trained: dict) -> None:
-    loaded = VQPAEAligner.load_from_checkpoint(trained["ckpt"])
+    loaded = VqpaeAligner.load_from_checkpoint(trained["ckpt"])
     for char in loaded.characters:
         char.pose_fitted.fill_(False)
     motion, _ = procedural.generate("biped22", "walk", seconds=1.0, fps=FPS, seed=1)
@@ -134,7 +134,7 @@ def test_untrained_pose_mlp_cannot_decode(trained: dict) -> None:
 def test_reinit_switch_off_keeps_codebook_usage_untracked(cache_dir: Path, tmp_path: Path,
                                                            helpers: dict) -> None:
     L.seed_everything(0, verbose=False)
-    model = VQPAEAligner(num_codes=8, kernel_size=7, reinit=False, pose_mlp="none")
+    model = VqpaeAligner(num_codes=8, kernel_size=7, reinit=False, pose_mlp="none")
     helpers["trainer"](tmp_path, 3).fit(model, datamodule=helpers["datamodule"](cache_dir))
     assert model.codebook is not None
     assert float(model.codebook.usage.abs().sum()) == 0.0
@@ -145,7 +145,7 @@ def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
     import numpy as np
 
     L.seed_everything(0, verbose=False)
-    model = VQPAEAligner(num_codes=8, kernel_size=7, pose_mlp="none", lambda_phase_rate=1.0)
+    model = VqpaeAligner(num_codes=8, kernel_size=7, pose_mlp="none", lambda_phase_rate=1.0)
     dm = helpers["datamodule"](cache_dir)
     trainer = helpers["trainer"](tmp_path, 2, validate=False)
     trainer.fit(model, datamodule=dm)
@@ -197,7 +197,7 @@ def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
 
 def test_phase_rate_loss_without_partner_windows_is_a_clear_error(
         cache_dir: Path, tmp_path: Path, helpers: dict) -> None:
-    model = VQPAEAligner(num_codes=8, kernel_size=7, pose_mlp="none", lambda_phase_rate=1.0)
+    model = VqpaeAligner(num_codes=8, kernel_size=7, pose_mlp="none", lambda_phase_rate=1.0)
     dm = helpers["datamodule"](cache_dir)
     dm.pair_seconds, dm.pair_shift = 0.0, 0
     with pytest.raises(SkelagnosticError, match=r"data\.pair_seconds > 0"):
@@ -206,15 +206,15 @@ def test_phase_rate_loss_without_partner_windows_is_a_clear_error(
 
 def test_bad_options_are_rejected() -> None:
     with pytest.raises(SkelagnosticError, match="lambda_phase_rate"):
-        VQPAEAligner(lambda_phase_rate=-1.0)
+        VqpaeAligner(lambda_phase_rate=-1.0)
     with pytest.raises(SkelagnosticError, match="phase_rate_grad"):
-        VQPAEAligner(phase_rate_grad="decoder")
+        VqpaeAligner(phase_rate_grad="decoder")
     with pytest.raises(SkelagnosticError, match="pose_mlp"):
-        VQPAEAligner(pose_mlp="sometimes")
+        VqpaeAligner(pose_mlp="sometimes")
     with pytest.raises(SkelagnosticError, match="num_codes"):
-        VQPAEAligner(num_codes=0)
+        VqpaeAligner(num_codes=0)
     with pytest.raises(SkelagnosticError, match="no datasets yet"):
-        VQPAEAligner().forward_dataset(0, torch.zeros(1, 3, 5))
+        VqpaeAligner().forward_dataset(0, torch.zeros(1, 3, 5))
 
 
 def test_cli_run_with_the_registered_plugin(vqpae_pm, tmp_path: Path, cache_dir: Path) -> None:
@@ -260,7 +260,7 @@ def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, sourc
                    plugin_manager=vqpae_pm).model.lambda_phase_rate == 1.0
     if Path(str(cfg.data.get("root", cfg.data.get("human_root")))).exists():
         dm = build_datamodule(cfg, vqpae_pm)
-        assert isinstance(dm, VQPAEDataModule) and dm.window == 61 and dm.pair_shift == 0
+        assert isinstance(dm, VqpaeDataModule) and dm.window == 61 and dm.pair_shift == 0
 
 
 def test_fit_without_data_uses_procedural_biped_and_quadruped(vqpae_pm) -> None:
@@ -272,7 +272,7 @@ def test_fit_without_data_uses_procedural_biped_and_quadruped(vqpae_pm) -> None:
     assert cfg.data.fps == 60 and cfg.data.window_seconds == 1.0 and cfg.data.stride == 1
     assert cfg.model.padding_mode == "replicate" and cfg.model.center_windows
     dm = build_datamodule(cfg, vqpae_pm)
-    assert isinstance(dm, VQPAEDataModule) and dm.window == 61 and dm.stride == 1
+    assert isinstance(dm, VqpaeDataModule) and dm.window == 61 and dm.stride == 1
     override = compose(["model=vqpae", "run_dir=/tmp/unused", "data.fps=30"],
                        plugin_manager=vqpae_pm)
     assert override.data.fps == 30

@@ -11,7 +11,7 @@ from skelagnostic_vqpae.data import (
     CachedFrameWindows,
     FrameWindows,
     MultiSource,
-    VQPAEDataModule,
+    VqpaeDataModule,
     human_dog_source,
 )
 
@@ -22,10 +22,10 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import RootLocalVelocities
 
 
-def _dm(cache_dir: Path, **kwargs: object) -> VQPAEDataModule:
+def _dm(cache_dir: Path, **kwargs: object) -> VqpaeDataModule:
     src = ProceduralSource(kinds=["biped22", "quadruped"], gaits=["walk"], clips_per_gait=2,
                            seconds=2.0)
-    dm = VQPAEDataModule(src, fps=20, batch_size=4, cache_dir=cache_dir, **kwargs)
+    dm = VqpaeDataModule(src, fps=20, batch_size=4, cache_dir=cache_dir, **kwargs)
     dm.prepare_data()
     dm.setup()
     return dm
@@ -76,7 +76,7 @@ def test_only_training_windows_carry_partners(cache_dir: Path) -> None:
     assert all("shifted" not in b for b in val.values() if b is not None)
     assert _dm(cache_dir, pair_seconds=0.0).pair_shift == 0
     with pytest.raises(SkelagnosticError, match="pair_seconds"):
-        VQPAEDataModule(pair_seconds=-1.0, cache_dir=cache_dir)
+        VqpaeDataModule(pair_seconds=-1.0, cache_dir=cache_dir)
 
 
 def test_one_second_windows_and_channels(cache_dir: Path) -> None:
@@ -92,9 +92,9 @@ def test_one_second_windows_and_channels(cache_dir: Path) -> None:
 
 def test_even_window_is_rejected(cache_dir: Path) -> None:
     with pytest.raises(SkelagnosticError, match=r"data\.window must be odd"):
-        VQPAEDataModule(window=20, window_seconds=None, cache_dir=cache_dir)
+        VqpaeDataModule(window=20, window_seconds=None, cache_dir=cache_dir)
     with pytest.raises(SkelagnosticError, match="window_seconds"):
-        VQPAEDataModule(window_seconds=0.0, cache_dir=cache_dir)
+        VqpaeDataModule(window_seconds=0.0, cache_dir=cache_dir)
 
 
 def test_features_are_z_scored_per_channel(cache_dir: Path) -> None:
@@ -128,7 +128,7 @@ class _ConstantChannel(ClipSource):
 
 
 def test_zero_variance_channels_give_no_nan(cache_dir: Path) -> None:
-    dm = VQPAEDataModule(_ConstantChannel(), fps=20, batch_size=4, cache_dir=cache_dir,
+    dm = VqpaeDataModule(_ConstantChannel(), fps=20, batch_size=4, cache_dir=cache_dir,
                          val_fraction=0.0)
     dm.prepare_data()
     dm.setup()
@@ -147,7 +147,7 @@ def test_multisource_gives_one_dataset_per_part(cache_dir: Path) -> None:
                          name="a")
     b = ProceduralSource(kinds=["biped22"], gaits=["run"], clips_per_gait=1, seconds=2.0,
                          name="b")
-    dm = VQPAEDataModule(MultiSource([a, b]), fps=20, cache_dir=cache_dir, val_fraction=0.0)
+    dm = VqpaeDataModule(MultiSource([a, b]), fps=20, cache_dir=cache_dir, val_fraction=0.0)
     dm.prepare_data()
     dm.setup()
     assert dm.dataset_names == ["a", "b"]  # same topology, still two datasets
@@ -178,7 +178,7 @@ def test_nearly_constant_channels_are_floored(cache_dir: Path) -> None:
             raised = raised or bool((got.std > ref.std).any())
     assert raised  # the floor does bite on these clips
     with pytest.raises(SkelagnosticError, match="std_floor"):
-        VQPAEDataModule(std_floor=1.5, cache_dir=cache_dir)
+        VqpaeDataModule(std_floor=1.5, cache_dir=cache_dir)
 
 
 def test_streamed_windows_and_statistics_match_the_in_memory_ones(cache_dir: Path) -> None:

@@ -46,9 +46,9 @@ def test_load_rejects_other_npz(tmp_path: Path) -> None:
 
 
 def test_fit_average_pose_lowers_the_pose_loss(trained: dict) -> None:
-    from skelagnostic_vqpae.aligner import VQPAEAligner
+    from skelagnostic_vqpae.aligner import VqpaeAligner
 
-    model = VQPAEAligner.load_from_checkpoint(trained["ckpt"])
+    model = VqpaeAligner.load_from_checkpoint(trained["ckpt"])
     for char in model.characters:  # start the pose MLPs over, then fit them post hoc
         for p in char.pose.parameters():
             torch.nn.init.normal_(p, std=0.1)

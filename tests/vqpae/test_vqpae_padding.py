@@ -78,7 +78,7 @@ def _train_quadruped(steps: int, **options: str) -> tuple[float, float, dict[str
     for _ in range(steps):
         x = windows[torch.randint(len(windows), (32,), generator=gen)]
         rec, params = net(x, book.quantizer(0))
-        centred = x - x.mean(-1, keepdim=True)  # VQPAEAligner(center_windows=True)
+        centred = x - x.mean(-1, keepdim=True)  # VqpaeAligner(center_windows=True)
         loss = torch.nn.functional.mse_loss(rec - rec.mean(-1, keepdim=True), centred)
         loss = loss + params.vq_loss
         opt.zero_grad()

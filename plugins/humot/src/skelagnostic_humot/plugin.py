@@ -21,7 +21,7 @@ CONFIG_PACKAGE = "skelagnostic_humot.conf"
 #: paper-size network (one batch of 18 chunks per topology; a step of 64 chunks costs
 #: ~0.4 TFLOP). Ten steps show that the pipeline runs end to end (checkpoint, metrics,
 #: rendered retargeting), not a trained model: ``experiment=humot_quick`` is the CPU
-#: configuration that learns (docs/methods/humot.md, "Status and results").
+#: configuration that learns (docs/reports/humot.md).
 DEFAULT_DATA: dict[str, Any] = {
     "source": "procedural",
     "kinds": ["biped22", "biped31", "biped17"],

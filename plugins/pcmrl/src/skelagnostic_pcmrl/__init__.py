@@ -20,18 +20,27 @@ from typing import TYPE_CHECKING
 from skelagnostic.lazy import lazy_exports
 from skelagnostic.version import distribution_version
 
-__all__ = ["PcmrlReconDataModule", "PcmrlReconstruction"]
+__all__ = [
+    "PcmrlInterpAligner",
+    "PcmrlInterpDataModule",
+    "PcmrlReconAligner",
+    "PcmrlReconDataModule",
+]
 #: Version of the distribution that ships this plugin (built-in: skelagnostic's).
 __version__ = distribution_version("skelagnostic")
 
 __getattr__, __dir__ = lazy_exports(
     __name__,
     {
+        "PcmrlInterpAligner": "skelagnostic_pcmrl.interp_aligner",
+        "PcmrlInterpDataModule": "skelagnostic_pcmrl.interp_data",
         "PcmrlReconDataModule": "skelagnostic_pcmrl.recon_data",
-        "PcmrlReconstruction": "skelagnostic_pcmrl.recon",
+        "PcmrlReconAligner": "skelagnostic_pcmrl.recon",
     },
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from skelagnostic_pcmrl.recon import PcmrlReconstruction
+    from skelagnostic_pcmrl.interp_aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
+    from skelagnostic_pcmrl.recon import PcmrlReconAligner
     from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule

@@ -127,7 +127,7 @@ def evaluate_clips(
     Args:
         clips: Source motions.
         target: Target skeleton (its own units).
-        aligner: A trained :class:`~skelagnostic_pcmrl.recon.PcmrlReconstruction`, or ``None``.
+        aligner: A trained :class:`~skelagnostic_pcmrl.recon.PcmrlReconAligner`, or ``None``.
         baselines: Also compute the ``original`` and :data:`BASELINES` rows.
         **options: Passed to :func:`evaluate_pair` (``sigmas``, ``num_points``, ``k``,
             ``seed``, ``stride``).

@@ -27,7 +27,7 @@ skeleton. It follows CITL (Mo et al., CVPR 2023) with PC-MRL's changes:
   sign-continuous target can differ from a prediction by a global sign after a
   fast spin), AdamW with linear warm-up.
 
-:class:`InterpolationAligner` wraps it as an :class:`~skelagnostic.aligners.Aligner`
+:class:`PcmrlInterpAligner` wraps it as an :class:`~skelagnostic.aligners.Aligner`
 with ``interpolate(motion, keyframes)``. :data:`INTERP_CONFIG` holds the authors'
 settings; ``experiment=pcmrl_interp_cpu`` a smaller CPU configuration.
 """
@@ -37,7 +37,8 @@ from __future__ import annotations
 from typing import Any
 
 from skelagnostic.core.kinematics import fk_from_global, global_from_local, local_from_global
-from skelagnostic_pcmrl.interp_aligner import InterpolationAligner
+from skelagnostic.lazy import deprecated_aliases
+from skelagnostic_pcmrl.interp_aligner import PcmrlInterpAligner
 from skelagnostic_pcmrl.interp_keyframes import (
     key_brackets,
     lerp_baseline,
@@ -54,7 +55,7 @@ __all__ = [
     "INTERP_DATA_DEFAULTS",
     "INTERP_DATA_OPTIONS",
     "CITLInterpolator",
-    "InterpolationAligner",
+    "PcmrlInterpAligner",
     "fk_from_global",
     "global_from_local",
     "key_brackets",
@@ -99,7 +100,7 @@ INTERP_DATA_DEFAULTS: dict[str, Any] = {
     "seconds": 8.0,
 }
 
-#: Data-module keys of :class:`~skelagnostic_pcmrl.interp_data.InterpolationDataModule`.
+#: Data-module keys of :class:`~skelagnostic_pcmrl.interp_data.PcmrlInterpDataModule`.
 INTERP_DATA_OPTIONS: dict[str, Any] = {
     "fps": 30.0,
     "window": 128,
@@ -121,3 +122,7 @@ INTERP_DATA_OPTIONS: dict[str, Any] = {
     "seed": 0,
     "num_workers": 0,
 }
+
+
+#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
+__getattr__ = deprecated_aliases(__name__, {"InterpolationAligner": "PcmrlInterpAligner"})

@@ -1,4 +1,4 @@
-"""PC-MRL stage 2: :class:`InterpolationAligner`, the interpolation model as an aligner.
+"""PC-MRL stage 2: :class:`PcmrlInterpAligner`, the interpolation model as an aligner.
 
 Training and validation steps, the loss, ``interpolate(motion, keyframes)``
 and the export graphs. See :mod:`~skelagnostic_pcmrl.interp` for the model as
@@ -23,6 +23,7 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import MotionError, SkelagnosticError
 from skelagnostic.export import ExportGraph, Method
+from skelagnostic.lazy import deprecated_aliases
 from skelagnostic_pcmrl.interp_keyframes import sign_invariant_l1, window_features, window_heading
 from skelagnostic_pcmrl.interp_network import CITLInterpolator
 from skelagnostic_pcmrl.points import group_of_joints
@@ -31,12 +32,12 @@ from skelagnostic_pcmrl.rpa import bone_tails
 log = logging.getLogger(__name__)
 
 
-class InterpolationAligner(Aligner):
+class PcmrlInterpAligner(Aligner):
     """PC-MRL's interpolation model on one target skeleton (capability ``"interpolate"``).
 
     The network is built in :meth:`setup` from the data module's target skeleton
     (or from ``skeleton=`` / a checkpoint). Training batches come from
-    :class:`~skelagnostic_pcmrl.interp_data.InterpolationDataModule`.
+    :class:`~skelagnostic_pcmrl.interp_data.PcmrlInterpDataModule`.
 
     Args:
         dim: Transformer width (paper 512).
@@ -217,7 +218,7 @@ class InterpolationAligner(Aligner):
     def _require_net(self) -> CITLInterpolator:
         if self.net is None:
             raise SkelagnosticError(
-                "InterpolationAligner has no skeleton yet: train it, load a checkpoint or pass "
+                "PcmrlInterpAligner has no skeleton yet: train it, load a checkpoint or pass "
                 "skeleton="
             )
         return self.net
@@ -255,7 +256,7 @@ class InterpolationAligner(Aligner):
 
         Args:
             batch: ``global_rotations``, ``root``, ``offsets``, ``tails`` and ``keys``
-                as :class:`~skelagnostic_pcmrl.interp_data.InterpolationDataModule` yields.
+                as :class:`~skelagnostic_pcmrl.interp_data.PcmrlInterpDataModule` yields.
 
         Returns:
             ``(feats, pred, positions)``: :meth:`features` (targets included), the
@@ -448,7 +449,7 @@ class InterpolationAligner(Aligner):
                     "postprocess": (
                         "local rotations: inverse(parent global) * global; clips longer than "
                         "training_window: cut at keyframes into chained windows sharing their "
-                        "boundary key, as InterpolationAligner.interpolate does"
+                        "boundary key, as PcmrlInterpAligner.interpolate does"
                     ),
                 },
             )
@@ -565,3 +566,7 @@ class InterpolationAligner(Aligner):
         grot = Q.mul(latent.z, latent.extras["q0"])
         local = local_from_global(grot, skeleton.parents)
         return Motion(skeleton, local, latent.extras["root"], latent.fps)
+
+
+#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
+__getattr__ = deprecated_aliases(__name__, {"InterpolationAligner": "PcmrlInterpAligner"})

@@ -1,6 +1,6 @@
 """Training data of PC-MRL's interpolation model (Sec. 3.4, Sec. 4.3 protocol).
 
-:class:`InterpolationDataModule` holds motions of ONE target skeleton topology
+:class:`PcmrlInterpDataModule` holds motions of ONE target skeleton topology
 (for PC-MRL: the stage-1 reconstructions written by ``skelagnostic retarget``;
 any BVH files or procedural clips of that topology work, e.g.
 ``data=bvh data.paths=[out/*.bvh] data.units=m``). Clips whose hierarchy (parent
@@ -40,9 +40,10 @@ from skelagnostic.data import MotionDataModule
 from skelagnostic.data.cache import CacheEntry, cache_key, read_exactly, slot_key
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.lazy import deprecated_aliases
 from skelagnostic_pcmrl.rpa import augment_rest_pose, bone_tails, random_tail_offsets
 
-__all__ = ["CachedClip", "Clip", "InterpolationDataModule", "gap_keys", "random_keys",
+__all__ = ["CachedClip", "Clip", "PcmrlInterpDataModule", "gap_keys", "random_keys",
            "regular_keys"]
 
 log = logging.getLogger(__name__)
@@ -242,7 +243,7 @@ class FixedWindows(Dataset):
         return _window(clip, start, self.window, self.keys)
 
 
-class InterpolationDataModule(MotionDataModule):
+class PcmrlInterpDataModule(MotionDataModule):
     """Keyframe-interpolation windows on one target skeleton (see the module docstring).
 
     Args:
@@ -507,3 +508,7 @@ class InterpolationDataModule(MotionDataModule):
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         """Nothing to restore."""
+
+
+#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
+__getattr__ = deprecated_aliases(__name__, {"InterpolationDataModule": "PcmrlInterpDataModule"})

@@ -8,8 +8,8 @@ each method fills the other frames:
   and spherical linear interpolation (SLERP) of every joint's local rotation
   between the surrounding keys, then forward kinematics
   (:func:`skelagnostic.baselines.lerp_slerp`);
-* ``PC-MRL``: :meth:`InterpolationAligner.interpolate
-  <skelagnostic_pcmrl.interp.InterpolationAligner.interpolate>`.
+* ``PC-MRL``: :meth:`PcmrlInterpAligner.interpolate
+  <skelagnostic_pcmrl.interp.PcmrlInterpAligner.interpolate>`.
 
 Metrics (:mod:`skelagnostic.metrics`): L2P on global positions, horizontally
 centred on the window's mean root position and z-normalised per channel with

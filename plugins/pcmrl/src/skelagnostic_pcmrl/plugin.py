@@ -6,10 +6,10 @@ Two aligners, one per stage of the paper (one registered name has one module
 and one data-module class, so the stages are two names):
 
 * ``model=pcmrl``: stage 1, point cloud -> target-skeleton reconstruction
-  (:class:`~skelagnostic_pcmrl.recon.PcmrlReconstruction`). ``model.stage``
+  (:class:`~skelagnostic_pcmrl.recon.PcmrlReconAligner`). ``model.stage``
   accepts only ``reconstruction`` and points to ``pcmrl_interp`` otherwise.
 * ``model=pcmrl_interp``: stage 2, FOQ keyframe interpolation
-  (``skelagnostic_pcmrl.interp.InterpolationAligner``).
+  (``skelagnostic_pcmrl.interp.PcmrlInterpAligner``).
 """
 
 from __future__ import annotations
@@ -53,12 +53,12 @@ TRAINER_OPTIONS: dict[str, Any] = {"max_time": "00:00:04:30"}
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
     """Register ``model=pcmrl`` (stage 1) and ``model=pcmrl_interp`` (stage 2)."""
-    from skelagnostic_pcmrl.recon import PcmrlReconstruction
+    from skelagnostic_pcmrl.recon import PcmrlReconAligner
     from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
 
     register(
         "pcmrl",
-        PcmrlReconstruction,
+        PcmrlReconAligner,
         PcmrlReconDataModule,
         config=read_model_config(CONFIG_PACKAGE, "pcmrl"),
         description="PC-MRL stage 1: unsupervised point-cloud reconstruction onto a target "
@@ -70,14 +70,14 @@ def register_aligners(register: Callable[..., Any]) -> None:
     from skelagnostic_pcmrl.interp import (
         INTERP_DATA_DEFAULTS,
         INTERP_DATA_OPTIONS,
-        InterpolationAligner,
+        PcmrlInterpAligner,
     )
-    from skelagnostic_pcmrl.interp_data import InterpolationDataModule
+    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
 
     register(
         "pcmrl_interp",
-        InterpolationAligner,
-        InterpolationDataModule,
+        PcmrlInterpAligner,
+        PcmrlInterpDataModule,
         config=read_model_config(CONFIG_PACKAGE, "pcmrl_interp"),
         description="PC-MRL stage 2: FOQ keyframe interpolation on the target skeleton",
         data=INTERP_DATA_DEFAULTS,

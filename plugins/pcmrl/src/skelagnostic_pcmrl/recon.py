@@ -1,6 +1,6 @@
 """PC-MRL stage 1: unsupervised point cloud -> target-skeleton motion (paper Sec. 3.2, Fig. 3 I).
 
-:class:`PcmrlReconstruction` is the ``model=pcmrl`` aligner. Per training
+:class:`PcmrlReconAligner` is the ``model=pcmrl`` aligner. Per training
 sequence it draws a 256-point cloud on the source motion (Eq. 3, sigma 0.05
 m), encodes every frame with a Point Transformer
 (:mod:`~skelagnostic_pcmrl.point_transformer`), runs a temporal transformer
@@ -10,7 +10,7 @@ quaternions of the target skeleton, derives the target joints with Eq. 1
 cloud on the reconstruction and minimises the temporal KNN loss per body group
 (Eq. 5), plus the optional end-effector loss (Eq. 6) and ``0.01 (|q| - 1)^2``.
 
-Inference (:meth:`~PcmrlReconstruction.encode` / ``decode`` / ``retarget``)
+Inference (:meth:`~PcmrlReconAligner.encode` / ``decode`` / ``retarget``)
 takes a motion on any skeleton, in any units (converted to metres), and
 returns a :class:`~skelagnostic.Motion` on the trained target skeleton in its
 own units, with local rotations (global rotations of joints that carry only
@@ -31,6 +31,7 @@ from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph
+from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.representations import POINT_GROUPS
 from skelagnostic_pcmrl.losses import end_effector_loss, temporal_knn_loss, unit_norm_penalty
 from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
@@ -45,7 +46,7 @@ from skelagnostic_pcmrl.points import (
 )
 from skelagnostic_pcmrl.temporal import TemporalTransformer
 
-__all__ = ["PcmrlReconstruction", "end_effector_pairs"]
+__all__ = ["PcmrlReconAligner", "end_effector_pairs"]
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -55,7 +56,7 @@ def _batch_size(batch: dict[str, Any]) -> int:
     """Windows in a ``{dataset: batch}`` step (Lightning cannot infer it from a dict)."""
     return sum(len(sub["features"]) for sub in batch.values() if sub is not None)
 
-class PcmrlReconstruction(Aligner):
+class PcmrlReconAligner(Aligner):
     """PC-MRL point-cloud-to-motion reconstruction onto one target skeleton.
 
     The target skeleton comes from the data module (``data.target``) when
@@ -98,7 +99,7 @@ class PcmrlReconstruction(Aligner):
             points along one fixed axis, predict the root and the global rotations in
             that frame, and rotate them back. The network then never has to learn
             the heading equivariance of global quaternions from data (not in the
-            paper; docs/methods/pcmrl.md gives the measurements). Checkpoints saved
+            paper; docs/reports/pcmrl.md gives the measurements). Checkpoints saved
             before this option existed load with it off.
         yaw_window: Frames of the moving average of the heading estimate (15).
         chunk: Frames per temporal-transformer chunk at inference (``None``: the
@@ -379,7 +380,7 @@ class PcmrlReconstruction(Aligner):
                 "postprocess": (
                     "rotations are unit quaternions (w, x, y, z); sequences longer than "
                     "the training window: run overlapping chunks and blend them, as "
-                    "PcmrlReconstruction.decode does"),
+                    "PcmrlReconAligner.decode does"),
             })]
 
     # --------------------------------------------------------------- training
@@ -544,9 +545,9 @@ class PcmrlReconstruction(Aligner):
 
 
 class _ReconstructionGraph(torch.nn.Module):
-    """:meth:`PcmrlReconstruction.reconstruct` for one up axis, plus local rotations."""
+    """:meth:`PcmrlReconAligner.reconstruct` for one up axis, plus local rotations."""
 
-    def __init__(self, aligner: PcmrlReconstruction, up: int) -> None:
+    def __init__(self, aligner: PcmrlReconAligner, up: int) -> None:
         super().__init__()
         self.aligner = aligner
         self.up = up
@@ -558,3 +559,7 @@ class _ReconstructionGraph(torch.nn.Module):
         parents = self.aligner._require_target().parents
         local = Q.normalize(local_from_global(out["rotations"], parents))
         return out["root"], out["rotations"], local, out["positions"]
+
+
+#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
+__getattr__ = deprecated_aliases(__name__, {"PcmrlReconstruction": "PcmrlReconAligner"})

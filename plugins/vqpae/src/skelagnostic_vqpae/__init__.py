@@ -18,18 +18,18 @@ from typing import TYPE_CHECKING
 from skelagnostic.lazy import lazy_exports
 from skelagnostic.version import distribution_version
 
-__all__ = ["VQPAEAligner", "VQPAEDataModule"]
+__all__ = ["VqpaeAligner", "VqpaeDataModule"]
 #: Version of the distribution that ships this plugin (built-in: skelagnostic's).
 __version__ = distribution_version("skelagnostic")
 
 __getattr__, __dir__ = lazy_exports(
     __name__,
     {
-        "VQPAEAligner": "skelagnostic_vqpae.aligner",
-        "VQPAEDataModule": "skelagnostic_vqpae.data",
+        "VqpaeAligner": "skelagnostic_vqpae.aligner",
+        "VqpaeDataModule": "skelagnostic_vqpae.data",
     },
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from skelagnostic_vqpae.aligner import VQPAEAligner
-    from skelagnostic_vqpae.data import VQPAEDataModule
+    from skelagnostic_vqpae.aligner import VqpaeAligner
+    from skelagnostic_vqpae.data import VqpaeDataModule

@@ -38,6 +38,7 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph, Method
+from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.metrics import ManifoldOverlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
@@ -54,7 +55,7 @@ if TYPE_CHECKING:
 
     from skelagnostic.callbacks import SummaryContent
 
-__all__ = ["DatasetSpec", "VQPAEAligner"]
+__all__ = ["DatasetSpec", "VqpaeAligner"]
 
 POSE_MODES = ("none", "detached", "joint")
 #: What the phase-rate loss trains (``model.phase_rate_grad``).
@@ -96,7 +97,7 @@ class _Character(nn.Module):
 class _PivotEncoder(nn.Module):
     """One character's VQ-PAE encoder as a graph: normalised windows -> pivot embedding.
 
-    The same computation as :meth:`VQPAEAligner.forward_dataset` up to the
+    The same computation as :meth:`VqpaeAligner.forward_dataset` up to the
     manifold point at the pivot, where ``Phi = phi + f * 0 = phi``.
     """
 
@@ -118,7 +119,7 @@ class _PivotEncoder(nn.Module):
         return phase, frequency, code, amplitude, point
 
 
-class VQPAEAligner(Aligner):
+class VqpaeAligner(Aligner):
     """VQ-PAEs of several characters sharing one amplitude codebook (WalkTheDog).
 
     The networks are built from the data module in :meth:`setup` (or from
@@ -139,11 +140,11 @@ class VQPAEAligner(Aligner):
             option existed load with ``"mlp"``.
         padding_mode: Padding of the encoder/decoder convolutions: ``"replicate"``
             (default) or ``"zeros"`` (PyTorch's default); see
-            :class:`~skelagnostic_vqpae.model.VQPAE` and docs/methods/vqpae.md.
+            :class:`~skelagnostic_vqpae.model.VQPAE` and docs/reports/vqpae.md.
         center_windows: Reconstruct each window's deviation from its temporal mean
             (default) instead of the window itself (the paper's ``L_rec``); the
             manifold, a sum of sinusoids, cannot carry the mean except by a
-            degenerate frequency near 0 (see docs/methods/vqpae.md).
+            degenerate frequency near 0 (see docs/reports/vqpae.md).
         beta: Commitment weight (0.25).
         lambda_vq: Weight of the codebook loss (1).
         lambda_phase_rate: Weight of the phase-rate loss (1; not in the paper; 0
@@ -154,7 +155,7 @@ class VQPAEAligner(Aligner):
             difference detached. The paper trains the frequency through the
             reconstruction only; on our procedural gaits that left the frequency
             up to 46 % off while the phase advanced at the true rate
-            (docs/methods/vqpae.md).
+            (docs/reports/vqpae.md).
         phase_rate_grad: What the phase-rate loss trains: ``"network"`` (the
             encoder and the timing branch), ``"timing"`` (the timing branch only:
             its kernel-1 convolution and the frequency MLP; the shared latent is
@@ -297,7 +298,7 @@ class VQPAEAligner(Aligner):
     def _require_built(self) -> SharedCodebook:
         if self.codebook is None:
             raise SkelagnosticError(
-                "VQPAEAligner: no datasets yet; train it, load a checkpoint or pass datasets="
+                "VqpaeAligner: no datasets yet; train it, load a checkpoint or pass datasets="
             )
         return self.codebook
 
@@ -348,7 +349,7 @@ class VQPAEAligner(Aligner):
         if "shifted" not in batch:
             raise SkelagnosticError(
                 f"model.lambda_phase_rate > 0 needs partner windows, but the training batch of "
-                f"dataset {name!r} has none: set data.pair_seconds > 0 (VQPAEDataModule)")
+                f"dataset {name!r} has none: set data.pair_seconds > 0 (VqpaeDataModule)")
         pae = self.characters[k].pae
         shift = batch["shift"].to(params.phase)
         valid = shift != 0
@@ -541,7 +542,7 @@ class VQPAEAligner(Aligner):
         """Embed every window of a data-module split, grouped into per-clip embeddings.
 
         Args:
-            datasets: Dataset name -> windows (``VQPAEDataModule.datasets[split]``).
+            datasets: Dataset name -> windows (``VqpaeDataModule.datasets[split]``).
             fps: Frame rate of the windows.
             batch_size: Windows per forward pass.
 
@@ -684,7 +685,7 @@ class VQPAEAligner(Aligner):
                     sk["parents"]) == list(skeleton.parents):
                 return k
         raise SkelagnosticError(
-            f"VQPAEAligner: no trained dataset has the topology of {skeleton!r} "
+            f"VqpaeAligner: no trained dataset has the topology of {skeleton!r} "
             f"({skeleton.num_joints} joints); datasets: {self.dataset_names}"
         )
 
@@ -745,7 +746,7 @@ class VQPAEAligner(Aligner):
         char = self.characters[k]
         if not bool(char.pose_fitted):
             raise SkelagnosticError(
-                f"VQPAEAligner: the average-pose MLP of {self.dataset_names[k]!r} is not "
+                f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not "
                 "trained (train with model.pose_mlp=detached|joint or call "
                 "skelagnostic_vqpae.embed.fit_average_pose)"
             )
@@ -753,3 +754,7 @@ class VQPAEAligner(Aligner):
         positions = pose.view(len(pose), -1, 3).double().cpu()
         rotations, root = inverse_kinematics(positions, skeleton)
         return Motion(skeleton, rotations, root, latent.fps)
+
+
+#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
+__getattr__ = deprecated_aliases(__name__, {"VQPAEAligner": "VqpaeAligner"})

@@ -50,9 +50,10 @@ from skelagnostic.data import (
 from skelagnostic.data.cache import CacheEntry, read_exactly
 from skelagnostic.data.datamodule import STATS_CHUNK_VALUES, check_statistics
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
 
-__all__ = ["CachedFrameWindows", "FrameWindows", "MultiSource", "VQPAEDataModule",
+__all__ = ["CachedFrameWindows", "FrameWindows", "MultiSource", "VqpaeDataModule",
            "human_dog_source", "styles_source"]
 
 #: Version of the cached per-clip layout (velocities and root-local positions per frame).
@@ -120,7 +121,7 @@ class FrameWindows(Dataset):
     later in the same clip (``s`` frames earlier where the clip ends first) as
     ``shifted`` ``[C, T]`` and the signed offset as ``shift`` (0 where the clip is
     shorter than ``T + s`` frames and neither fits), for the phase-rate loss of
-    :class:`~skelagnostic_vqpae.aligner.VQPAEAligner`.
+    :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`.
 
     Args:
         features: ``[F, C]`` normalised features of all clips, concatenated.
@@ -311,7 +312,7 @@ class _Tagged:
         return {self.name: batch}
 
 
-class VQPAEDataModule(MotionDataModule):
+class VqpaeDataModule(MotionDataModule):
     """Multi-dataset windows for the VQ-PAE (see the module docstring).
 
     Args:
@@ -352,7 +353,7 @@ class VQPAEDataModule(MotionDataModule):
     ) -> None:
         if "per_element_stats" in kwargs:
             raise SkelagnosticError(
-                "data.per_element_stats is not an option of VQPAEDataModule: its statistics "
+                "data.per_element_stats is not an option of VqpaeDataModule: its statistics "
                 "are always per element"
             )
         if not pair_seconds >= 0:
@@ -485,3 +486,7 @@ class VQPAEDataModule(MotionDataModule):
             if name in self.representations:
                 self.representations[name].load_normalization_state(stats["input"])
                 self.pose_representations[name].load_normalization_state(stats["pose"])
+
+
+#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
+__getattr__ = deprecated_aliases(__name__, {"VQPAEDataModule": "VqpaeDataModule"})

@@ -22,7 +22,7 @@ from torch import Tensor
 
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic_vqpae.aligner import VQPAEAligner
+from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.model import phase_manifold
 
 __all__ = [
@@ -90,7 +90,7 @@ class ClipEmbedding:
                        float(data["fps"]), str(data["dataset"]))
 
 
-def embed_clip(aligner: VQPAEAligner, motion: Motion) -> ClipEmbedding:
+def embed_clip(aligner: VqpaeAligner, motion: Motion) -> ClipEmbedding:
     """Embed every frame of ``motion`` with the VQ-PAE of its skeleton.
 
     Args:
@@ -106,7 +106,7 @@ def embed_clip(aligner: VQPAEAligner, motion: Motion) -> ClipEmbedding:
                          latent.fps, aligner.dataset_names[int(x["dataset"])])
 
 
-def fit_average_pose(aligner: VQPAEAligner, datamodule: Any, epochs: int = 1,
+def fit_average_pose(aligner: VqpaeAligner, datamodule: Any, epochs: int = 1,
                      lr: float = 1e-3) -> dict[str, float]:
     """Train every dataset's average-pose MLP on the frozen VQ-PAE (Sec. 5.2, Eq. 10).
 
@@ -115,7 +115,7 @@ def fit_average_pose(aligner: VQPAEAligner, datamodule: Any, epochs: int = 1,
 
     Args:
         aligner: A trained aligner (its VQ-PAEs and codebook stay fixed).
-        datamodule: The :class:`~skelagnostic_vqpae.data.VQPAEDataModule` it was trained on
+        datamodule: The :class:`~skelagnostic_vqpae.data.VqpaeDataModule` it was trained on
             (set up).
         epochs: Passes over each dataset's training windows.
         lr: Adam learning rate.
@@ -208,7 +208,7 @@ def retrieve(
     return sorted(found, key=lambda r: r.distance)[:top]
 
 
-def plot_manifold(aligner: VQPAEAligner, embeddings: Mapping[str, Sequence[ClipEmbedding]],
+def plot_manifold(aligner: VqpaeAligner, embeddings: Mapping[str, Sequence[ClipEmbedding]],
                   out: str | Path | None = None, samples: int = 64) -> Any:
     """The phase manifold like Fig. 1: PCA of the codebook ellipses, one panel per character.
 

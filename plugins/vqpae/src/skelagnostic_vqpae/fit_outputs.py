@@ -20,13 +20,13 @@ if TYPE_CHECKING:
     import lightning as L
 
     from skelagnostic.callbacks import SummaryContent
-    from skelagnostic_vqpae.aligner import VQPAEAligner
+    from skelagnostic_vqpae.aligner import VqpaeAligner
 
 __all__ = ["fit_summary", "overlap_figures"]
 
 
-def fit_summary(aligner: VQPAEAligner, trainer: L.Trainer) -> SummaryContent:
-    """The manifold figures and pictures of the fit summary (:meth:`VQPAEAligner.fit_summary`).
+def fit_summary(aligner: VqpaeAligner, trainer: L.Trainer) -> SummaryContent:
+    """The manifold figures and pictures of the fit summary (:meth:`VqpaeAligner.fit_summary`).
 
     * metrics (in ``vqpae_metrics.json``): the manifold overlap (usage,
       overlap, per-dataset share, codes used per dataset) of the per-frame
@@ -67,7 +67,7 @@ def fit_summary(aligner: VQPAEAligner, trainer: L.Trainer) -> SummaryContent:
     }
 
 
-def overlap_figures(aligner: VQPAEAligner, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
+def overlap_figures(aligner: VqpaeAligner, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
     """Manifold overlap (Table 2) of per-clip embeddings of every dataset."""
     codes = [
         torch.cat([e.code for e in embeddings.get(n, [])] or [torch.zeros(0, dtype=torch.long)])

@@ -239,7 +239,7 @@ class VQPAE(nn.Module):
             settle on a local optimum (the procedural gallop at half its rate) or,
             on a single quadruped, lose the phase. Starting from the centroid
             avoids both, but in our human + dog runs it slowed the sharing of
-            codes between the characters (see docs/methods/vqpae.md), so it is
+            codes between the characters (see docs/reports/vqpae.md), so it is
             not the default.
 
     Raises:

@@ -34,13 +34,13 @@ DATA_OPTIONS: dict[str, Any] = {"fps": 60, "window_seconds": 1.0, "stride": 1}
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
     """Register ``model=vqpae``."""
-    from skelagnostic_vqpae.aligner import VQPAEAligner
-    from skelagnostic_vqpae.data import VQPAEDataModule
+    from skelagnostic_vqpae.aligner import VqpaeAligner
+    from skelagnostic_vqpae.data import VqpaeDataModule
 
     register(
         "vqpae",
-        VQPAEAligner,
-        VQPAEDataModule,
+        VqpaeAligner,
+        VqpaeDataModule,
         config=read_model_config(CONFIG_PACKAGE, "vqpae"),
         description="WalkTheDog VQ-PAE: phase manifold shared across characters (human, dog, ...)",
         data=DEFAULT_DATA,

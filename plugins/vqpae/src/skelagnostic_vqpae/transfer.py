@@ -25,7 +25,7 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.matching import MatchResult, MotionDatabase, frequency_scaled_motion_matching
 from skelagnostic.representations import GlobalPositions
-from skelagnostic_vqpae.aligner import VQPAEAligner
+from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
 
 __all__ = ["TransferDatabase", "TransferResult", "build_database", "transfer"]
@@ -61,7 +61,7 @@ class TransferResult:
     source: ClipEmbedding
 
 
-def build_database(aligner: VQPAEAligner, motions: Sequence[Motion],
+def build_database(aligner: VqpaeAligner, motions: Sequence[Motion],
                    names: Sequence[str] | None = None) -> TransferDatabase:
     """Embed the target character's clips and build the matching database.
 
@@ -94,7 +94,7 @@ def build_database(aligner: VQPAEAligner, motions: Sequence[Motion],
 
 
 def transfer(
-    aligner: VQPAEAligner,
+    aligner: VqpaeAligner,
     source: Motion,
     target: TransferDatabase,
     lambda1: float = 0.5,
