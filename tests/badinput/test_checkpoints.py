@@ -236,7 +236,11 @@ def test_read_checkpoint_api(trained: Path, tmp_path: Path, all_aligners: Plugin
         read_checkpoint(tmp_path / "plain.pt")
     humot = all_aligners.aligner("humot").module
     with pytest.raises(CheckpointError, match="checkpoint of model=example, this is model=humot"):
-        load_checkpoint(humot, trained, plugin_manager=all_aligners)
+        load_checkpoint(humot, trained, aligners=all_aligners.aligner_classes())
+    # without the registered aligners the writer cannot be named, but it is still refused
+    with pytest.raises(CheckpointError, match="not a checkpoint of model=HumotAligner"):
+        load_checkpoint(humot, trained)
+    assert read_checkpoint(trained, "humot")["state_dict"]  # a name alone cannot be checked
 
 
 #: Tiny training runs of every built-in aligner, with checkpoints every step.
@@ -276,15 +280,15 @@ def test_every_aligner_checkpoint_loads_with_weights_only(
         warnings.simplefilter("ignore")
         app.run(cfg, plugin_manager=all_aligners)
         # the whole file (loops, callbacks, data module, hyperparameters) under the safe loader
-        checkpoint = read_checkpoint(ckpt, name, plugin_manager=all_aligners)
+        checkpoint = read_checkpoint(ckpt, name, aligners=all_aligners.aligner_classes())
         assert checkpoint["global_step"] == 2
         model = load_checkpoint(all_aligners.aligner(name).module, ckpt,
-                                plugin_manager=all_aligners)
+                                aligners=all_aligners.aligner_classes())
         assert set(model.state_dict()) == set(checkpoint["state_dict"])
         # resuming (weights_only=True) restores the loops, callbacks and data loader position
         resumed = app.compose([*FITS[name], *common(3, tmp_path / "resumed"),
                                f"ckpt_path={ckpt}"], plugin_manager=all_aligners)
         app.run(resumed, plugin_manager=all_aligners)
     after = read_checkpoint(tmp_path / "resumed" / "checkpoints" / "last.ckpt", name,
-                            plugin_manager=all_aligners)
+                            aligners=all_aligners.aligner_classes())
     assert after["global_step"] == 3

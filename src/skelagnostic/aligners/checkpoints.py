@@ -2,7 +2,7 @@
 
 Every place that loads a checkpoint (``skelagnostic fit|validate|test|predict
 ckpt_path=...``, ``skelagnostic retarget|interpolate|transfer ckpt=...``,
-:func:`skelagnostic.plugins.load_aligner` and the plugins' evaluation scripts)
+:func:`skelagnostic.plugins.load_aligner`, ``skelagnostic evaluate``)
 goes through :func:`read_checkpoint`, which loads the file with
 ``torch.load(weights_only=True)`` (never unpickling code) and turns every way a
 file can be wrong into a :class:`CheckpointError` naming the file and the
@@ -27,8 +27,6 @@ from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
     import lightning as L
-
-    from skelagnostic.plugins import PluginManager
 
 __all__ = ["CheckpointError", "CheckpointNotFoundError", "architecture_mismatch",
            "check_architecture", "load_checkpoint", "read_checkpoint"]
@@ -64,7 +62,7 @@ def read_checkpoint(
     model: str | type | None = None,
     *,
     option: str = "checkpoint",
-    plugin_manager: PluginManager | None = None,
+    aligners: Mapping[str, type] | None = None,
 ) -> dict[str, Any]:
     """Load a Lightning checkpoint with ``weights_only=True`` and check whose it is.
 
@@ -73,8 +71,11 @@ def read_checkpoint(
         model: The aligner that will load it: a registered name or a class;
             ``None`` skips the check of the model that wrote it.
         option: How the user named the file, for the message (``ckpt_path``).
-        plugin_manager: Where the other aligners are looked up to name the one
-            that wrote the checkpoint (default: the process-wide one).
+        aligners: The registered aligners (name -> class, e.g.
+            ``PluginManager.aligner_classes()``) among which the one that wrote
+            the checkpoint is looked up, to name it when it is not ``model``.
+            ``None``: a ``model`` given by name is not checked, and a class is
+            checked only against its own options.
 
     Returns:
         The checkpoint (``state_dict``, ``hyper_parameters``, loop states, ...).
@@ -111,7 +112,7 @@ def read_checkpoint(
         raise CheckpointError(file, f"{shown} is a torch file but not a Lightning checkpoint "
                                     "(it has no state_dict)", option)
     if model is not None:
-        _check_model(file, checkpoint, model, option, plugin_manager)
+        _check_model(file, checkpoint, model, option, aligners or {})
     return checkpoint
 
 
@@ -120,7 +121,7 @@ def load_checkpoint(
     path: str | Path,
     *,
     option: str = "checkpoint",
-    plugin_manager: PluginManager | None = None,
+    aligners: Mapping[str, type] | None = None,
     **overrides: Any,
 ) -> ModuleT:
     """``module.load_from_checkpoint`` (CPU, ``weights_only=True``) after :func:`read_checkpoint`.
@@ -129,7 +130,8 @@ def load_checkpoint(
         module: The LightningModule class to build.
         path: The checkpoint file.
         option: How the user named the file, for the messages.
-        plugin_manager: Where the other aligners are looked up.
+        aligners: The registered aligners, to name the one that wrote the
+            checkpoint (see :func:`read_checkpoint`).
         **overrides: Hyperparameters replacing the saved ones.
 
     Returns:
@@ -139,7 +141,7 @@ def load_checkpoint(
         CheckpointError: See :func:`read_checkpoint`; also when the weights do
             not fit the module (a different architecture).
     """
-    checkpoint = read_checkpoint(path, module, option=option, plugin_manager=plugin_manager)
+    checkpoint = read_checkpoint(path, module, option=option, aligners=aligners)
     saved = dict(checkpoint.get("hyper_parameters") or {})
     with architecture_mismatch(path, saved, {**saved, **overrides}, option):
         return module.load_from_checkpoint(Path(path), map_location="cpu", weights_only=True,
@@ -255,7 +257,7 @@ def _fit(cls: type, keys: set[str]) -> int | None:
 
 
 def _check_model(file: Path, checkpoint: dict[str, Any], model: str | type, option: str,
-                 plugin_manager: PluginManager | None) -> None:
+                 aligners: Mapping[str, type]) -> None:
     """Raise :class:`CheckpointError` if the hyperparameters belong to another aligner.
 
     Lightning does not store the class of the module in the checkpoint, but
@@ -267,10 +269,6 @@ def _check_model(file: Path, checkpoint: dict[str, Any], model: str | type, opti
     if not isinstance(saved, Mapping) or not saved:
         return
     keys = {str(k) for k in saved}
-    from skelagnostic.plugins import get_plugin_manager
-
-    pm = plugin_manager or get_plugin_manager()
-    aligners = {name: spec.module for name, spec in pm.aligners.items()}
     if isinstance(model, str):
         name, cls = model, aligners.get(model)
         if cls is None:

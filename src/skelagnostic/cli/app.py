@@ -367,7 +367,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
         source_run = find_run_dir(ckpt)  # a run directory stands for its best/last checkpoint
         ckpt = str(checkpoint_of(ckpt))
-        checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path", plugin_manager=pm)
+        checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path",
+                                     aligners=pm.aligner_classes())
     if task == "evaluate" and checkpoint is None:
         raise ConfigError("evaluate: give ckpt_path=<checkpoint or run directory> of the "
                           "trained model")

@@ -50,7 +50,8 @@ def evaluate_checkpoint(
         EvaluationError: No held-out split, or the protocol found nothing to evaluate.
     """
     protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
-    aligner = load_checkpoint(module, ckpt, option="ckpt_path", plugin_manager=pm).eval()
+    aligner = load_checkpoint(module, ckpt, option="ckpt_path",
+                              aligners=pm.aligner_classes()).eval()
     held = held_out(datamodule)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

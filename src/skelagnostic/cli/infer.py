@@ -115,7 +115,7 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
         model = _model_name_near(path)
     pm = get_plugin_manager()
     return load_checkpoint(pm.aligner(model).module, path, option="ckpt",
-                           plugin_manager=pm).eval()
+                           aligners=pm.aligner_classes()).eval()
 
 
 def _model_name_near(ckpt: Path) -> str:

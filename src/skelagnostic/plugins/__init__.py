@@ -115,5 +115,5 @@ def load_aligner(name: str, checkpoint: str | Path | None = None, **overrides: A
         from skelagnostic.aligners.checkpoints import load_checkpoint
 
         model = load_checkpoint(spec.module, Path(checkpoint),
-                                plugin_manager=get_plugin_manager(), **overrides)
+                                aligners=get_plugin_manager().aligner_classes(), **overrides)
     return model.eval()

@@ -321,6 +321,16 @@ class PluginManager:
         """Registered aligners by name."""
         return MappingProxyType({s.name: s for s in self._collect().aligners})
 
+    def aligner_classes(self) -> dict[str, type]:
+        """Registered aligner classes by name (what checkpoint checks compare against).
+
+        Example:
+            >>> from skelagnostic.plugins import get_plugin_manager
+            >>> get_plugin_manager().aligner_classes()["humot"].__name__
+            'HumotAligner'
+        """
+        return {name: spec.module for name, spec in self.aligners.items()}
+
     @property
     def representations(self) -> Mapping[str, RepresentationSpec]:
         """Registered motion representations by name."""
