@@ -91,6 +91,7 @@ def test_help_lists_aligners_and_plugin_experiments(example_plugin: Path,
                   if ": " in line)
     assert "example" in groups["model"].split(", ")
     assert "example_quick" in groups["experiment"].split(", ")  # from the plugin's conf/
+    assert "debug" in groups and "_aligner" not in groups  # the internal group stays hidden
 
 
 def test_help_with_a_model_shows_its_resolved_defaults(example_plugin: Path,

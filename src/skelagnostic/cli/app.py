@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import inspect
+import io
 import logging
 import os
 import re
@@ -565,6 +566,27 @@ def _discard_failed_run(run_dir: Path) -> str:
     return ""
 
 
+@contextlib.contextmanager
+def _hidden_groups_in_help(flags: Sequence[str]) -> Iterator[None]:
+    """Leave the internal ``_aligner`` group out of ``--help``'s list of config groups.
+
+    Hydra lists every group of the search path; ``_aligner/<name>`` only carries an
+    aligner's data and trainer options (selected from ``model=``), so it is not a
+    choice for users. Other output passes through unchanged.
+    """
+    if not {"--help", "-h"} & set(flags):
+        yield
+        return
+    buffer = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buffer):
+            yield
+    finally:
+        hidden = f"{ALIGNER_GROUP}: "
+        sys.stdout.write("".join(line for line in buffer.getvalue().splitlines(keepends=True)
+                                 if not line.startswith(hidden)))
+
+
 def split_hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
     """Split a command line into Hydra's flags (with their values) and its overrides.
 
@@ -708,7 +730,8 @@ def main(task: str, argv: Sequence[str]) -> int:
         with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}), \
                 quiet_lightning():
             try:
-                entry()
+                with _hidden_groups_in_help(flags):
+                    entry()
             except SystemExit as exc:  # Hydra exits by itself after --help and --hydra-help
                 if exc.code not in (0, None) or failures or terminated or run_dirs:
                     raise
