@@ -342,7 +342,7 @@ def plot_method_comparison(
     Examples:
         >>> from skelagnostic.viz import plot_method_comparison
         >>> fig = plot_method_comparison({"model": {"mpjpe": 2.0}, "mean_pose": {"mpjpe": 9.0}})
-        >>> [round(b.get_height(), 1) for b in fig.axes[0].patches]
+        >>> [float(round(b.get_height(), 1)) for b in fig.axes[0].patches]
         [2.0, 9.0]
     """
     metrics = list(dict.fromkeys(m for row in values.values() for m in row))
