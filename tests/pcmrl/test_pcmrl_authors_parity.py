@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from skelagnostic_pcmrl.interp_eval import authors_table1, keyframe_centre
 from skelagnostic_pcmrl.losses import authors_alpha, authors_knn_terms, temporal_knn_loss
 
 from skelagnostic.errors import SkelagnosticError
@@ -91,3 +92,44 @@ def test_authors_alpha_schedule() -> None:
     assert authors_alpha(25250, 500, 50000) == pytest.approx(0.5)
     assert authors_alpha(50000, 500, 50000) == 0.0
     assert authors_alpha(10, 0, 100) == 1.0
+
+
+TABLE1 = _load("authors_table1.pt")
+
+
+@pytest.mark.parametrize("run", range(len(TABLE1["runs"])))
+def test_table1_metrics_equal_the_authors_eval(run: int) -> None:
+    """L2P, L2Q, NPSS and the keyframe centre of their eval_inpainter.py."""
+    r = TABLE1["runs"][run]
+    tpos = TABLE1["target_positions"].double()
+    trot = TABLE1["target_rotations"].double()
+    valid = TABLE1["valid_joints"]
+    centre = keyframe_centre(tpos, r["keys"], valid)
+    assert torch.allclose(centre, r["centre"].double(), atol=1e-5)
+    out = authors_table1(
+        r["pred_positions"].double(), r["pred_rotations"].double(), tpos, trot, r["keys"], valid
+    )
+    for name in ("l2p", "l2q", "npss"):
+        assert out[name] == pytest.approx(r[name], abs=1e-5), name
+    # the centre matters for NPSS (positions' spectra), not for L2P and L2Q
+    off = authors_table1(
+        r["pred_positions"].double(), r["pred_rotations"].double(), tpos, trot, r["keys"], None
+    )
+    assert off["l2p"] == pytest.approx(out["l2p"], abs=1e-9)
+    assert abs(off["npss"] - out["npss"]) > 1e-4
+
+
+def test_table1_pastes_the_keys_of_the_target() -> None:
+    r = TABLE1["runs"][0]
+    keys = r["keys"]
+    tpos = TABLE1["target_positions"].double()
+    trot = TABLE1["target_rotations"].double()
+    pos, rot = r["pred_positions"].double().clone(), r["pred_rotations"].double().clone()
+    ref = authors_table1(pos, rot, tpos, trot, keys, TABLE1["valid_joints"])
+    pos[:, keys] += 3.0
+    rot[:, keys] = -rot[:, keys]
+    assert authors_table1(pos, rot, tpos, trot, keys, TABLE1["valid_joints"]) == pytest.approx(ref)
+    with pytest.raises(SkelagnosticError, match="keyframe"):
+        authors_table1(pos, rot, tpos, trot, torch.zeros_like(keys), None)
+    with pytest.raises(SkelagnosticError, match="rotations"):
+        authors_table1(pos, rot[..., :3], tpos, trot, keys, None)
