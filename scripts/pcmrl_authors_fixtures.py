@@ -119,9 +119,8 @@ def knn_fixture(repo: Path) -> dict[str, Any]:
     cases = []
     specs = [  # seed, batch, frames, source points, predicted points, k, dtype of the run
         (0, 2, 6, 20, 48, 4, torch.float64),
-        (1, 2, 8, 24, 64, 8, torch.float64),
+        (1, 2, 8, 20, 48, 8, torch.float64),
         (2, 2, 8, 16, 30, 3, torch.float64),
-        (3, 2, 8, 24, 64, 8, torch.float32),
     ]
     for seed, batch, frames, m, n, k, dtype in specs:
         # inputs stored in float32 (exact in float64 too); the loss runs in ``dtype``

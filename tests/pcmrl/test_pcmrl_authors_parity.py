@@ -40,6 +40,20 @@ def test_knn_terms_and_gradients_equal_the_authors(case: int) -> None:
         assert torch.allclose(grad, ref, atol=1e-8, rtol=1e-5), (name, (grad - ref).abs().max())
 
 
+def test_knn_terms_in_float32_are_within_1e5_of_the_authors() -> None:
+    for c in KNN:
+        with torch.no_grad():
+            terms = authors_knn_terms(
+                c["actual"].float(),
+                c["expected"].float(),
+                c["actual_groups"],
+                c["expected_groups"],
+                c["k"],
+            )
+        for value, name in zip(terms, ("glob", "norm", "vel"), strict=True):
+            assert float(value) == pytest.approx(float(c[name]), abs=1e-5)
+
+
 def test_knn_loss_authors_variant_is_their_weighted_sum() -> None:
     c = KNN[1]
     args = (
