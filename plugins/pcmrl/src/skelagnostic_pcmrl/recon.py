@@ -94,7 +94,8 @@ class PcmrlReconAligner(Aligner):
         knn_alpha_warmup: ``knn_variant="authors"``: steps of the linear ramp of the
             normalised term's weight ``alpha``, which then decays linearly to 0 at
             ``trainer.max_steps`` (:func:`~skelagnostic_pcmrl.losses.authors_alpha`;
-            500 in the authors' code; 0: ``alpha = 1`` throughout).
+            500 in the authors' code; 0: ``alpha = 1`` throughout; no decay when
+            ``trainer.max_steps`` is not set).
         knn_reduction: ``"mean"`` (per point, neighbour and frame) or ``"sum"`` (Eq. 5 as is).
         lambda_q: Weight of the unit-norm penalty (0.01).
         lambda_end: Weight of the end-effector loss (0: off; the paper's loss is optional).
