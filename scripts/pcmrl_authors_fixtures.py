@@ -112,7 +112,7 @@ def _knn_case(seed: int, batch: int, frames: int, m: int, n: int, dtype: torch.d
     return expected, actual, g_e, g_a
 
 
-def knn_fixture(repo: Path) -> dict[str, Any]:
+def knn_fixture() -> dict[str, Any]:
     """Run the authors' ``KNNLoss`` on seeded clouds; inputs, terms and gradients."""
     from models.utils.knn_loss import KNNLoss
 
@@ -213,7 +213,7 @@ def _smooth_motion(gen: torch.Generator, batch: int, frames: int, joints: int):
     return root.float(), local.float()
 
 
-def table1_fixture(repo: Path, bvh: Path, batch: int = 2, frames: int = 24) -> dict[str, Any]:
+def table1_fixture(bvh: Path, batch: int = 2, frames: int = 24) -> dict[str, Any]:
     """Run the authors' ``InpainterEval.eval`` on a fixed motion and network output."""
     import eval_inpainter
     from data.cmu import CMUDataLoader
@@ -316,8 +316,8 @@ def main() -> None:
     _stub_modules()
     torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
-    torch.save(knn_fixture(args.repo), args.out / "authors_knn.pt")
-    torch.save(table1_fixture(args.repo, args.bvh), args.out / "authors_table1.pt")
+    torch.save(knn_fixture(), args.out / "authors_knn.pt")
+    torch.save(table1_fixture(args.bvh), args.out / "authors_table1.pt")
     for name in ("authors_knn.pt", "authors_table1.pt"):
         print(f"wrote {args.out / name} ({(args.out / name).stat().st_size} bytes)")
 

@@ -187,7 +187,8 @@ def _authors_inputs(
     """
     metric = motion.to_metres().double()
     rot = metric.global_rotations().clone()
-    others = [j for j in range(rot.shape[1]) if j not in set(joints)]
+    keep = set(joints)
+    others = [j for j in range(rot.shape[1]) if j not in keep]
     rot[:, others] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=rot.dtype)
     if reference is None:
         rot = Q.continuity(rot, dim=-3)
