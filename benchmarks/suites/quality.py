@@ -21,11 +21,11 @@ reports, each next to a baseline measured in the same run:
   per-dataset share on shared codes (Table 2) for LaFAN1 + MANN dog at K = 32,
   against the same training without codebook re-initialisation (the paper's
   ablation); skipped without the shared clips.
-* PC-MRL interpolation (``quality_pcmrl_interp``): L2P at keyframe gaps 5, 15
-  and 30 on 128-frame windows of held-out procedural biped31 clips (the
-  paper's Table 1 protocol, ``skelagnostic_pcmrl.interp_eval``; L2P normalised
-  with the evaluated windows' statistics), against LERP/SLERP, for
-  ``experiment=pcmrl_interp_cpu``.
+* PC-MRL interpolation (``quality_pcmrl_interp``): L2P, L2Q and NPSS at keyframe
+  gaps 5, 15 and 30 on 128-frame windows of held-out procedural biped31 clips
+  (the paper's Table 1 protocol as the authors compute it,
+  ``skelagnostic_pcmrl.interp_eval.authors_table1``; L2P in metres over all
+  frames), against LERP/SLERP, for ``experiment=pcmrl_interp_cpu``.
 
 * PC-MRL reconstruction (``quality_pcmrl_recon``): the paper's Table 2
   protocol (temporal KNN distance, 1024 points, K = 8, x100 in metres) at

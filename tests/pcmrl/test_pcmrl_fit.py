@@ -65,6 +65,29 @@ def test_tiny_fit_writes_a_checkpoint_that_reloads(pcmrl_pm, pcmrl_tiny, tmp_pat
     assert torch.equal(state["temporal.proj.weight"], model.temporal.proj.weight)
 
 
+def test_tiny_fit_with_the_authors_knn_loss(pcmrl_pm, pcmrl_tiny, tmp_path) -> None:
+    """knn_variant=authors trains (alpha ramp on) and logs a finite KNN loss."""
+    tiny = [f"model.{k}={v}" for k, v in pcmrl_tiny.items()]
+    cfg = app.compose(
+        [
+            "model=pcmrl",
+            f"run_dir={tmp_path}",
+            "model.knn_variant=authors",
+            "model.knn_alpha_warmup=4",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            *FAST,
+            *tiny,
+        ],
+        plugin_manager=pcmrl_pm,
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        metrics = app.run(cfg, plugin_manager=pcmrl_pm)
+    assert {"train/loss", "val/knn"} <= set(metrics)
+    assert all(torch.isfinite(torch.tensor(v)) for v in metrics.values())
+    assert metrics["val/knn"] > 0
+
+
 # The 2-process DDP fit (rank-zero writes, identical weights on both ranks) is
 # tests/reliability/test_ddp_methods.py::test_fit_ddp_two_cpu_processes[pcmrl].
 

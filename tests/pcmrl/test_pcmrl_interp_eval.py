@@ -28,12 +28,16 @@ def _clips() -> list[Motion]:
 
 def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
     clips = _clips()
-    report = evaluate({"oracle": lambda m, k: m, "LERP": lerp_slerp}, clips, window=32,
-                      stride=16, gaps=(5, 15))
+    report = evaluate(
+        {"oracle": lambda m, k: m, "LERP": lerp_slerp}, clips, window=32, stride=16, gaps=(5, 15)
+    )
     assert report["protocol"]["windows"] == len(windows(clips, 32, 16)) == 6
     for gap in ("5", "15"):
-        assert report["results"]["oracle"][gap] == {"l2p": 0.0, "l2q": 0.0, "npss": 0.0}
+        oracle = report["results"]["oracle"][gap]
+        assert set(oracle) == {f"{p}{m}" for p in ("", "lafan1_") for m in ("l2p", "l2q", "npss")}
+        assert all(v == pytest.approx(0.0, abs=1e-12) for v in oracle.values())
         assert report["results"]["LERP"][gap]["l2p"] > 0
+        assert report["results"]["LERP"][gap]["lafan1_l2p"] > 0
     # L2P of LERP at gap 15 by hand: centred positions, z-scored with the windows' stats,
     # L2 norm per non-key frame, mean over frames
     wins = windows(clips, 32, 16)
@@ -49,9 +53,12 @@ def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
         per_frame = (a - b).norm(dim=-1)
         errs.append(per_frame[[t for t in range(32) if t not in keys]])
     expected = float(torch.cat(errs).mean())
-    assert report["results"]["LERP"]["15"]["l2p"] == pytest.approx(expected, rel=1e-6)
+    assert report["results"]["LERP"]["15"]["lafan1_l2p"] == pytest.approx(expected, rel=1e-6)
     # longer gaps are harder for LERP
     assert report["results"]["LERP"]["15"]["l2p"] > report["results"]["LERP"]["5"]["l2p"]
+    assert (
+        report["results"]["LERP"]["15"]["lafan1_l2p"] > report["results"]["LERP"]["5"]["lafan1_l2p"]
+    )
     table = format_table(report)
     assert table.splitlines()[0].startswith("| Method | L2P 5 | L2P 15 | L2Q 5")
     assert "| oracle | 0.0000" in table
@@ -60,11 +67,18 @@ def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
 def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
     L.seed_everything(0)
     dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=8)
-    model = PcmrlInterpAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=16,
-                                 warmup_steps=1)
-    trainer = L.Trainer(max_steps=2, accelerator="cpu", logger=False, default_root_dir=tmp_path,
-                        enable_progress_bar=False, enable_model_summary=False,
-                        limit_val_batches=0)
+    model = PcmrlInterpAligner(
+        dim=16, heads=2, layers=1, ff_mult=2, max_relative=16, warmup_steps=1
+    )
+    trainer = L.Trainer(
+        max_steps=2,
+        accelerator="cpu",
+        logger=False,
+        default_root_dir=tmp_path,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        limit_val_batches=0,
+    )
     trainer.fit(model, datamodule=dm)
     model.eval()
     clips = _clips()
@@ -77,12 +91,16 @@ def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
     assert [r["clip"] for r in out.rows] == ["walk", "run"]
     assert any("short" in n for n in out.notes)
     assert out.methods == ["model", "lerp_slerp"]
-    assert set(out.metrics) == {f"{k}@{g}" for k in ("l2p", "l2q", "npss") for g in (5, 15, 30)}
+    assert set(out.metrics) == {
+        f"{p}{k}@{g}" for p in ("", "lafan1_") for k in ("l2p", "l2q", "npss") for g in (5, 15, 30)
+    }
     # the same figures as the Table 1 function on the clip, with the shared statistics
     stats = position_stats(windows(clips, 32, 16))
     direct = evaluate({"LERP": lerp_slerp}, clips[:1], 32, 16, stats=stats)
-    assert out.rows[0]["values"]["lerp_slerp"]["l2p@15"] == pytest.approx(
-        direct["results"]["LERP"]["15"]["l2p"])
+    for key in ("l2p", "npss", "lafan1_l2p"):
+        assert out.rows[0]["values"]["lerp_slerp"][f"{key}@15"] == pytest.approx(
+            direct["results"]["LERP"]["15"][key]
+        )
     for values in out.rows[1]["values"].values():
         assert all(v >= 0 and v == v for v in values.values())
 
@@ -92,3 +110,25 @@ def test_evaluate_needs_long_enough_clips() -> None:
 
     with pytest.raises(SkelagnosticError, match="no clip has 128 frames"):
         evaluate({"LERP": lerp_slerp}, _clips(), window=128)
+
+
+def test_authors_metrics_of_lerp_by_hand() -> None:
+    """The protocol's authors' L2P of LERP: keys pasted, metres, mean over all frames."""
+    from skelagnostic.errors import SkelagnosticError
+
+    clips = _clips()
+    report = evaluate(
+        {"LERP": lerp_slerp}, clips, window=32, stride=16, gaps=(15,), metrics=("authors",)
+    )
+    assert set(report["results"]["LERP"]["15"]) == {"l2p", "l2q", "npss"}
+    wins = windows(clips, 32, 16)
+    keys = [0, 15, 30, 31]
+    err = []
+    for w in wins:
+        pred = lerp_slerp(w, keys).to_metres().double().global_positions()
+        err.append((pred - w.to_metres().double().global_positions()).flatten(1).norm(dim=-1))
+    assert report["results"]["LERP"]["15"]["l2p"] == pytest.approx(float(torch.cat(err).mean()))
+    assert report["results"]["LERP"]["15"]["l2p"] > 0
+    assert "| LERP |" in format_table(report)
+    with pytest.raises(SkelagnosticError, match="metrics"):
+        evaluate({"LERP": lerp_slerp}, clips, window=32, metrics=("paper",))

@@ -38,8 +38,7 @@ def _clouds(seed: int, batch: int = 2, frames: int = 5, n: int = 40, m: int = 12
 def test_knn_loss_equals_brute_force_sum_and_mean() -> None:
     preds, target, g_p, g_t = _clouds(0)
     k = 4
-    ref = [_brute_force(preds[b], target[b], g_p[b].tolist(), g_t[b].tolist(), k)
-           for b in range(2)]
+    ref = [_brute_force(preds[b], target[b], g_p[b].tolist(), g_t[b].tolist(), k) for b in range(2)]
     loss_sum = temporal_knn_loss(preds, target, g_p, g_t, k=k, reduction="sum")
     assert math.isclose(float(loss_sum), sum(ref) / 2, rel_tol=1e-9)
     loss_mean = temporal_knn_loss(preds, target, g_p, g_t, k=k)
@@ -50,8 +49,9 @@ def test_knn_loss_agrees_with_the_core_metric_and_is_differentiable() -> None:
     preds, target, g_p, g_t = _clouds(1, batch=1)
     preds.requires_grad_(True)
     loss = temporal_knn_loss(preds, target, g_p[0], g_t[0], k=3)
-    ref = temporal_knn_distance(preds[0].detach(), target[0], preds_groups=g_p[0],
-                                target_groups=g_t[0], k=3)
+    ref = temporal_knn_distance(
+        preds[0].detach(), target[0], preds_groups=g_p[0], target_groups=g_t[0], k=3
+    )
     assert math.isclose(float(loss.detach()), float(ref), rel_tol=1e-9)
     loss.backward()
     assert preds.grad is not None and preds.grad.abs().sum() > 0
@@ -75,16 +75,18 @@ def test_knn_loss_is_zero_for_identical_clouds_and_respects_groups() -> None:
 
 
 def test_authors_variant_terms() -> None:
-    """Three terms / sqrt(T): a pure translation changes the global and not the centred term."""
+    """Three terms / sqrt(T): a pure translation changes the global and not the normalised term."""
     gen = torch.Generator().manual_seed(3)
     pts = torch.randn(1, 9, 20, 3, generator=gen)
     groups = torch.zeros(20, dtype=torch.long)
     moved = pts + torch.tensor([0.5, 0.0, 0.0])
     loss = temporal_knn_loss(moved, pts, groups, groups, k=1, variant="authors")
-    # global term: 0.5 per frame, 9 frames, / sqrt(9); centred and velocity terms: 0
-    assert float(loss) == pytest.approx(0.5 * 9 / 3, rel=1e-5)
+    # global term: |flattened trajectory difference| = sqrt(9 * 0.5^2), / sqrt(9);
+    # normalised and velocity terms: 0
+    assert float(loss) == pytest.approx(0.5, rel=1e-5)
     assert float(temporal_knn_loss(pts, pts, groups, groups, k=1, variant="authors")) == (
-        pytest.approx(0.0, abs=1e-5))
+        pytest.approx(0.0, abs=1e-5)
+    )
 
 
 def test_knn_loss_rejects_bad_arguments() -> None:

@@ -288,3 +288,18 @@ def test_a_few_steps_reduce_the_knn_loss(model) -> None:
         opt.step()
         losses.append(float(loss.detach()))
     assert losses[-1] < 0.75 * losses[0], losses
+
+
+def test_authors_knn_alpha_follows_their_schedule_during_training(pcmrl_tiny) -> None:
+    from types import SimpleNamespace
+
+    model = PcmrlReconAligner(**pcmrl_tiny, knn_variant="authors", knn_alpha_warmup=10)
+    assert model._knn_alpha() == 1.0  # no trainer: evaluation weight
+    model._trainer = SimpleNamespace(max_steps=110, global_step=4)
+    model.train()
+    assert model._knn_alpha() == pytest.approx(0.5)  # step 5 of a 10-step ramp
+    model._trainer.global_step = 59
+    assert model._knn_alpha() == pytest.approx(0.5)  # halfway down from step 10 to 110
+    model.eval()
+    assert model._knn_alpha() == 1.0
+    model._trainer = None

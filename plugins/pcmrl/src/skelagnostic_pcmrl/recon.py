@@ -33,7 +33,12 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph
 from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.representations import POINT_GROUPS
-from skelagnostic_pcmrl.losses import end_effector_loss, temporal_knn_loss, unit_norm_penalty
+from skelagnostic_pcmrl.losses import (
+    authors_alpha,
+    end_effector_loss,
+    temporal_knn_loss,
+    unit_norm_penalty,
+)
 from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
 from skelagnostic_pcmrl.points import (
     effective_joints,
@@ -83,7 +88,14 @@ class PcmrlReconAligner(Aligner):
         temporal_heads: Temporal attention heads (4).
         dropout: Dropout of the temporal transformer.
         knn_k: Neighbours of the KNN loss (8).
-        knn_variant: ``"paper"`` (Eq. 5) or ``"authors"`` (three terms / sqrt(T)).
+        knn_variant: ``"paper"`` (Eq. 5) or ``"authors"`` (the authors' code:
+            :func:`~skelagnostic_pcmrl.losses.authors_knn_terms`, global +
+            ``alpha`` x normalised + velocity terms).
+        knn_alpha_warmup: ``knn_variant="authors"``: steps of the linear ramp of the
+            normalised term's weight ``alpha``, which then decays linearly to 0 at
+            ``trainer.max_steps`` (:func:`~skelagnostic_pcmrl.losses.authors_alpha`;
+            500 in the authors' code; 0: ``alpha = 1`` throughout; no decay when
+            ``trainer.max_steps`` is not set).
         knn_reduction: ``"mean"`` (per point, neighbour and frame) or ``"sum"`` (Eq. 5 as is).
         lambda_q: Weight of the unit-norm penalty (0.01).
         lambda_end: Weight of the end-effector loss (0: off; the paper's loss is optional).
@@ -131,6 +143,7 @@ class PcmrlReconAligner(Aligner):
         dropout: float = 0.0,
         knn_k: int = 8,
         knn_variant: str = "paper",
+        knn_alpha_warmup: int = 500,
         knn_reduction: str = "mean",
         lambda_q: float = 0.01,
         lambda_end: float = 0.0,
@@ -407,7 +420,8 @@ class PcmrlReconAligner(Aligner):
                                        generator, self.device)
             tgt_pts = tgt_layout.points(out["rotations"], out["positions"], self._target_offsets)
             knn = temporal_knn_loss(tgt_pts, src_pts, tgt_layout.groups, src_layout.groups,
-                                    hp.knn_k, hp.knn_reduction, hp.knn_variant)
+                                    hp.knn_k, hp.knn_reduction, hp.knn_variant,
+                                    alpha=self._knn_alpha())
             norm = unit_norm_penalty(out["raw"])
             end = end_effector_loss(out["positions"], gpos, end_effector_pairs(source, target))
             loss = knn + hp.lambda_q * norm + hp.lambda_end * end
@@ -419,6 +433,14 @@ class PcmrlReconAligner(Aligner):
         if not losses:
             return torch.zeros((), device=self.device, requires_grad=prefix == "train")
         return torch.stack(losses).mean()
+
+    def _knn_alpha(self) -> float:
+        """Weight of the authors' normalised KNN term at this step (1 outside training)."""
+        trainer = self._trainer
+        if trainer is None or not self.training:
+            return 1.0
+        total = trainer.max_steps if trainer.max_steps and trainer.max_steps > 0 else 0
+        return authors_alpha(self.global_step + 1, int(self.hparams.knn_alpha_warmup), total)
 
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         """KNN + unit-norm (+ end-effector) loss on fresh clouds; logs ``train/loss``."""
