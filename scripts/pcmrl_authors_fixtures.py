@@ -22,10 +22,14 @@ given on the command line (``github.com/MiniEval/PC-MRL``, no licence file).
 
 Usage::
 
-    python scripts/pcmrl_authors_fixtures.py /path/to/PC-MRL /path/to/cmu/01_01.bvh
+    python -c "import skelagnostic as sa; \
+        sa.write_bvh(sa.procedural.generate('biped31', 'walk', seconds=1.0)[0], 'biped31.bvh')"
+    python scripts/pcmrl_authors_fixtures.py /path/to/PC-MRL biped31.bvh
 
-The BVH gives the CMU skeleton of the Table 1 fixture (any CMU clip of the
-cgspeed conversion; the tests read the skeleton back from the fixture).
+The BVH gives the CMU-topology skeleton of the Table 1 fixture (the tests read
+it back from the fixture). The committed fixture uses the package's procedural
+``biped31`` skeleton (CMU joint names), so it holds nothing of a licensed
+dataset; any CMU clip of the cgspeed conversion works too.
 """
 
 from __future__ import annotations
