@@ -23,6 +23,7 @@ from skelagnostic_vqpae.authors import (
     vqae_key_map,
 )
 
+from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "walkthedog"
@@ -157,3 +158,9 @@ def test_missing_files_and_unsupported_options(tmp_path: Path) -> None:
     with pytest.raises(SkelagnosticError, match="not a directory"):
         load_run(tmp_path / "nowhere")
     assert read_args(args)["load"] == "Datasets/human,Datasets/dog"
+
+
+def test_a_run_without_skeletons_says_so(model: VqpaeAligner) -> None:
+    skeleton = Skeleton(["hips", "head"], [-1, 0], [[0.0, 0.0, 0.0], [0.0, 0.5, 0.0]])
+    with pytest.raises(SkelagnosticError, match="no trained dataset has the topology"):
+        model.dataset_of(skeleton)
