@@ -9,6 +9,7 @@ windows, the outputs of their network in eval mode.
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -97,9 +98,14 @@ def test_key_map_covers_their_state_dict() -> None:
     assert set(vqae_key_map(7, 5)) == set(state) - {"tpi", "args"}
 
 
-def test_latest_complete_epoch_is_loaded(tmp_path: Path, outputs: dict[str, np.ndarray]) -> None:
+def _copy_run(tmp_path: Path) -> Path:
     run = tmp_path / "run"
     shutil.copytree(FIXTURE / "run", run)
+    return run
+
+
+def test_latest_complete_epoch_is_loaded(tmp_path: Path, outputs: dict[str, np.ndarray]) -> None:
+    run = _copy_run(tmp_path)
     for i in (0, 1):
         shutil.copy(run / f"1_{i}_1Channels.pt", run / f"3_{i}_1Channels.pt")
     shutil.copy(run / "1_1Channels_VQ.pt", run / "3_1Channels_VQ.pt")
@@ -112,35 +118,38 @@ def test_latest_complete_epoch_is_loaded(tmp_path: Path, outputs: dict[str, np.n
     np.testing.assert_array_equal(codes, 7 - outputs["code0"])
 
 
-def _copy_run(tmp_path: Path) -> Path:
-    run = tmp_path / "run"
-    shutil.copytree(FIXTURE / "run", run)
-    return run
+KEY = "freq_fc.layers.3.weight"
 
 
-def test_errors_name_the_file_and_key(tmp_path: Path) -> None:
+def _narrow(state: dict[str, torch.Tensor]) -> None:
+    state[KEY] = state[KEY][:, :4]
+
+
+def _drop(state: dict[str, torch.Tensor]) -> None:
+    del state[KEY]
+
+
+def _extra(state: dict[str, torch.Tensor]) -> None:
+    state["extra.weight"] = torch.zeros(1)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (_narrow, r"1_1_1Channels\.pt: 'freq_fc\.layers\.3\.weight' has shape \[16, 4\]"),
+        (_drop, r"1_1_1Channels\.pt has no key 'freq_fc\.layers\.3\.weight'"),
+        (_extra, r"1_1_1Channels\.pt has unexpected keys \['extra\.weight'\]"),
+    ],
+)
+def test_errors_name_the_file_and_key(
+    tmp_path: Path, edit: Callable[[dict[str, torch.Tensor]], None], message: str
+) -> None:
     run = _copy_run(tmp_path)
     path = run / "1_1_1Channels.pt"
     state = torch.load(path, weights_only=True)
-    state["freq_fc.layers.3.weight"] = state["freq_fc.layers.3.weight"][:, :4]
+    edit(state)
     torch.save(state, path)
-    with pytest.raises(
-        SkelagnosticError,
-        match=r"1_1_1Channels\.pt: 'freq_fc\.layers\.3\.weight'"
-        r" has shape \[16, 4\]",
-    ):
-        load_run(run)
-    del state["freq_fc.layers.3.weight"]
-    torch.save(state, path)
-    with pytest.raises(
-        SkelagnosticError,
-        match=r"1_1_1Channels\.pt has no key "
-        r"'freq_fc\.layers\.3\.weight'",
-    ):
-        load_run(run)
-    state["extra.weight"] = torch.zeros(1)
-    torch.save(state, path)
-    with pytest.raises(SkelagnosticError, match=r"unexpected keys \['extra\.weight'\]"):
+    with pytest.raises(SkelagnosticError, match=message):
         load_run(run)
 
 
