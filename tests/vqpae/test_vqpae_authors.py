@@ -133,12 +133,17 @@ def _extra(state: dict[str, torch.Tensor]) -> None:
     state["extra.weight"] = torch.zeros(1)
 
 
+def _flat_grid(state: dict[str, torch.Tensor]) -> None:
+    state["args"] = torch.zeros_like(state["args"])
+
+
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
         (_narrow, r"1_1_1Channels\.pt: 'freq_fc\.layers\.3\.weight' has shape \[16, 4\]"),
         (_drop, r"1_1_1Channels\.pt has no key 'freq_fc\.layers\.3\.weight'"),
         (_extra, r"1_1_1Channels\.pt has unexpected keys \['extra\.weight'\]"),
+        (_flat_grid, r"1_1_1Channels\.pt: 'args' \(the time grid\) must increase"),
     ],
 )
 def test_errors_name_the_file_and_key(

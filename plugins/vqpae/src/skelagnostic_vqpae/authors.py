@@ -243,6 +243,10 @@ def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
             )
         conv = _tensor(state, "convs.0.weight", path)
         span = float(grid[-1] - grid[0])
+        if not span > 0:
+            raise SkelagnosticError(
+                f"authors' run: {path}: 'args' (the time grid) must increase, got {grid.tolist()}"
+            )
         specs[name] = {
             "channels": int(conv.shape[1]),
             "window": grid.numel(),
