@@ -178,3 +178,15 @@ def test_a_run_without_skeletons_says_so(model: VqpaeAligner) -> None:
     skeleton = Skeleton(["hips", "head"], [-1, 0], [[0.0, 0.0, 0.0], [0.0, 0.5, 0.0]])
     with pytest.raises(SkelagnosticError, match="no trained dataset has the topology"):
         model.dataset_of(skeleton)
+
+
+def test_rebuilds_from_its_hyperparameters(
+    model: VqpaeAligner, outputs: dict[str, np.ndarray]
+) -> None:
+    """What a Lightning checkpoint of the loaded aligner stores is enough to rebuild it."""
+    again = VqpaeAligner(**model.hparams)
+    again.load_state_dict(model.state_dict())
+    x = torch.from_numpy(outputs["x1"])
+    ours, theirs = again.eval().embed_batch(x, 1), model.embed_batch(x, 1)
+    for key in ("phase", "frequency", "code", "amplitude", "reconstruction"):
+        assert torch.allclose(ours[key].double(), theirs[key].double(), rtol=0, atol=1e-6), key
