@@ -229,3 +229,26 @@ class TestFrequencyHead:
     def test_rejects_unknown_head(self) -> None:
         with pytest.raises(SkelagnosticError, match="frequency_head"):
             VQPAE(9, 61, 60.0, frequency_head="peak")
+
+
+class TestAuthorsOptions:
+    """``phase_kernel`` and ``freq_hidden_elu``: the authors' timing branch, off by default."""
+
+    def test_defaults_keep_the_kernel_1_conv_and_leaky_relu_mlp(self) -> None:
+        net = _net()
+        assert net.phase_conv.kernel_size == (1,)
+        assert not any(isinstance(m, torch.nn.ELU) for m in net.freq_mlp)
+
+    def test_authors_timing_branch(self) -> None:
+        torch.manual_seed(0)
+        net = VQPAE(12, 21, 20.0, latent=4, kernel_size=5, freq_layers=3, phase_kernel=5,
+                    freq_hidden_elu=True, padding_mode="zeros")
+        assert net.phase_conv.kernel_size == (5,) and net.phase_conv.padding_mode == "zeros"
+        kinds = [type(m).__name__ for m in net.freq_mlp]
+        assert kinds == ["Linear", "LeakyReLU", "ELU"] * 2 + ["Linear"]
+        phase, frequency, signal = net.phase_and_frequency(torch.randn(3, 12, 21))
+        assert phase.shape == frequency.shape == (3,) and signal.shape == (3, 21)
+
+    def test_rejects_even_phase_kernel(self) -> None:
+        with pytest.raises(SkelagnosticError, match="phase_kernel must be positive and odd"):
+            VQPAE(9, 61, 60.0, phase_kernel=4)

@@ -5,8 +5,9 @@ Registered as ``model=vqpae`` through the ``skelagnostic`` entry-point group
 (the periodic autoencoder), :mod:`~skelagnostic_vqpae.codebook` (the shared
 codebook), :mod:`~skelagnostic_vqpae.data` (frame windows, data module),
 :mod:`~skelagnostic_vqpae.aligner` (training and inference),
-:mod:`~skelagnostic_vqpae.embed` (clip embeddings, retrieval) and
-:mod:`~skelagnostic_vqpae.transfer` (frequency-scaled motion matching).
+:mod:`~skelagnostic_vqpae.embed` (clip embeddings, retrieval),
+:mod:`~skelagnostic_vqpae.transfer` (frequency-scaled motion matching) and
+:mod:`~skelagnostic_vqpae.authors` (runs of the authors' trainer, loaded).
 Imports are lazy: ``import skelagnostic_vqpae`` loads no model code until one of
 the names below is used.
 """

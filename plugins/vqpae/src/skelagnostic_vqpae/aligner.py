@@ -141,6 +141,9 @@ class VqpaeAligner(Aligner):
         padding_mode: Padding of the encoder/decoder convolutions: ``"replicate"``
             (default) or ``"zeros"`` (PyTorch's default); see
             :class:`~skelagnostic_vqpae.model.VQPAE` and docs/reports/vqpae.md.
+        phase_kernel: Kernel of the timing branch's convolution (1; the authors' code: 23).
+        freq_hidden_elu: ELU after every hidden LeakyReLU of the frequency MLP
+            (authors' code); see :class:`~skelagnostic_vqpae.model.VQPAE`.
         center_windows: Reconstruct each window's deviation from its temporal mean
             (default) instead of the window itself (the paper's ``L_rec``); the
             manifold, a sum of sinusoids, cannot carry the mean except by a
@@ -192,6 +195,8 @@ class VqpaeAligner(Aligner):
         spectrum: str = "normalized",
         padding_mode: str = "replicate",
         frequency_head: str = "mlp",
+        phase_kernel: int = 1,
+        freq_hidden_elu: bool = False,
         center_windows: bool = True,
         beta: float = 0.25,
         lambda_vq: float = 1.0,
@@ -248,7 +253,9 @@ class VqpaeAligner(Aligner):
                        freq_layers=hp.freq_layers, amp_layers=hp.amp_layers,
                        decoder_centering=hp.decoder_centering, spectrum=hp.spectrum,
                        padding_mode=hp.padding_mode,
-                       frequency_head=hp.frequency_head)
+                       frequency_head=hp.frequency_head,
+                       phase_kernel=hp.phase_kernel,
+                       freq_hidden_elu=hp.freq_hidden_elu)
             for spec in datasets.values()
         )
         self.codebook = SharedCodebook(hp.num_codes, 2 * hp.latent, len(datasets), hp.beta,
@@ -567,6 +574,41 @@ class VqpaeAligner(Aligner):
                          for _, sel in _clips_in_frame_order(cat)] if cat else []
         return out
 
+    @torch.no_grad()
+    def embed_batch(self, x: Tensor, dataset: int | str) -> dict[str, Tensor]:
+        """Embed normalised windows of one dataset (no grouping into clips).
+
+        Args:
+            x: ``[B, C, T]`` windows, normalised as the network receives them.
+            dataset: Index or name of the dataset (character).
+
+        Returns:
+            ``phase`` ``[B]`` (cycles), ``frequency`` ``[B]`` (Hz), ``code`` ``[B]``,
+            ``amplitude`` ``[B, 2d]`` (the quantised amplitude: first half the
+            sine, second half the cosine coefficients), ``manifold`` ``[B, d]``
+            (the point ``Psi(A, phi)`` at the pivot) and ``reconstruction``
+            ``[B, C, T]`` (the decoder's output, normalised).
+
+        Raises:
+            SkelagnosticError: No datasets yet, an unknown dataset, or ``x`` of the wrong shape.
+        """
+        self._require_built()
+        if isinstance(dataset, str):
+            if dataset not in self.dataset_names:
+                raise SkelagnosticError(
+                    f"VqpaeAligner: unknown dataset {dataset!r}; known: {self.dataset_names}")
+            k = self.dataset_names.index(dataset)
+        elif 0 <= dataset < len(self.dataset_names):
+            k = int(dataset)
+        else:
+            raise SkelagnosticError(f"VqpaeAligner: dataset index {dataset} out of range "
+                                    f"[0, {len(self.dataset_names)})")
+        rec, p = self.forward_dataset(k, x.to(self.device))
+        return {"phase": p.phase, "frequency": p.frequency, "code": p.code,
+                "amplitude": p.amplitude,
+                "manifold": phase_manifold(p.amplitude, p.phase.unsqueeze(-1))[..., 0],
+                "reconstruction": rec}
+
     def _pivot_embedding(self, k: int, batch: Mapping[str, Tensor]) -> dict[str, Tensor]:
         """Dataset ``k``'s embedding of each window's pivot, with its ``clip`` and ``pivot``."""
         _, p = self.forward_dataset(k, batch["features"])
@@ -628,7 +670,7 @@ class VqpaeAligner(Aligner):
             stem = "".join(c if c.isalnum() or c in "_.-" else "_" for c in name)
             meta = {
                 "dataset": name,
-                "skeleton": spec["skeleton"],
+                "skeleton": spec.get("skeleton"),  # None for an authors' run (.authors)
                 "fps": float(spec["fps"]),
                 "window": window,
                 "pivot": window // 2,
@@ -680,7 +722,9 @@ class VqpaeAligner(Aligner):
         """
         specs = self.hparams["datasets"] or {}
         for k, spec in enumerate(specs.values()):
-            sk = spec["skeleton"]
+            sk = spec.get("skeleton")  # absent for an authors' run (skelagnostic_vqpae.authors)
+            if sk is None:
+                continue
             if list(sk["joint_names"]) == list(skeleton.joint_names) and list(
                     sk["parents"]) == list(skeleton.parents):
                 return k

@@ -6,8 +6,8 @@ Shapes follow PyTorch's ``Conv1d`` layout: an input window is ``[B, C_in, T]``
 
 * encoder: two ``Conv1d`` (kernel 23, "same" padding, ``C_in -> C_in // 3 -> d``),
   each followed by :class:`TemporalCentering` and ELU (Fig. 2, supplement 2.1);
-* timing branch: ``Conv1d(d -> 1, kernel 1)``, the FFT power spectrum of that
-  signal through a 5-layer MLP for the frequency ``f`` (Fig. 3) and
+* timing branch: ``Conv1d(d -> 1, kernel 1)`` (option ``phase_kernel``), the FFT
+  power spectrum of that signal through a 5-layer MLP for the frequency ``f`` (Fig. 3) and
   :func:`mason_phase` for the pivot phase ``phi`` (supplement Eq. 1);
 * amplitude branch: temporal mean of the latent, a 5-layer MLP to the raw
   amplitude ``A~`` (size ``2d``), quantised by the shared codebook
@@ -166,12 +166,15 @@ class TemporalCentering(nn.Module):
         return x - x.mean(dim=-1, keepdim=True)
 
 
-def _mlp(sizes: list[int], slope: float = 0.2) -> nn.Sequential:
+def _mlp(sizes: list[int], slope: float = 0.2, hidden_elu: bool = False) -> nn.Sequential:
+    """Linear layers with LeakyReLU between them (and ELU after it with ``hidden_elu``)."""
     layers: list[nn.Module] = []
     for i, (a, b) in enumerate(pairwise(sizes)):
         layers.append(nn.Linear(a, b))
         if i < len(sizes) - 2:
             layers.append(nn.LeakyReLU(slope))
+            if hidden_elu:
+                layers.append(nn.ELU())
     return nn.Sequential(*layers)
 
 
@@ -241,6 +244,12 @@ class VQPAE(nn.Module):
             avoids both, but in our human + dog runs it slowed the sharing of
             codes between the characters (see docs/reports/vqpae.md), so it is
             not the default.
+        phase_kernel: Kernel of the timing branch's ``Conv1d(d -> 1)`` (odd; default
+            1, the paper's Fig. 3; the authors' code uses the encoder's kernel,
+            23, with "same" padding of ``padding_mode``).
+        freq_hidden_elu: Apply ELU after the LeakyReLU of every hidden layer of the
+            frequency MLP, as the authors' ``MLP(..., last_activation=True)`` does
+            (default ``False``: LeakyReLU only, the paper's description).
 
     Raises:
         SkelagnosticError: A size is not positive, ``window`` is even or ``kernel_size`` even.
@@ -260,6 +269,8 @@ class VQPAE(nn.Module):
         spectrum: str = "normalized",
         padding_mode: str = "replicate",
         frequency_head: str = "mlp",
+        phase_kernel: int = 1,
+        freq_hidden_elu: bool = False,
     ) -> None:
         super().__init__()
         if frequency_head not in FREQUENCY_HEADS:
@@ -277,9 +288,9 @@ class VQPAE(nn.Module):
                            ("freq_layers", freq_layers), ("amp_layers", amp_layers)):
             if value <= 0:
                 raise SkelagnosticError(f"VQPAE: {arg} must be positive, got {value}")
-        if kernel_size <= 0 or kernel_size % 2 == 0:
-            raise SkelagnosticError(
-                f"VQPAE: kernel_size must be positive and odd, got {kernel_size}")
+        for arg, value in (("kernel_size", kernel_size), ("phase_kernel", phase_kernel)):
+            if value <= 0 or value % 2 == 0:
+                raise SkelagnosticError(f"VQPAE: {arg} must be positive and odd, got {value}")
         mid = intermediate if intermediate is not None else max(1, channels // 3)
         if mid <= 0:
             raise SkelagnosticError(f"VQPAE: intermediate must be positive, got {mid}")
@@ -292,9 +303,10 @@ class VQPAE(nn.Module):
             conv(channels, mid), TemporalCentering(), nn.ELU(),
             conv(mid, latent), TemporalCentering(), nn.ELU(),
         )
-        self.phase_conv = nn.Conv1d(latent, 1, 1)
+        self.phase_conv = nn.Conv1d(latent, 1, phase_kernel, padding="same",
+                                    padding_mode=padding_mode)
         bins = window // 2 + 1
-        self.freq_mlp = _mlp([bins] * freq_layers + [1])
+        self.freq_mlp = _mlp([bins] * freq_layers + [1], hidden_elu=freq_hidden_elu)
         # frequency of every rfft bin (Hz): k / (T dt)
         self.register_buffer("bin_hz", torch.arange(bins, dtype=torch.float32) * self.fps / window,
                              persistent=False)
