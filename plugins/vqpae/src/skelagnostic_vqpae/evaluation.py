@@ -398,8 +398,8 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
         "database, 1 s replays, no period term and no time warping (the target plays at its "
         f"own rate, re-matched every second); `{OWN_RATE}`: one replay as long as the source "
         "(at most the shortest database clip), the best-matching target stretch at its own rate",
-        "gait frequency: from the feet's root-local positions (forward swings per second), the same "
-        "measurement for the source and the outputs; no model output is used",
+        "gait frequency: forward swings per second of the feet's root-local positions, the "
+        "same measurement for the source and the outputs; no model output is used",
     ]
     return Evaluation(
         TRANSFER_METRICS, rows, plots=["transfer.gif", "transfer_sheet.png"], notes=notes
