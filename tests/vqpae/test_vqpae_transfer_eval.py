@@ -168,3 +168,23 @@ def test_main_experiment_writes_the_transfer_summary(tmp_path, monkeypatch, caps
             assert (run / f"vqpae_transfer{suffix}").stat().st_size > 0
     finally:
         get_plugin_manager.cache_clear()
+
+
+def test_unscaled_transfer_replays_fixed_windows(tiny_run) -> None:
+    from skelagnostic_vqpae.evaluation import split_clips
+    from skelagnostic_vqpae.transfer import build_database, transfer
+
+    from skelagnostic.errors import SkelagnosticError
+
+    model, held = tiny_run
+    human = next(c for c in held.clips if model.dataset_of(c.skeleton) == 0)
+    dogs = [c for c in split_clips(held.datamodule, "train") if model.dataset_of(c.skeleton) == 1]
+    target = build_database(model, dogs)
+    with torch.no_grad():
+        result = transfer(model, human, target, scaled=False, replay_seconds=0.5)
+    replay = round(0.5 * target.database.fps)
+    assert all(s.length == replay for s in result.match.segments)
+    assert all(s.out_length == replay for s in result.match.segments[:-1])
+    assert result.motion.num_frames == len(result.source)
+    with pytest.raises(SkelagnosticError, match="replay_seconds"):
+        transfer(model, human, target, scaled=False, replay_seconds=0.0)
