@@ -32,7 +32,7 @@ import torch
 
 from skelagnostic.baselines import mean_pose
 from skelagnostic.core.motion import Motion
-from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut
+from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut, split_clips
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import GlobalPositions
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip, plot_manifold
@@ -47,7 +47,6 @@ __all__ = [
     "gait_frequency",
     "manifold_protocol",
     "phase_line",
-    "split_clips",
     "transfer_protocol",
     "transfer_rows",
 ]
@@ -269,27 +268,6 @@ def acceleration(motion: Motion) -> tuple[float, float]:
     per_frame = (pos[2:] - 2 * pos[1:-1] + pos[:-2]).norm(dim=-1).mean(-1) * motion.fps**2
     per_frame = per_frame / max(motion.skeleton.height(), 1e-9)
     return float(per_frame.mean()), float(per_frame.max())
-
-
-def split_clips(datamodule: Any, split: str) -> list[Motion]:
-    """The clips a data module assigns to ``split``, named by clip id, at its frame rate.
-
-    Args:
-        datamodule: A set-up data module (``sources``, ``assigned_splits``, ``fps``).
-        split: ``"train"``, ``"val"`` or ``"test"``.
-    """
-    assigned = getattr(datamodule, "assigned_splits", {}) or {}
-    fps = float(datamodule.fps)
-    clips = []
-    for source in datamodule.sources:
-        for ref in source.clips():
-            if assigned.get(ref.id) != split:
-                continue
-            motion = source.load(ref)
-            motion = motion if motion.fps == fps else motion.resample(fps)
-            motion.name = ref.id
-            clips.append(motion)
-    return clips
 
 
 def transfer_rows(

@@ -100,8 +100,8 @@ def transfer_summary(
         rows and the per-method means), ``renders`` (``transfer``: the first clip,
         its transfer and the two baselines') and ``notes`` (a Markdown table).
     """
-    from skelagnostic.evaluation import MODEL, mean_rows
-    from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, split_clips, transfer_rows
+    from skelagnostic.evaluation import MODEL, mean_rows, split_clips
+    from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_rows
 
     if len(aligner.dataset_names) < 2 or not hasattr(datamodule, "sources"):
         return {}
