@@ -30,6 +30,8 @@ __all__ = ["fit_summary", "overlap_figures", "transfer_summary"]
 
 #: Held-out source clips re-enacted at the end of ``fit`` (seconds each: a few).
 SUMMARY_TRANSFER_CLIPS = 3
+#: Longest source excerpt transferred at the end of ``fit`` (the start of each clip), seconds.
+SUMMARY_TRANSFER_SECONDS = 10.0
 #: Seconds of the transfer render (the start of the clip; a short path keeps the figures large).
 RENDER_SECONDS = 3.0
 
@@ -85,8 +87,9 @@ def transfer_summary(
 ) -> dict[str, Any]:
     """Held-out clips of the first character re-enacted by the second, model vs baseline.
 
-    The first ``max_clips`` validation (else test) clips of the first dataset go
-    through :func:`skelagnostic_vqpae.evaluation.transfer_rows` with the second
+    The first ``max_clips`` validation (else test) clips of the first dataset (their
+    first :data:`SUMMARY_TRANSFER_SECONDS` seconds: motion-capture clips can last
+    minutes) go through :func:`skelagnostic_vqpae.evaluation.transfer_rows` with the second
     dataset's training clips as the database.
 
     Args:
@@ -112,13 +115,15 @@ def transfer_summary(
     database = [c for c in split_clips(datamodule, "train") if aligner.dataset_of(c.skeleton) == 1]
     if not sources or not database:
         return {}
-    rows, outputs = transfer_rows(aligner, sources[:max_clips], database)
+    excerpts = [c[: int(SUMMARY_TRANSFER_SECONDS * c.fps) + 1] for c in sources[:max_clips]]
+    rows, outputs = transfer_rows(aligner, excerpts, database)
     means = mean_rows(rows)
     source, target = aligner.dataset_names[0], aligner.dataset_names[1]
     lines = [
         "## Transfer of held-out clips",
         "",
-        f"{len(rows)} held-out ({split}) clips of `{source}` re-enacted with the "
+        f"{len(rows)} held-out ({split}) clips of `{source}` (at most their first "
+        f"{SUMMARY_TRANSFER_SECONDS:g} s) re-enacted with the "
         f"{len(database)} training clips of `{target}`, on the same manifold query: "
         "`model`, frequency-scaled motion matching (the paper); "
         f"`{UNSCALED}`, classical motion matching (1 s replays, no time warping: the target "
