@@ -173,3 +173,16 @@ def test_unscaled_transfer_replays_fixed_windows(tiny_run) -> None:
     assert result.motion.num_frames == len(result.source)
     with pytest.raises(SkelagnosticError, match="replay_seconds"):
         transfer(model, human, target, scaled=False, replay_seconds=0.0)
+
+
+def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
+    from skelagnostic.cli.app import compose
+
+    cfg = compose(
+        ["model=vqpae", "experiment=vqpae_main", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm
+    )
+    assert cfg.model.num_codes == 16 and cfg.model.lr == 1e-3 and cfg.model.pose_mlp == "none"
+    assert cfg.data.source == "procedural" and cfg.data.fps == 30 and cfg.threads == 1
+    assert cfg.trainer.max_time == "00:00:04:15" and cfg.trainer.max_epochs == -1
+    default = compose(["model=vqpae", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm)
+    assert default.model.num_codes == 32 and default.data.fps == 60  # paper-size defaults
