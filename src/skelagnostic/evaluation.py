@@ -40,6 +40,7 @@ __all__ = [
     "markdown",
     "mean_rows",
         "reconstruction_rows",
+    "split_clips",
     "write_evaluation",
 ]
 
@@ -101,6 +102,21 @@ def held_out(datamodule: Any) -> HeldOut:
             "data.test_fraction>0 or data.val_fraction>0 so the model is evaluated on clips it "
             "did not train on"
         )
+    return HeldOut(split, split_clips(datamodule, split), datamodule)
+
+
+def split_clips(datamodule: Any, split: str) -> list[Motion]:
+    """The clips a set-up data module assigns to ``split``, loaded again from their sources.
+
+    Args:
+        datamodule: A set-up :class:`~skelagnostic.data.MotionDataModule` (or any
+            object with ``sources``, ``assigned_splits`` and ``fps``).
+        split: ``"train"``, ``"val"`` or ``"test"``.
+
+    Returns:
+        The clips in source order, resampled to ``datamodule.fps``, named by clip id.
+    """
+    assigned: Mapping[str, str] = getattr(datamodule, "assigned_splits", {}) or {}
     fps = float(datamodule.fps)
     clips = []
     for source in datamodule.sources:
@@ -112,7 +128,7 @@ def held_out(datamodule: Any) -> HeldOut:
                 motion = motion.resample(fps)
             motion.name = ref.id
             clips.append(motion)
-    return HeldOut(split, clips, datamodule)
+    return clips
 
 
 @dataclass

@@ -67,3 +67,17 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     trainer.save_checkpoint(ckpt)
     return {"model": model, "dm": dm, "before": before, "after": after, "ckpt": ckpt,
             "root": root}
+
+
+@pytest.fixture
+def vqpae_cli(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
+    """``skelagnostic.cli.main``, run in ``tmp_path`` with only the VQ-PAE plugin loaded."""
+    from skelagnostic import cli
+    from skelagnostic.plugins import LOAD_PLUGINS_ENV, get_plugin_manager
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv(LOAD_PLUGINS_ENV, "vqpae")
+    get_plugin_manager.cache_clear()
+    yield cli.main
+    get_plugin_manager.cache_clear()

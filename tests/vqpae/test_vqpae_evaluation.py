@@ -57,39 +57,29 @@ def test_manifold_protocol_on_held_out_clips(helpers, tmp_path) -> None:
     assert (tmp_path / "manifold.png").stat().st_size > 0
 
 
-def test_evaluate_cli_on_a_tiny_vqpae_run(tmp_path, monkeypatch, capsys) -> None:
+def test_evaluate_cli_on_a_tiny_vqpae_run(tmp_path, vqpae_cli, capsys) -> None:
     """fit a few steps, then ``skelagnostic evaluate ckpt_path=RUN``: the default protocol."""
     import json
 
-    from skelagnostic import cli
-    from skelagnostic.plugins import LOAD_PLUGINS_ENV, get_plugin_manager
-
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setenv(LOAD_PLUGINS_ENV, "vqpae")
-    get_plugin_manager.cache_clear()
-    try:
-        fit = [
-            "fit",
-            "model=vqpae",
-            "threads=1",
-            "trainer.max_steps=3",
-            "model.num_codes=8",
-            "data.kinds=[biped22,quadruped]",
-            "data.clips_per_gait=2",
-            "data.seconds=3.0",
-            "data.fps=20",
-            "data.test_fraction=0.25",
-        ]
-        assert cli.main(fit) == 0, capsys.readouterr().err
-        (run,) = (tmp_path / "runs" / "vqpae" / "fit").iterdir()
-        capsys.readouterr()
-        assert cli.main(["evaluate", f"ckpt_path={run}", "threads=1"]) == 0, capsys.readouterr().err
-        (evaluation,) = (tmp_path / "runs" / "vqpae" / "evaluate").iterdir()
-        report = json.loads((evaluation / "evaluation.json").read_text())
-        assert report["protocol"] == "vqpae.manifold" and report["data"]["split"] == "test"
-        assert report["plots"] == ["evaluation.png", "manifold.png"]
-        assert "chance" in report["methods"]
-        assert "vqpae.manifold on the test split" in capsys.readouterr().out
-    finally:
-        get_plugin_manager.cache_clear()
+    fit = [
+        "fit",
+        "model=vqpae",
+        "threads=1",
+        "trainer.max_steps=3",
+        "model.num_codes=8",
+        "data.kinds=[biped22,quadruped]",
+        "data.clips_per_gait=2",
+        "data.seconds=3.0",
+        "data.fps=20",
+        "data.test_fraction=0.25",
+    ]
+    assert vqpae_cli(fit) == 0, capsys.readouterr().err
+    (run,) = (tmp_path / "runs" / "vqpae" / "fit").iterdir()
+    capsys.readouterr()
+    assert vqpae_cli(["evaluate", f"ckpt_path={run}", "threads=1"]) == 0, capsys.readouterr().err
+    (evaluation,) = (tmp_path / "runs" / "vqpae" / "evaluate").iterdir()
+    report = json.loads((evaluation / "evaluation.json").read_text())
+    assert report["protocol"] == "vqpae.manifold" and report["data"]["split"] == "test"
+    assert report["plots"] == ["evaluation.png", "manifold.png"]
+    assert "chance" in report["methods"]
+    assert "vqpae.manifold on the test split" in capsys.readouterr().out

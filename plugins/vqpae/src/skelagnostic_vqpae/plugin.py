@@ -65,8 +65,8 @@ def register_config_paths(register: Callable[..., Any]) -> None:
 
 @hookimpl
 def register_evaluations(register: Callable[..., Any]) -> None:
-    """Register ``vqpae.manifold`` (the default of ``model=vqpae``)."""
-    from skelagnostic_vqpae.evaluation import manifold_protocol
+    """Register ``vqpae.manifold`` (the default of ``model=vqpae``) and ``vqpae.transfer``."""
+    from skelagnostic_vqpae.evaluation import manifold_protocol, transfer_protocol
 
     register(
         "vqpae.manifold",
@@ -75,4 +75,12 @@ def register_evaluations(register: Callable[..., Any]) -> None:
         default=True,
         description="shared codes (vs chance), phase linearity and average-pose error "
         "(vs the mean pose) of held-out clips; codebook usage and overlap",
+    )
+    register(
+        "vqpae.transfer",
+        transfer_protocol,
+        model="vqpae",
+        description="held-out clips of the first character re-enacted by the second "
+        "(frequency-scaled motion matching): gait-frequency error and smoothness vs "
+        "unscaled motion matching",
     )

@@ -23,7 +23,12 @@ from torch import Tensor
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.matching import MatchResult, MotionDatabase, frequency_scaled_motion_matching
+from skelagnostic.matching import (
+    MatchResult,
+    MotionDatabase,
+    frequency_scaled_motion_matching,
+    motion_matching,
+)
 from skelagnostic.representations import GlobalPositions
 from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
@@ -100,8 +105,15 @@ def transfer(
     lambda1: float = 0.5,
     lambda2: float = 1.0,
     max_period_ratio: float | None = None,
+    scaled: bool = True,
+    replay_seconds: float = 1.0,
 ) -> TransferResult:
     """Transfer ``source`` onto the target character by frequency-scaled motion matching.
+
+    With ``scaled=False`` the same query and database go through classical motion
+    matching instead (:func:`~skelagnostic.matching.motion_matching`: fixed replay
+    length ``replay_seconds``, no period term, no time warping), so the target
+    clips play at their own rate: the baseline of the ``vqpae.transfer`` evaluation.
 
     Args:
         aligner: A trained aligner that knows both skeletons.
@@ -110,12 +122,15 @@ def transfer(
         lambda1: Weight of the start-pose term (0.5).
         lambda2: Weight of the period term (1).
         max_period_ratio: Optional cap on the period ratio (the authors' code: 2).
+        scaled: Frequency-scaled matching (the paper); False: classical matching.
+        replay_seconds: Replay length of classical matching (``scaled=False`` only).
 
     Returns:
         The transferred motion (target skeleton, database frame rate).
 
     Raises:
-        SkelagnosticError: The source embedding's frame rate differs from the database's.
+        SkelagnosticError: The source embedding's frame rate differs from the database's,
+            or ``replay_seconds`` is not positive.
     """
     emb = embed_clip(aligner, source)
     if emb.fps != target.database.fps:
@@ -123,6 +138,13 @@ def transfer(
             f"transfer: source embedded at {emb.fps} fps, database at {target.database.fps} fps"
         )
     query = {"manifold": emb.manifold.float(), "frequency": emb.frequency.float()[:, None]}
+    if not scaled:
+        if not replay_seconds > 0:
+            raise SkelagnosticError(f"transfer: replay_seconds must be > 0, got {replay_seconds}")
+        replay = max(1, round(replay_seconds * target.database.fps))
+        match = motion_matching(target.database, query, replay, control="manifold", pose="pose",
+                                lambda_pose=lambda1, output=["pose"])
+        return TransferResult(_assemble(match, target), match, emb)
     match = frequency_scaled_motion_matching(
         target.database, query, control="manifold", pose="pose", frequency="frequency",
         lambda1=lambda1, lambda2=lambda2, max_period_ratio=max_period_ratio, output=["pose"])

@@ -1,0 +1,188 @@
+"""The vqpae.transfer protocol: model-free gait frequency, smoothness, and the protocol itself."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import lightning as L
+import pytest
+import torch
+from skelagnostic_vqpae.aligner import VqpaeAligner
+from skelagnostic_vqpae.evaluation import (
+    OWN_RATE,
+    UNSCALED,
+    acceleration,
+    foot_joints,
+    gait_frequency,
+    transfer_protocol,
+)
+
+from skelagnostic import procedural
+from skelagnostic.core.motion import Motion
+from skelagnostic.evaluation import MODEL, EvaluationError, held_out
+
+
+@pytest.mark.parametrize(
+    ("kind", "gait"),
+    [
+        ("biped22", "walk"),
+        ("biped22", "run"),
+        ("quadruped", "walk"),
+        ("quadruped", "trot"),
+        ("quadruped", "gallop"),
+    ],
+)
+@pytest.mark.parametrize("fps", [30, 60])
+def test_gait_frequency_reads_the_generator_frequency(kind: str, gait: str, fps: int) -> None:
+    for seed in (1000, 1001):
+        clip, info = procedural.generate(
+            kind, gait, seconds=6.0, fps=fps, seed=seed, turn_rate=15.0
+        )
+        assert gait_frequency(clip) == pytest.approx(info["frequency"], rel=0.01)
+
+
+def test_gait_frequency_follows_a_slowed_copy() -> None:
+    clip, info = procedural.generate("quadruped", "trot", seconds=8.0, fps=60, seed=4)
+    for rate in (40.0, 90.0):  # the same frames played slower / faster
+        replayed = Motion(clip.skeleton, clip.rotations, clip.root_positions, rate)
+        assert gait_frequency(replayed) == pytest.approx(info["frequency"] * rate / 60, rel=0.01)
+    explicit, _ = procedural.generate("biped22", "walk", seconds=8.0, fps=30, seed=4, frequency=0.7)
+    assert gait_frequency(explicit) == pytest.approx(0.7, rel=0.01)
+
+
+def test_gait_frequency_of_a_still_pose_is_nan() -> None:
+    clip, _ = procedural.generate("biped22", "walk", seconds=3.0, fps=30, seed=0)
+    still = Motion(
+        clip.skeleton,
+        clip.rotations[:1].expand_as(clip.rotations).clone(),
+        clip.root_positions[:1].expand_as(clip.root_positions).clone(),
+        30,
+    )
+    assert math.isnan(gait_frequency(still))
+
+
+def test_feet_are_the_low_end_effectors() -> None:
+    biped, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=30, seed=0)
+    dog, _ = procedural.generate("quadruped", "walk", seconds=2.0, fps=30, seed=0)
+    assert len(foot_joints(biped)) == 2 and len(foot_joints(dog)) == 4
+    assert all("Hand" not in biped.skeleton.joint_names[j] for j in foot_joints(biped))
+
+
+def test_acceleration_sees_a_cut() -> None:
+    clip, _ = procedural.generate("quadruped", "walk", seconds=4.0, fps=30, seed=0)
+    n = clip.num_frames // 2
+    rot = torch.cat([clip.rotations[:n], clip.rotations[n + 7 :]])  # a jump of 7 frames
+    root = torch.cat(
+        [
+            clip.root_positions[:n],
+            clip.root_positions[n + 7 :] - clip.root_positions[n + 7] + clip.root_positions[n],
+        ]
+    )
+    cut = Motion(clip.skeleton, rot, root, clip.fps)
+    mean_smooth, max_smooth = acceleration(clip)
+    mean_cut, max_cut = acceleration(cut)
+    assert max_cut > 2 * max_smooth and mean_cut > mean_smooth
+    assert mean_smooth > 0
+
+
+@pytest.fixture
+def tiny_run(helpers, tmp_path):
+    """A VQ-PAE trained a few steps (no quality expected) and its held-out clips."""
+    L.seed_everything(0, verbose=False)
+    dm = helpers["datamodule"](tmp_path / "cache")
+    dm.test_fraction = 0.3
+    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000)
+    helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
+    return model.eval(), held_out(dm)
+
+
+def test_transfer_protocol_runs_on_a_tiny_model(tiny_run, tmp_path) -> None:
+    model, held = tiny_run
+    humans = [c for c in held.clips if model.dataset_of(c.skeleton) == 0]
+    assert humans, "the test data must hold out a clip of the first character"
+    with torch.no_grad():
+        out = transfer_protocol(model, held, tmp_path)
+    assert [r["clip"] for r in out.rows] == [str(c.name) for c in humans]
+    assert out.methods == [MODEL, UNSCALED, OWN_RATE]
+    for row, clip in zip(out.rows, humans, strict=True):
+        assert row["source_hz"] == pytest.approx(gait_frequency(clip))
+        for values in row["values"].values():
+            assert set(values) == set(out.metrics)
+            assert values["accel_height_per_s2"] > 0
+            if math.isfinite(values["output_hz"]):
+                expected = 100 * abs(values["output_hz"] - row["source_hz"]) / row["source_hz"]
+                assert values["frequency_error_pct"] == pytest.approx(expected)
+    for plot in out.plots:
+        assert (tmp_path / plot).stat().st_size > 0
+
+
+def test_transfer_protocol_needs_two_characters(tiny_run, tmp_path) -> None:
+    model, held = tiny_run
+    dogs_only = type(held)(
+        held.split, [c for c in held.clips if model.dataset_of(c.skeleton)], held.datamodule
+    )
+    with pytest.raises(EvaluationError, match="no held-out clip"):
+        transfer_protocol(model, dogs_only, tmp_path)
+
+
+def test_transfer_protocol_is_registered(vqpae_pm) -> None:
+    spec = vqpae_pm.evaluation("vqpae.transfer", "vqpae")
+    assert spec.function is transfer_protocol and not spec.default
+    assert vqpae_pm.evaluation(None, "vqpae").name == "vqpae.manifold"
+
+
+@pytest.mark.slow
+def test_main_experiment_writes_the_transfer_summary(tmp_path, vqpae_cli, capsys) -> None:
+    """``fit model=vqpae experiment=vqpae_main`` with a reduced budget, through the CLI."""
+    args = [
+        "fit",
+        "model=vqpae",
+        "experiment=vqpae_main",
+        "trainer.max_steps=150",
+        "trainer.max_time=00:00:01:30",
+    ]
+    assert vqpae_cli(args) == 0, capsys.readouterr().err
+    (run,) = (tmp_path / "runs" / "vqpae" / "fit").iterdir()
+    assert "## Transfer of held-out clips" in (run / "summary.md").read_text()
+    transfer = json.loads((run / "vqpae_metrics.json").read_text())["transfer"]
+    assert transfer["split"] == "val" and transfer["per_clip"]
+    split = json.loads((run / "split.json").read_text())["clips"]
+    assert all(split[row["clip"]] == "val" for row in transfer["per_clip"])
+    assert all(split[clip] == "train" for clip in transfer["database_clips"])
+    assert set(transfer["mean"]) == {MODEL, UNSCALED, OWN_RATE}
+    for suffix in (".gif", ".png"):
+        assert (run / f"vqpae_transfer{suffix}").stat().st_size > 0
+
+
+def test_unscaled_transfer_replays_fixed_windows(tiny_run) -> None:
+    from skelagnostic_vqpae.transfer import build_database, transfer
+
+    from skelagnostic.errors import SkelagnosticError
+    from skelagnostic.evaluation import split_clips
+
+    model, held = tiny_run
+    human = next(c for c in held.clips if model.dataset_of(c.skeleton) == 0)
+    dogs = [c for c in split_clips(held.datamodule, "train") if model.dataset_of(c.skeleton) == 1]
+    target = build_database(model, dogs)
+    with torch.no_grad():
+        result = transfer(model, human, target, scaled=False, replay_seconds=0.5)
+    replay = round(0.5 * target.database.fps)
+    assert all(s.length == replay for s in result.match.segments)
+    assert all(s.out_length == replay for s in result.match.segments[:-1])
+    assert result.motion.num_frames == len(result.source)
+    with pytest.raises(SkelagnosticError, match="replay_seconds"):
+        transfer(model, human, target, scaled=False, replay_seconds=0.0)
+
+
+def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
+    from skelagnostic.cli.app import compose
+
+    cfg = compose(
+        ["model=vqpae", "experiment=vqpae_main", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm
+    )
+    assert cfg.model.num_codes == 16 and cfg.model.lr == 1e-3 and cfg.model.pose_mlp == "none"
+    assert cfg.data.source == "procedural" and cfg.data.fps == 30 and cfg.threads == 1
+    assert cfg.trainer.max_time == "00:00:04:15" and cfg.trainer.max_epochs == -1
+    default = compose(["model=vqpae", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm)
+    assert default.model.num_codes == 32 and default.data.fps == 60  # paper-size defaults
