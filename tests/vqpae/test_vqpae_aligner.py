@@ -53,7 +53,7 @@ def test_fit_writes_metrics_and_the_manifold_pictures(trained: dict) -> None:
     assert 0.0 < train["usage"] <= 1.0
     # the written overlap is the metric of the validation clips' codes, recomputed here
     model: VqpaeAligner = trained["model"]
-    embeddings = model.embed_windows(trained["dm"].datasets["val"], FPS)
+    embeddings = model.embed_datasets(trained["dm"].datasets["val"], FPS)
     for name in names:
         codes = torch.cat([e.code for e in embeddings[name]])
         assert metrics["codes_used"][name] == int(codes.unique().numel())

@@ -53,11 +53,11 @@ def test_run_loads_as_their_network(model: VqpaeAligner) -> None:
 
 
 @pytest.mark.parametrize("dataset", [0, 1])
-def test_embed_batch_equals_the_authors_outputs(
+def test_embed_windows_equals_the_authors_outputs(
     model: VqpaeAligner, outputs: dict[str, np.ndarray], dataset: int
 ) -> None:
     x = torch.from_numpy(outputs[f"x{dataset}"])
-    ours = model.embed_batch(x, dataset)
+    ours = model.embed_windows(x, dataset)
     np.testing.assert_array_equal(ours["code"].numpy(), outputs[f"code{dataset}"])
     assert len(np.unique(outputs[f"code{dataset}"])) > 1  # the fixture exercises the codebook
     dphase = ours["phase"].numpy() - outputs[f"phase{dataset}"]
@@ -75,15 +75,15 @@ def test_embed_batch_equals_the_authors_outputs(
     )
 
 
-def test_embed_batch_takes_dataset_names_and_rejects_unknown_ones(
+def test_embed_windows_takes_dataset_names_and_rejects_unknown_ones(
     model: VqpaeAligner, outputs: dict[str, np.ndarray]
 ) -> None:
     x = torch.from_numpy(outputs["x1"][:2])
-    assert torch.equal(model.embed_batch(x, "dog")["code"], model.embed_batch(x, 1)["code"])
+    assert torch.equal(model.embed_windows(x, "dog")["code"], model.embed_windows(x, 1)["code"])
     with pytest.raises(SkelagnosticError, match="unknown dataset 'cat'"):
-        model.embed_batch(x, "cat")
+        model.embed_windows(x, "cat")
     with pytest.raises(SkelagnosticError, match="out of range"):
-        model.embed_batch(x, 2)
+        model.embed_windows(x, 2)
 
 
 def test_state_order_round_trips() -> None:
@@ -114,7 +114,7 @@ def test_latest_complete_epoch_is_loaded(tmp_path: Path, outputs: dict[str, np.n
     state = torch.load(run / "3_1Channels_VQ.pt", weights_only=True)
     state["vqs.0.embedding.weight"] = state["vqs.0.embedding.weight"].flip(0)
     torch.save(state, run / "3_1Channels_VQ.pt")
-    codes = load_run(run).embed_batch(torch.from_numpy(outputs["x0"]), 0)["code"].numpy()
+    codes = load_run(run).embed_windows(torch.from_numpy(outputs["x0"]), 0)["code"].numpy()
     np.testing.assert_array_equal(codes, 7 - outputs["code0"])
 
 
@@ -187,6 +187,6 @@ def test_rebuilds_from_its_hyperparameters(
     again = VqpaeAligner(**model.hparams)
     again.load_state_dict(model.state_dict())
     x = torch.from_numpy(outputs["x1"])
-    ours, theirs = again.eval().embed_batch(x, 1), model.embed_batch(x, 1)
+    ours, theirs = again.eval().embed_windows(x, 1), model.embed_windows(x, 1)
     for key in ("phase", "frequency", "code", "amplitude", "reconstruction"):
         assert torch.allclose(ours[key].double(), theirs[key].double(), rtol=0, atol=1e-6), key

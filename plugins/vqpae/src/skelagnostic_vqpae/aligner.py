@@ -544,7 +544,7 @@ class VqpaeAligner(Aligner):
         return fit_summary(self, trainer)
 
     @torch.no_grad()
-    def embed_windows(self, datasets: Mapping[str, Any], fps: float,
+    def embed_datasets(self, datasets: Mapping[str, Any], fps: float,
                       batch_size: int = 1024) -> dict[str, list[Any]]:
         """Embed every window of a data-module split, grouped into per-clip embeddings.
 
@@ -575,7 +575,7 @@ class VqpaeAligner(Aligner):
         return out
 
     @torch.no_grad()
-    def embed_batch(self, x: Tensor, dataset: int | str) -> dict[str, Tensor]:
+    def embed_windows(self, x: Tensor, dataset: int | str) -> dict[str, Tensor]:
         """Embed normalised windows of one dataset (no grouping into clips).
 
         Args:

@@ -57,7 +57,7 @@ def fit_summary(aligner: VqpaeAligner, trainer: L.Trainer) -> SummaryContent:
     ]
     if not splits:
         return {}
-    embeddings = {name: aligner.embed_windows(dm.datasets[name], dm.fps) for name in splits}
+    embeddings = {name: aligner.embed_datasets(dm.datasets[name], dm.fps) for name in splits}
     figures = {name: overlap_figures(aligner, embeddings[name]) for name in splits}
     metrics = {
         "split": splits[0],
