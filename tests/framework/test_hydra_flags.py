@@ -20,7 +20,7 @@ from skelagnostic import cli
 from skelagnostic.cli.app import split_hydra_flags
 
 SCRIPT = Path(sys.executable).with_name("skelagnostic")
-VERBS = ("fit", "validate", "test", "predict")
+VERBS = ("fit", "validate", "test", "predict", "evaluate")
 
 #: flag arguments -> text their output must contain
 FLAGS: dict[str, tuple[list[str], str]] = {
