@@ -124,3 +124,16 @@ def test_local_overrides_are_git_ignored() -> None:
     if not ignore.is_file():
         pytest.skip("not a source checkout")
     assert ignore.read_text().splitlines()[1:] == ["*", "!.gitignore"]
+
+
+def test_a_config_package_without_config_yaml_is_named_with_the_fix(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from skelagnostic.cli.app import ConfigError, check_config_package
+
+    check_config_package()  # the installed skelagnostic.conf has its config.yaml
+    stale = tmp_path / "stale_pkg" / "conf"  # a namespace package: only __pycache__ left
+    (stale / "__pycache__").mkdir(parents=True)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(ConfigError, match=r"stale_pkg\.conf .*has no config\.yaml.*delete it"):
+        check_config_package("stale_pkg.conf")

@@ -566,6 +566,33 @@ def _discard_failed_run(run_dir: Path) -> str:
     return ""
 
 
+def check_config_package(module: str = CONFIG_MODULE) -> None:
+    """Fail with a clear message when the config package has no ``config.yaml``.
+
+    The config tree is installed as ``skelagnostic.conf`` from the top-level
+    ``conf/``. An editable checkout updated from a version that kept it in
+    ``src/skelagnostic/conf/`` can keep that directory (git leaves its
+    ``__pycache__``), and Python then imports it as an empty namespace package
+    that hides the real one; Hydra's own message ("Cannot find primary config")
+    does not say why.
+
+    Raises:
+        ConfigError: The package cannot be imported or holds no ``config.yaml``.
+    """
+    import importlib.util
+
+    spec = importlib.util.find_spec(module)
+    places = list(spec.submodule_search_locations or []) if spec else []
+    if any((Path(place) / "config.yaml").is_file() for place in places):
+        return
+    where = ", ".join(places) or "nowhere"
+    raise ConfigError(
+        f"the config package {module} (found at {where}) has no config.yaml; if that is a "
+        "leftover src/skelagnostic/conf/ directory of an older checkout, delete it (the "
+        "configs now live in the top-level conf/), then reinstall with pip install -e ."
+    )
+
+
 @contextlib.contextmanager
 def _hidden_groups_in_help(flags: Sequence[str]) -> Iterator[None]:
     """Leave the internal ``_aligner`` group out of ``--help``'s list of config groups.
@@ -725,6 +752,7 @@ def main(task: str, argv: Sequence[str]) -> int:
                 except SIGTERMException:  # a SystemExit with status 0: report it as a failure
                     terminated.append(True)
 
+        check_config_package()
         entry = hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name="config",
                            version_base="1.3")(task_function)
         with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}), \
