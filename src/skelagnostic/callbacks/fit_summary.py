@@ -186,6 +186,8 @@ class FitSummary(pl.Callback):
             lines += ["## Summary figures", "", "| figure | value |", "|---|---|"]
             for key, value in own.items():
                 shown = json.dumps(value) if isinstance(value, (dict, list)) else _cell(value)
+                if len(shown) > 200:  # a nested record: its table is a note, its data the JSON
+                    shown = f"see `{key}` in `{metrics_file.name}`"
                 lines.append(f"| `{key}` | {shown} |")
             lines.append("")
         if pictures:
