@@ -36,11 +36,11 @@ __all__ = [
     "Evaluation",
     "EvaluationError",
     "HeldOut",
+    "clips_of_split",
     "held_out",
     "markdown",
     "mean_rows",
-        "reconstruction_rows",
-    "split_clips",
+    "reconstruction_rows",
     "write_evaluation",
 ]
 
@@ -102,10 +102,10 @@ def held_out(datamodule: Any) -> HeldOut:
             "data.test_fraction>0 or data.val_fraction>0 so the model is evaluated on clips it "
             "did not train on"
         )
-    return HeldOut(split, split_clips(datamodule, split), datamodule)
+    return HeldOut(split, clips_of_split(datamodule, split), datamodule)
 
 
-def split_clips(datamodule: Any, split: str) -> list[Motion]:
+def clips_of_split(datamodule: Any, split: str) -> list[Motion]:
     """The clips a set-up data module assigns to ``split``, loaded again from their sources.
 
     Args:

@@ -159,11 +159,12 @@ def test_unscaled_transfer_replays_fixed_windows(tiny_run) -> None:
     from skelagnostic_vqpae.transfer import build_database, transfer
 
     from skelagnostic.errors import SkelagnosticError
-    from skelagnostic.evaluation import split_clips
+    from skelagnostic.evaluation import clips_of_split
 
     model, held = tiny_run
     human = next(c for c in held.clips if model.dataset_of(c.skeleton) == 0)
-    dogs = [c for c in split_clips(held.datamodule, "train") if model.dataset_of(c.skeleton) == 1]
+    dogs = [c for c in clips_of_split(held.datamodule, "train")
+            if model.dataset_of(c.skeleton) == 1]
     target = build_database(model, dogs)
     with torch.no_grad():
         result = transfer(model, human, target, scaled=False, replay_seconds=0.5)

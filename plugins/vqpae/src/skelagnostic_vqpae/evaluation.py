@@ -32,7 +32,7 @@ import torch
 
 from skelagnostic.baselines import mean_pose
 from skelagnostic.core.motion import Motion
-from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut, split_clips
+from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut, clips_of_split
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import GlobalPositions
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip, plot_manifold
@@ -359,7 +359,7 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
     if held.datamodule is None:
         raise EvaluationError("vqpae.transfer: the held-out clips come without their data module")
     database = [
-        c for c in split_clips(held.datamodule, "train") if aligner.dataset_of(c.skeleton) == 1
+        c for c in clips_of_split(held.datamodule, "train") if aligner.dataset_of(c.skeleton) == 1
     ]
     if not database:
         raise EvaluationError(f"vqpae.transfer: no training clip of {names[1]!r} for the database")

@@ -103,16 +103,18 @@ def transfer_summary(
         rows and the per-method means), ``renders`` (``transfer``: the first clip,
         its transfer and the two baselines') and ``notes`` (a Markdown table).
     """
-    from skelagnostic.evaluation import MODEL, mean_rows, split_clips
+    from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
     from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_rows
 
     if len(aligner.dataset_names) < 2 or not hasattr(datamodule, "sources"):
         return {}
     for split in ("val", "test"):
-        sources = [c for c in split_clips(datamodule, split) if aligner.dataset_of(c.skeleton) == 0]
+        sources = [c for c in clips_of_split(datamodule, split)
+                   if aligner.dataset_of(c.skeleton) == 0]
         if sources:
             break
-    database = [c for c in split_clips(datamodule, "train") if aligner.dataset_of(c.skeleton) == 1]
+    database = [c for c in clips_of_split(datamodule, "train")
+                if aligner.dataset_of(c.skeleton) == 1]
     if not sources or not database:
         return {}
     excerpts = [c[: int(SUMMARY_TRANSFER_SECONDS * c.fps) + 1] for c in sources[:max_clips]]
