@@ -48,7 +48,7 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike[str]) -> None:
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(target, lambda fh: torch.save(obj, fh), follow_symlinks=False,
-                 temp_suffix=TEMP_SUFFIX)
+                 temp_suffix=TEMP_SUFFIX, sync_directory=True)
 
 
 class AtomicCheckpointIO(TorchCheckpointIO):

@@ -14,8 +14,9 @@ through :func:`atomic_write`, so that all of them behave the same way:
 * a target that is a symbolic link is written through: the file it points to is
   replaced and the link stays a link (``follow_symlinks=False`` replaces the
   link itself, as checkpoint files need);
-* the directory entry (the rename) is flushed to disk too, where the platform
-  allows it.
+* with ``sync_directory=True`` the directory entry (the rename) is flushed to
+  disk too, where the platform allows it (checkpoints ask for it; BVH files and
+  rebuildable cache entries skip the extra ``fsync``).
 
 Checkpoints (:func:`skelagnostic.callbacks.checkpoint_io.atomic_torch_save`) go
 through the same function with a fixed temporary name, so that a save killed
@@ -97,7 +98,8 @@ def _create_temporary(target: Path, temp_suffix: str | None) -> tuple[int, Path]
 
 
 def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object], *,
-                 follow_symlinks: bool = True, temp_suffix: str | None = None) -> Path:
+                 follow_symlinks: bool = True, temp_suffix: str | None = None,
+                 sync_directory: bool = False) -> Path:
     """Write a file atomically, with the permissions the umask allows.
 
     Args:
@@ -110,6 +112,7 @@ def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object], *
         temp_suffix: Write to the fixed name ``<name><temp_suffix>`` instead of
             a random one, so that a process killed mid-write leaves at most one
             temporary file, which the next write reuses.
+        sync_directory: Also flush the directory entry of the rename to disk.
 
     Returns:
         The path of the file written (``path``, with symbolic links followed
@@ -144,5 +147,6 @@ def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object], *
         except OSError:
             pass
         raise
-    fsync_directory(target.parent)
+    if sync_directory:
+        fsync_directory(target.parent)
     return target
