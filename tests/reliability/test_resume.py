@@ -15,6 +15,7 @@ import torch
 from lightning.pytorch.callbacks import ModelCheckpoint
 from torch.utils.data import TensorDataset
 
+from skelagnostic.callbacks import ResumeFromEpochEnd
 from skelagnostic.data.datamodule import ResumableDataLoader, _ResumableSampler
 from skelagnostic.data.sources import ProceduralSource
 
@@ -171,7 +172,8 @@ def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner,
         ModelCheckpoint(dirpath=root / "epochs", filename="{step}", save_top_k=-1,
                         save_on_train_epoch_end=True, mode="max"),  # mode: a distinct state key
     ]
-    trainer = L.Trainer(accelerator="cpu", max_epochs=3, logger=False, callbacks=checkpoints,
+    trainer = L.Trainer(accelerator="cpu", max_epochs=3, logger=False,
+                        callbacks=[*checkpoints, ResumeFromEpochEnd()],  # as skelagnostic fit
                         enable_progress_bar=False, enable_model_summary=False,
                         default_root_dir=root, **options)
     return trainer, model, dm
@@ -186,6 +188,8 @@ def _state(trainer: L.Trainer, model: ExampleAligner) -> dict:
 @pytest.mark.parametrize("options", [
     pytest.param({"limit_val_batches": 1}, id="validation"),
     pytest.param({"limit_train_batches": 4, "limit_val_batches": 0}, id="limit_train_batches"),
+    # max_steps: Lightning restarts epoch-end checkpoints as unfinished (ResumeFromEpochEnd)
+    pytest.param({"max_steps": 16, "limit_val_batches": 0}, id="max_steps"),
 ])
 def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path,
                                                            options: dict) -> None:
@@ -193,14 +197,17 @@ def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path,
     trainer.fit(model, datamodule=dm)
     reference = _state(trainer, model)
     per_epoch = trainer.num_training_batches
-    assert reference["global_step"] == 3 * per_epoch and per_epoch >= 4
+    total = options.get("max_steps", 3 * per_epoch)
+    assert reference["global_step"] == total and per_epoch >= 4 and total > 2 * per_epoch
     saved = sorted((tmp_path / "ref").glob("*/*.ckpt"))
     steps = {int(p.stem.split("=")[1]) for p in saved if p.parent.name == "steps"}
-    assert steps == set(range(1, 3 * per_epoch + 1))  # every step: first, middle, last batch
+    assert steps == set(range(1, total + 1))  # every step: first, middle, last batch
     assert {p.parent.name for p in saved} == (
         {"steps", "epochs"} if options.get("limit_val_batches") == 0 else {"steps", "val",
                                                                            "epochs"})
     for ckpt in saved:
+        if int(ckpt.stem.split("=")[1]) == options.get("max_steps"):
+            continue  # written when max_steps had ended the run: no interruption to resume
         trainer, model, dm = _trainer(tmp_path / "resumed" / ckpt.parent.name / ckpt.stem,
                                       **options)
         trainer.fit(model, datamodule=dm, ckpt_path=ckpt)

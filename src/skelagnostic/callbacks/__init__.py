@@ -5,6 +5,7 @@ from skelagnostic.callbacks.checkpoint_io import AtomicCheckpointIO
 from skelagnostic.callbacks.ema import EMAWeights
 from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
+from skelagnostic.callbacks.resume import ResumeFromEpochEnd
 
 __all__ = [
     "AtomicCheckpointIO",
@@ -14,5 +15,6 @@ __all__ = [
     "LatestWithoutValidation",
     "RenderSampleSource",
     "RenderSamples",
+    "ResumeFromEpochEnd",
     "SummaryContent",
 ]

@@ -403,10 +403,14 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         _require_test_split(datamodule)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
     if task == "fit":
-        from skelagnostic.callbacks import FinalStepCheckpoint, LatestWithoutValidation
+        from skelagnostic.callbacks import (
+            FinalStepCheckpoint,
+            LatestWithoutValidation,
+            ResumeFromEpochEnd,
+        )
 
-        callbacks += [LatestWithoutValidation(), FinalStepCheckpoint(), RecordSplit(run_dir),
-                      AdaptiveLogInterval()]
+        callbacks += [LatestWithoutValidation(), FinalStepCheckpoint(), ResumeFromEpochEnd(),
+                      RecordSplit(run_dir), AdaptiveLogInterval()]
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
     _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")
