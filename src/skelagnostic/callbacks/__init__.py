@@ -4,6 +4,7 @@ from skelagnostic.callbacks.checkpoint import FinalStepCheckpoint, LatestWithout
 from skelagnostic.callbacks.checkpoint_io import AtomicCheckpointIO
 from skelagnostic.callbacks.ema import EMAWeights
 from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
+from skelagnostic.callbacks.progress import RichProgress
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 from skelagnostic.callbacks.resume import ResumeFromEpochEnd
 
@@ -16,5 +17,6 @@ __all__ = [
     "RenderSampleSource",
     "RenderSamples",
     "ResumeFromEpochEnd",
+    "RichProgress",
     "SummaryContent",
 ]
