@@ -252,6 +252,76 @@ def skeleton(kind: str, scale: float = 1.0) -> Skeleton:
     return Skeleton(names, parents, offsets, end_sites=end_sites, name=kind, morphology=morphology)
 
 
+#: Values of ``generate(root_carrier=...)`` and ``generate(channels=...)``.
+_ROOT_CARRIERS = (None, "static")
+_CHANNEL_LAYOUTS = (None, "all6")
+_SIX = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
+_THREE = _SIX[3:]
+
+
+def _static_carrier(motion: Motion) -> Motion:
+    """``motion`` under a static root ``joint_Root`` whose child (the old root) carries the path.
+
+    The old root's OFFSET becomes its position in the last frame (an export-time
+    pose, as MotionBuilder writes it); its per-frame position goes to the
+    translations, so forward kinematics of the old joints is unchanged.
+    """
+    sk = motion.skeleton
+    num_frames = motion.num_frames
+    offsets = torch.cat([torch.zeros(1, 3, dtype=sk.offsets.dtype), sk.offsets])
+    offsets[1] = motion.root_positions[-1]
+    rotations = torch.cat([Q.identity(num_frames, 1, dtype=motion.dtype), motion.rotations], 1)
+    translations = offsets.to(motion.dtype).expand(num_frames, -1, -1).clone()
+    translations[:, 1] = motion.root_positions
+    skeleton = Skeleton(
+        ["joint_Root", *sk.joint_names],
+        [-1, *(p + 1 for p in sk.parents)],
+        offsets,
+        end_sites={j + 1: v for j, v in sk.end_sites.items()},
+        body_groups=["spine", *sk.body_groups],
+        up_axis=sk.up_axis,
+        name=sk.name,
+        morphology=sk.morphology,
+        channels=[_SIX, _SIX] + [_THREE] * (sk.num_joints - 1),
+        body_root=1,
+    )
+    return Motion(
+        skeleton,
+        rotations,
+        torch.zeros(num_frames, 3, dtype=motion.dtype),
+        motion.fps,
+        translations=translations,
+        name=motion.name,
+        units=motion.units,
+    )
+
+
+def _six_channels(motion: Motion) -> Motion:
+    """``motion`` with six channels on every joint of its skeleton (the motion is the same)."""
+    sk = motion.skeleton
+    skeleton = Skeleton(
+        sk.joint_names,
+        sk.parents,
+        sk.offsets,
+        end_sites=sk.end_sites,
+        body_groups=sk.body_groups,
+        up_axis=sk.up_axis,
+        name=sk.name,
+        morphology=sk.morphology,
+        channels=[_SIX] * sk.num_joints,
+        body_root=sk.body_root,
+    )
+    return Motion(
+        skeleton,
+        motion.rotations,
+        motion.root_positions,
+        motion.fps,
+        translations=motion.translations,
+        name=motion.name,
+        units=motion.units,
+    )
+
+
 def generate(
     kind: str = "biped22",
     gait: str = "walk",
@@ -263,6 +333,8 @@ def generate(
     turn_rate: float = 0.0,
     scale: float | None = None,
     noise: float = 0.0,
+    root_carrier: str | None = None,
+    channels: str | None = None,
 ) -> tuple[Motion, dict[str, Any]]:
     """Generate a procedural gait with known frequency and phase.
 
@@ -280,6 +352,18 @@ def generate(
         turn_rate: Heading change in degrees per second.
         scale: Body size factor (default: varied by the seed around 1).
         noise: Standard deviation in degrees of i.i.d. rotation noise added to animated joints.
+        root_carrier: The layout of the exported file's root. ``None``: the hips are
+            the root and carry the trajectory (LaFAN1, CMU). ``"static"``: a static
+            root ``joint_Root`` at the origin whose only child, the hips, carries the
+            trajectory in its position channels, with the hips' OFFSET at their
+            position in the last frame (what a MotionBuilder export written with the
+            time slider at the end of the take holds; the Bandai-Namco research
+            motion dataset has this layout). Forward kinematics of the body joints is
+            the same as without the carrier.
+        channels: Channels per joint when written with :func:`~skelagnostic.write_bvh`.
+            ``None``: six on the root (and the carrier's child), three rotations on
+            the others. ``"all6"``: six on every joint, the position channels of the
+            non-root joints repeating their OFFSETs (Bandai-Namco, MotionBuilder).
 
     Returns:
         ``(motion, info)``: ``info`` holds ``kind``, ``gait``, ``frequency`` (Hz),
@@ -288,7 +372,8 @@ def generate(
         ``synthetic=True``.
 
     Raises:
-        SkelagnosticError: For unknown kinds or gaits, or non-positive durations.
+        SkelagnosticError: For unknown kinds or gaits, non-positive durations, or an
+            unknown ``root_carrier`` or ``channels``.
 
     Examples:
         >>> import skelagnostic as sa
@@ -306,6 +391,15 @@ def generate(
         )
     if not seconds > 0 or not fps > 0:
         raise SkelagnosticError(f"seconds and fps must be positive, got {seconds} and {fps}")
+    if root_carrier not in _ROOT_CARRIERS:
+        raise SkelagnosticError(
+            f"root_carrier must be one of {', '.join(map(repr, _ROOT_CARRIERS))}, "
+            f"got {root_carrier!r}"
+        )
+    if channels not in _CHANNEL_LAYOUTS:
+        raise SkelagnosticError(
+            f"channels must be one of {', '.join(map(repr, _CHANNEL_LAYOUTS))}, got {channels!r}"
+        )
     rng = np.random.default_rng(seed)
     g = table[gait]
     jitter = lambda spread: float(1.0 + spread * (2.0 * rng.random() - 1.0))  # noqa: E731
@@ -411,6 +505,10 @@ def generate(
         dq = torch.cat([torch.cos(half)[..., None], torch.sin(half)[..., None] * axis], -1)
         rot[:, animated] = Q.mul(rot[:, animated], dq)
     motion = Motion(sk, rot, root, fps, name=f"{kind}_{gait}_{seed}", units="cm")
+    if root_carrier == "static":
+        motion = _static_carrier(motion)
+    if channels == "all6":
+        motion = _six_channels(motion)
     info = {
         "kind": kind,
         "gait": gait,
