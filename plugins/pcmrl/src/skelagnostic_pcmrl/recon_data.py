@@ -47,6 +47,7 @@ def load_target_skeleton(target: str, units: str | None = None) -> tuple[Skeleto
         units = units or "cm"
     elif Path(target).is_file():
         skeleton = read_bvh(target).skeleton
+        skeleton = skeleton.rooted_at(skeleton.body_root)  # without a trajectory carrier
         units = infer_units(skeleton, units)
     else:
         raise SkelagnosticError(
@@ -92,8 +93,9 @@ class PcmrlReconDataModule(MotionDataModule):
 
             sources = [ProceduralSource(kinds=("biped22",))]
         sources = flatten_sources(sources)
-        super().__init__([MetresSource(s, source_units) for s in sources],
-                         batch_size=batch_size, **kwargs)
+        super().__init__(
+            [MetresSource(s, source_units) for s in sources], batch_size=batch_size, **kwargs
+        )
         if not isinstance(self.representation, LocalQuaternions):
             raise SkelagnosticError(
                 "model=pcmrl needs data.representation=local_quaternions (or null), got "
