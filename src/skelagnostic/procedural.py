@@ -259,64 +259,53 @@ _SIX = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotat
 _THREE = _SIX[3:]
 
 
-def _static_carrier(motion: Motion) -> Motion:
-    """``motion`` under a static root ``joint_Root`` whose child (the old root) carries the path.
+def _export_layout(motion: Motion, root_carrier: str | None, channels: str | None) -> Motion:
+    """``motion`` laid out as ``generate(root_carrier=..., channels=...)`` asks.
 
-    The old root's OFFSET becomes its position in the last frame (an export-time
-    pose, as MotionBuilder writes it); its per-frame position goes to the
+    ``root_carrier="static"`` puts a static root ``joint_Root`` above the old
+    root, whose OFFSET becomes its position in the last frame (an export-time
+    pose, as MotionBuilder writes it) and whose per-frame position goes to the
     translations, so forward kinematics of the old joints is unchanged.
+    ``channels="all6"`` gives every joint six channels.
     """
     sk = motion.skeleton
     num_frames = motion.num_frames
-    offsets = torch.cat([torch.zeros(1, 3, dtype=sk.offsets.dtype), sk.offsets])
-    offsets[1] = motion.root_positions[-1]
-    rotations = torch.cat([Q.identity(num_frames, 1, dtype=motion.dtype), motion.rotations], 1)
-    translations = offsets.to(motion.dtype).expand(num_frames, -1, -1).clone()
-    translations[:, 1] = motion.root_positions
+    names, parents, offsets = sk.joint_names, sk.parents, sk.offsets
+    end_sites, groups, body_root = sk.end_sites, sk.body_groups, sk.body_root
+    rotations, root, translations = motion.rotations, motion.root_positions, motion.translations
+    layout = [_SIX] + [_THREE] * (sk.num_joints - 1)
+    if root_carrier == "static":
+        names, groups = ["joint_Root", *names], ["spine", *groups]
+        parents = [-1, *(p + 1 for p in parents)]
+        offsets = torch.cat([torch.zeros(1, 3, dtype=offsets.dtype), offsets])
+        offsets[1] = root[-1]
+        end_sites = {j + 1: v for j, v in end_sites.items()}
+        body_root = 1
+        rotations = torch.cat([Q.identity(num_frames, 1, dtype=motion.dtype), rotations], 1)
+        translations = offsets.to(motion.dtype).expand(num_frames, -1, -1).clone()
+        translations[:, 1] = root
+        root = torch.zeros(num_frames, 3, dtype=motion.dtype)
+        layout = [_SIX, *layout]
+    if channels == "all6":
+        layout = [_SIX] * len(names)
     skeleton = Skeleton(
-        ["joint_Root", *sk.joint_names],
-        [-1, *(p + 1 for p in sk.parents)],
+        names,
+        parents,
         offsets,
-        end_sites={j + 1: v for j, v in sk.end_sites.items()},
-        body_groups=["spine", *sk.body_groups],
+        end_sites=end_sites,
+        body_groups=groups,
         up_axis=sk.up_axis,
         name=sk.name,
         morphology=sk.morphology,
-        channels=[_SIX, _SIX] + [_THREE] * (sk.num_joints - 1),
-        body_root=1,
+        channels=layout,
+        body_root=body_root,
     )
     return Motion(
         skeleton,
         rotations,
-        torch.zeros(num_frames, 3, dtype=motion.dtype),
+        root,
         motion.fps,
         translations=translations,
-        name=motion.name,
-        units=motion.units,
-    )
-
-
-def _six_channels(motion: Motion) -> Motion:
-    """``motion`` with six channels on every joint of its skeleton (the motion is the same)."""
-    sk = motion.skeleton
-    skeleton = Skeleton(
-        sk.joint_names,
-        sk.parents,
-        sk.offsets,
-        end_sites=sk.end_sites,
-        body_groups=sk.body_groups,
-        up_axis=sk.up_axis,
-        name=sk.name,
-        morphology=sk.morphology,
-        channels=[_SIX] * sk.num_joints,
-        body_root=sk.body_root,
-    )
-    return Motion(
-        skeleton,
-        motion.rotations,
-        motion.root_positions,
-        motion.fps,
-        translations=motion.translations,
         name=motion.name,
         units=motion.units,
     )
@@ -505,10 +494,8 @@ def generate(
         dq = torch.cat([torch.cos(half)[..., None], torch.sin(half)[..., None] * axis], -1)
         rot[:, animated] = Q.mul(rot[:, animated], dq)
     motion = Motion(sk, rot, root, fps, name=f"{kind}_{gait}_{seed}", units="cm")
-    if root_carrier == "static":
-        motion = _static_carrier(motion)
-    if channels == "all6":
-        motion = _six_channels(motion)
+    if root_carrier is not None or channels is not None:
+        motion = _export_layout(motion, root_carrier, channels)
     info = {
         "kind": kind,
         "gait": gait,
