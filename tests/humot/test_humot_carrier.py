@@ -36,3 +36,14 @@ def test_humot_templates_of_a_carrier_clip(tmp_path: Path) -> None:
             plain.skeleton, None if positions is None else plain.global_positions()
         )
         torch.testing.assert_close(template[1:] - template[1], want, atol=1e-4, rtol=0)
+
+
+def test_humot_topology_of_a_carrier_skeleton() -> None:
+    """The bone directions HuMoT derives from a carrier skeleton are the ordinary ones."""
+    from skelagnostic_humot.data import Topology
+
+    plain = sa.procedural.generate("biped22", "walk", seconds=2.0)[0].skeleton
+    carrier = sa.procedural.generate("biped22", "walk", seconds=2.0, root_carrier="static")[0]
+    directions = Topology.of(carrier.skeleton).directions
+    assert float(directions[:2].abs().sum()) == 0.0
+    torch.testing.assert_close(directions[1:], Topology.of(plain).directions)
