@@ -139,6 +139,15 @@ def test_heading_and_velocities_follow_the_body_root(files: dict[str, Path], nam
 
 
 @pytest.mark.parametrize("name", ["carrier", "carrier_all6"])
+def test_root_relative_positions_follow_the_body_root(files: dict[str, Path], name: str) -> None:
+    from skelagnostic.representations import GlobalPositions
+
+    plain = GlobalPositions(frame="root").encode(sa.read_bvh(files["plain"]))
+    carrier = GlobalPositions(frame="root").encode(sa.read_bvh(files[name]))
+    torch.testing.assert_close(carrier[:, 1:], plain, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("name", ["carrier", "carrier_all6"])
 def test_reroot_at_the_body_root_gives_the_ordinary_motion(
     files: dict[str, Path], name: str
 ) -> None:
