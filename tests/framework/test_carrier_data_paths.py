@@ -190,3 +190,16 @@ def test_vqpae(walks: dict[str, Path], tmp_path: Path) -> None:
 
     dm = _assert_same_items(make, walks, tmp_path)
     _one_step(VqpaeAligner(num_codes=8, kernel_size=7, pose_mlp="none"), dm, tmp_path)
+
+
+def test_cli_inputs_drop_the_carrier(walks: dict[str, Path]) -> None:
+    """``retarget``/``interpolate``/``transfer`` read their files through the same rule."""
+    from skelagnostic.cli.infer import _read
+
+    plain = _read(walks["plain"] / "walk.bvh", {})
+    carrier = _read(walks["carrier"] / "walk.bvh", {"units": "cm"})
+    assert carrier.skeleton.joint_names == plain.skeleton.joint_names
+    assert carrier.units == "cm" and carrier.translations is None
+    torch.testing.assert_close(
+        carrier.global_positions(), plain.global_positions(), atol=1e-5, rtol=0
+    )
