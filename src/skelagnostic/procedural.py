@@ -252,6 +252,65 @@ def skeleton(kind: str, scale: float = 1.0) -> Skeleton:
     return Skeleton(names, parents, offsets, end_sites=end_sites, name=kind, morphology=morphology)
 
 
+#: Values of ``generate(root_carrier=...)`` and ``generate(channels=...)``.
+_ROOT_CARRIERS = (None, "static")
+_CHANNEL_LAYOUTS = (None, "all6")
+_SIX = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
+_THREE = _SIX[3:]
+
+
+def _export_layout(motion: Motion, root_carrier: str | None, channels: str | None) -> Motion:
+    """``motion`` laid out as ``generate(root_carrier=..., channels=...)`` asks.
+
+    ``root_carrier="static"`` puts a static root ``joint_Root`` above the old
+    root, whose OFFSET becomes its position in the last frame (an export-time
+    pose, as MotionBuilder writes it) and whose per-frame position goes to the
+    translations, so forward kinematics of the old joints is unchanged.
+    ``channels="all6"`` gives every joint six channels.
+    """
+    sk = motion.skeleton
+    num_frames = motion.num_frames
+    names, parents, offsets = sk.joint_names, sk.parents, sk.offsets
+    end_sites, groups, body_root = sk.end_sites, sk.body_groups, sk.body_root
+    rotations, root, translations = motion.rotations, motion.root_positions, motion.translations
+    layout = [_SIX] + [_THREE] * (sk.num_joints - 1)
+    if root_carrier == "static":
+        names, groups = ["joint_Root", *names], ["spine", *groups]
+        parents = [-1, *(p + 1 for p in parents)]
+        offsets = torch.cat([torch.zeros(1, 3, dtype=offsets.dtype), offsets])
+        offsets[1] = root[-1]
+        end_sites = {j + 1: v for j, v in end_sites.items()}
+        body_root = 1
+        rotations = torch.cat([Q.identity(num_frames, 1, dtype=motion.dtype), rotations], 1)
+        translations = offsets.to(motion.dtype).expand(num_frames, -1, -1).clone()
+        translations[:, 1] = root
+        root = torch.zeros(num_frames, 3, dtype=motion.dtype)
+        layout = [_SIX, *layout]
+    if channels == "all6":
+        layout = [_SIX] * len(names)
+    skeleton = Skeleton(
+        names,
+        parents,
+        offsets,
+        end_sites=end_sites,
+        body_groups=groups,
+        up_axis=sk.up_axis,
+        name=sk.name,
+        morphology=sk.morphology,
+        channels=layout,
+        body_root=body_root,
+    )
+    return Motion(
+        skeleton,
+        rotations,
+        root,
+        motion.fps,
+        translations=translations,
+        name=motion.name,
+        units=motion.units,
+    )
+
+
 def generate(
     kind: str = "biped22",
     gait: str = "walk",
@@ -263,6 +322,8 @@ def generate(
     turn_rate: float = 0.0,
     scale: float | None = None,
     noise: float = 0.0,
+    root_carrier: str | None = None,
+    channels: str | None = None,
 ) -> tuple[Motion, dict[str, Any]]:
     """Generate a procedural gait with known frequency and phase.
 
@@ -280,6 +341,18 @@ def generate(
         turn_rate: Heading change in degrees per second.
         scale: Body size factor (default: varied by the seed around 1).
         noise: Standard deviation in degrees of i.i.d. rotation noise added to animated joints.
+        root_carrier: The layout of the exported file's root. ``None``: the hips are
+            the root and carry the trajectory (LaFAN1, CMU). ``"static"``: a static
+            root ``joint_Root`` at the origin whose only child, the hips, carries the
+            trajectory in its position channels, with the hips' OFFSET at their
+            position in the last frame (what a MotionBuilder export written with the
+            time slider at the end of the take holds; the Bandai-Namco research
+            motion dataset has this layout). Forward kinematics of the body joints is
+            the same as without the carrier.
+        channels: Channels per joint when written with :func:`~skelagnostic.write_bvh`.
+            ``None``: six on the root (and the carrier's child), three rotations on
+            the others. ``"all6"``: six on every joint, the position channels of the
+            non-root joints repeating their OFFSETs (Bandai-Namco, MotionBuilder).
 
     Returns:
         ``(motion, info)``: ``info`` holds ``kind``, ``gait``, ``frequency`` (Hz),
@@ -288,7 +361,8 @@ def generate(
         ``synthetic=True``.
 
     Raises:
-        SkelagnosticError: For unknown kinds or gaits, or non-positive durations.
+        SkelagnosticError: For unknown kinds or gaits, non-positive durations, or an
+            unknown ``root_carrier`` or ``channels``.
 
     Examples:
         >>> import skelagnostic as sa
@@ -306,6 +380,15 @@ def generate(
         )
     if not seconds > 0 or not fps > 0:
         raise SkelagnosticError(f"seconds and fps must be positive, got {seconds} and {fps}")
+    if root_carrier not in _ROOT_CARRIERS:
+        raise SkelagnosticError(
+            f"root_carrier must be one of {', '.join(map(repr, _ROOT_CARRIERS))}, "
+            f"got {root_carrier!r}"
+        )
+    if channels not in _CHANNEL_LAYOUTS:
+        raise SkelagnosticError(
+            f"channels must be one of {', '.join(map(repr, _CHANNEL_LAYOUTS))}, got {channels!r}"
+        )
     rng = np.random.default_rng(seed)
     g = table[gait]
     jitter = lambda spread: float(1.0 + spread * (2.0 * rng.random() - 1.0))  # noqa: E731
@@ -411,6 +494,8 @@ def generate(
         dq = torch.cat([torch.cos(half)[..., None], torch.sin(half)[..., None] * axis], -1)
         rot[:, animated] = Q.mul(rot[:, animated], dq)
     motion = Motion(sk, rot, root, fps, name=f"{kind}_{gait}_{seed}", units="cm")
+    if root_carrier is not None or channels is not None:
+        motion = _export_layout(motion, root_carrier, channels)
     info = {
         "kind": kind,
         "gait": gait,

@@ -182,11 +182,13 @@ def keyframes_from_options(num_frames: int, every: str | None, keys: str | None)
 
 
 def _read(path: Path, options: dict[str, str]) -> Motion:
-    """``read_bvh(path)`` with the ``units=`` option applied."""
+    """``read_bvh(path)`` without a trajectory carrier, with the ``units=`` option applied."""
     from skelagnostic import read_bvh
     from skelagnostic.core.motion import UNITS
+    from skelagnostic.data.sources import reroot
 
     motion = read_bvh(path)
+    motion = reroot(motion, motion.skeleton.body_root)
     units = options.get("units")
     if units is not None:
         if units not in UNITS:

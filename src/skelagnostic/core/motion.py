@@ -278,7 +278,9 @@ class Motion:
 
         The forward direction is perpendicular to the left-to-right vector of the
         hips and shoulders (the first joint of each limb group), projected on the
-        ground; without limbs it falls back to the root's rotated rest forward axis.
+        ground; without limbs it falls back to the rotated rest forward axis of the
+        body root (:attr:`Skeleton.body_root <skelagnostic.Skeleton.body_root>`, the
+        file root unless that is a static trajectory carrier).
         """
         sk = self.skeleton
         up = sk.up_index
@@ -302,7 +304,12 @@ class Motion:
         heading = Q.heading_from_direction(forward, up=up, forward=fwd_axis)
         degenerate = (across.norm(dim=-1) < 1e-9).unsqueeze(-1)
         if bool(degenerate.any()):
-            fallback = Q.yaw(self.rotations[:, 0], up=up, forward=fwd_axis)
+            body = (
+                self.rotations[:, 0]
+                if sk.body_root == 0
+                else self.global_rotations()[:, sk.body_root]
+            )
+            fallback = Q.yaw(body, up=up, forward=fwd_axis)
             heading = torch.where(degenerate, fallback, heading)
         return heading
 

@@ -213,10 +213,13 @@ class Skeleton:
         channels: Optional per-joint BVH channel names, kept so that
             :func:`~skelagnostic.write_bvh` can reproduce the file's layout. Not part of
             the topology (ignored by ``==`` and ``hash``).
+        body_root: The joint (index or name) that is the body's root, when the file
+            root is a static *trajectory carrier* above it (see :attr:`body_root`);
+            ``None`` means the file root, joint 0.
 
     Raises:
-        SkeletonError: On duplicate names, bad parents, wrong offset shape or
-            non-finite offsets.
+        SkeletonError: On duplicate names, bad parents, wrong offset shape,
+            non-finite offsets or an unknown ``body_root``.
     """
 
     def __init__(
@@ -230,6 +233,7 @@ class Skeleton:
         name: str | None = None,
         morphology: str | None = None,
         channels: Sequence[Sequence[str]] | None = None,
+        body_root: int | str | None = None,
     ) -> None:
         names = [str(n) for n in joint_names]
         parents_l = [int(p) for p in parents]
@@ -280,7 +284,10 @@ class Skeleton:
             raise SkeletonError(
                 f"channels has {len(self.channels)} entries for {len(names)} joints"
             )
-        inferred = infer_body_groups(names, parents_l, off, lateral_axis=self._lateral_axis())
+        self._body_root = 0 if body_root is None else self._body_root_index(body_root)
+        inferred = infer_body_groups(
+            names, parents_l, self.rest_offsets(), lateral_axis=self._lateral_axis()
+        )
         if body_groups is None:
             groups = inferred
         elif isinstance(body_groups, Mapping):
@@ -337,6 +344,45 @@ class Skeleton:
         """Index (0, 1, 2) of the up axis."""
         return _AXES[self.up_axis]
 
+    @property
+    def body_root(self) -> int:
+        """Index of the joint that is the body's root (0 unless the file root is a carrier).
+
+        Some exports (the Bandai-Namco research motion dataset, MotionBuilder
+        exports) put a static root node at the origin whose only child, the hips,
+        carries the world trajectory in its position channels. That root is a
+        *trajectory carrier*, not a body part: the link from it to its child is no
+        bone (its OFFSET is wherever the hips stood when the file was exported).
+        :func:`~skelagnostic.read_bvh` detects such files and sets ``body_root``
+        to the child. Rest geometry (:meth:`rest_offsets`, :meth:`bone_lengths`,
+        :meth:`rest_positions` and what derives from them: the template, the
+        height, the unit guess) then gives the links from joint 0 down to the body
+        root zero length; forward kinematics is unchanged (it uses
+        :attr:`offsets`).
+        """
+        return self._body_root
+
+    def carrier_joints(self) -> list[int]:
+        """The trajectory-carrier joints above :attr:`body_root`, root first (else ``[]``).
+
+        Example:
+            >>> from skelagnostic import procedural
+            >>> motion, _ = procedural.generate("biped22", "walk", 1.0, root_carrier="static")
+            >>> motion.skeleton.body_root, motion.skeleton.carrier_joints()
+            (1, [0])
+        """
+        path, j = [], self._body_root
+        while self._parents[j] >= 0:
+            j = self._parents[j]
+            path.append(j)
+        return path[::-1]
+
+    def _body_root_index(self, joint: int | str) -> int:
+        try:
+            return self.index(joint)
+        except SkeletonError as exc:
+            raise SkeletonError(f"body_root: {exc}") from None
+
     def _lateral_axis(self) -> int:
         # Canonical BVH convention: Y up, facing +Z, left +X; for Z up, facing +Y... +X left.
         return 0 if self.up_axis in {"y", "z"} else 2
@@ -371,9 +417,29 @@ class Skeleton:
         """``(parent, child)`` index pairs, one per non-root joint."""
         return [(p, c) for c, p in enumerate(self._parents) if p >= 0]
 
+    def rest_offsets(self) -> torch.Tensor:
+        """``[J, 3]`` offsets of the rest geometry: :attr:`offsets` without the carrier links.
+
+        Equal to :attr:`offsets` except on a skeleton whose :attr:`body_root` is not
+        the file root: the offsets of the body root and of the carrier joints
+        between it and joint 0 are zero there (the carrier's link to the body is
+        the trajectory at export time, not a bone). Joint 0 keeps its offset.
+        Joints with animated translations (BVH position channels) use their
+        OFFSET here too: bone lengths are the rest pose's, never a frame's.
+        """
+        if self._body_root == 0:
+            return self._offsets
+        off = self._offsets.clone()
+        off[[*self.carrier_joints()[1:], self._body_root]] = 0.0
+        return off
+
     def bone_lengths(self) -> torch.Tensor:
-        """``[J]`` length of the bone ending at each joint (0 for the root)."""
-        lengths = self._offsets.norm(dim=-1).clone()
+        """``[J]`` length of the bone ending at each joint in the rest geometry.
+
+        0 for the root and, on a skeleton with a trajectory carrier, for the body
+        root and the carrier joints (see :meth:`rest_offsets`).
+        """
+        lengths = self.rest_offsets().norm(dim=-1).clone()
         lengths[0] = 0.0
         return lengths
 
@@ -450,10 +516,15 @@ class Skeleton:
 
     # ----------------------------------------------------------- derived forms
     def rest_positions(self) -> torch.Tensor:
-        """``[J, 3]`` global joint positions of the file's rest pose (zero rotations)."""
-        pos = torch.zeros_like(self._offsets)
+        """``[J, 3]`` global joint positions of the file's rest pose (zero rotations).
+
+        Built from :meth:`rest_offsets`: a trajectory carrier and the body root
+        share joint 0's position.
+        """
+        offsets = self.rest_offsets()
+        pos = torch.zeros_like(offsets)
         for j, p in enumerate(self._parents):
-            pos[j] = self._offsets[j] if p < 0 else pos[p] + self._offsets[j]
+            pos[j] = offsets[j] if p < 0 else pos[p] + offsets[j]
         return pos
 
     def template(self) -> torch.Tensor:
@@ -509,7 +580,8 @@ class Skeleton:
         Removed joints are bridged: a kept joint is re-parented to its nearest kept
         ancestor and its offset becomes the sum of the offsets along the removed
         chain (exact when the removed joints have zero rest rotation, which is the
-        BVH rest pose).
+        BVH rest pose). The :attr:`body_root` stays if kept; otherwise the subset's
+        body root is its root.
 
         Raises:
             SkeletonError: On unknown names or when the root is dropped.
@@ -538,6 +610,38 @@ class Skeleton:
             name=self.name,
             morphology=self.morphology,
             channels=None if self.channels is None else [self.channels[j] for j in order],
+            body_root=new_index.get(self._body_root, 0),
+        )
+
+    def rooted_at(self, joint: str | int) -> Skeleton:
+        """The subtree under ``joint``, with ``joint`` as its root (offsets kept).
+
+        ``skeleton.rooted_at(skeleton.body_root)`` drops a trajectory carrier. The
+        motion counterpart, which keeps the global motion of the kept joints, is
+        :func:`skelagnostic.data.reroot`.
+
+        Raises:
+            SkeletonError: ``joint`` is unknown.
+        """
+        new_root = self.index(joint)
+        if new_root == 0:
+            return self
+        keep = [new_root]
+        for j in range(new_root + 1, self.num_joints):
+            if self._parents[j] in keep:
+                keep.append(j)
+        index = {j: i for i, j in enumerate(keep)}
+        return Skeleton(
+            [self._names[j] for j in keep],
+            [-1] + [index[self._parents[j]] for j in keep[1:]],
+            self._offsets[keep].clone(),
+            end_sites={index[j]: v for j, v in self.end_sites.items() if j in index},
+            body_groups=[self._groups[j] for j in keep],
+            up_axis=self.up_axis,
+            name=self.name,
+            morphology=self.morphology,
+            channels=None if self.channels is None else [self.channels[j] for j in keep],
+            body_root=index.get(self._body_root, 0),
         )
 
     def scaled(self, factor: float) -> Skeleton:
@@ -552,6 +656,7 @@ class Skeleton:
             name=self.name,
             morphology=self.morphology,
             channels=self.channels,
+            body_root=self._body_root,
         )
 
     # --------------------------------------------------------- identity, I/O
@@ -592,6 +697,7 @@ class Skeleton:
             "name": self.name,
             "morphology": self.morphology,
             "channels": self.channels,
+            "body_root": self._body_root,
         }
 
     @classmethod
@@ -608,6 +714,7 @@ class Skeleton:
                 name=data.get("name"),
                 morphology=data.get("morphology"),
                 channels=data.get("channels"),
+                body_root=data.get("body_root"),
             )
         except KeyError as exc:
             raise SkeletonError(f"skeleton description lacks the field {exc.args[0]!r}") from None

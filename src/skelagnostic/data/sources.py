@@ -26,7 +26,6 @@ import torch
 
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.paths import expand_path
-from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = [
@@ -191,10 +190,14 @@ def flatten_sources(sources: ClipSource | Sequence[ClipSource] | None) -> list[C
     return [part for s in listed for part in (s.parts if isinstance(s, MultiSource) else [s])]
 
 
-def reroot(motion: Motion, joint: str) -> Motion:
+def reroot(motion: Motion, joint: str | int) -> Motion:
     """Drop the joints above ``joint`` and make it the root (keeping its global motion).
 
-    Used for rigs whose file root is a fixed helper (Bandai-Namco's ``joint_Root``).
+    Used for rigs whose file root is a fixed helper (Bandai-Namco's ``joint_Root``,
+    a static trajectory carrier: see :attr:`Skeleton.body_root
+    <skelagnostic.Skeleton.body_root>`). Forward kinematics of the kept joints is
+    unchanged. Animated translations that only repeat the kept joints' offsets
+    (six channels on every joint) are dropped.
 
     Raises:
         SkeletonError: ``joint`` is unknown.
@@ -203,29 +206,26 @@ def reroot(motion: Motion, joint: str) -> Motion:
     new_root = sk.index(joint)
     if new_root == 0:
         return motion
-    keep = [new_root]
-    for j in range(new_root + 1, sk.num_joints):
-        if sk.parents[j] in keep:
-            keep.append(j)
-    index = {j: i for i, j in enumerate(keep)}
-    parents = [-1] + [index[sk.parents[j]] for j in keep[1:]]
-    offsets = sk.offsets[keep].clone()
-    skeleton = Skeleton(
-        [sk.joint_names[j] for j in keep],
-        parents,
-        offsets,
-        end_sites={index[j]: v for j, v in sk.end_sites.items() if j in index},
-        body_groups=[sk.body_groups[j] for j in keep],
-        up_axis=sk.up_axis,
-        name=sk.name,
-        morphology=sk.morphology,
-    )
+    skeleton = sk.rooted_at(new_root)
+    keep = [sk.index(name) for name in skeleton.joint_names]
+    offsets = skeleton.offsets
     rotations = motion.rotations[:, keep].clone()
     rotations[:, 0] = motion.global_rotations()[:, new_root]
     root = motion.global_positions()[:, new_root]
     trans = None if motion.translations is None else motion.translations[:, keep]
-    return Motion(skeleton, rotations, root, motion.fps, translations=trans, name=motion.name,
-                  units=motion.units)
+    if trans is not None and torch.equal(
+        trans[:, 1:], offsets[1:].to(trans).expand_as(trans[:, 1:])
+    ):
+        trans = None
+    return Motion(
+        skeleton,
+        rotations,
+        root,
+        motion.fps,
+        translations=trans,
+        name=motion.name,
+        units=motion.units,
+    )
 
 
 def _file_key(path: Path) -> str:
@@ -246,7 +246,11 @@ class BVHSource(ClipSource):
         test_pattern: Regular expression; clips whose path matches go to the test split.
         units: Length unit of the files (a key of :data:`~skelagnostic.core.UNITS`);
             the clips are converted to metres. ``None`` keeps the file's units.
-        root_joint: Re-root every clip at this joint (see :func:`reroot`).
+        root_joint: Re-root every clip at this joint (see :func:`reroot`). ``None``:
+            a file whose root is a static trajectory carrier (detected by
+            :func:`~skelagnostic.read_bvh`, see :attr:`Skeleton.body_root
+            <skelagnostic.Skeleton.body_root>`) is re-rooted at its body root, any
+            other file is kept as it is; give the file root's name to keep a carrier.
         name: Label of the source.
 
     Raises:
@@ -265,8 +269,9 @@ class BVHSource(ClipSource):
         if isinstance(self.paths, (str, Path)):
             self.paths = [self.paths]
         if self.units is not None and self.units not in UNITS:
-            raise SkelagnosticError(f"data.units: unknown unit {self.units!r}; known: "
-                                    f"{', '.join(UNITS)}")
+            raise SkelagnosticError(
+                f"data.units: unknown unit {self.units!r}; known: {', '.join(UNITS)}"
+            )
         files: list[Path] = []
         for raw in self.paths:
             path = expand_path(raw)
@@ -291,17 +296,16 @@ class BVHSource(ClipSource):
         ]
 
     def loading(self) -> dict[str, Any]:
-        """``units`` and ``root_joint``: they change the loaded motion."""
-        return {"units": self.units, "root_joint": self.root_joint}
+        """``units``, ``root_joint`` and the carrier rule: they change the loaded motion."""
+        return {"units": self.units, "root_joint": self.root_joint, "carrier": "body_root"}
 
     def load(self, clip: ClipRef) -> Motion:
-        """Read the BVH file of ``clip``."""
+        """Read the BVH file of ``clip`` (re-rooted, see ``root_joint``)."""
         from skelagnostic.io.bvh import read_bvh
 
         motion = read_bvh(clip.id)
-        if self.root_joint is not None:
-            motion = reroot(motion, self.root_joint)
-        return _to_metres(motion, self.units)
+        root = self.root_joint if self.root_joint is not None else motion.skeleton.body_root
+        return _to_metres(reroot(motion, root), self.units)
 
 
 #: Keys of a mapping entry of ``data.paths`` (besides ``path``/``paths``).
@@ -335,8 +339,13 @@ def bvh_sources(
     """
     if isinstance(paths, (str, Path, Mapping)):
         paths = [paths]
-    defaults = {"units": units, "name": name, "pattern": pattern, "test_pattern": test_pattern,
-                "root_joint": root_joint}
+    defaults = {
+        "units": units,
+        "name": name,
+        "pattern": pattern,
+        "test_pattern": test_pattern,
+        "root_joint": root_joint,
+    }
     plain = [p for p in paths if not isinstance(p, Mapping)]
     sources = [BVHSource(plain, **defaults)] if plain else []
     for i, entry in enumerate(paths):
@@ -345,8 +354,10 @@ def bvh_sources(
         where = f"data.paths[{i}]"
         unknown = sorted(set(entry) - {"path", "paths", *_ENTRY_KEYS})
         if unknown:
-            raise SkelagnosticError(f"{where}.{unknown[0]} is not an option of a path entry; "
-                                    f"accepted: path, paths, {', '.join(_ENTRY_KEYS)}")
+            raise SkelagnosticError(
+                f"{where}.{unknown[0]} is not an option of a path entry; "
+                f"accepted: path, paths, {', '.join(_ENTRY_KEYS)}"
+            )
         entry_paths = entry.get("paths", entry.get("path"))
         if not entry_paths:
             raise SkelagnosticError(f"{where}: give the entry a 'path' (or 'paths')")
@@ -388,8 +399,9 @@ class ProceduralSource(ClipSource):
             gaits = self.gaits
             if gaits is None:
                 gaits = sorted({g for table in procedural.GAITS.values() for g in table} - {"idle"})
-            clips = procedural.dataset(tuple(self.kinds), tuple(gaits), self.clips_per_gait,
-                                       self.seconds, seed=self.seed)
+            clips = procedural.dataset(
+                tuple(self.kinds), tuple(gaits), self.clips_per_gait, self.seconds, seed=self.seed
+            )
             if not clips:
                 raise SkelagnosticError(
                     f"data: the procedural kinds {list(self.kinds)} have none of the gaits "
@@ -445,14 +457,21 @@ class DatasetPreset:
 PRESETS: dict[str, DatasetPreset] = {
     p.name: p
     for p in (
-        DatasetPreset("lafan1", "Ubisoft LaFAN1: 22 joints, 30 fps, cm; subject 5 is the test set",
-                      "cm", test_pattern=r"subject5"),
-        DatasetPreset("cmu", "CMU mocap (BVH conversions): 31 joints, 120 fps, CMU units",
-                      "cmu"),
-        DatasetPreset("mann_dog", "MANN dog: 21 joints, 60 fps, cm, human-style joint names",
-                      "cm"),
-        DatasetPreset("bandai", "Bandai-Namco: joint_Root fixed at the origin, Hips carry the "
-                      "translation (re-rooted at Hips)", "cm", root_joint="Hips"),
+        DatasetPreset(
+            "lafan1",
+            "Ubisoft LaFAN1: 22 joints, 30 fps, cm; subject 5 is the test set",
+            "cm",
+            test_pattern=r"subject5",
+        ),
+        DatasetPreset("cmu", "CMU mocap (BVH conversions): 31 joints, 120 fps, CMU units", "cmu"),
+        DatasetPreset("mann_dog", "MANN dog: 21 joints, 60 fps, cm, human-style joint names", "cm"),
+        DatasetPreset(
+            "bandai",
+            "Bandai-Namco: joint_Root fixed at the origin, Hips carry the "
+            "translation (re-rooted at Hips)",
+            "cm",
+            root_joint="Hips",
+        ),
     )
 }
 
@@ -466,5 +485,6 @@ def preset_source(preset: str, root: str | Path) -> BVHSource:
     if preset not in PRESETS:
         raise SkelagnosticError(f"unknown dataset preset {preset!r}; known: {', '.join(PRESETS)}")
     p = PRESETS[preset]
-    return BVHSource([expand_path(root)], p.pattern, p.test_pattern, p.units, p.root_joint,
-                     name=p.name)
+    return BVHSource(
+        [expand_path(root)], p.pattern, p.test_pattern, p.units, p.root_joint, name=p.name
+    )

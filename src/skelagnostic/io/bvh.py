@@ -41,6 +41,7 @@ __all__ = ["BVHWarning", "parse_bvh", "read_bvh", "write_bvh"]
 class BVHWarning(UserWarning):
     """A BVH file that reads but looks damaged (its last motion line has no line end)."""
 
+
 _ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 _DEFAULT_ROOT = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
@@ -414,6 +415,27 @@ def _warn_if_cut(body: bytes, first_line: int, path: Path | None) -> None:
     )
 
 
+#: Largest change over the clip of a channel that still counts as static (file units).
+_STATIC_TOLERANCE = 1e-9
+
+
+def _carrier_child(joints: list[_Joint], values: np.ndarray) -> int | None:
+    """The body root under a static trajectory-carrier root, or ``None`` for ordinary files.
+
+    The rule: the file root's channels (if any) keep one value over the whole
+    clip, the root has exactly one child joint, and that child has all three
+    position channels. The child then carries the world trajectory (Bandai-Namco,
+    MotionBuilder exports) and is the body's root (:attr:`Skeleton.body_root`).
+    """
+    children = [k for k, joint in enumerate(joints) if joint.parent == 0]
+    if len(children) != 1 or not set(_POS) <= set(joints[children[0]].channels):
+        return None
+    root_columns = values[:, : len(joints[0].channels)]
+    if root_columns.size and float(np.ptp(root_columns, axis=0).max()) > _STATIC_TOLERANCE:
+        return None
+    return children[0]
+
+
 def _build_motion(
     joints: list[_Joint],
     values: np.ndarray,
@@ -447,7 +469,9 @@ def _build_motion(
         local = np.repeat(offsets[None], num_frames, axis=0)
         local[:, pos_joint, pos_axis] = values[:, pos_cols]
         root_positions = local[:, 0]
-        if any(k > 0 for k in pos_joint):
+        # position channels of non-root joints that only repeat their OFFSETs (six
+        # channels on every joint) animate nothing: the motion is then the ordinary one
+        if not np.array_equal(local[:, 1:], np.broadcast_to(offsets[None, 1:], local[:, 1:].shape)):
             translations = local
     by_order: dict[str, list[int]] = {}
     for k, order in enumerate(orders):
@@ -477,6 +501,7 @@ def _build_motion(
             end_sites={k: j.end_sites for k, j in enumerate(joints) if j.end_sites},
             channels=[j.channels for j in joints],
             name=name,
+            body_root=_carrier_child(joints, values),
         )
     except SkeletonError as exc:
         raise BVHError(str(exc), path) from None

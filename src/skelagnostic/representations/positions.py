@@ -122,7 +122,8 @@ class GlobalPositions(MotionRepresentation):
 
     Args:
         frame: ``"world"``: global positions. ``"root"``: positions relative to
-            the root's ground projection, rotated into the character's facing
+            the ground projection of the body root (:attr:`Skeleton.body_root
+            <skelagnostic.Skeleton.body_root>`), rotated into the character's facing
             frame (:meth:`Motion.facing`), so they do not depend on where the
             character is or which way it faces.
 
@@ -149,7 +150,7 @@ class GlobalPositions(MotionRepresentation):
         pos = motion.global_positions()
         if self.frame == "world":
             return pos
-        ground = motion.root_positions.clone()
+        ground = pos[:, motion.skeleton.body_root].clone()  # the body's, not a carrier's
         ground[:, motion.skeleton.up_index] = 0.0
         return Q.rotate(Q.inv(motion.facing()).unsqueeze(1), pos - ground.unsqueeze(1))
 

@@ -69,7 +69,8 @@ class Topology:
                         torch.where(skeleton.offsets.norm(dim=-1, keepdim=True) > 0,
                                     skeleton.offsets / skeleton.offsets.norm(
                                         dim=-1, keepdim=True).clamp_min(1e-12), 0.0),
-                        body_groups=skeleton.body_groups, morphology=skeleton.morphology)
+                        body_groups=skeleton.body_groups, morphology=skeleton.morphology,
+                        body_root=skeleton.body_root)
         tmpl = skeleton_template(unit)
         parents = torch.tensor([max(p, 0) for p in skeleton.parents])
         directions = (tmpl - tmpl[parents]).float()

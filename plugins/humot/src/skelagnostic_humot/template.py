@@ -88,6 +88,11 @@ def from_model_frame(positions: torch.Tensor, up_axis: str = "y") -> torch.Tenso
 def median_bone_lengths(positions: torch.Tensor, skeleton: Skeleton) -> torch.Tensor:
     """``[J]`` temporal median of each joint's bone length in ``positions`` ``[F, J, 3]`` (root 0).
 
+    The body root and the joints above it (a trajectory carrier, see
+    :attr:`Skeleton.body_root <skelagnostic.Skeleton.body_root>`) get 0, as in
+    :meth:`Skeleton.bone_lengths <skelagnostic.Skeleton.bone_lengths>`: the
+    carrier's distance to the hips is the trajectory, not a bone.
+
     Raises:
         SkeletonError: ``positions`` does not have the skeleton's joint count.
     """
@@ -97,7 +102,7 @@ def median_bone_lengths(positions: torch.Tensor, skeleton: Skeleton) -> torch.Te
         )
     parents = torch.tensor([max(p, 0) for p in skeleton.parents], device=positions.device)
     lengths = (positions - positions[:, parents]).norm(dim=-1).median(dim=0).values
-    lengths[0] = 0.0
+    lengths[[*skeleton.carrier_joints(), skeleton.body_root]] = 0.0
     return lengths
 
 
@@ -129,7 +134,7 @@ def skeleton_template(skeleton: Skeleton, positions: torch.Tensor | None = None)
                            torch.tensor([0.0, 1.0, 0.0], dtype=sk.offsets.dtype))
         sk = Skeleton(sk.joint_names, sk.parents, unit * lengths[:, None],
                       body_groups=sk.body_groups, up_axis=sk.up_axis, name=sk.name,
-                      morphology=sk.morphology)
+                      morphology=sk.morphology, body_root=sk.body_root)
     return to_model_frame(sk.template(), "y")
 
 

@@ -47,6 +47,7 @@ def load_target_skeleton(target: str, units: str | None = None) -> tuple[Skeleto
         units = units or "cm"
     elif Path(target).is_file():
         skeleton = read_bvh(target).skeleton
+        skeleton = skeleton.rooted_at(skeleton.body_root)  # without a trajectory carrier
         units = infer_units(skeleton, units)
     else:
         raise SkelagnosticError(
