@@ -1,0 +1,98 @@
+"""PC-MRL networks equal the authors' for their weights (issue #26, item 6).
+
+``tests/fixtures/pcmrl_net`` holds small networks of the authors' code
+(github.com/MiniEval/PC-MRL) with their outputs, written by
+``scripts/fixtures/pcmrl_network_parity.py``; the tests need none of their code.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from skelagnostic_pcmrl.authors import load_stage1, load_stage2, read_state
+from skelagnostic_pcmrl.fps import farthest_point_sampling
+from skelagnostic_pcmrl.interp_keyframes import window_features
+
+from skelagnostic.core import quaternion as Q
+from skelagnostic.errors import SkelagnosticError
+
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "pcmrl_net"
+OUT = torch.load(FIXTURES / "outputs.pt", weights_only=False)
+TOL = 1e-4
+
+
+@pytest.fixture(scope="module")
+def stage1() -> torch.nn.Module:
+    return load_stage1(FIXTURES / "stage1.pt", heads=OUT["sizes"]["heads"], k=OUT["sizes"]["k"])
+
+
+def test_fps_keeps_the_authors_indices_at_every_stage(stage1: torch.nn.Module) -> None:
+    xyz = OUT["clouds"].flatten(0, 1)[..., :3]
+    for expected in OUT["fps"]:
+        idx = farthest_point_sampling(xyz, expected.shape[-1])
+        assert torch.equal(idx, expected)
+        xyz = torch.gather(xyz, 1, idx[..., None].expand(-1, -1, 3))
+
+
+def test_point_encoder_equals_the_authors(stage1: torch.nn.Module) -> None:
+    with torch.no_grad():
+        out = stage1.encoder(OUT["clouds"].flatten(0, 1))
+    assert (out - OUT["encoder"]).abs().max() < TOL
+
+
+def test_temporal_transformer_equals_the_authors(stage1: torch.nn.Module) -> None:
+    with torch.no_grad():
+        out = stage1.temporal(OUT["features"])
+    assert (out - OUT["temporal"]).abs().max() < TOL
+
+
+def test_stage1_forward_equals_the_authors(stage1: torch.nn.Module) -> None:
+    with torch.no_grad():
+        out = stage1(OUT["clouds"])
+    assert out.shape == OUT["stage1"].shape
+    assert (out - OUT["stage1"]).abs().max() < TOL
+
+
+def test_stage2_network_equals_the_authors() -> None:
+    case = OUT["stage2"]
+    net = load_stage2(FIXTURES / "stage2.pt", heads=case["sizes"]["heads"])
+    with torch.no_grad():
+        out = net(case["inputs"], case["keys"])
+    assert (out - case["output"]).abs().max() < TOL
+
+
+def test_foq_and_rest_directions_equal_the_authors() -> None:
+    case = OUT["foq"]
+    rot = case["global"]
+    num_b, num_t, num_j = rot.shape[:3]
+    keys = torch.ones(num_b, num_t, dtype=torch.bool)
+    feats = window_features(
+        rot,
+        torch.zeros(num_b, num_t, 3),
+        torch.zeros(num_b, num_j, 3),
+        case["tails"].expand(num_b, -1, -1),
+        keys,
+        [-1] + [0] * (num_j - 1),
+    )
+    assert (feats["foq"] - case["foq"]).abs().max() < 1e-6
+    assert (feats["q0"] - case["q0"][:, 0]).abs().max() < 1e-6
+    direction = feats["inputs"][..., :-1].unflatten(-1, (num_j, 10))[..., 3:6]
+    assert (direction - case["p_base"]).abs().max() < 1e-6
+    assert torch.allclose(Q.mul(feats["foq"], feats["q0"][:, None]), rot, atol=1e-6)
+
+
+def test_loader_names_the_file_and_key_at_fault(tmp_path: Path) -> None:
+    state, _ = read_state(FIXTURES / "stage2.pt")
+    del state["decoder.output.bias"]
+    path = tmp_path / "CITL5000.pt"
+    torch.save(state, path)
+    with pytest.raises(SkelagnosticError, match=r"CITL5000\.pt.*'decoder\.output\.bias'"):
+        load_stage2(path, heads=OUT["stage2"]["sizes"]["heads"])
+    state1, _ = read_state(FIXTURES / "stage1.pt")
+    state1["cloud_encoder.extra.weight"] = torch.zeros(1)
+    with pytest.raises(SkelagnosticError, match=r"unexpected key 'cloud_encoder\.extra\.weight'"):
+        load_stage1(state1)
+    with pytest.raises(SkelagnosticError, match="no such checkpoint file"):
+        load_stage1(tmp_path / "missing.pt")
