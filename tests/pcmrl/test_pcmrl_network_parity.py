@@ -13,10 +13,15 @@ import pytest
 import torch
 from skelagnostic_pcmrl.authors import load_stage1, load_stage2, read_state
 from skelagnostic_pcmrl.fps import farthest_point_sampling
+from skelagnostic_pcmrl.interp_data import Clip, PcmrlInterpDataModule, TrainWindows
 from skelagnostic_pcmrl.interp_keyframes import window_features
+from skelagnostic_pcmrl.rpa import lateral_axis, left_right_pairs, mirrored_tail_offsets
 
+import skelagnostic as sa
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.representations import POINT_GROUPS
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "pcmrl_net"
 OUT = torch.load(FIXTURES / "outputs.pt", weights_only=False)
@@ -96,3 +101,51 @@ def test_loader_names_the_file_and_key_at_fault(tmp_path: Path) -> None:
         load_stage1(state1)
     with pytest.raises(SkelagnosticError, match="no such checkpoint file"):
         load_stage1(tmp_path / "missing.pt")
+
+
+def _rpa_skeleton() -> Skeleton:
+    case = OUT["rpa"]
+    groups = [POINT_GROUPS[g] for g in case["groups"]]
+    return Skeleton(case["names"], case["parents"], case["offsets"], body_groups=groups)
+
+
+def test_mirrored_tail_offsets_equal_the_authors_draw() -> None:
+    case = OUT["rpa"]
+    skeleton = _rpa_skeleton()
+    assert [list(p) for p in left_right_pairs(skeleton)] == case["pairs"]
+    gen = torch.Generator().manual_seed(case["seed"])
+    # their aug_range is the width of the interval; mirror_axis=1 is the component they negate
+    delta = mirrored_tail_offsets(skeleton, case["aug_range"] / 2, gen, mirror_axis=1)
+    assert (delta - case["aug"]).abs().max() < 1e-7
+
+
+def test_mirrored_tail_offsets_mirror_across_the_sagittal_plane_by_default() -> None:
+    skeleton = _rpa_skeleton()
+    assert lateral_axis(skeleton) == 0  # left joints at +x in this rest pose
+    delta = mirrored_tail_offsets(skeleton, 0.05, torch.Generator().manual_seed(3))
+    flip = torch.tensor([-1.0, 1.0, 1.0])
+    for left, right in left_right_pairs(skeleton):
+        assert torch.equal(delta[right], delta[left] * flip)
+        assert float(delta[left].abs().max()) <= 0.05
+    unpaired = [j for j, g in enumerate(skeleton.body_groups) if g == "spine"]
+    assert not delta[unpaired].any()
+
+
+def test_training_windows_draw_mirrored_offsets_when_asked() -> None:
+    motion = sa.procedural.generate("biped31", "walk", seconds=2.0)[0]
+    clip = Clip.from_motion(motion, "walk")
+    windows = TrainWindows(
+        [clip], 16, 2, 4, rpa_range=0.05, rpa_prob=1.0, samples=3, seed=1, rpa_offsets="mirrored"
+    )
+    skeleton = clip.skeleton
+    flip = torch.ones(3)
+    flip[lateral_axis(skeleton)] = -1.0
+    spine = [j for j, g in enumerate(skeleton.body_groups) if g == "spine" and j > 0]
+    for i in range(len(windows)):
+        moved = windows[i]["offsets"] - clip.offsets
+        assert moved.abs().max() > 0
+        assert not moved[spine].any()
+        for left, right in left_right_pairs(skeleton):
+            assert torch.allclose(moved[right], moved[left] * flip, atol=1e-6)
+    with pytest.raises(SkelagnosticError, match=r"data\.rpa_offsets"):
+        PcmrlInterpDataModule(rpa_offsets="symmetric")

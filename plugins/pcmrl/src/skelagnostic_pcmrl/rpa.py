@@ -15,6 +15,12 @@ right factor of every frame's global rotation, so first-frame offset quaternions
 (FOQ, Sec. 3.3) are unchanged by RPA: it alters the skeleton the model animates
 (bone lengths, hip/shoulder attachments), the first-frame global rotations and
 therefore the forward-kinematics targets.
+
+How the tail offsets are drawn (:data:`RPA_OFFSETS`): ``"independent"``
+(:func:`random_tail_offsets`, every bone its own draw) or ``"mirrored"``
+(:func:`mirrored_tail_offsets`, the draw of the authors' ``train_inpainter.py``:
+only the arm and leg bones move, each left bone and its right counterpart by the
+same offset mirrored across the body's sagittal plane).
 """
 
 from __future__ import annotations
@@ -28,12 +34,21 @@ from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError, SkeletonError
 
 __all__ = [
+    "RPA_OFFSETS",
     "BoneTails",
     "augment_rest_pose",
     "bone_tails",
+    "lateral_axis",
+    "left_right_pairs",
     "max_real_quaternion",
+    "mirrored_tail_offsets",
     "random_tail_offsets",
 ]
+
+#: Ways of drawing the RPA tail offsets (see the module docstring).
+RPA_OFFSETS = ("independent", "mirrored")
+#: (left, right) body groups whose joints are paired, in the authors' order (arms, then legs).
+_PAIRED_GROUPS = (("left_arm", "right_arm"), ("left_leg", "right_leg"))
 
 #: Offsets shorter than this (in the data's units) count as zero-length bones.
 EPS = 1e-6
@@ -137,6 +152,88 @@ def random_tail_offsets(
         raise SkelagnosticError(f"RPA range must be non-negative, got {scale}")
     u = torch.rand(num_joints, 3, generator=generator, dtype=dtype)
     return (2.0 * u - 1.0) * scale
+
+
+def left_right_pairs(skeleton: Skeleton) -> list[tuple[int, int]]:
+    """``(left, right)`` joint pairs of the arms, then of the legs (each in joint order).
+
+    A joint of a left arm or leg body group is paired with its counterpart of
+    :meth:`~skelagnostic.core.skeleton.Skeleton.mirror_map` when that counterpart is in
+    the matching right group (the authors' pairs: their arm and leg groups; spine
+    joints, such as CMU's ``LHipJoint``, stay unpaired).
+    """
+    groups, mirror = skeleton.body_groups, skeleton.mirror_map()
+    return [
+        (j, mirror[j])
+        for left, right in _PAIRED_GROUPS
+        for j in range(skeleton.num_joints)
+        if groups[j] == left and mirror[j] != j and groups[mirror[j]] == right
+    ]
+
+
+def lateral_axis(skeleton: Skeleton, pairs: list[tuple[int, int]] | None = None) -> int:
+    """The rest pose's left-right axis: the largest component of the mean left-minus-right.
+
+    Raises:
+        SkeletonError: The skeleton has no left/right pairs, or they coincide at rest.
+    """
+    pairs = left_right_pairs(skeleton) if pairs is None else pairs
+    if not pairs:
+        raise SkeletonError(f"{skeleton!r} has no left/right joint pairs (see mirror_map)")
+    rest = skeleton.rest_positions()
+    left, right = zip(*pairs, strict=True)
+    side = (rest[list(left)] - rest[list(right)]).abs().mean(dim=0)
+    if float(side.max()) <= EPS:
+        raise SkeletonError(f"{skeleton!r}: left and right joints coincide in the rest pose")
+    return int(side.argmax())
+
+
+def mirrored_tail_offsets(
+    skeleton: Skeleton,
+    scale: float,
+    generator: torch.Generator | None = None,
+    mirror_axis: int | None = None,
+    dtype: torch.dtype = torch.float32,
+) -> torch.Tensor:
+    """``[J, 3]`` RPA offsets drawn per left/right pair, as the authors draw them.
+
+    Every pair of :func:`left_right_pairs` gets one offset uniform in
+    ``[-scale, scale)`` per axis (one ``torch.rand(P, 3)`` draw, in pair order);
+    the left joint takes it and the right joint takes it with the ``mirror_axis``
+    component negated. Unpaired joints get zero.
+
+    Args:
+        skeleton: The skeleton whose bones are augmented.
+        scale: Half-width of the range (the authors' ``aug_range`` is the full width:
+            their 0.1 is ``scale=0.05``).
+        generator: Random generator.
+        mirror_axis: Component negated for the right joint; ``None``: the rest pose's
+            :func:`lateral_axis`, a mirror across the sagittal plane. The authors'
+            code negates component 1, the up axis of their Y-up CMU target.
+        dtype: Output dtype.
+
+    Raises:
+        SkelagnosticError: ``scale`` is negative or ``mirror_axis`` is not 0, 1 or 2.
+        SkeletonError: The skeleton has no left/right pairs.
+    """
+    if scale < 0:
+        raise SkelagnosticError(f"RPA range must be non-negative, got {scale}")
+    pairs = left_right_pairs(skeleton)
+    if not pairs:
+        raise SkeletonError(
+            f"{skeleton!r} has no left/right arm or leg joint pairs (see "
+            "mirror_map and body_groups): mirrored RPA offsets need them"
+        )
+    axis = lateral_axis(skeleton, pairs) if mirror_axis is None else int(mirror_axis)
+    if axis not in (0, 1, 2):
+        raise SkelagnosticError(f"RPA mirror axis must be 0, 1 or 2, got {mirror_axis}")
+    delta = torch.zeros(skeleton.num_joints, 3, dtype=dtype)
+    draw = (2.0 * torch.rand(len(pairs), 3, generator=generator, dtype=dtype) - 1.0) * scale
+    left, right = (list(side) for side in zip(*pairs, strict=True))
+    delta[left] = draw
+    delta[right] = draw
+    delta[right, axis] = -draw[:, axis]
+    return delta
 
 
 def augment_rest_pose(
