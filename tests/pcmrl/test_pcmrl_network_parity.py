@@ -15,10 +15,16 @@ from skelagnostic_pcmrl.authors import load_stage1, load_stage2, read_state
 from skelagnostic_pcmrl.fps import farthest_point_sampling
 from skelagnostic_pcmrl.interp_data import Clip, PcmrlInterpDataModule, TrainWindows
 from skelagnostic_pcmrl.interp_keyframes import window_features
-from skelagnostic_pcmrl.rpa import lateral_axis, left_right_pairs, mirrored_tail_offsets
+from skelagnostic_pcmrl.rpa import (
+    authors_rest_pose_rotations,
+    lateral_axis,
+    left_right_pairs,
+    mirrored_tail_offsets,
+)
 
 import skelagnostic as sa
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import fk_from_global
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import POINT_GROUPS
@@ -149,3 +155,38 @@ def test_training_windows_draw_mirrored_offsets_when_asked() -> None:
             assert torch.allclose(moved[right], moved[left] * flip, atol=1e-6)
     with pytest.raises(SkelagnosticError, match=r"data\.rpa_offsets"):
         PcmrlInterpDataModule(rpa_offsets="symmetric")
+
+
+def test_authors_rest_pose_rotations_equal_their_augmentation() -> None:
+    case = OUT["rpa"]
+    rot, heads = case["global"][0], case["heads"][0]
+    new = authors_rest_pose_rotations(
+        rot, heads[:, 0], case["offsets"], case["tails"], case["parents"], case["aug"]
+    )
+    ref = case["global_aug"][0]
+    # their IK returns the same rotations with the opposite quaternion sign (Algorithm 1)
+    assert torch.minimum((new - ref).abs().amax(-1), (new + ref).abs().amax(-1)).max() < 1e-5
+    pos = fk_from_global(new, heads[:, 0], case["offsets"], case["parents"])
+    assert (pos - case["heads_aug"][0]).abs().max() < 1e-5
+    moved = (Q.mul(new, Q.inv(rot))[..., 0].abs() < 1 - 1e-4).any(dim=0)
+    assert moved[[1, 2, 3, 4, 6, 7, 8, 9]].any()  # the augmentation turned some bones
+
+
+def test_training_windows_solve_rotations_as_the_authors_when_asked() -> None:
+    motion = sa.procedural.generate("biped31", "walk", seconds=2.0)[0]
+    clip = Clip.from_motion(motion, "walk")
+    common = {"rpa_range": 0.05, "samples": 2, "seed": 4, "rpa_offsets": "mirrored"}
+    plain = TrainWindows([clip], 16, 2, 4, rpa_prob=0.0, **common)
+    augmented = TrainWindows([clip], 16, 2, 4, rpa_prob=1.0, rpa_solve="authors", **common)
+    parents = clip.skeleton.parents
+    for i in range(len(plain)):
+        a, b = plain[i], augmented[i]
+        assert torch.equal(b["offsets"], clip.offsets) and torch.equal(b["tails"], clip.tails)
+        assert not torch.allclose(a["global_rotations"], b["global_rotations"], atol=1e-4)
+        lengths = [
+            fk_from_global(w["global_rotations"], w["root"], clip.offsets, parents) for w in (a, b)
+        ]
+        bones = [(p[:, 1:] - p[:, parents[1:]]).norm(dim=-1) for p in lengths]
+        assert torch.allclose(bones[0], bones[1], atol=1e-5)
+    with pytest.raises(SkelagnosticError, match=r"data\.rpa_solve"):
+        PcmrlInterpDataModule(rpa_solve="lengths")

@@ -21,22 +21,33 @@ How the tail offsets are drawn (:data:`RPA_OFFSETS`): ``"independent"``
 (:func:`mirrored_tail_offsets`, the draw of the authors' ``train_inpainter.py``:
 only the arm and leg bones move, each left bone and its right counterpart by the
 same offset mirrored across the body's sagittal plane).
+
+How the motion follows the moved tails (:data:`RPA_SOLVES`): ``"directions"``
+(:func:`augment_rest_pose`: the offsets of the children take the new tails, so
+the bone lengths change and every bone keeps its direction) or ``"authors"``
+(:func:`authors_rest_pose_rotations`, what the authors' ``train_inpainter.py``
+does: the offsets stay, so the bone lengths stay, and the rotations are solved
+again, which turns the bones).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
 
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import fk_from_global
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError, SkeletonError
 
 __all__ = [
     "RPA_OFFSETS",
+    "RPA_SOLVES",
     "BoneTails",
     "augment_rest_pose",
+    "authors_rest_pose_rotations",
     "bone_tails",
     "lateral_axis",
     "left_right_pairs",
@@ -47,6 +58,8 @@ __all__ = [
 
 #: Ways of drawing the RPA tail offsets (see the module docstring).
 RPA_OFFSETS = ("independent", "mirrored")
+#: Ways of re-solving the motion for the moved tails (see the module docstring).
+RPA_SOLVES = ("directions", "authors")
 #: (left, right) body groups whose joints are paired, in the authors' order (arms, then legs).
 _PAIRED_GROUPS = (("left_arm", "right_arm"), ("left_leg", "right_leg"))
 
@@ -292,3 +305,67 @@ def augment_rest_pose(
     new_tails[site] = old_tails[site] + delta[site]
     q_fix = max_real_quaternion(new_tails, old_tails)
     return new_offsets, Q.mul(global_rotations, q_fix.to(global_rotations.device)), new_tails
+
+
+def authors_rest_pose_rotations(
+    global_rotations: torch.Tensor,
+    root: torch.Tensor,
+    offsets: torch.Tensor,
+    tails: torch.Tensor,
+    parents: Sequence[int],
+    delta: torch.Tensor,
+) -> torch.Tensor:
+    """RPA as the authors' ``train_inpainter.py`` applies it: new global rotations, same bones.
+
+    Joint by joint from the root, with ``h`` the original and ``h'`` the new
+    position of the joint's head (``h'`` from the parent's new rotation and the
+    unchanged offset) and ``t`` the original world position of its tail:
+
+    1. ``q_b = arc(t - h, t - h') * q``: the bone turned to reach its old tail
+       from its new head;
+    2. ``a = q_b * (T + delta) / |T + delta|``, the moved rest tail in that pose;
+    3. ``q' = arc(t - h', a) * q_b``, in the order of their code (from the bone to
+       ``a``).
+
+    ``arc(u, v)`` is :func:`max_real_quaternion` (Algorithm 1, normalised; their
+    code's result differs only by the sign of the quaternion). The root position,
+    the offsets and the tails stay as they are; the bone lengths are kept.
+
+    Args:
+        global_rotations: ``[..., J, 4]`` global rotations.
+        root: ``[..., 3]`` root positions.
+        offsets: ``[J, 3]`` rest offsets.
+        tails: ``[J, 3]`` rest tails (zeros: no tail, the rotation is kept).
+        parents: Parent index per joint (parents first).
+        delta: ``[J, 3]`` tail offsets (:func:`mirrored_tail_offsets`).
+
+    Returns:
+        ``[..., J, 4]`` new global rotations.
+
+    Raises:
+        SkeletonError: A shape does not match the number of joints.
+    """
+    num_j = global_rotations.shape[-2]
+    for name, t in (("offsets", offsets), ("tails", tails), ("delta", delta)):
+        if t.shape != (num_j, 3):
+            raise SkeletonError(f"RPA: {name} must have shape [{num_j}, 3], got {list(t.shape)}")
+    if len(parents) != num_j:
+        raise SkeletonError(f"RPA: {len(parents)} parents for {num_j} joints")
+    dtype = global_rotations.dtype
+    offsets, tails, delta = offsets.to(dtype), tails.to(dtype), delta.to(dtype)
+    heads = fk_from_global(global_rotations, root, offsets, parents)
+    new_heads: list[torch.Tensor] = []
+    new_rots: list[torch.Tensor] = []
+    for j, p in enumerate(parents):
+        q = global_rotations[..., j, :]
+        head = root if p < 0 else new_heads[p] + Q.rotate(new_rots[p], offsets[j])
+        new_heads.append(head)
+        if float(tails[j].norm()) <= EPS:
+            new_rots.append(q)
+            continue
+        tail = heads[..., j, :] + Q.rotate(q, tails[j])
+        reach = tail - head
+        q_base = Q.mul(max_real_quaternion(tail - heads[..., j, :], reach), q)
+        moved = Q.rotate(q_base, (tails[j] + delta[j]).expand_as(reach))
+        new_rots.append(Q.mul(max_real_quaternion(reach, moved), q_base))
+    return torch.stack(new_rots, dim=-2)
