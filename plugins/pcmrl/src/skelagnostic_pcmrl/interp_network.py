@@ -20,11 +20,7 @@ import torch
 from torch import Tensor, nn
 
 from skelagnostic.errors import SkelagnosticError
-
-#: Values of the ``layout`` option.
-INTERP_LAYOUTS = ("skelagnostic", "authors")
-#: RMSNorm epsilon inside the square root equivalent to the authors' 1e-8 added to the RMS.
-AUTHORS_RMS_EPS = 1e-16
+from skelagnostic_pcmrl.point_transformer import AUTHORS_RMS_EPS, LAYOUTS
 
 
 class RelativeAttention(nn.Module):
@@ -154,9 +150,9 @@ class CITLInterpolator(nn.Module):
         layout: str = "skelagnostic",
     ) -> None:
         super().__init__()
-        if layout not in INTERP_LAYOUTS:
+        if layout not in LAYOUTS:
             raise SkelagnosticError(
-                f"CITLInterpolator: layout={layout!r} is not one of {', '.join(INTERP_LAYOUTS)}"
+                f"CITLInterpolator: layout={layout!r} is not one of {', '.join(LAYOUTS)}"
             )
         self.layout = layout
         post = layout == "authors"

@@ -50,7 +50,7 @@ __all__ = [
 
 #: Values of the encoder's ``attention`` option.
 ATTENTIONS = ("full", "vector", "none")
-#: Values of the encoder's ``layout`` option.
+#: Values of the ``layout`` option of the PC-MRL networks (encoder, temporal, CITL).
 LAYOUTS = ("skelagnostic", "authors")
 #: RMSNorm epsilon inside the square root equivalent to the authors' 1e-8 added to the RMS.
 AUTHORS_RMS_EPS = 1e-16

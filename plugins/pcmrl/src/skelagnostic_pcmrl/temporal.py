@@ -21,15 +21,12 @@ import torch
 from torch import nn
 
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic_pcmrl.point_transformer import AUTHORS_RMS_EPS, LAYOUTS
 
-__all__ = ["TEMPORAL_LAYOUTS", "TemporalTransformer", "sinusoidal_positions"]
+__all__ = ["TemporalTransformer", "sinusoidal_positions"]
 
-#: Values of the ``layout`` option.
-TEMPORAL_LAYOUTS = ("skelagnostic", "authors")
 #: Sinusoidal channels concatenated to the frame features by ``layout="authors"``.
 AUTHORS_POSITION_DIM = 16
-#: RMSNorm epsilon inside the square root equivalent to the authors' 1e-8 added to the RMS.
-AUTHORS_RMS_EPS = 1e-16
 
 
 def sinusoidal_positions(frames: int, dim: int, device: torch.device | None = None) -> torch.Tensor:
@@ -96,10 +93,9 @@ class TemporalTransformer(nn.Module):
         layout: str = "skelagnostic",
     ) -> None:
         super().__init__()
-        if layout not in TEMPORAL_LAYOUTS:
+        if layout not in LAYOUTS:
             raise SkelagnosticError(
-                f"temporal transformer: layout={layout!r} is not one of "
-                f"{', '.join(TEMPORAL_LAYOUTS)}"
+                f"temporal transformer: layout={layout!r} is not one of {', '.join(LAYOUTS)}"
             )
         if dim % heads or dim % 2:
             raise SkelagnosticError(
