@@ -1,7 +1,7 @@
 """PC-MRL parity with the authors' code (issue #26 items 4-5), from committed fixtures.
 
 The fixtures under ``tests/fixtures/pcmrl`` were written by
-``scripts/pcmrl_authors_fixtures.py``, which runs the authors' ``KNNLoss`` and
+``scripts/fixtures/pcmrl_authors_fixtures.py``, which runs the authors' ``KNNLoss`` and
 ``eval_inpainter.py`` (github.com/MiniEval/PC-MRL); the tests need neither.
 """
 

@@ -264,14 +264,17 @@ def _local(clip) -> torch.Tensor:  # type: ignore[no-untyped-def]
     return global_to_local(clip.global_rotations, clip.skeleton.parents)
 
 
-def test_training_reduces_the_loss() -> None:
+@pytest.mark.parametrize("layout", ["skelagnostic", "authors"])
+def test_training_reduces_the_loss(layout: str) -> None:
     """A few dozen steps on one batch must fit it better than the start (not a no-op)."""
     torch.manual_seed(0)
     dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=8, samples_per_epoch=8,
                                  rpa_prob=0.0)
     dm.setup("fit")
     batch = next(iter(dm.train_dataloader()))
-    model = PcmrlInterpAligner(**TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32)
+    model = PcmrlInterpAligner(**TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32,
+                               layout=layout)
+    assert model.net is not None and model.net.layout == layout
     opt = torch.optim.AdamW(model.parameters(), lr=3e-3)
     first = model._losses(batch)[0].item()
     for _ in range(40):

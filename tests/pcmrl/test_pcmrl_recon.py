@@ -265,10 +265,17 @@ def test_wrong_target_and_stage_are_clear_errors(model, pcmrl_tiny) -> None:
         PcmrlReconAligner(**pcmrl_tiny).heads(torch.zeros(1, 2, 32))
 
 
-def test_a_few_steps_reduce_the_knn_loss(model) -> None:
+@pytest.mark.parametrize("layout", ["skelagnostic", "authors"])
+def test_a_few_steps_reduce_the_knn_loss(pcmrl_tiny, layout) -> None:
     """Unsupervised learning signal: the KNN loss of one batch drops when optimised."""
     from skelagnostic_pcmrl.losses import temporal_knn_loss
 
+    torch.manual_seed(0)
+    if layout == "authors":  # its temporal width is the frame feature's + 16
+        pcmrl_tiny["temporal_dim"] = None
+    with pytest.warns(ZeroLengthBoneWarning):
+        model = PcmrlReconAligner(target="biped31", chunk=16, layout=layout, **pcmrl_tiny)
+    assert model.encoder.layout == model.temporal.layout == layout
     torch.manual_seed(1)
     motion = procedural.generate("biped22", "walk", seconds=0.4)[0].convert_units("m")
     src = sample_layout(motion.skeleton, 64, 0.05, batch=(2,))

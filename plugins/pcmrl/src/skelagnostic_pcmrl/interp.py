@@ -116,6 +116,8 @@ INTERP_DATA_OPTIONS: dict[str, Any] = {
     "val_gap": 15,
     "rpa_range": 0.1,
     "rpa_prob": 0.5,
+    "rpa_offsets": "independent",
+    "rpa_solve": "directions",
     "mirror": False,
     "procedural_kind": None,
     "procedural_clips": 0,

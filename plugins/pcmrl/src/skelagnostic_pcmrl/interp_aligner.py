@@ -26,6 +26,7 @@ from skelagnostic.export import ExportGraph, Method
 from skelagnostic.lazy import deprecated_aliases
 from skelagnostic_pcmrl.interp_keyframes import sign_invariant_l1, window_features, window_heading
 from skelagnostic_pcmrl.interp_network import CITLInterpolator
+from skelagnostic_pcmrl.point_transformer import LAYOUTS
 from skelagnostic_pcmrl.points import group_of_joints
 from skelagnostic_pcmrl.rpa import bone_tails
 
@@ -77,6 +78,9 @@ class PcmrlInterpAligner(Aligner):
         fps: Frame rate of the training data (set by :meth:`setup`).
         window: Training window length (set by :meth:`setup`; long clips are split
             into chunks of at most this many frames by :meth:`interpolate`).
+        layout: ``"skelagnostic"`` (pre-norm blocks) or ``"authors"`` (the blocks of the
+            authors' CITL: post-norm with masked norms, every frame attending to itself,
+            :class:`~skelagnostic_pcmrl.interp_network.CITLInterpolator`).
 
     Raises:
         SkelagnosticError: An option is out of range.
@@ -105,6 +109,7 @@ class PcmrlInterpAligner(Aligner):
         skeleton: Mapping[str, Any] | None = None,
         fps: float | None = None,
         window: int = 128,
+        layout: str = "skelagnostic",
     ) -> None:
         super().__init__()
         for arg, value in (
@@ -123,6 +128,10 @@ class PcmrlInterpAligner(Aligner):
         if residual_space not in ("foq", "local"):
             raise SkelagnosticError(
                 f"model.residual_space must be 'foq' or 'local', got {residual_space!r}"
+            )
+        if layout not in LAYOUTS:
+            raise SkelagnosticError(
+                f"model.layout must be one of {', '.join(LAYOUTS)}, got {layout!r}"
             )
         if interm_tokens not in ("zero", "lerp"):
             raise SkelagnosticError(
@@ -153,6 +162,7 @@ class PcmrlInterpAligner(Aligner):
             hp.max_relative,
             zero_output=hp.residual,
             interm_features=interm,
+            layout=hp.get("layout", "skelagnostic"),
         )
 
     def features(

@@ -41,7 +41,15 @@ from skelagnostic.data.cache import CacheEntry, cache_key, read_exactly, slot_ke
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.lazy import deprecated_aliases
-from skelagnostic_pcmrl.rpa import augment_rest_pose, bone_tails, random_tail_offsets
+from skelagnostic_pcmrl.rpa import (
+    RPA_OFFSETS,
+    RPA_SOLVES,
+    augment_rest_pose,
+    authors_rest_pose_rotations,
+    bone_tails,
+    mirrored_tail_offsets,
+    random_tail_offsets,
+)
 
 __all__ = ["CachedClip", "Clip", "PcmrlInterpDataModule", "gap_keys", "random_keys",
            "regular_keys"]
@@ -191,7 +199,8 @@ class TrainWindows(Dataset):
 
     def __init__(self, clips: Sequence[Clip], window: int, min_keys: int, max_keys: int,
                  rpa_range: float, rpa_prob: float, samples: int, seed: int,
-                 key_mode: str = "random", min_gap: int = 5, max_gap: int = 30) -> None:
+                 key_mode: str = "random", min_gap: int = 5, max_gap: int = 30,
+                 rpa_offsets: str = "independent", rpa_solve: str = "directions") -> None:
         self.clips = [c for c in clips if c.num_frames >= window]
         if not self.clips:
             raise SkelagnosticError(
@@ -200,7 +209,8 @@ class TrainWindows(Dataset):
             )
         self.weights = [c.num_frames - window + 1 for c in self.clips]
         self.window, self.min_keys, self.max_keys = window, min_keys, max_keys
-        self.rpa_range, self.rpa_prob = rpa_range, rpa_prob
+        self.rpa_range, self.rpa_prob, self.rpa_offsets = rpa_range, rpa_prob, rpa_offsets
+        self.rpa_solve = rpa_solve
         self.samples, self.seed = samples, seed
         self.key_mode, self.min_gap, self.max_gap = key_mode, min_gap, max_gap
         self.epoch = 0
@@ -219,7 +229,16 @@ class TrainWindows(Dataset):
         item = _window(clip, start, self.window, keys)
         if self.rpa_range > 0 and rng.random() < self.rpa_prob:
             gen = torch.Generator().manual_seed(rng.getrandbits(62))
-            delta = random_tail_offsets(clip.skeleton.num_joints, self.rpa_range, gen)
+            if self.rpa_offsets == "mirrored":
+                delta = mirrored_tail_offsets(clip.skeleton, self.rpa_range, gen)
+            else:
+                delta = random_tail_offsets(clip.skeleton.num_joints, self.rpa_range, gen)
+            if self.rpa_solve == "authors":
+                grot = authors_rest_pose_rotations(item["global_rotations"], item["root"],
+                                                   clip.offsets, clip.tails,
+                                                   clip.skeleton.parents, delta)
+                item.update(global_rotations=grot)
+                return item
             offsets, grot, tails = augment_rest_pose(clip.skeleton, item["global_rotations"],
                                                      delta, offsets=clip.offsets)
             item.update(offsets=offsets, global_rotations=grot, tails=tails)
@@ -264,6 +283,19 @@ class PcmrlInterpDataModule(MotionDataModule):
         val_gap: Keyframe gap of the validation/test windows.
         rpa_range: RPA tail offset range in metres (paper 0.1; 0 disables RPA).
         rpa_prob: Share of training windows that get RPA (not given by the paper).
+        rpa_offsets: How the RPA tail offsets are drawn
+            (:data:`~skelagnostic_pcmrl.rpa.RPA_OFFSETS`): ``"independent"`` (every bone
+            its own offset in ``[-rpa_range, rpa_range]^3``) or ``"mirrored"`` (the
+            authors' draw: arm and leg bones only, each left/right pair one offset
+            mirrored across the sagittal plane,
+            :func:`~skelagnostic_pcmrl.rpa.mirrored_tail_offsets`; their ``aug_range``
+            of 0.1 is ``rpa_range=0.05``).
+        rpa_solve: How the motion follows the moved tails
+            (:data:`~skelagnostic_pcmrl.rpa.RPA_SOLVES`): ``"directions"`` (the bones
+            take the new lengths and keep their directions,
+            :func:`~skelagnostic_pcmrl.rpa.augment_rest_pose`) or ``"authors"`` (the
+            authors' code: the bone lengths stay and the rotations are solved again,
+            :func:`~skelagnostic_pcmrl.rpa.authors_rest_pose_rotations`).
         mirror: Also train on the left/right mirror of every training clip (not in the paper).
         procedural_kind: Add procedural clips of this kind (same hierarchy) to training.
         procedural_clips: How many per gait (walk, run).
@@ -299,6 +331,8 @@ class PcmrlInterpDataModule(MotionDataModule):
         val_gap: int = 15,
         rpa_range: float = 0.1,
         rpa_prob: float = 0.5,
+        rpa_offsets: str = "independent",
+        rpa_solve: str = "directions",
         mirror: bool = False,
         procedural_kind: str | None = None,
         procedural_clips: int = 0,
@@ -328,6 +362,14 @@ class PcmrlInterpDataModule(MotionDataModule):
             )
         if rpa_range < 0 or not 0 <= rpa_prob <= 1:
             raise SkelagnosticError("data.rpa_range must be >= 0 and data.rpa_prob in [0, 1]")
+        if rpa_offsets not in RPA_OFFSETS:
+            raise SkelagnosticError(
+                f"data.rpa_offsets must be one of {', '.join(RPA_OFFSETS)}, got {rpa_offsets!r}"
+            )
+        if rpa_solve not in RPA_SOLVES:
+            raise SkelagnosticError(
+                f"data.rpa_solve must be one of {', '.join(RPA_SOLVES)}, got {rpa_solve!r}"
+            )
         if sources is None:
             sources = [ProceduralSource(kinds=("biped31",), gaits=("walk", "run"))]
         super().__init__(sources=sources, representation=None, window=window, stride=stride,
@@ -336,6 +378,7 @@ class PcmrlInterpDataModule(MotionDataModule):
         self.key_mode, self.min_gap, self.max_gap = key_mode, int(min_gap), int(max_gap)
         self.samples_per_epoch, self.val_gap = int(samples_per_epoch), int(val_gap)
         self.rpa_range, self.rpa_prob, self.mirror = float(rpa_range), float(rpa_prob), mirror
+        self.rpa_offsets, self.rpa_solve = rpa_offsets, rpa_solve
         self.procedural_kind, self.procedural_clips = procedural_kind, int(procedural_clips)
         self.seed = int(seed)
         self.skeleton: Skeleton | None = None
@@ -469,7 +512,8 @@ class PcmrlInterpDataModule(MotionDataModule):
         self.train_set = TrainWindows(self.clips["train"], self.window, self.min_keys,
                                       self.max_keys, self.rpa_range, self.rpa_prob,
                                       self.samples_per_epoch, self.seed, self.key_mode,
-                                      self.min_gap, self.max_gap)
+                                      self.min_gap, self.max_gap, self.rpa_offsets,
+                                      self.rpa_solve)
         for split in ("val", "test"):
             short = [c.name for c in self.clips[split] if c.num_frames < self.window]
             if short:

@@ -19,6 +19,15 @@ Layout, following the paper and the authors' encoder (METHODS.md "PC-MRL"):
    the new width; 256 points end as one point of ``dim * 2**stages``
    channels (64 -> 1024);
 4. a residual MLP gives the frame feature.
+
+``layout="authors"`` builds the encoder of the authors' code instead (the layout
+their checkpoints hold, :mod:`skelagnostic_pcmrl.authors`): a single linear
+input layer; per stage, RMSNorm, single-head dot-product attention over all the
+points (no residual), RMSNorm and a LeakyReLU feed-forward block added to the
+normalised input, then the pooling (FPS to ``N // 4`` points from point 0, the
+``k`` nearest points' features next to the kept point's absolute position,
+bias-free linear layers with a LeakyReLU, max-pool); the first remaining point
+through a residual LeakyReLU MLP.
 """
 
 from __future__ import annotations
@@ -29,11 +38,22 @@ from torch import nn
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic_pcmrl.fps import farthest_point_sampling, gather_points, knn_indices
 
-__all__ = ["ATTENTIONS", "PointAttention", "PointTransformerEncoder", "TransitionDown",
-           "VectorAttention"]
+__all__ = [
+    "ATTENTIONS",
+    "LAYOUTS",
+    "AuthorsPointStage",
+    "PointAttention",
+    "PointTransformerEncoder",
+    "TransitionDown",
+    "VectorAttention",
+]
 
 #: Values of the encoder's ``attention`` option.
 ATTENTIONS = ("full", "vector", "none")
+#: Values of the ``layout`` option of the PC-MRL networks (encoder, temporal, CITL).
+LAYOUTS = ("skelagnostic", "authors")
+#: RMSNorm epsilon inside the square root equivalent to the authors' 1e-8 added to the RMS.
+AUTHORS_RMS_EPS = 1e-16
 
 
 class _Scale(nn.Module):
@@ -60,8 +80,9 @@ class _AttentionBlock(nn.Module):
     def __init__(self, channels: int, layer_scale: float | None) -> None:
         super().__init__()
         self.norm2 = nn.LayerNorm(channels)
-        self.ff = nn.Sequential(nn.Linear(channels, 2 * channels), nn.ReLU(),
-                                nn.Linear(2 * channels, channels))
+        self.ff = nn.Sequential(
+            nn.Linear(channels, 2 * channels), nn.ReLU(), nn.Linear(2 * channels, channels)
+        )
         self.scale1 = _Scale(channels, layer_scale)
         self.scale2 = _Scale(channels, layer_scale)
 
@@ -82,10 +103,12 @@ class PointAttention(_AttentionBlock):
     def __init__(self, channels: int, heads: int, layer_scale: float | None = None) -> None:
         super().__init__(channels, layer_scale)
         if channels % heads:
-            raise SkelagnosticError(f"point attention: {channels} channels are not divisible "
-                                    f"by {heads} heads")
-        self.position = nn.Sequential(nn.Linear(3, channels), nn.ReLU(), nn.Linear(channels,
-                                                                                  channels))
+            raise SkelagnosticError(
+                f"point attention: {channels} channels are not divisible by {heads} heads"
+            )
+        self.position = nn.Sequential(
+            nn.Linear(3, channels), nn.ReLU(), nn.Linear(channels, channels)
+        )
         self.norm1 = nn.LayerNorm(channels)
         self.attn = nn.MultiheadAttention(channels, heads, batch_first=True)
 
@@ -120,10 +143,10 @@ class VectorAttention(_AttentionBlock):
         self.k = int(k)
         self.norm1 = nn.LayerNorm(channels)
         self.qkv = nn.Linear(channels, 3 * channels)
-        self.theta = nn.Sequential(nn.Linear(3, channels), nn.ReLU(), nn.Linear(channels,
-                                                                               channels))
-        self.gamma = nn.Sequential(nn.Linear(channels, channels), nn.ReLU(),
-                                   nn.Linear(channels, channels))
+        self.theta = nn.Sequential(nn.Linear(3, channels), nn.ReLU(), nn.Linear(channels, channels))
+        self.gamma = nn.Sequential(
+            nn.Linear(channels, channels), nn.ReLU(), nn.Linear(channels, channels)
+        )
         self.proj = nn.Linear(channels, channels)
 
     def forward(self, features: torch.Tensor, xyz: torch.Tensor) -> torch.Tensor:
@@ -152,12 +175,16 @@ class TransitionDown(nn.Module):
         self.ratio = int(ratio)
         self.k = int(k)
         self.mlp = nn.Sequential(
-            nn.Linear(in_channels + 3, out_channels), nn.LayerNorm(out_channels), nn.ReLU(),
-            nn.Linear(out_channels, out_channels), nn.ReLU(),
+            nn.Linear(in_channels + 3, out_channels),
+            nn.LayerNorm(out_channels),
+            nn.ReLU(),
+            nn.Linear(out_channels, out_channels),
+            nn.ReLU(),
         )
 
-    def forward(self, features: torch.Tensor, xyz: torch.Tensor
-                ) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, features: torch.Tensor, xyz: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """``([B, M, C_out], [B, M, 3])`` with ``M = ceil(N / ratio)``."""
         num = xyz.shape[-2]
         keep = max(1, -(-num // self.ratio))
@@ -166,6 +193,58 @@ class TransitionDown(nn.Module):
         rel = gather_points(xyz, groups) - centres.unsqueeze(-2)
         grouped = torch.cat([gather_points(features, groups), rel], dim=-1)
         return self.mlp(grouped).amax(dim=-2), centres
+
+
+class AuthorsPointStage(nn.Module):
+    """One stage of the authors' encoder: point attention, feed-forward block, pooling.
+
+    ``h = n1(x)``, ``a = o(softmax(q(h) k(h)^T / sqrt(C)) v(h))``,
+    ``h = h + ff(n2(a))``; then FPS keeps ``N // ratio`` points (the first is
+    point 0), each is grouped with its ``min(k, N)`` nearest points, and
+    ``pool_out(max_k LeakyReLU(pool_in([p_centre, h_neighbour])))`` gives
+    ``2 C`` channels.
+
+    Args:
+        channels: Input width ``C``.
+        ratio: Down-sampling factor (4).
+        k: Neighbours per group (8).
+    """
+
+    def __init__(self, channels: int, ratio: int = 4, k: int = 8) -> None:
+        super().__init__()
+        self.ratio, self.k = int(ratio), int(k)
+        self.norm1 = nn.RMSNorm(channels, eps=AUTHORS_RMS_EPS)
+        self.q = nn.Linear(channels, channels)
+        self.k_proj = nn.Linear(channels, channels)
+        self.v = nn.Linear(channels, channels)
+        self.o = nn.Linear(channels, channels)
+        self.norm2 = nn.RMSNorm(channels, eps=AUTHORS_RMS_EPS)
+        self.ff = nn.Sequential(
+            nn.Linear(channels, 4 * channels), nn.LeakyReLU(), nn.Linear(4 * channels, channels)
+        )
+        self.pool_in = nn.Linear(3 + channels, 2 * channels, bias=False)
+        self.pool_out = nn.Linear(2 * channels, 2 * channels, bias=False)
+
+    def forward(
+        self, features: torch.Tensor, xyz: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``([B, N // ratio, 2 C], [B, N // ratio, 3])`` from ``[B, N, C]``, ``[B, N, 3]``."""
+        num, channels = xyz.shape[-2], features.shape[-1]
+        keep = num // self.ratio
+        if keep < 1:
+            raise SkelagnosticError(
+                f"authors' point encoder: {num} points cannot be pooled by {self.ratio}"
+            )
+        h = self.norm1(features)
+        weights = (self.q(h) @ self.k_proj(h).transpose(-1, -2) / channels**0.5).softmax(-1)
+        h = h + self.ff(self.norm2(self.o(weights @ self.v(h))))
+        centres = gather_points(xyz, farthest_point_sampling(xyz, keep))
+        groups = knn_indices(centres, xyz, min(self.k, num))  # [B, M, k]
+        grouped = torch.cat(
+            [centres.unsqueeze(-2).expand(*groups.shape, 3), gather_points(h, groups)], dim=-1
+        )
+        pooled = nn.functional.leaky_relu(self.pool_in(grouped)).amax(dim=-2)
+        return self.pool_out(pooled), centres
 
 
 class PointTransformerEncoder(nn.Module):
@@ -182,23 +261,53 @@ class PointTransformerEncoder(nn.Module):
             (:data:`ATTENTIONS`).
         attention_k: Neighbours of the ``"vector"`` attention (16, as in [52]).
         layer_scale: Initial residual scale of the attention blocks (``None``: no scale).
+        layout: ``"skelagnostic"`` (the blocks above) or ``"authors"`` (the authors'
+            encoder, see the module docstring; ``heads``, ``attention``,
+            ``attention_k`` and ``layer_scale`` do not apply to it).
 
     Raises:
-        SkelagnosticError: A size is not positive or ``attention`` is unknown.
+        SkelagnosticError: A size is not positive, or ``attention`` or ``layout``
+            is unknown.
     """
 
-    def __init__(self, in_channels: int = 5, dim: int = 64, stages: int = 4, heads: int = 4,
-                 k: int = 8, ratio: int = 4, attention: str = "full", attention_k: int = 16,
-                 layer_scale: float | None = None) -> None:
+    def __init__(
+        self,
+        in_channels: int = 5,
+        dim: int = 64,
+        stages: int = 4,
+        heads: int = 4,
+        k: int = 8,
+        ratio: int = 4,
+        attention: str = "full",
+        attention_k: int = 16,
+        layer_scale: float | None = None,
+        layout: str = "skelagnostic",
+    ) -> None:
         super().__init__()
+        if layout not in LAYOUTS:
+            raise SkelagnosticError(
+                f"point encoder: layout={layout!r} is not one of {', '.join(LAYOUTS)}"
+            )
+        self.layout = layout
         if dim < 1 or stages < 0:
-            raise SkelagnosticError(f"point encoder: dim={dim} and stages={stages} must be "
-                                    "positive / non-negative")
+            raise SkelagnosticError(
+                f"point encoder: dim={dim} and stages={stages} must be positive / non-negative"
+            )
         if attention not in ATTENTIONS:
-            raise SkelagnosticError(f"point encoder: attention={attention!r} is not one of "
-                                    f"{', '.join(ATTENTIONS)}")
-        self.embed = nn.Sequential(nn.Linear(3 + in_channels, dim), nn.ReLU(), nn.Linear(dim, dim))
+            raise SkelagnosticError(
+                f"point encoder: attention={attention!r} is not one of {', '.join(ATTENTIONS)}"
+            )
         widths = [dim * 2**i for i in range(stages + 1)]
+        self.out_channels = widths[-1]
+        if layout == "authors":
+            self.embed = nn.Linear(3 + in_channels, dim)
+            self.stages = nn.ModuleList(
+                AuthorsPointStage(widths[i], ratio, k) for i in range(stages)
+            )
+            self.head_in = nn.Linear(widths[-1], widths[-1])
+            self.head_out = nn.Linear(widths[-1], widths[-1])
+            return
+        self.embed = nn.Sequential(nn.Linear(3 + in_channels, dim), nn.ReLU(), nn.Linear(dim, dim))
 
         def block(channels: int) -> nn.Module:
             if attention == "full":
@@ -208,18 +317,29 @@ class PointTransformerEncoder(nn.Module):
             return _NoAttention()
 
         self.attn0 = block(dim)
-        self.down = nn.ModuleList(TransitionDown(widths[i], widths[i + 1], ratio, k)
-                                  for i in range(stages))
+        self.down = nn.ModuleList(
+            TransitionDown(widths[i], widths[i + 1], ratio, k) for i in range(stages)
+        )
         self.attn = nn.ModuleList(block(widths[i + 1]) for i in range(stages))
-        self.out_channels = widths[-1]
-        self.head = nn.Sequential(nn.LayerNorm(widths[-1]), nn.Linear(widths[-1], widths[-1]),
-                                  nn.ReLU(), nn.Linear(widths[-1], widths[-1]))
+        self.head = nn.Sequential(
+            nn.LayerNorm(widths[-1]),
+            nn.Linear(widths[-1], widths[-1]),
+            nn.ReLU(),
+            nn.Linear(widths[-1], widths[-1]),
+        )
 
     def forward(self, points: torch.Tensor) -> torch.Tensor:
         """Encode ``[..., N, 3 + in_channels]`` clouds into ``[..., out_channels]``."""
         lead = points.shape[:-2]
         x = points.reshape(-1, *points.shape[-2:])
         xyz = x[..., :3].contiguous()
+        if self.layout == "authors":
+            h = self.embed(x)
+            for stage in self.stages:
+                h, xyz = stage(h, xyz)
+            h = self.head_in(h[:, 0])  # the first remaining point, as the authors take it
+            h = h + self.head_out(nn.functional.leaky_relu(h))
+            return h.reshape(*lead, -1)
         h = self.attn0(self.embed(x), xyz)
         for down, attn in zip(self.down, self.attn, strict=True):
             h, xyz = down(h, xyz)

@@ -49,7 +49,7 @@ from skelagnostic_pcmrl.points import (
     sample_layout,
     warn_zero_length_bones,
 )
-from skelagnostic_pcmrl.temporal import TemporalTransformer
+from skelagnostic_pcmrl.temporal import AUTHORS_POSITION_DIM, TemporalTransformer
 
 __all__ = ["PcmrlReconAligner", "end_effector_pairs"]
 
@@ -83,7 +83,9 @@ class PcmrlReconAligner(Aligner):
         attention_k: Neighbours of ``point_attention="vector"`` (16, as in [52]).
         layer_scale: Initial residual scale of the point attention blocks
             (LayerScale; ``None``: none).
-        temporal_dim: Width of the temporal transformer (``None``: the frame feature width).
+        temporal_dim: Width of the temporal transformer (``None``: the frame feature width;
+            with ``layout="authors"`` it must be ``None``: the width is the frame feature
+            width + 16).
         temporal_layers: Temporal transformer blocks (6).
         temporal_heads: Temporal attention heads (4).
         dropout: Dropout of the temporal transformer.
@@ -120,6 +122,13 @@ class PcmrlReconAligner(Aligner):
             a data module; ``None``: from the data module or the checkpoint.
         target_units: Units of ``target`` (``None``: guessed).
         sample_seed: Seed of the point clouds drawn at inference and validation.
+        layout: ``"skelagnostic"`` or ``"authors"``: the point encoder and temporal
+            transformer of the authors' code
+            (:class:`~skelagnostic_pcmrl.point_transformer.PointTransformerEncoder`,
+            :class:`~skelagnostic_pcmrl.temporal.TemporalTransformer`;
+            ``point_heads``, ``point_attention``, ``attention_k``, ``layer_scale``
+            and ``dropout`` do not apply to it). The output layer starts from the
+            target's rest pose in both.
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset({"encode", "decode", "retarget"})
@@ -157,6 +166,7 @@ class PcmrlReconAligner(Aligner):
         target: str | None = None,
         target_units: str | None = None,
         sample_seed: int = 0,
+        layout: str = "skelagnostic",
     ) -> None:
         super().__init__()
         if stage != "reconstruction":
@@ -178,7 +188,11 @@ class PcmrlReconAligner(Aligner):
         self.save_hyperparameters()
         self.encoder = PointTransformerEncoder(len(POINT_GROUPS), dim, stages, point_heads,
                                                group_k, attention=point_attention,
-                                               attention_k=attention_k, layer_scale=layer_scale)
+                                               attention_k=attention_k, layer_scale=layer_scale,
+                                               layout=layout)
+        if layout == "authors" and temporal_dim is not None:
+            raise SkelagnosticError("model.temporal_dim must be null with model.layout=authors "
+                                    "(the width is the frame feature width + 16)")
         self.temporal: TemporalTransformer | None = None
         self.target_skeleton: Skeleton | None = None
         self.target_units: str | None = None
@@ -214,10 +228,15 @@ class PcmrlReconAligner(Aligner):
                                       _AXES[skeleton.up_axis], 1)[0, 0]
         self.register_buffer("_rest_heading_inv", Q.inv(rest_heading), persistent=False)
         hp = self.hparams
+        layout = hp.get("layout", "skelagnostic")
         width = hp.temporal_dim or self.encoder.out_channels
+        if layout == "authors":
+            width = self.encoder.out_channels + AUTHORS_POSITION_DIM
         self.temporal = TemporalTransformer(self.encoder.out_channels, width, hp.temporal_layers,
-                                            hp.temporal_heads, 3 + 4 * len(joints), hp.dropout)
-        last = self.temporal.out[-1]
+                                            hp.temporal_heads, 3 + 4 * len(joints), hp.dropout,
+                                            layout=layout)
+        out = self.temporal.out
+        last = out if isinstance(out, torch.nn.Linear) else out[-1]
         with torch.no_grad():  # start from the target's rest pose at the cloud centre
             last.weight.mul_(0.01)
             last.bias.zero_()

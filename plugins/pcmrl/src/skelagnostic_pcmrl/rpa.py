@@ -15,25 +15,53 @@ right factor of every frame's global rotation, so first-frame offset quaternions
 (FOQ, Sec. 3.3) are unchanged by RPA: it alters the skeleton the model animates
 (bone lengths, hip/shoulder attachments), the first-frame global rotations and
 therefore the forward-kinematics targets.
+
+How the tail offsets are drawn (:data:`RPA_OFFSETS`): ``"independent"``
+(:func:`random_tail_offsets`, every bone its own draw) or ``"mirrored"``
+(:func:`mirrored_tail_offsets`, the draw of the authors' ``train_inpainter.py``:
+only the arm and leg bones move, each left bone and its right counterpart by the
+same offset mirrored across the body's sagittal plane).
+
+How the motion follows the moved tails (:data:`RPA_SOLVES`): ``"directions"``
+(:func:`augment_rest_pose`: the offsets of the children take the new tails, so
+the bone lengths change and every bone keeps its direction) or ``"authors"``
+(:func:`authors_rest_pose_rotations`, what the authors' ``train_inpainter.py``
+does: the offsets stay, so the bone lengths stay, and the rotations are solved
+again, which turns the bones).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
 
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import fk_from_global
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError, SkeletonError
 
 __all__ = [
+    "RPA_OFFSETS",
+    "RPA_SOLVES",
     "BoneTails",
     "augment_rest_pose",
+    "authors_rest_pose_rotations",
     "bone_tails",
+    "lateral_axis",
+    "left_right_pairs",
     "max_real_quaternion",
+    "mirrored_tail_offsets",
     "random_tail_offsets",
 ]
+
+#: Ways of drawing the RPA tail offsets (see the module docstring).
+RPA_OFFSETS = ("independent", "mirrored")
+#: Ways of re-solving the motion for the moved tails (see the module docstring).
+RPA_SOLVES = ("directions", "authors")
+#: (left, right) body groups whose joints are paired, in the authors' order (arms, then legs).
+_PAIRED_GROUPS = (("left_arm", "right_arm"), ("left_leg", "right_leg"))
 
 #: Offsets shorter than this (in the data's units) count as zero-length bones.
 EPS = 1e-6
@@ -139,6 +167,88 @@ def random_tail_offsets(
     return (2.0 * u - 1.0) * scale
 
 
+def left_right_pairs(skeleton: Skeleton) -> list[tuple[int, int]]:
+    """``(left, right)`` joint pairs of the arms, then of the legs (each in joint order).
+
+    A joint of a left arm or leg body group is paired with its counterpart of
+    :meth:`~skelagnostic.core.skeleton.Skeleton.mirror_map` when that counterpart is in
+    the matching right group (the authors' pairs: their arm and leg groups; spine
+    joints, such as CMU's ``LHipJoint``, stay unpaired).
+    """
+    groups, mirror = skeleton.body_groups, skeleton.mirror_map()
+    return [
+        (j, mirror[j])
+        for left, right in _PAIRED_GROUPS
+        for j in range(skeleton.num_joints)
+        if groups[j] == left and mirror[j] != j and groups[mirror[j]] == right
+    ]
+
+
+def lateral_axis(skeleton: Skeleton, pairs: list[tuple[int, int]] | None = None) -> int:
+    """The rest pose's left-right axis: the largest component of the mean left-minus-right.
+
+    Raises:
+        SkeletonError: The skeleton has no left/right pairs, or they coincide at rest.
+    """
+    pairs = left_right_pairs(skeleton) if pairs is None else pairs
+    if not pairs:
+        raise SkeletonError(f"{skeleton!r} has no left/right joint pairs (see mirror_map)")
+    rest = skeleton.rest_positions()
+    left, right = zip(*pairs, strict=True)
+    side = (rest[list(left)] - rest[list(right)]).abs().mean(dim=0)
+    if float(side.max()) <= EPS:
+        raise SkeletonError(f"{skeleton!r}: left and right joints coincide in the rest pose")
+    return int(side.argmax())
+
+
+def mirrored_tail_offsets(
+    skeleton: Skeleton,
+    scale: float,
+    generator: torch.Generator | None = None,
+    mirror_axis: int | None = None,
+    dtype: torch.dtype = torch.float32,
+) -> torch.Tensor:
+    """``[J, 3]`` RPA offsets drawn per left/right pair, as the authors draw them.
+
+    Every pair of :func:`left_right_pairs` gets one offset uniform in
+    ``[-scale, scale)`` per axis (one ``torch.rand(P, 3)`` draw, in pair order);
+    the left joint takes it and the right joint takes it with the ``mirror_axis``
+    component negated. Unpaired joints get zero.
+
+    Args:
+        skeleton: The skeleton whose bones are augmented.
+        scale: Half-width of the range (the authors' ``aug_range`` is the full width:
+            their 0.1 is ``scale=0.05``).
+        generator: Random generator.
+        mirror_axis: Component negated for the right joint; ``None``: the rest pose's
+            :func:`lateral_axis`, a mirror across the sagittal plane. The authors'
+            code negates component 1, the up axis of their Y-up CMU target.
+        dtype: Output dtype.
+
+    Raises:
+        SkelagnosticError: ``scale`` is negative or ``mirror_axis`` is not 0, 1 or 2.
+        SkeletonError: The skeleton has no left/right pairs.
+    """
+    if scale < 0:
+        raise SkelagnosticError(f"RPA range must be non-negative, got {scale}")
+    pairs = left_right_pairs(skeleton)
+    if not pairs:
+        raise SkeletonError(
+            f"{skeleton!r} has no left/right arm or leg joint pairs (see "
+            "mirror_map and body_groups): mirrored RPA offsets need them"
+        )
+    axis = lateral_axis(skeleton, pairs) if mirror_axis is None else int(mirror_axis)
+    if axis not in (0, 1, 2):
+        raise SkelagnosticError(f"RPA mirror axis must be 0, 1 or 2, got {mirror_axis}")
+    delta = torch.zeros(skeleton.num_joints, 3, dtype=dtype)
+    draw = (2.0 * torch.rand(len(pairs), 3, generator=generator, dtype=dtype) - 1.0) * scale
+    left, right = (list(side) for side in zip(*pairs, strict=True))
+    delta[left] = draw
+    delta[right] = draw
+    delta[right, axis] = -draw[:, axis]
+    return delta
+
+
 def augment_rest_pose(
     skeleton: Skeleton,
     global_rotations: torch.Tensor,
@@ -195,3 +305,67 @@ def augment_rest_pose(
     new_tails[site] = old_tails[site] + delta[site]
     q_fix = max_real_quaternion(new_tails, old_tails)
     return new_offsets, Q.mul(global_rotations, q_fix.to(global_rotations.device)), new_tails
+
+
+def authors_rest_pose_rotations(
+    global_rotations: torch.Tensor,
+    root: torch.Tensor,
+    offsets: torch.Tensor,
+    tails: torch.Tensor,
+    parents: Sequence[int],
+    delta: torch.Tensor,
+) -> torch.Tensor:
+    """RPA as the authors' ``train_inpainter.py`` applies it: new global rotations, same bones.
+
+    Joint by joint from the root, with ``h`` the original and ``h'`` the new
+    position of the joint's head (``h'`` from the parent's new rotation and the
+    unchanged offset) and ``t`` the original world position of its tail:
+
+    1. ``q_b = arc(t - h, t - h') * q``: the bone turned to reach its old tail
+       from its new head;
+    2. ``a = q_b * (T + delta) / |T + delta|``, the moved rest tail in that pose;
+    3. ``q' = arc(t - h', a) * q_b``, in the order of their code (from the bone to
+       ``a``).
+
+    ``arc(u, v)`` is :func:`max_real_quaternion` (Algorithm 1, normalised; their
+    code's result differs only by the sign of the quaternion). The root position,
+    the offsets and the tails stay as they are; the bone lengths are kept.
+
+    Args:
+        global_rotations: ``[..., J, 4]`` global rotations.
+        root: ``[..., 3]`` root positions.
+        offsets: ``[J, 3]`` rest offsets.
+        tails: ``[J, 3]`` rest tails (zeros: no tail, the rotation is kept).
+        parents: Parent index per joint (parents first).
+        delta: ``[J, 3]`` tail offsets (:func:`mirrored_tail_offsets`).
+
+    Returns:
+        ``[..., J, 4]`` new global rotations.
+
+    Raises:
+        SkeletonError: A shape does not match the number of joints.
+    """
+    num_j = global_rotations.shape[-2]
+    for name, t in (("offsets", offsets), ("tails", tails), ("delta", delta)):
+        if t.shape != (num_j, 3):
+            raise SkeletonError(f"RPA: {name} must have shape [{num_j}, 3], got {list(t.shape)}")
+    if len(parents) != num_j:
+        raise SkeletonError(f"RPA: {len(parents)} parents for {num_j} joints")
+    dtype = global_rotations.dtype
+    offsets, tails, delta = offsets.to(dtype), tails.to(dtype), delta.to(dtype)
+    heads = fk_from_global(global_rotations, root, offsets, parents)
+    new_heads: list[torch.Tensor] = []
+    new_rots: list[torch.Tensor] = []
+    for j, p in enumerate(parents):
+        q = global_rotations[..., j, :]
+        head = root if p < 0 else new_heads[p] + Q.rotate(new_rots[p], offsets[j])
+        new_heads.append(head)
+        if float(tails[j].norm()) <= EPS:
+            new_rots.append(q)
+            continue
+        tail = heads[..., j, :] + Q.rotate(q, tails[j])
+        reach = tail - head
+        q_base = Q.mul(max_real_quaternion(tail - heads[..., j, :], reach), q)
+        moved = Q.rotate(q_base, (tails[j] + delta[j]).expand_as(reach))
+        new_rots.append(Q.mul(max_real_quaternion(reach, moved), q_base))
+    return torch.stack(new_rots, dim=-2)
