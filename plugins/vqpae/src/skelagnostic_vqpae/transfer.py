@@ -54,9 +54,9 @@ __all__ = [
 ]
 
 #: Inertialization halflife of the transitions, seconds. The paper inertializes every
-#: transition without giving a value, the authors' code has no inertialization; 0.1 s
-#: is the default of Holden's motion-matching code (Bollo's spring) and of
-#: :func:`~skelagnostic.matching.frequency_scaled_motion_matching`.
+#: transition without giving a value and the authors' offline matching script has no
+#: blending; 0.1 s is the default of Holden's motion-matching code (Bollo's spring) and
+#: of :func:`~skelagnostic.matching.frequency_scaled_motion_matching`.
 HALFLIFE = 0.1
 
 #: Largest relative difference ``|f_head - f_phase| / f_phase`` between the frequency
