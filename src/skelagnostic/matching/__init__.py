@@ -16,7 +16,11 @@ This package depends on torch and numpy only (no lightning, hydra or pluggy).
 from skelagnostic.matching._errors import MatchingError
 from skelagnostic.matching.assemble import assemble_motion
 from skelagnostic.matching.database import MotionDatabase
-from skelagnostic.matching.inertialization import decay_offset, inertialize
+from skelagnostic.matching.inertialization import (
+    decay_offset,
+    inertialize,
+    inertialize_rotations,
+)
 from skelagnostic.matching.matching import (
     MatchResult,
     Segment,
@@ -36,6 +40,7 @@ __all__ = [
     "decay_offset",
     "frequency_scaled_motion_matching",
     "inertialize",
+    "inertialize_rotations",
     "motion_matching",
     "sample_frames",
 ]

@@ -20,60 +20,11 @@ import torch
 
 from skelagnostic.matching._errors import MatchingError
 from skelagnostic.matching.database import MotionDatabase
-from skelagnostic.matching.inertialization import decay_offset, inertialize
+from skelagnostic.matching.inertialization import inertialize, inertialize_rotations
 from skelagnostic.matching.matching import MatchResult
 
 if TYPE_CHECKING:
     from skelagnostic.core.motion import Motion
-
-
-def _to_rotvec(q: torch.Tensor) -> torch.Tensor:
-    """Scaled axis-angle of unit (w, x, y, z) quaternions (shortest arc)."""
-    q = torch.where(q[..., :1] < 0, -q, q)
-    xyz = q[..., 1:]
-    norm = torch.linalg.vector_norm(xyz, dim=-1, keepdim=True)
-    angle = 2 * torch.atan2(norm, q[..., :1])
-    scale = torch.where(norm > 1e-12, angle / norm.clamp_min(1e-12), torch.full_like(norm, 2.0))
-    return xyz * scale
-
-
-def _from_rotvec(v: torch.Tensor) -> torch.Tensor:
-    """Unit (w, x, y, z) quaternions from scaled axis-angle vectors."""
-    angle = torch.linalg.vector_norm(v, dim=-1, keepdim=True)
-    half = 0.5 * angle
-    small = torch.full_like(angle, 0.5)  # sin(a / 2) / a -> 1 / 2
-    scale = torch.where(angle > 1e-12, torch.sin(half) / angle.clamp_min(1e-12), small)
-    return torch.cat([torch.cos(half), v * scale], dim=-1)
-
-
-def _inertialize_rotations(
-    segments: list[torch.Tensor], continuations: list[torch.Tensor], dt: float, halflife: float
-) -> torch.Tensor:
-    """Quaternion inertialization of ``[n_s, J, 4]`` segments (continuations ``[2, J, 4]``)."""
-    from skelagnostic.core import quaternion as Q
-
-    out = [segments[0]]
-    joints = segments[0].shape[1]
-    x = segments[0].new_zeros(joints, 3)
-    v = torch.zeros_like(x)
-    for s in range(1, len(segments)):
-        seg, cont = segments[s], continuations[s - 1]
-        elapsed = x.new_tensor([segments[s - 1].shape[0] * dt])
-        x, v = (c[0] for c in decay_offset(x, v, elapsed, halflife))
-        # offset rotation: where the old replay (with its offset) would be, relative to the new
-        carried = Q.mul(_from_rotvec(x), cont[0])
-        x = _to_rotvec(Q.mul(carried, Q.inv(seg[0])))
-        src_v = _to_rotvec(Q.mul(cont[1], Q.inv(cont[0]))) / dt
-        dst_v = (
-            _to_rotvec(Q.mul(seg[1], Q.inv(seg[0]))) / dt
-            if seg.shape[0] > 1
-            else torch.zeros_like(x)
-        )
-        v = v + src_v - dst_v
-        times = torch.arange(seg.shape[0], dtype=x.dtype, device=x.device) * dt
-        offset, _ = decay_offset(x.reshape(-1), v.reshape(-1), times, halflife)
-        out.append(Q.mul(_from_rotvec(offset.reshape(-1, joints, 3)), seg))
-    return torch.cat(out)
 
 
 def assemble_motion(
@@ -170,6 +121,6 @@ def assemble_motion(
     if halflife is None:
         rotations, roots = torch.cat(rot_parts), torch.cat(root_parts)
     else:
-        rotations = _inertialize_rotations(rot_parts, rot_conts, dt, halflife)
+        rotations = inertialize_rotations(rot_parts, rot_conts, dt, halflife)
         roots = inertialize(root_parts, root_conts, dt, halflife)
     return Motion(skeleton, rotations, roots, database.fps, name="motion matching")

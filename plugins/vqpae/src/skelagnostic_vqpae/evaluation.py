@@ -36,6 +36,7 @@ from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut,
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import GlobalPositions
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip, plot_manifold
+from skelagnostic_vqpae.transfer import FREQUENCY_TOLERANCE, HALFLIFE, build_database, transfer
 
 __all__ = [
     "OWN_RATE",
@@ -49,6 +50,7 @@ __all__ = [
     "phase_line",
     "transfer_protocol",
     "transfer_rows",
+    "transition_note",
 ]
 
 
@@ -171,6 +173,25 @@ TRANSFER_METRICS = {
 
 #: Baseline of :func:`transfer_rows`: classical motion matching (1 s replays, no time warping).
 UNSCALED = "unscaled_matching"
+
+
+def transition_note(halflife: float | None, frequency_tolerance: float | None) -> str:
+    """How :func:`transfer_rows` splices and times its outputs, for reports."""
+    splice = (
+        f"every transition between replayed windows is inertialized (joint rotations and root, "
+        f"halflife {halflife:g} s) in all three outputs"
+        if halflife is not None
+        else "replayed windows are spliced with hard cuts (no inertialization)"
+    )
+    periods = (
+        "the frequency head's estimates"
+        if frequency_tolerance is None
+        else f"the frequency head's estimates, replaced by the measured phase rate where they "
+        f"differ from it by more than {100 * frequency_tolerance:g} %"
+    )
+    return f"{splice}; matching periods: {periods}"
+
+
 #: Baseline of :func:`transfer_rows`: the best-matching target stretch, played at its own rate.
 OWN_RATE = "own_rate_clip"
 
@@ -275,6 +296,8 @@ def transfer_rows(
     sources: Sequence[Motion],
     database: Sequence[Motion],
     replay_seconds: float = 1.0,
+    halflife: float | None = HALFLIFE,
+    frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
 ) -> tuple[list[dict[str, Any]], dict[str, list[Motion]]]:
     """Transfer every source clip onto the database's character, model and baseline.
 
@@ -284,33 +307,45 @@ def transfer_rows(
     fixed ``replay_seconds`` replay: the database plays at its own rate, re-matched
     every replay) and :data:`OWN_RATE` (classical matching with one replay as long as
     the source, or the shortest database clip: the best-matching stretch of a target
-    clip played at its own rate, without cuts).
+    clip played at its own rate, without cuts). All three splice their replays and
+    time them the same way (:func:`transition_note`).
 
     Args:
         aligner: A trained aligner that knows both skeletons.
         sources: Clips of the source character (e.g. held-out human clips).
         database: Clips of the target character (e.g. its training clips).
         replay_seconds: Replay length of the baseline.
+        halflife: Inertialization halflife of the transitions, seconds; None: hard
+            cuts (:func:`~skelagnostic_vqpae.transfer.transfer`).
+        frequency_tolerance: Period rule
+            (:func:`~skelagnostic_vqpae.transfer.matching_frequency`); None: the
+            frequency head's estimates.
 
     Returns:
         ``(rows, outputs)``: rows for :class:`Evaluation` with :data:`TRANSFER_METRICS`
         (plus ``source_hz`` per row), and ``clip id -> [source, model output, baseline
         output, unscaled-matching output, own-rate output]``.
     """
-    from skelagnostic_vqpae.transfer import build_database, transfer
-
-    target = build_database(aligner, database, [str(m.name) for m in database])
+    target = build_database(
+        aligner, database, [str(m.name) for m in database], frequency_tolerance=frequency_tolerance
+    )
     shortest = min(m.duration for m in target.motions)
     rows, outputs = [], {}
     for clip in sources:
         source_hz = gait_frequency(clip)
+        options = {"halflife": halflife, "frequency_tolerance": frequency_tolerance}
         made = {
-            MODEL: transfer(aligner, clip, target).motion,
+            MODEL: transfer(aligner, clip, target, **options).motion,
             UNSCALED: transfer(
-                aligner, clip, target, scaled=False, replay_seconds=replay_seconds
+                aligner, clip, target, scaled=False, replay_seconds=replay_seconds, **options
             ).motion,
             OWN_RATE: transfer(
-                aligner, clip, target, scaled=False, replay_seconds=min(clip.duration, shortest)
+                aligner,
+                clip,
+                target,
+                scaled=False,
+                replay_seconds=min(clip.duration, shortest),
+                **options,
             ).motion,
         }
         values = {}
@@ -378,6 +413,7 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
         "(at most the shortest database clip), the best-matching target stretch at its own rate",
         "gait frequency: forward swings per second of the feet's root-local positions, the "
         "same measurement for the source and the outputs; no model output is used",
+        transition_note(HALFLIFE, FREQUENCY_TOLERANCE),
     ]
     return Evaluation(
         TRANSFER_METRICS, rows, plots=["transfer.gif", "transfer_sheet.png"], notes=notes

@@ -104,17 +104,20 @@ def transfer_summary(
         its transfer and the two baselines') and ``notes`` (a Markdown table).
     """
     from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
-    from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_rows
+    from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_rows, transition_note
+    from skelagnostic_vqpae.transfer import FREQUENCY_TOLERANCE, HALFLIFE
 
     if len(aligner.dataset_names) < 2 or not hasattr(datamodule, "sources"):
         return {}
     for split in ("val", "test"):
-        sources = [c for c in clips_of_split(datamodule, split)
-                   if aligner.dataset_of(c.skeleton) == 0]
+        sources = [
+            c for c in clips_of_split(datamodule, split) if aligner.dataset_of(c.skeleton) == 0
+        ]
         if sources:
             break
-    database = [c for c in clips_of_split(datamodule, "train")
-                if aligner.dataset_of(c.skeleton) == 1]
+    database = [
+        c for c in clips_of_split(datamodule, "train") if aligner.dataset_of(c.skeleton) == 1
+    ]
     if not sources or not database:
         return {}
     excerpts = [c[: int(SUMMARY_TRANSFER_SECONDS * c.fps) + 1] for c in sources[:max_clips]]
@@ -133,7 +136,7 @@ def transfer_summary(
         "stretch as long as the source, at its own rate. Gait frequencies are counted from "
         "the feet's forward swings of each motion, independently of the model; acceleration "
         "(mean and worst frame, over the skeleton height, 1/s^2) measures smoothness, lower "
-        "is smoother.",
+        f"is smoother. Transitions: {transition_note(HALFLIFE, FREQUENCY_TOLERANCE)}.",
         "",
         "| clip | source Hz | method | output Hz | frequency error % | mean accel | max accel |",
         "|---|---|---|---|---|---|---|",
@@ -160,6 +163,8 @@ def transfer_summary(
             "source": source,
             "target": target,
             "database_clips": [str(c.name) for c in database],
+            "halflife": HALFLIFE,
+            "frequency_tolerance": FREQUENCY_TOLERANCE,
             "per_clip": rows,
             "mean": means,
         },

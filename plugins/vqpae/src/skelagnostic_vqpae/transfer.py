@@ -7,9 +7,18 @@ skeleton height: the paper's "normalized joint positions" descriptor ``J``).
 The source clip's embedding (manifold + frequency, from its own VQ-PAE) is the
 query of :func:`~skelagnostic.matching.frequency_scaled_motion_matching` (Alg. 1,
 Eq. 9; ``lambda1`` 0.5, ``lambda2`` 1). The replayed target windows, time-warped
-to the source periods, are assembled into a motion of the target skeleton: local
-rotations slerped at the (fractional) source frames, each segment's root path and
-heading continued from the previous segment's end.
+to the source periods, are assembled into a motion of the target skeleton by
+:func:`~skelagnostic.matching.assemble_motion`: local rotations slerped at the
+(fractional) source frames, each segment's root path and heading continued from
+where the previous segment would have gone, and every transition inertialized
+(joint rotations and root position, critically damped offsets of halflife
+:data:`HALFLIFE`), as the paper does at each transition.
+
+Periods for matching come from the frequency head, except where it disagrees with
+the phase the same embedding measures: :func:`matching_frequency` replaces the
+head's estimate by the measured phase rate (the unwrapped pivot-phase advance
+over the VQ-PAE window centred on the frame) where the two differ by more than
+:data:`FREQUENCY_TOLERANCE` of the measured rate.
 """
 
 from __future__ import annotations
@@ -20,12 +29,12 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.matching import (
     MatchResult,
     MotionDatabase,
+    assemble_motion,
     frequency_scaled_motion_matching,
     motion_matching,
 )
@@ -33,7 +42,26 @@ from skelagnostic.representations import GlobalPositions
 from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
 
-__all__ = ["TransferDatabase", "TransferResult", "build_database", "transfer"]
+__all__ = [
+    "FREQUENCY_TOLERANCE",
+    "HALFLIFE",
+    "TransferDatabase",
+    "TransferResult",
+    "build_database",
+    "matching_frequency",
+    "phase_rate",
+    "transfer",
+]
+
+#: Inertialization halflife of the transitions, seconds. The paper inertializes every
+#: transition without giving a value and the authors' offline matching script has no
+#: blending; 0.1 s is the default of Holden's motion-matching code (Bollo's spring) and
+#: of :func:`~skelagnostic.matching.frequency_scaled_motion_matching`.
+HALFLIFE = 0.1
+
+#: Largest relative difference ``|f_head - f_phase| / f_phase`` between the frequency
+#: head and the measured phase rate for which the head's estimate is kept.
+FREQUENCY_TOLERANCE = 0.05
 
 
 @dataclass
@@ -66,14 +94,103 @@ class TransferResult:
     source: ClipEmbedding
 
 
-def build_database(aligner: VqpaeAligner, motions: Sequence[Motion],
-                   names: Sequence[str] | None = None) -> TransferDatabase:
+def phase_rate(phase: Tensor, fps: float, window: int) -> Tensor:
+    """Measured phase rate per frame, Hz: the pivot phase's advance over a window.
+
+    The per-frame differences of ``phase`` are wrapped to ``[-1/2, 1/2)`` cycles and
+    summed (the unwrapped phase), and the advance over the ``window`` frames centred
+    on each frame (cut at the clip's ends) is divided by the window's duration. The
+    wrapping is unambiguous while the phase advances less than half a cycle per
+    frame (below ``fps / 2`` Hz).
+
+    Args:
+        phase: ``[F]`` pivot phase of every frame, in cycles.
+        fps: Frame rate.
+        window: Frames of the measuring window (the VQ-PAE's window; >= 2).
+
+    Returns:
+        ``[F]`` float64 rates in Hz (0 for a single frame).
+
+    Example:
+        >>> phase = torch.remainder(torch.arange(12) * 0.3 + 0.5, 1.0) - 0.5  # 6 Hz at 20 fps
+        >>> [round(r, 6) for r in phase_rate(phase, 20.0, 5)[[0, 6]].tolist()]
+        [6.0, 6.0]
+    """
+    if window < 2:
+        raise SkelagnosticError(f"phase_rate: window must be >= 2 frames, got {window}")
+    phase = phase.double().reshape(-1)
+    frames = phase.numel()
+    if frames < 2:
+        return torch.zeros(frames, dtype=torch.float64)
+    step = phase.diff()
+    step = step - torch.round(step)
+    unwrapped = torch.cat([phase.new_zeros(1), step.cumsum(0)])
+    index = torch.arange(frames)
+    lo = (index - window // 2).clamp(min=0)
+    hi = (lo + window - 1).clamp(max=frames - 1)
+    lo = (hi - (window - 1)).clamp(min=0)
+    return (unwrapped[hi] - unwrapped[lo]) * fps / (hi - lo).double()
+
+
+def matching_frequency(
+    embedding: ClipEmbedding, window: int, tolerance: float | None = FREQUENCY_TOLERANCE
+) -> tuple[Tensor, Tensor]:
+    """Per-frame frequencies for the matching periods: the head's, or the measured phase rate.
+
+    Rule: with ``f_head`` the frequency head's estimate and ``f_phase`` the
+    :func:`phase_rate` over the VQ-PAE window, a frame uses ``f_phase`` where
+    ``f_phase > 0`` and ``|f_head - f_phase| > tolerance * f_phase``, else ``f_head``.
+    The phase is what the manifold query and database are made of, so where the
+    head contradicts it, periods cut from the head would not span one cycle of the
+    matched features; a phase that stands still or runs backwards (no cycle to
+    measure, e.g. idling) keeps the head's estimate.
+
+    Args:
+        embedding: A clip's embedding.
+        window: Frames of the measuring window (the VQ-PAE's window).
+        tolerance: Relative tolerance (> 0); None keeps the head's estimate everywhere
+            (the paper's periods).
+
+    Returns:
+        ``(frequency [F] float32 Hz, replaced [F] bool)``: the frequencies and where
+        the measured rate replaced the head's estimate.
+
+    Raises:
+        SkelagnosticError: A non-positive tolerance or a window shorter than 2 frames.
+    """
+    head = embedding.frequency.float()
+    if tolerance is None:
+        return head, torch.zeros(head.shape, dtype=torch.bool)
+    if not tolerance > 0:
+        raise SkelagnosticError(f"frequency_tolerance: must be > 0 (or None), got {tolerance}")
+    measured = phase_rate(embedding.phase, embedding.fps, window)
+    replaced = (measured > 0) & ((head.double() - measured).abs() > tolerance * measured)
+    return torch.where(replaced, measured.float(), head), replaced
+
+
+def _window(aligner: VqpaeAligner, motion: Motion) -> int:
+    """Frames of the VQ-PAE window of ``motion``'s character."""
+    return int(aligner.characters[aligner.dataset_of(motion.skeleton)].pae.window)
+
+
+def build_database(
+    aligner: VqpaeAligner,
+    motions: Sequence[Motion],
+    names: Sequence[str] | None = None,
+    frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
+) -> TransferDatabase:
     """Embed the target character's clips and build the matching database.
+
+    The ``frequency`` group holds :func:`matching_frequency` (the head's estimate,
+    or the measured phase rate where they disagree by more than
+    ``frequency_tolerance``).
 
     Args:
         aligner: A trained aligner that knows the clips' skeleton.
         motions: Clips of one character (topology), any frame rate.
         names: Optional clip names.
+        frequency_tolerance: See :func:`matching_frequency`; None: the head's
+            estimates as they are.
 
     Returns:
         The database.
@@ -88,12 +205,15 @@ def build_database(aligner: VqpaeAligner, motions: Sequence[Motion],
         raise SkelagnosticError("build_database: the clips belong to different characters")
     embeddings = [embed_clip(aligner, m) for m in motions]
     fps = embeddings[0].fps
+    window = _window(aligner, motions[0])
     resampled = [m if m.fps == fps else m.resample(fps) for m in motions]
     clips = []
     for m, e in zip(resampled, embeddings, strict=True):
         pose = GlobalPositions(frame="root").encode(m).float().flatten(1) / m.skeleton.height()
-        clips.append({"manifold": e.manifold.float(), "frequency": e.frequency.float()[:, None],
-                      "pose": pose})
+        frequency, _ = matching_frequency(e, window, frequency_tolerance)
+        clips.append(
+            {"manifold": e.manifold.float(), "frequency": frequency[:, None], "pose": pose}
+        )
     db = MotionDatabase.from_clips(clips, fps=fps, clip_names=names)
     return TransferDatabase(db, resampled, embeddings)
 
@@ -107,6 +227,8 @@ def transfer(
     max_period_ratio: float | None = None,
     scaled: bool = True,
     replay_seconds: float = 1.0,
+    halflife: float | None = HALFLIFE,
+    frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
 ) -> TransferResult:
     """Transfer ``source`` onto the target character by frequency-scaled motion matching.
 
@@ -124,74 +246,55 @@ def transfer(
         max_period_ratio: Optional cap on the period ratio (the authors' code: 2).
         scaled: Frequency-scaled matching (the paper); False: classical matching.
         replay_seconds: Replay length of classical matching (``scaled=False`` only).
+        halflife: Inertialization halflife of the transitions, seconds (joint
+            rotations and root position); None splices the replayed frames with
+            hard cuts (the root path is still continued).
+        frequency_tolerance: Rule of the source's periods (:func:`matching_frequency`);
+            None: the frequency head's estimates (the paper). The database's
+            periods follow the rule it was built with (:func:`build_database`).
 
     Returns:
         The transferred motion (target skeleton, database frame rate).
 
     Raises:
         SkelagnosticError: The source embedding's frame rate differs from the database's,
-            or ``replay_seconds`` is not positive.
+            or ``replay_seconds``, ``halflife`` or ``frequency_tolerance`` is not positive.
     """
     emb = embed_clip(aligner, source)
     if emb.fps != target.database.fps:
         raise SkelagnosticError(
             f"transfer: source embedded at {emb.fps} fps, database at {target.database.fps} fps"
         )
-    query = {"manifold": emb.manifold.float(), "frequency": emb.frequency.float()[:, None]}
+    if halflife is not None and not halflife > 0:
+        raise SkelagnosticError(f"transfer: halflife must be > 0 seconds (or None), got {halflife}")
+    frequency, _ = matching_frequency(emb, _window(aligner, source), frequency_tolerance)
+    query = {"manifold": emb.manifold.float(), "frequency": frequency[:, None]}
     if not scaled:
         if not replay_seconds > 0:
             raise SkelagnosticError(f"transfer: replay_seconds must be > 0, got {replay_seconds}")
         replay = max(1, round(replay_seconds * target.database.fps))
-        match = motion_matching(target.database, query, replay, control="manifold", pose="pose",
-                                lambda_pose=lambda1, output=["pose"])
-        return TransferResult(_assemble(match, target), match, emb)
-    match = frequency_scaled_motion_matching(
-        target.database, query, control="manifold", pose="pose", frequency="frequency",
-        lambda1=lambda1, lambda2=lambda2, max_period_ratio=max_period_ratio, output=["pose"])
-    return TransferResult(_assemble(match, target), match, emb)
-
-
-def _sample(motion: Motion, frames: Tensor) -> tuple[Tensor, Tensor]:
-    """Local rotations ``[n, J, 4]`` and root positions ``[n, 3]`` at fractional frames."""
-    i0 = frames.floor().long().clamp(0, motion.num_frames - 1)
-    i1 = (i0 + 1).clamp(max=motion.num_frames - 1)
-    w = (frames - i0.double()).to(motion.rotations.dtype)
-    rot = Q.slerp(motion.rotations[i0], motion.rotations[i1], w[:, None])
-    root = torch.lerp(motion.root_positions[i0], motion.root_positions[i1], w[:, None])
-    return rot, root
-
-
-def _assemble(match: MatchResult, target: TransferDatabase) -> Motion:
-    if match.source_frames is None:
-        raise SkelagnosticError("transfer: the matching result has no source frames")
-    db = target.database
-    skeleton = target.motions[0].skeleton
-    up = skeleton.up_index
-    forward = 2 if up != 2 else 1
-    rotations, roots = [], []
-    heading: Tensor | None = None
-    ground_next: Tensor | None = None
-    for seg in match.segments:
-        start = int(db.clip_range(seg.clip)[0])
-        frames = match.source_frames[seg.start: seg.start + seg.out_length] - start
-        rot, root = _sample(target.motions[seg.clip], frames)
-        seg_yaw = Q.yaw(rot[:1, 0], up=up, forward=forward)[0]
-        ground = root.clone()
-        ground[:, up] = 0.0
-        if heading is None or ground_next is None:
-            turn = Q.identity(dtype=rot.dtype)
-            offset = torch.zeros(3, dtype=rot.dtype)
-        else:
-            turn = Q.mul(heading, Q.inv(seg_yaw))
-            offset = ground_next
-        rot = rot.clone()
-        rot[:, 0] = Q.mul(turn.expand_as(rot[:, 0]), rot[:, 0])
-        moved = Q.rotate(turn.expand(len(ground), 4), ground - ground[:1]) + offset
-        moved[:, up] = root[:, up]
-        rotations.append(rot)
-        roots.append(moved)
-        heading = Q.yaw(rot[-1:, 0], up=up, forward=forward)[0]
-        step = moved[-1] - moved[-2] if len(moved) > 1 else torch.zeros_like(moved[-1])
-        ground_next = moved[-1] + step
-        ground_next[up] = 0.0
-    return Motion(skeleton, torch.cat(rotations), torch.cat(roots), db.fps)
+        match = motion_matching(
+            target.database,
+            query,
+            replay,
+            control="manifold",
+            pose="pose",
+            lambda_pose=lambda1,
+            output=["pose"],
+            halflife=halflife,
+        )
+    else:
+        match = frequency_scaled_motion_matching(
+            target.database,
+            query,
+            control="manifold",
+            pose="pose",
+            frequency="frequency",
+            lambda1=lambda1,
+            lambda2=lambda2,
+            max_period_ratio=max_period_ratio,
+            output=["pose"],
+            halflife=halflife,
+        )
+    motion = assemble_motion(target.motions, match, target.database, halflife=halflife)
+    return TransferResult(motion, match, emb)
