@@ -524,11 +524,11 @@ class Skeleton:
            upper arm or thigh hangs straight down; the limb's own geometry is kept.
         4. Degenerate rest geometry falls back, per bone, to the length-only
            construction: a clavicle or pelvis bone lying along the body axis points
-           sideways (a quadruped's shoulder blade steeply down, forward and outward), a toe
-           bone hanging along the leg points forward, a quadruped's tail or hip bone
-           pointing towards the head is turned half a turn about the lateral axis,
-           and a limb without a recognisable elbow or knee is rotated at the end of
-           its first non-zero bone.
+           sideways (a quadruped's shoulder blade steeply down, forward and
+           outward); a toe bone hanging along the leg points forward; a quadruped's
+           tail or hip bone pointing forward and up (towards the head) is turned
+           half a turn about the lateral axis; a limb without a recognisable elbow
+           or knee is rotated at the end of its first non-zero bone.
 
         Without a body frame (no head, no left/right hips or upper arms, or a
         collinear rest pose) the whole template is the length-only construction.
@@ -652,19 +652,20 @@ class Skeleton:
             r = rot[p]
             d = r @ units[j]
             hanging[j] = hanging[p] or p in pivot_of
-            fix = None
-            if lengths[j] <= 0 or float(d.norm()) == 0.0:
-                pass
-            elif quad and (g == "tail" or (g.endswith("_leg") and not hanging[j])):
-                if float(d @ fwd) > 1e-6:  # pointing into the body: a segment rested flipped
+            girdle = g.endswith(("_arm", "_leg")) and not hanging[j]
+            if lengths[j] > 0 and float(d.norm()) > 0:
+                fix = torch.eye(3, dtype=dtype)
+                hind = quad and (g == "tail" or (girdle and g.endswith("_leg")))
+                if hind and float(d @ fwd) > 1e-6 and float(d @ up) >= 0:
+                    # forward and up from the pelvis: a segment rested upside down
                     fix = _axis_rotation(lat, torch.pi)
-            elif g.endswith(("_arm", "_leg")) and not hanging[j] and _parallel(d, body_axis):
-                side = (1.0 if g.startswith("left_") else -1.0) * lat
-                target = (side - 2 * up + fwd) / 6**0.5 if quad and g.endswith("_arm") else side
-                fix = _rotation_between(d, target)
-            elif hanging[j] and set(_words(self._names[j])) & _TOE_WORDS and float(d @ up) < -0.9:
-                fix = _rotation_between(d, fwd)
-            if fix is not None:
+                elif girdle and _parallel(d, body_axis):
+                    side = (1.0 if g.startswith("left_") else -1.0) * lat
+                    quad_arm = quad and g.endswith("_arm")
+                    target = (side - 2 * up + fwd) / 6**0.5 if quad_arm else side
+                    fix = _rotation_between(d, target)
+                elif hanging[j] and set(_words(self._names[j])) & _TOE_WORDS and d @ up < -0.9:
+                    fix = _rotation_between(d, fwd)
                 r, d = fix @ r, fix @ d
             pos[j] = pos[p] + lengths[j] * d
             rot[j] = r
