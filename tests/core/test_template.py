@@ -403,3 +403,17 @@ def test_collinear_clavicle_points_sideways():
         t[sk.index("RightForeArm")], torch.tensor([-12.0, 17.0, 0.0], dtype=torch.float64)
     )
     assert sk.height() == pytest.approx(65 + 40)
+
+
+def test_limb_without_elbow_names_hangs_from_the_end_of_its_first_bone():
+    """Arm joints with no elbow word: the limb turns at the end of its first non-zero bone."""
+    names = "root chest head l_arm1 l_arm2 l_arm3 r_arm1 r_arm2 r_arm3".split()
+    parents = [-1, 0, 1, 1, 3, 4, 1, 6, 7]
+    offsets = [[0, 0, 0], [0, 50, 0], [0, 20, 0], [6, 0, 0], [25, 0, 0], [20, 0, 0]]
+    offsets += [[-x, y, z] for x, y, z in offsets[3:]]
+    sk = _chain(offsets, names, parents)
+    assert sk.body_groups[3:6] == ["left_arm"] * 3
+    torch.testing.assert_close(
+        sk.template()[3:6],
+        torch.tensor([[6.0, 50.0, 0.0], [6.0, 25.0, 0.0], [6.0, 5.0, 0.0]], dtype=torch.float64),
+    )

@@ -582,16 +582,10 @@ class Skeleton:
                 middle, pivot = pivot, self._parents[pivot]
             if self._groups[pivot] == group:
                 return pivot
-        started: set[int] = set()  # limb joints with a non-zero limb bone at or above them
-        for j in members:
-            p = self._parents[j]
-            if p in started:
-                started.add(j)
-            elif lengths[j] > 0:
-                started.add(j)
-                has_limb_child = any(self._groups[c] == group for c in self.children(j))
-                return j if has_limb_child else None
-        return None
+        first = next((j for j in members if lengths[j] > 0), None)
+        if first is None or not any(self._groups[c] == group for c in self.children(first)):
+            return None
+        return first
 
     def _body_frame(
         self, rest: torch.Tensor, pivots: Mapping[str, int | None]
