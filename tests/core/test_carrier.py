@@ -104,7 +104,7 @@ def test_unit_guess_before_the_rule_was_the_distance_walked(files: dict[str, Pat
     naive = sa.Skeleton(sk.joint_names, sk.parents, sk.offsets, morphology=sk.morphology)
     assert naive.body_root == 0
     assert float(naive.bone_lengths()[1]) > 500.0
-    assert naive.height() > 4 * sk.height()
+    assert naive.height() > 3 * sk.height()  # the pole (5.8 m) follows the rest direction
     assert infer_units(naive) != "cm"
 
 

@@ -100,9 +100,9 @@ def test_template_is_canonical_and_keeps_bone_lengths():
     torch.testing.assert_close(t[0], torch.zeros(3, dtype=torch.float64))
     for p, c in s.bones():
         assert torch.isclose((t[c] - t[p]).norm(), s.offsets[c].norm())
-    # spine up, legs down, left leg on +X
+    # spine up, legs down, left leg on +X; the hip bones keep their 5-unit drop
     assert t[2, 1] > 0 and t[4, 1] < 0 and t[3, 0] > 0 and t[5, 0] < 0
-    assert s.height() == pytest.approx(50 + 40)
+    assert s.height() == pytest.approx(50 + 5 + 40)
 
 
 def test_template_ignores_rest_pose_orientation():

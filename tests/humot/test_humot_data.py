@@ -34,8 +34,9 @@ def test_two_subsets_are_independent():
 
 def test_gather_subset_bones_skip_to_nearest_kept_ancestor():
     parents = [-1, 0, 1, 2, 0, 4]
-    keep = torch.tensor([[True, False, True, True, False, True],
-                         [False, True, True, False, False, False]])
+    keep = torch.tensor(
+        [[True, False, True, True, False, True], [False, True, True, False, False, False]]
+    )
     sub = gather_subset(keep, parents)
     assert sub.index.tolist() == [[0, 2, 3, 5], [1, 2, 0, 0]]
     assert sub.mask.tolist() == [[True] * 4, [True, True, False, False]]
@@ -59,9 +60,22 @@ def test_prepare_chunks_centres_on_major_joints():
     assert torch.allclose(tmpl[0, 0], torch.zeros(3))
 
 
+@pytest.mark.data
+def test_topology_templates_are_the_skeleton_template_at_its_bone_lengths(shared_data):
+    """LaFAN1's rest pose is rotated: the template's frame must come from its real lengths."""
+    from skelagnostic_humot.template import skeleton_template
+
+    sk = sa.read_bvh(shared_data / "human/lafan1/Lafan1_example.bvh").skeleton
+    topo = Topology.of(sk)
+    torch.testing.assert_close(
+        topo.templates(sk.bone_lengths().float()), skeleton_template(sk).float(), atol=1e-4, rtol=0
+    )
+
+
 def test_datamodule_chunks_and_drops_non_humans(tmp_path):
-    source = ProceduralSource(kinds=["biped22", "biped17", "quadruped"], gaits=["walk"],
-                              clips_per_gait=2, seconds=2.0)
+    source = ProceduralSource(
+        kinds=["biped22", "biped17", "quadruped"], gaits=["walk"], clips_per_gait=2, seconds=2.0
+    )
     dm = HumotDataModule([source], cache_dir=tmp_path, val_fraction=0.5)
     assert (dm.window, dm.stride, dm.batch_size, dm.fps) == (30, 6, 32, 30.0)
     dm.prepare_data()

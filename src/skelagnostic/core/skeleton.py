@@ -133,6 +133,56 @@ def _limb(name: str) -> str | None:
     return None
 
 
+_ELBOW_WORDS = frozenset({"forearm", "elbow", "lowerarm"})
+_KNEE_WORDS = frozenset({"knee", "calf", "shin", "lowerleg", "tibia"})
+_TWIST_WORDS = frozenset({"twist", "roll"})
+_TOE_WORDS = frozenset({"toe", "toes", "ball"})
+_LIMB_GROUPS = ("left_arm", "right_arm", "left_leg", "right_leg")
+
+
+def _is_middle_joint(name: str, words: frozenset[str]) -> bool:
+    """Whether a joint name denotes an elbow (``words`` of the arm) or a knee."""
+    w = _words(name)
+    if set(w) & words:
+        return True
+    if words is _ELBOW_WORDS:
+        return "arm" in w and bool({"fore", "lower"} & set(w))
+    # "LeftLeg" (Mixamo, CMU, MANN) is the knee; "LeftUpLeg", "UpperLeg", "LegHip" are not
+    return "leg" in w and not ({"up", "upper", "thigh", "hip", "top"} & set(w))
+
+
+def _parallel(d: torch.Tensor, axis: torch.Tensor, tol: float = 0.1) -> bool:
+    """Whether unit ``d`` lies along ``axis`` (either way) within ``tol`` of the sine."""
+    return float(torch.linalg.cross(d, axis).norm()) < tol
+
+
+def _axis_rotation(axis: torch.Tensor, angle: float) -> torch.Tensor:
+    """``[3, 3]`` rotation by ``angle`` radians about unit ``axis`` (Rodrigues)."""
+    k = torch.zeros(3, 3, dtype=axis.dtype)
+    k[0, 1], k[0, 2], k[1, 2] = -axis[2], axis[1], -axis[0]
+    k = k - k.T
+    a = torch.tensor(angle, dtype=axis.dtype)
+    return torch.eye(3, dtype=axis.dtype) + torch.sin(a) * k + (1 - torch.cos(a)) * (k @ k)
+
+
+def _rotation_between(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``[3, 3]`` smallest rotation taking unit ``a`` to unit ``b``.
+
+    For opposite vectors the half turn is about an axis perpendicular to ``a``.
+    """
+    axis = torch.linalg.cross(a, b)
+    sin = float(axis.norm())
+    cos = float(a @ b)
+    if sin < 1e-9:
+        if cos > 0:
+            return torch.eye(3, dtype=a.dtype)
+        helper = torch.zeros(3, dtype=a.dtype)
+        helper[int(torch.argmin(a.abs()))] = 1.0
+        perp = torch.linalg.cross(a, helper)
+        return _axis_rotation(perp / perp.norm(), torch.pi)
+    return _axis_rotation(axis / sin, float(np.arctan2(sin, cos)))
+
+
 def infer_body_groups(
     joint_names: Sequence[str],
     parents: Sequence[int],
@@ -528,15 +578,188 @@ class Skeleton:
         return pos
 
     def template(self) -> torch.Tensor:
-        """``[J, 3]`` canonical neutral pose from bone lengths and body groups.
+        """``[J, 3]`` canonical neutral pose built from the file's own rest geometry.
 
-        The file's rest pose varies between datasets (T-pose, A-pose, or the MANN
-        dog's all-along-+X rest), so the template is rebuilt from bone lengths
-        alone in a canonical frame: Y up, facing +Z, left +X, root at the origin.
-        Bipeds stand with the spine straight up; quadrupeds hold the spine
-        forward. Each limb's first non-zero bone points sideways (hip, clavicle),
-        the rest straight down (arms down), bones ending in a toe/ball point
-        forward; the tail points backward.
+        The canonical frame is Y up, facing +Z, left +X, root at the origin. Every
+        bone keeps its length (:meth:`bone_lengths`); its direction comes from the
+        rest offsets (see ``docs/skeleton.md``):
+
+        1. The rest pose is turned into the canonical frame using the body itself:
+           for bipeds up is pelvis to head, for quadrupeds forward is pelvis to the
+           joint the front legs hang from; left is right hip to left hip (right to
+           left upper arm without legs). A rotated rest pose (LaFAN1's, the MANN
+           dog's) therefore gives the same template as an upright one.
+        2. Torso, neck, head, clavicle and pelvis bones keep their rest directions.
+        3. Each limb is rotated as a whole at its upper-arm or hip joint (the parent
+           of the joint named as elbow or knee, twist joints skipped) so that the
+           upper arm or thigh hangs straight down; the limb's own geometry is kept.
+        4. Degenerate rest geometry falls back, per bone, to the length-only
+           construction: a clavicle or pelvis bone lying along the body axis points
+           sideways (a quadruped's shoulder blade steeply down, forward and
+           outward); a toe bone hanging along the leg points forward; a quadruped's
+           tail or hip bone pointing forward and up (towards the head) is turned
+           half a turn about the lateral axis; a limb without a recognisable elbow
+           or knee is rotated at the end of its first non-zero bone.
+
+        Without a body frame (no head, no left/right hips or upper arms, or a
+        collinear rest pose) the whole template is the length-only construction.
+        """
+        units, lengths = self._rest_directions()
+        rest = torch.zeros_like(self._offsets)
+        for j, p in enumerate(self._parents):
+            if p >= 0:
+                rest[j] = rest[p] + lengths[j] * units[j]
+        pivots = {g: self._limb_pivot(g, lengths) for g in _LIMB_GROUPS}
+        frame = self._body_frame(rest, pivots)
+        if frame is None:
+            return self._template_from_lengths()
+        return self._template_from_rest(frame, units, lengths, rest, pivots)
+
+    def _rest_directions(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """``[J, 3]`` unit rest directions (zero for zero-length bones), ``[J]`` lengths."""
+        offsets = self.rest_offsets()
+        norms = offsets.norm(dim=-1, keepdim=True)
+        units = torch.where(norms > 1e-12, offsets / norms.clamp_min(1e-12), 0.0)
+        units[0] = 0.0
+        return units, self.bone_lengths()
+
+    def _head_joint(self) -> int | None:
+        """The head: the shallowest spine joint named ``head``, else the deepest spine leaf."""
+        spine = [j for j in range(1, self.num_joints) if self._groups[j] == "spine"]
+        named = [j for j in spine if "head" in _words(self._names[j])]
+        if named:
+            return min(named, key=self.depth)
+        has_child = set(self._parents)
+        leaves = [j for j in spine if j not in has_child]
+        return max(leaves, key=self.depth) if leaves else None
+
+    def _limb_pivot(self, group: str, lengths: torch.Tensor) -> int | None:
+        """The joint at which a limb is turned to hang down (upper-arm or hip joint).
+
+        The parent of the limb's first joint named as an elbow (arms) or knee (legs),
+        moving up past twist/roll joints and zero-length links; failing that, the
+        end of the limb's first non-zero bone. ``None`` when nothing of the limb
+        hangs below that joint.
+        """
+        members = [j for j in range(1, self.num_joints) if self._groups[j] == group]
+        words = _ELBOW_WORDS if group.endswith("_arm") else _KNEE_WORDS
+        middle = next((j for j in members if _is_middle_joint(self._names[j], words)), None)
+        if middle is not None:
+            pivot = self._parents[middle]
+            while (
+                pivot > 0
+                and self._groups[self._parents[pivot]] == group
+                and (_TWIST_WORDS & set(_words(self._names[pivot])) or lengths[middle] <= 0)
+            ):
+                middle, pivot = pivot, self._parents[pivot]
+            if self._groups[pivot] == group:
+                return pivot
+        first = next((j for j in members if lengths[j] > 0), None)
+        if first is None or not any(self._groups[c] == group for c in self.children(first)):
+            return None
+        return first
+
+    def _body_frame(
+        self, rest: torch.Tensor, pivots: Mapping[str, int | None]
+    ) -> torch.Tensor | None:
+        """``[3, 3]`` rotation taking rest vectors into the canonical frame, or ``None``.
+
+        Its rows are the body's left, up and forward directions in the rest pose.
+        """
+        lateral = None
+        for left, right in (("left_leg", "right_leg"), ("left_arm", "right_arm")):
+            if pivots[left] is not None and pivots[right] is not None:
+                lateral = rest[pivots[left]] - rest[pivots[right]]
+                break
+        target = self._head_joint()
+        if self.morphology == "quadruped":
+            front = [
+                self._parents[j]
+                for j in range(1, self.num_joints)
+                if self._groups[j].endswith("_arm")
+                and not self._groups[self._parents[j]].endswith("_arm")
+            ]
+            target = front[0] if front else target
+        if lateral is None or target is None or float(rest[target].norm()) <= 1e-9:
+            return None
+        axis = rest[target] / rest[target].norm()
+        lateral = lateral - (lateral @ axis) * axis
+        if float(lateral.norm()) <= 1e-6 * float(rest[target].norm()):
+            return None
+        lateral = lateral / lateral.norm()
+        if self.morphology == "quadruped":
+            fwd, up = axis, torch.linalg.cross(axis, lateral)
+        else:
+            up, fwd = axis, torch.linalg.cross(lateral, axis)
+        return torch.stack([lateral, up, fwd])
+
+    def _template_from_rest(
+        self,
+        frame: torch.Tensor,
+        units: torch.Tensor,
+        lengths: torch.Tensor,
+        rest: torch.Tensor,
+        pivots: Mapping[str, int | None],
+    ) -> torch.Tensor:
+        """The construction of :meth:`template` given the body frame and limb pivots."""
+        dtype = units.dtype
+        lat, up, fwd = torch.eye(3, dtype=dtype)
+        quad = self.morphology == "quadruped"
+        body_axis = fwd if quad else up
+        pivot_of = {pv: g for g, pv in pivots.items() if pv is not None}
+        # rot[j]: the rotation applied to the rest directions of the bones below joint j
+        rot = [frame.to(dtype)] * self.num_joints
+        hanging = [False] * self.num_joints  # j lies below its limb's pivot
+        pos = torch.zeros_like(self._offsets)
+        for j, p in enumerate(self._parents):
+            if p < 0:
+                continue
+            g = self._groups[j]
+            r = rot[p]
+            d = r @ units[j]
+            hanging[j] = hanging[p] or p in pivot_of
+            girdle = g.endswith(("_arm", "_leg")) and not hanging[j]
+            if lengths[j] > 0 and float(d.norm()) > 0:
+                fix = torch.eye(3, dtype=dtype)
+                hind = quad and (g == "tail" or (girdle and g.endswith("_leg")))
+                if hind and float(d @ fwd) > 1e-6 and float(d @ up) >= 0:
+                    # forward and up from the pelvis: a segment rested upside down
+                    fix = _axis_rotation(lat, torch.pi)
+                elif girdle and _parallel(d, body_axis):
+                    side = (1.0 if g.startswith("left_") else -1.0) * lat
+                    quad_arm = quad and g.endswith("_arm")
+                    target = (side - 2 * up + fwd) / 6**0.5 if quad_arm else side
+                    fix = _rotation_between(d, target)
+                elif hanging[j] and set(_words(self._names[j])) & _TOE_WORDS and d @ up < -0.9:
+                    fix = _rotation_between(d, fwd)
+                r, d = fix @ r, fix @ d
+            pos[j] = pos[p] + lengths[j] * d
+            rot[j] = r
+            if j in pivot_of:
+                hang = r @ self._pivot_vector(j, rest)
+                if float(hang.norm()) > 1e-12:
+                    rot[j] = _rotation_between(hang / hang.norm(), -up) @ r
+        return pos - pos[0]
+
+    def _pivot_vector(self, pivot: int, rest: torch.Tensor) -> torch.Tensor:
+        """Rest vector from a limb's pivot to the nearest limb joint below it not on it."""
+        group = self._groups[pivot]
+        queue = [c for c in self.children(pivot) if self._groups[c] == group]
+        while queue:
+            c = queue.pop(0)
+            vec = rest[c] - rest[pivot]
+            if float(vec.norm()) > 1e-9:
+                return vec
+            queue.extend(k for k in self.children(c) if self._groups[k] == group)
+        return torch.zeros(3, dtype=rest.dtype)
+
+    def _template_from_lengths(self) -> torch.Tensor:
+        """The length-only construction, used when the rest geometry gives no body frame.
+
+        Bipeds stand with the spine straight up; quadrupeds hold the spine forward
+        with the head and neck raised by 45 degrees. Each limb's first non-zero bone
+        points sideways (hip, clavicle), the rest straight down (arms down), bones
+        ending in a toe/ball point forward; the tail points backward.
         """
         lengths = self.bone_lengths()
         pos = torch.zeros_like(self._offsets)

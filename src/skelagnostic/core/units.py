@@ -26,8 +26,9 @@ UNITS: dict[str, float] = {
 
 #: Standing height (metres) of the person the unit guess assumes.
 HUMAN_HEIGHT = 1.7
-#: Height (metres) assumed for a character with a tail (a quadruped).
-QUADRUPED_HEIGHT = 0.6
+#: Height (metres) assumed for a character with a tail (a quadruped): the template holds a
+#: quadruped's head level, so this is about its shoulder height (0.43 m for the MANN dog).
+QUADRUPED_HEIGHT = 0.5
 
 
 def units_for_height(height: float, reference: float = HUMAN_HEIGHT) -> str:

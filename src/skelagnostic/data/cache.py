@@ -43,8 +43,10 @@ import numpy as np
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.io.atomic import atomic_write
 
-#: Bump when the cached layout or the window extraction changes.
-CACHE_VERSION = 1
+#: Bump when the cached layout or the window extraction changes. 2: clips whose unit is
+#: guessed from :meth:`~skelagnostic.Skeleton.height` are converted with the height of the
+#: template built from the rest geometry (issue #26, item 8).
+CACHE_VERSION = 2
 #: Environment variable overriding the default cache directory.
 CACHE_ENV = "SKELAGNOSTIC_CACHE"
 
@@ -57,8 +59,9 @@ def default_cache_dir() -> Path:
 
 def cache_key(clip_key: str, preprocessing: dict[str, Any]) -> str:
     """SHA-256 of the clip's content key and the preprocessing config (JSON-serialisable)."""
-    blob = json.dumps({"clip": clip_key, "pre": preprocessing, "version": CACHE_VERSION},
-                      sort_keys=True)
+    blob = json.dumps(
+        {"clip": clip_key, "pre": preprocessing, "version": CACHE_VERSION}, sort_keys=True
+    )
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -68,8 +71,9 @@ def slot_key(source_id: str, preprocessing: dict[str, Any]) -> str:
     Unlike :func:`cache_key` it does not depend on the clip's content, so a file
     that changes keeps its slot (:meth:`WindowCache.track`).
     """
-    blob = json.dumps({"source": source_id, "pre": preprocessing, "version": CACHE_VERSION},
-                      sort_keys=True)
+    blob = json.dumps(
+        {"source": source_id, "pre": preprocessing, "version": CACHE_VERSION}, sort_keys=True
+    )
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -143,8 +147,9 @@ class CacheEntry:
             offset, shape, _ = _read_npy_header(fh)
         return offset, shape
 
-    def read(self, start: int = 0, stop: int | None = None,
-             out: np.ndarray | None = None) -> np.ndarray:
+    def read(
+        self, start: int = 0, stop: int | None = None, out: np.ndarray | None = None
+    ) -> np.ndarray:
         """Windows ``start:stop`` read from the file into memory (no memory map).
 
         Args:
@@ -236,12 +241,14 @@ class WindowCache:
             if dtype != np.float32 or shape[:1] != (len(info["starts"]),):
                 raise ValueError(f"array {shape} {dtype} does not match its metadata")
             if array.stat().st_size != expected:
-                raise ValueError(f"array file has {array.stat().st_size} bytes, expected "
-                                 f"{expected}")
+                raise ValueError(
+                    f"array file has {array.stat().st_size} bytes, expected {expected}"
+                )
             self._verify(array, data_start, info)
         except (OSError, ValueError, KeyError, TypeError) as exc:
-            warnings.warn(f"damaged cache entry {array} rebuilt ({exc})", CacheWarning,
-                          stacklevel=2)
+            warnings.warn(
+                f"damaged cache entry {array} rebuilt ({exc})", CacheWarning, stacklevel=2
+            )
             return None
         entry = CacheEntry(array, info)
         entry.__dict__["layout"] = (data_start, shape)  # known: spare a second header read
@@ -325,8 +332,12 @@ class WindowCache:
 
     def size(self) -> int:
         """Bytes of all files of the cache (entries, slots, temporary files)."""
-        return sum(p.stat().st_size for sub in ("windows", "slots")
-                   for p in (self.root / sub).rglob("*") if p.is_file())
+        return sum(
+            p.stat().st_size
+            for sub in ("windows", "slots")
+            for p in (self.root / sub).rglob("*")
+            if p.is_file()
+        )
 
     def clear(self) -> int:
         """Delete every entry (the ``windows`` and ``slots`` directories); returns bytes freed."""

@@ -93,7 +93,7 @@ def guess_units(figure: StickFigure) -> str:
 
     The guess is the unit of :data:`skelagnostic.core.UNITS` that brings the
     height closest (in ratio) to a typical standing height: 1.7 m for bipeds,
-    0.6 m for characters with a tail (quadrupeds). Give the units explicitly
+    0.5 m for characters with a tail (quadrupeds). Give the units explicitly
     (``Motion.units`` or ``units=``) when they are known.
 
     Args:

@@ -65,15 +65,13 @@ class Topology:
     def of(cls, skeleton: Skeleton) -> Topology:
         """Precompute the topology data of ``skeleton``."""
         num = skeleton.num_joints
-        unit = Skeleton(skeleton.joint_names, skeleton.parents,
-                        torch.where(skeleton.offsets.norm(dim=-1, keepdim=True) > 0,
-                                    skeleton.offsets / skeleton.offsets.norm(
-                                        dim=-1, keepdim=True).clamp_min(1e-12), 0.0),
-                        body_groups=skeleton.body_groups, morphology=skeleton.morphology,
-                        body_root=skeleton.body_root)
-        tmpl = skeleton_template(unit)
+        # the bone directions of the skeleton's own template: the template's body frame
+        # depends on the bone lengths, so a unit-length copy would not give them
+        tmpl = skeleton_template(skeleton)
         parents = torch.tensor([max(p, 0) for p in skeleton.parents])
-        directions = (tmpl - tmpl[parents]).float()
+        bones = tmpl - tmpl[parents]
+        norms = bones.norm(dim=-1, keepdim=True)
+        directions = torch.where(norms > 1e-9, bones / norms.clamp_min(1e-12), 0.0).float()
         ancestors = torch.zeros(num, num)
         for j in range(num):
             k = j
@@ -88,8 +86,9 @@ class Topology:
         return self.ancestors.to(lengths) @ (lengths[..., None] * d)
 
 
-def prepare_chunks(world: torch.Tensor, topology: Topology, up_axis: str = "y"
-                   ) -> tuple[torch.Tensor, torch.Tensor]:
+def prepare_chunks(
+    world: torch.Tensor, topology: Topology, up_axis: str = "y"
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Chunks ready for the network: model axes, centred by the major joints, with templates.
 
     Args:
@@ -111,8 +110,13 @@ def prepare_chunks(world: torch.Tensor, topology: Topology, up_axis: str = "y"
     return pos, topology.templates(lengths)
 
 
-def sample_keep(major: torch.Tensor, batch: int, p_major: float = 0.1, p_other: float = 0.5,
-                generator: torch.Generator | None = None) -> torch.Tensor:
+def sample_keep(
+    major: torch.Tensor,
+    batch: int,
+    p_major: float = 0.1,
+    p_other: float = 0.5,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
     """``[batch, J]`` random keep masks: drop major joints with ``p_major``, others ``p_other``.
 
     A draw that drops every joint is replaced by keeping all of them.
@@ -212,8 +216,14 @@ class HumotDataModule(MotionDataModule):
             ``representation``: default world joint positions; ...).
     """
 
-    def __init__(self, sources: ClipSource | Sequence[ClipSource] | None = None, *,
-                 window: int = 30, stride: int = 6, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        sources: ClipSource | Sequence[ClipSource] | None = None,
+        *,
+        window: int = 30,
+        stride: int = 6,
+        **kwargs: Any,
+    ) -> None:
         super().__init__(sources, window=window, stride=stride, **kwargs)
         #: Datasets left out because their skeleton is not a biped.
         self.skipped: list[str] = []
@@ -226,8 +236,11 @@ class HumotDataModule(MotionDataModule):
         """As the base class, but a dataset of a non-biped skeleton is left out (and logged)."""
         skeleton = Skeleton.from_dict(members[0][1].meta["skeleton"])
         if skeleton.morphology != "biped":
-            log.info("humot: skipping dataset %r (%s skeleton, HuMoT models humans)", name,
-                     skeleton.morphology)
+            log.info(
+                "humot: skipping dataset %r (%s skeleton, HuMoT models humans)",
+                name,
+                skeleton.morphology,
+            )
             self.skipped.append(name)
             return
         super().add_dataset(name, members)
