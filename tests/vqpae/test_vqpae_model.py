@@ -11,6 +11,7 @@ from skelagnostic_vqpae.codebook import SharedCodebook
 from skelagnostic_vqpae.model import (
     VQPAE,
     AveragePoseMLP,
+    TemporalCentering,
     mason_phase,
     phase_manifold,
     relative_times,
@@ -232,10 +233,18 @@ class TestFrequencyHead:
 
 
 class TestAuthorsOptions:
-    """``phase_kernel`` and ``freq_hidden_elu``: the authors' timing branch, off by default."""
+    """``phase_kernel`` and ``freq_hidden_elu``: the authors' timing branch by default."""
 
-    def test_defaults_keep_the_kernel_1_conv_and_leaky_relu_mlp(self) -> None:
-        net = _net()
+    def test_defaults_are_the_authors_network(self) -> None:
+        net = VQPAE(9, 61, 60.0)
+        assert net.phase_conv.kernel_size == (23,) and net.phase_conv.padding_mode == "zeros"
+        assert net.encoder[0].padding_mode == "zeros" and net.spectrum == "power"
+        kinds = [type(m).__name__ for m in net.freq_mlp]
+        assert kinds == ["Linear", "LeakyReLU", "ELU"] * 6 + ["Linear"]  # n_layers_fft 7
+        assert any(isinstance(m, TemporalCentering) for m in net.decoder)
+
+    def test_paper_options_keep_the_kernel_1_conv_and_leaky_relu_mlp(self) -> None:
+        net = VQPAE(9, 61, 60.0, phase_kernel=1, freq_hidden_elu=False)
         assert net.phase_conv.kernel_size == (1,)
         assert not any(isinstance(m, torch.nn.ELU) for m in net.freq_mlp)
 
