@@ -92,7 +92,10 @@ PLUS_OPTIONS: dict[str, Any] = {
 #: written for them (``vqpae_main``, ``vqpae_human_dog``, ``vqpae_stylized``) still use.
 PREVIOUS_DEFAULTS: dict[str, Any] = {**PLUS_OPTIONS, "frequency_head": "mlp", "schedule": "cosine"}
 
-#: Per dataset: ``{"channels", "window", "fps", "skeleton" (Skeleton.to_dict())}``.
+#: Per dataset: ``{"channels", "window", "fps", "skeleton" (Skeleton.to_dict())}``; a run
+#: of the authors' trainer (:mod:`~skelagnostic_vqpae.authors`) has no skeleton unless one
+#: is given, and with its phase decoders ``"pose_channels"`` (their output size) and
+#: ``"pose_features"`` (their feature names).
 DatasetSpec = Mapping[str, Any]
 
 
@@ -116,12 +119,13 @@ class _Character(nn.Module):
                  **pae_options: Any) -> None:
         super().__init__()
         channels, window = int(spec["channels"]), int(spec["window"])
+        pose = int(spec.get("pose_channels") or channels)  # an authors' phase decoder: more
         self.pae = VQPAE(channels, window, float(spec["fps"]), latent, **pae_options)
-        self.pose = AveragePoseMLP(latent, channels, pose_layers)
-        for name in ("input_mean", "pose_mean"):
-            self.register_buffer(name, torch.zeros(channels))
-        for name in ("input_std", "pose_std"):
-            self.register_buffer(name, torch.ones(channels))
+        self.pose = AveragePoseMLP(latent, pose, pose_layers)
+        self.register_buffer("input_mean", torch.zeros(channels))
+        self.register_buffer("input_std", torch.ones(channels))
+        self.register_buffer("pose_mean", torch.zeros(pose))
+        self.register_buffer("pose_std", torch.ones(pose))
         self.register_buffer("pose_fitted", torch.tensor(False))
 
 
@@ -645,6 +649,42 @@ class VqpaeAligner(Aligner):
         return out
 
     @torch.no_grad()
+    def average_pose(self, points: Tensor, dataset: int | str) -> Tensor:
+        """The average-pose MLP (or the authors' phase decoder) at manifold points, denormalised.
+
+        Args:
+            points: ``[..., d]`` phase-manifold points.
+            dataset: Index or name of the dataset (character).
+
+        Returns:
+            ``[..., P]``: root-local joint positions ``[J * 3]`` for a skelagnostic model;
+            for an authors' run, their phase decoder's features (``pose_features`` of
+            the dataset's spec, concatenated).
+
+        Raises:
+            SkelagnosticError: No datasets yet, an unknown dataset, or its MLP was not trained.
+        """
+        k = self._dataset_index(dataset)
+        char = self.characters[k]
+        if not bool(char.pose_fitted):
+            raise SkelagnosticError(
+                f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not trained")
+        return char.pose(points.to(char.pose_mean)) * char.pose_std + char.pose_mean
+
+    def _dataset_index(self, dataset: int | str) -> int:
+        """Index of a dataset given by index or name (clear errors otherwise)."""
+        self._require_built()
+        if isinstance(dataset, str):
+            if dataset not in self.dataset_names:
+                raise SkelagnosticError(
+                    f"VqpaeAligner: unknown dataset {dataset!r}; known: {self.dataset_names}")
+            return self.dataset_names.index(dataset)
+        if 0 <= dataset < len(self.dataset_names):
+            return int(dataset)
+        raise SkelagnosticError(f"VqpaeAligner: dataset index {dataset} out of range "
+                                f"[0, {len(self.dataset_names)})")
+
+    @torch.no_grad()
     def embed_windows(self, x: Tensor, dataset: int | str) -> dict[str, Tensor]:
         """Embed normalised windows of one dataset (no grouping into clips).
 
@@ -662,17 +702,7 @@ class VqpaeAligner(Aligner):
         Raises:
             SkelagnosticError: No datasets yet, an unknown dataset, or ``x`` of the wrong shape.
         """
-        self._require_built()
-        if isinstance(dataset, str):
-            if dataset not in self.dataset_names:
-                raise SkelagnosticError(
-                    f"VqpaeAligner: unknown dataset {dataset!r}; known: {self.dataset_names}")
-            k = self.dataset_names.index(dataset)
-        elif 0 <= dataset < len(self.dataset_names):
-            k = int(dataset)
-        else:
-            raise SkelagnosticError(f"VqpaeAligner: dataset index {dataset} out of range "
-                                    f"[0, {len(self.dataset_names)})")
+        k = self._dataset_index(dataset)
         rec, p = self.forward_dataset(k, x.to(self.device))
         return {"phase": p.phase, "frequency": p.frequency, "code": p.code,
                 "amplitude": p.amplitude,
@@ -768,7 +798,7 @@ class VqpaeAligner(Aligner):
                           "preprocess": "resample to fps; the window of frame i holds frames "
                                         "i - pivot .. i + pivot (repeat the end frames at "
                                         "the clip edges)"}))
-            if bool(char.pose_fitted):
+            if bool(char.pose_fitted) and not spec.get("pose_features"):
                 graphs.append(ExportGraph(
                     f"pose_decoder_{stem}", Method(char.pose, "forward"),
                     (torch.zeros(2, self.hparams.latent).normal_(),), ("manifold",),
@@ -858,6 +888,12 @@ class VqpaeAligner(Aligner):
         """
         k = self.dataset_of(skeleton)
         char = self.characters[k]
+        features = self.hparams["datasets"][self.dataset_names[k]].get("pose_features")
+        if features:
+            raise SkelagnosticError(
+                f"VqpaeAligner: {self.dataset_names[k]!r} has the authors' phase decoder, which "
+                f"predicts their exporter's features {list(features)}, not root-local joint "
+                "positions: run it with average_pose() (skelagnostic_vqpae.authors)")
         if not bool(char.pose_fitted):
             raise SkelagnosticError(
                 f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not "
