@@ -96,7 +96,7 @@ class TestVQPAE:
         assert bool((p.phase > -0.5).all() and (p.phase <= 0.5).all())
 
     def test_layer_layout_follows_the_paper(self) -> None:
-        net = VQPAE(66, 61, 60.0)
+        net = VQPAE(66, 61, 60.0, freq_layers=5, phase_kernel=1)  # the paper's (not the defaults)
         convs = [m for m in net.encoder if isinstance(m, torch.nn.Conv1d)]
         assert [(c.in_channels, c.out_channels, c.kernel_size[0]) for c in convs] == [
             (66, 22, 23), (22, 10, 23)]
@@ -180,7 +180,7 @@ class TestFrequencyHead:
         # a latent whose timing signal is exactly ``y``: channel 0 carries it, the conv reads it
         with torch.no_grad():
             net.phase_conv.weight.zero_()
-            net.phase_conv.weight[0, 0, 0] = 1.0
+            net.phase_conv.weight[0, 0, net.phase_conv.kernel_size[0] // 2] = 1.0  # centre tap
             net.phase_conv.bias.zero_()
         latent = torch.zeros(len(y), net.latent, net.window)
         latent[:, 0] = y
