@@ -48,6 +48,8 @@ def test_a_registered_scheme_builds_the_model(pm: tuple[PluginManager, _Reader])
     assert isinstance(aligner, ExampleAligner) and not aligner.training
     assert reader.paths == ["some/dir"]
     assert manager.read_external_checkpoint("toy:x", model="toy") is not None
+    info = next(p for p in manager.plugins() if p.name == "reader")
+    assert "checkpoint reader:toy" in info.provides  # `skelagnostic plugins` lists it
 
 
 def test_plain_paths_are_not_schemes(pm: tuple[PluginManager, _Reader], tmp_path: Path) -> None:
