@@ -38,13 +38,23 @@ sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
 
 import lightning as L  # noqa: E402
 import torch  # noqa: E402
-from skelagnostic_vqpae.aligner import VqpaeAligner  # noqa: E402
+from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner  # noqa: E402
 from skelagnostic_vqpae.data import MultiSource, VqpaeDataModule  # noqa: E402
 from skelagnostic_vqpae.embed import embed_clip  # noqa: E402
 from skelagnostic_vqpae.evaluation import code_overlap, phase_line  # noqa: E402
 
 from skelagnostic import procedural  # noqa: E402
 from skelagnostic.data import BVHSource, ProceduralSource  # noqa: E402
+
+
+def _aligner(**options: Any) -> VqpaeAligner:
+    """The aligner with the settings of the measured runs (docs/reports/vqpae.md).
+
+    They predate the authors' defaults of ``model=vqpae``: ``PREVIOUS_DEFAULTS``
+    (``experiment=vqpae_plus`` with the paper's frequency head and the cosine
+    schedule), then ``options``.
+    """
+    return VqpaeAligner(**{**PREVIOUS_DEFAULTS, **options})
 
 
 def _train(dm: VqpaeDataModule, model: VqpaeAligner, steps: int,
@@ -80,8 +90,7 @@ def check_procedural(steps: int, lr: float, fps: float, options: dict[str, Any],
                               seconds=8.0)
     dm = VqpaeDataModule(source, fps=fps, stride=1, batch_size=32, cache_dir=cache,
                          window_seconds=window_seconds, pair_seconds=pair_seconds)
-    model = VqpaeAligner(num_codes=16, lr=lr, restart_period=10_000, pose_mlp="none",
-                         **options)
+    model = _aligner(num_codes=16, lr=lr, restart_period=10_000, pose_mlp="none", **options)
     seconds = _train(dm, model, steps)
     half = round(fps * window_seconds) // 2
     clips = []
@@ -169,8 +178,8 @@ def check_human_dog(steps: int, reinit: bool, lr: float, num_codes: int,
     L.seed_everything(0, verbose=False)
     dm = _human_dog_module(human_files)
     options = {"lambda_phase_rate": 0.0, **options}  # experiment=vqpae_human_dog's objective
-    model = VqpaeAligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
-                         restart_period=10_000, **options)
+    model = _aligner(num_codes=num_codes, reinit=reinit, lr=lr, pose_mlp="none",
+                     restart_period=10_000, **options)
     curve = [OverlapCurve(eval_every, num_codes, human_files)] if eval_every else []
     seconds = _train(dm, model, steps, curve, save)
     model.eval()
@@ -204,8 +213,8 @@ def check_sweep(codes: list[int], steps: int, lr: float, options: dict[str, Any]
     for num_codes in codes:
         L.seed_everything(0, verbose=False)
         dm = _human_dog_module(human_files)
-        model = VqpaeAligner(num_codes=num_codes, lr=lr, pose_mlp="detached",
-                             restart_period=10_000, **options)
+        model = _aligner(num_codes=num_codes, lr=lr, pose_mlp="detached",
+                         restart_period=10_000, **options)
         seconds = _train(dm, model, steps)
         model.eval()
         row = {"num_codes": num_codes, "train_seconds": round(seconds, 1),

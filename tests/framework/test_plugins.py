@@ -48,10 +48,10 @@ def register_config_paths(register):
 """
 
 
-def test_hookspecs_are_the_documented_five() -> None:
-    assert sorted(HOOKS) == ["register_aligners", "register_config_paths",
-                             "register_datasets", "register_evaluations",
-                             "register_representations"]
+def test_hookspecs_are_the_documented_six() -> None:
+    assert sorted(HOOKS) == ["register_aligners", "register_checkpoint_readers",
+                             "register_config_paths", "register_datasets",
+                             "register_evaluations", "register_representations"]
 
 
 @pytest.mark.parametrize("hook", HOOKS)

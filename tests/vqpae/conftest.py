@@ -23,13 +23,17 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def make_datamodule(cache_dir: Path) -> Any:
-    """Procedural biped + quadruped, every gait, 3 s clips at 20 fps, pivots every 2 frames."""
+    """Procedural biped + quadruped, every gait, 3 s clips at 20 fps, pivots every 2 frames.
+
+    With partner windows 0.1 s on, for the phase-rate loss of ``PREVIOUS_DEFAULTS``.
+    """
     from skelagnostic_vqpae.data import VqpaeDataModule
 
     from skelagnostic.data import ProceduralSource
 
     src = ProceduralSource(kinds=["biped22", "quadruped"], clips_per_gait=2, seconds=3.0)
-    return VqpaeDataModule(src, fps=FPS, stride=2, batch_size=16, cache_dir=cache_dir)
+    return VqpaeDataModule(src, fps=FPS, stride=2, batch_size=16, cache_dir=cache_dir,
+                           pair_seconds=0.1)
 
 
 def make_trainer(root: Path, steps: int, validate: bool = True) -> L.Trainer:
@@ -50,12 +54,13 @@ def helpers() -> dict[str, Callable[..., Any]]:
 @pytest.fixture(scope="session")
 def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """A small aligner trained for 200 steps, its data, validation before/after, checkpoint."""
-    from skelagnostic_vqpae.aligner import VqpaeAligner
+    from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
 
     root = tmp_path_factory.mktemp("vqpae-train")
     L.seed_everything(0, verbose=False)
     dm = make_datamodule(root / "cache")
-    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000)
+    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000,
+                         **PREVIOUS_DEFAULTS)
     before = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
     from skelagnostic.callbacks import FitSummary
 

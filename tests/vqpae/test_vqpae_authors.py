@@ -19,13 +19,16 @@ from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.authors import (
     authors_state_order,
     load_run,
+    phase_decoder_files,
     read_args,
     to_authors_state,
     vqae_key_map,
 )
 
+from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.io.bvh import read_bvh, write_bvh
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "walkthedog"
 TOL = 1e-4
@@ -190,3 +193,157 @@ def test_rebuilds_from_its_hyperparameters(
     ours, theirs = again.eval().embed_windows(x, 1), model.embed_windows(x, 1)
     for key in ("phase", "frequency", "code", "amplitude", "reconstruction"):
         assert torch.allclose(ours[key].double(), theirs[key].double(), rtol=0, atol=1e-6), key
+
+
+# ---------------------------------------------------------------- phase decoders
+
+
+@pytest.mark.parametrize("dataset", [0, 1])
+def test_phase_decoders_equal_the_authors_outputs(
+    model: VqpaeAligner, outputs: dict[str, np.ndarray], dataset: int
+) -> None:
+    points = torch.from_numpy(outputs[f"manifold{dataset}"])
+    ours = model.average_pose(points, dataset).numpy()
+    np.testing.assert_allclose(ours, outputs[f"pose{dataset}"], rtol=0, atol=TOL)
+    spec = model.hparams["datasets"][model.dataset_names[dataset]]
+    assert spec["pose_channels"] == outputs[f"pose{dataset}"].shape[1]
+    assert spec["pose_features"] == ["Velocities", "Positions", "Rotations"]
+    assert model.hparams["pose_mlp"] == "joint" and model.hparams["pose_layers"] == 3
+
+
+def test_phase_decoder_files_follow_their_dataset_names(tmp_path: Path) -> None:
+    run = _copy_run(tmp_path)
+    assert {k: v.name for k, v in phase_decoder_files(run, 1).items()} == {
+        "Datasets/human": "human_0000_Channels.pt",
+        "Datasets/dog": "dog_0000_Channels.pt",
+    }
+    assert phase_decoder_files(run, 2) == {}
+    (run / "human_0000_Channels.pt").unlink()
+    (run / "dog_0000_Channels.pt").unlink()
+    plain = load_run(run)
+    assert plain.hparams["pose_mlp"] == "none"
+    with pytest.raises(SkelagnosticError, match="not trained"):
+        plain.average_pose(torch.zeros(1, 4), 0)
+
+
+def test_the_authors_decoder_is_not_a_pose_for_decode(tmp_path: Path) -> None:
+    run = _with_characters(tmp_path)
+    loaded = load_run(run)
+    human = read_bvh(run / "human.bvh")
+    with pytest.raises(SkelagnosticError, match="their exporter's features"):
+        loaded.decode(loaded.encode(human), human.skeleton)
+    assert all(not g.name.startswith("pose_decoder") for g in loaded.export_graphs())
+
+
+def test_an_unsupported_decoder_activation_is_named(tmp_path: Path) -> None:
+    run = _copy_run(tmp_path)
+    args = run / "args.txt"
+    args.write_text(
+        args.read_text().replace(
+            "--activation_phase_decoder=LeakyReLU", "--activation_phase_decoder=ELU"
+        )
+    )
+    with pytest.raises(SkelagnosticError, match="--activation_phase_decoder=ELU"):
+        load_run(run)
+
+
+# ------------------------------------------------- skeletons, normalisation, the CLI
+
+
+def _chain(joints: int, fps: float, frames: int, seed: int) -> Motion:
+    """A walking chain of ``joints`` joints with smooth periodic rotations."""
+    names = [f"j{i}" for i in range(joints)]
+    offsets = [[0.0, 0.0, 0.0]] + [[0.0, 0.2, 0.05 * i] for i in range(1, joints)]
+    skeleton = Skeleton(names, [-1, *range(joints - 1)], offsets)
+    t = torch.arange(frames, dtype=torch.float64) / fps
+    g = torch.Generator().manual_seed(seed)
+    phase = torch.rand(joints, generator=g, dtype=torch.float64)
+    angle = 0.4 * torch.sin(2 * torch.pi * (1.5 * t[:, None] + phase))
+    rotations = torch.zeros(frames, joints, 4, dtype=torch.float64)
+    rotations[..., 0], rotations[..., 1] = torch.cos(angle / 2), torch.sin(angle / 2)
+    root = torch.stack([torch.zeros_like(t), torch.full_like(t, 1.0), 1.2 * t], dim=1)
+    return Motion(skeleton, rotations, root, fps)
+
+
+def _with_characters(tmp_path: Path) -> Path:
+    """The fixture run with ``human.bvh`` (5 joints), ``dog.bvh`` (4) and their statistics."""
+    run = _copy_run(tmp_path)
+    for name, joints, seed in (("human", 5, 0), ("dog", 4, 1)):
+        write_bvh(_chain(joints, 30.0, 90, seed), run / f"{name}.bvh")
+        np.savez(
+            run / f"{name}_normalization.npz",
+            mean=np.zeros(3 * joints),
+            std=np.full(3 * joints, 0.5),
+        )
+    return run
+
+
+def test_skeletons_and_normalisation_from_the_run_directory(tmp_path: Path) -> None:
+    run = _with_characters(tmp_path)
+    loaded = load_run(run)
+    human, dog = read_bvh(run / "human.bvh"), read_bvh(run / "dog.bvh")
+    assert loaded.dataset_of(human.skeleton) == 0 and loaded.dataset_of(dog.skeleton) == 1
+    assert torch.equal(loaded.characters[1].input_std, torch.full((12,), 0.5))
+    latent = loaded.encode(human)
+    assert latent.z.shape == (90, 4) and latent.fps == 30.0
+    (run / "dog_normalization.npz").unlink()
+    with pytest.raises(SkelagnosticError, match=r"dog_normalization\.npz is missing"):
+        load_run(run)
+    write_bvh(_chain(3, 30.0, 10, 0), run / "dog.bvh")
+    with pytest.raises(SkelagnosticError, match=r"dog\.bvh has 3 joints"):
+        load_run(run)
+
+
+def test_cli_transfer_and_load_aligner_read_authors_runs(tmp_path: Path, vqpae_cli) -> None:
+    from skelagnostic.plugins import load_aligner
+
+    run = _with_characters(tmp_path)
+    source = tmp_path / "walk.bvh"
+    write_bvh(_chain(5, 30.0, 120, 2), source)
+    target = tmp_path / "dog_walk.bvh"  # the fixture's dog runs at 0.2 Hz: 15 s of it
+    write_bvh(_chain(4, 30.0, 450, 3), target)
+    out = tmp_path / "out.bvh"
+    code = vqpae_cli(["transfer", str(source), str(target), f"ckpt=authors:{run}", f"out={out}"])
+    assert code == 0
+    result = read_bvh(out)
+    assert result.skeleton.num_joints == 4 and result.num_frames > 0
+    aligner = load_aligner("vqpae", f"authors:{run}")
+    assert aligner.dataset_names == ["human", "dog"] and not aligner.training
+    with pytest.raises(SkelagnosticError, match="no checkpoint reader 'nosuch'"):
+        load_aligner("vqpae", f"nosuch:{run}")
+    with pytest.raises(SkelagnosticError, match="takes no hyperparameter overrides"):
+        load_aligner("vqpae", f"authors:{run}", lr=1.0)
+
+
+def test_cli_evaluate_reads_an_authors_run(tmp_path: Path, vqpae_cli, capsys) -> None:
+    """``evaluate ckpt_path=authors:<dir>`` runs a protocol on the held-out clips of data=."""
+    run = _with_characters(tmp_path)
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    for k in range(5):
+        write_bvh(_chain(5, 30.0, 90, 10 + k), clips / f"human_{k}.bvh")
+        write_bvh(_chain(4, 30.0, 90, 20 + k), clips / f"dog_{k}.bvh")
+    code = vqpae_cli(
+        [
+            "evaluate",
+            f"ckpt_path=authors:{run}",
+            "data=bvh",
+            f"data.paths=[{clips}]",
+            "data.fps=30",
+            "protocol=vqpae.manifold",
+            f"run_dir={tmp_path / 'eval'}",
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert (tmp_path / "eval" / "evaluation.json").is_file()
+    code = vqpae_cli(
+        [
+            "validate",
+            f"ckpt_path=authors:{run}",
+            "data=bvh",
+            f"data.paths=[{clips}]",
+            f"run_dir={tmp_path / 'val'}",
+        ]
+    )
+    assert code == 1 and "read by evaluate and the inference verbs" in capsys.readouterr().err

@@ -23,6 +23,7 @@ from skelagnostic.representations import RootLocalVelocities
 
 
 def _dm(cache_dir: Path, **kwargs: object) -> VqpaeDataModule:
+    kwargs.setdefault("pair_seconds", 0.1)  # partner windows (the default is none)
     src = ProceduralSource(kinds=["biped22", "quadruped"], gaits=["walk"], clips_per_gait=2,
                            seconds=2.0)
     dm = VqpaeDataModule(src, fps=20, batch_size=4, cache_dir=cache_dir, **kwargs)

@@ -7,7 +7,7 @@ import math
 import lightning as L
 import pytest
 import torch
-from skelagnostic_vqpae.aligner import VqpaeAligner
+from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
 from skelagnostic_vqpae.evaluation import code_overlap, manifold_protocol, phase_line
 
 from skelagnostic.evaluation import held_out
@@ -35,7 +35,8 @@ def test_manifold_protocol_on_held_out_clips(helpers, tmp_path) -> None:
     L.seed_everything(0, verbose=False)
     dm = helpers["datamodule"](tmp_path / "cache")
     dm.test_fraction = 0.25
-    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000)
+    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000,
+                         **PREVIOUS_DEFAULTS)
     helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
     model.eval()
     held = held_out(dm)

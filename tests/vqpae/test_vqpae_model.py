@@ -11,6 +11,7 @@ from skelagnostic_vqpae.codebook import SharedCodebook
 from skelagnostic_vqpae.model import (
     VQPAE,
     AveragePoseMLP,
+    TemporalCentering,
     mason_phase,
     phase_manifold,
     relative_times,
@@ -95,7 +96,7 @@ class TestVQPAE:
         assert bool((p.phase > -0.5).all() and (p.phase <= 0.5).all())
 
     def test_layer_layout_follows_the_paper(self) -> None:
-        net = VQPAE(66, 61, 60.0)
+        net = VQPAE(66, 61, 60.0, freq_layers=5, phase_kernel=1)  # the paper's (not the defaults)
         convs = [m for m in net.encoder if isinstance(m, torch.nn.Conv1d)]
         assert [(c.in_channels, c.out_channels, c.kernel_size[0]) for c in convs] == [
             (66, 22, 23), (22, 10, 23)]
@@ -179,7 +180,7 @@ class TestFrequencyHead:
         # a latent whose timing signal is exactly ``y``: channel 0 carries it, the conv reads it
         with torch.no_grad():
             net.phase_conv.weight.zero_()
-            net.phase_conv.weight[0, 0, 0] = 1.0
+            net.phase_conv.weight[0, 0, net.phase_conv.kernel_size[0] // 2] = 1.0  # centre tap
             net.phase_conv.bias.zero_()
         latent = torch.zeros(len(y), net.latent, net.window)
         latent[:, 0] = y
@@ -232,10 +233,18 @@ class TestFrequencyHead:
 
 
 class TestAuthorsOptions:
-    """``phase_kernel`` and ``freq_hidden_elu``: the authors' timing branch, off by default."""
+    """``phase_kernel`` and ``freq_hidden_elu``: the authors' timing branch by default."""
 
-    def test_defaults_keep_the_kernel_1_conv_and_leaky_relu_mlp(self) -> None:
-        net = _net()
+    def test_defaults_are_the_authors_network(self) -> None:
+        net = VQPAE(9, 61, 60.0)
+        assert net.phase_conv.kernel_size == (23,) and net.phase_conv.padding_mode == "zeros"
+        assert net.encoder[0].padding_mode == "zeros" and net.spectrum == "power"
+        kinds = [type(m).__name__ for m in net.freq_mlp]
+        assert kinds == ["Linear", "LeakyReLU", "ELU"] * 6 + ["Linear"]  # n_layers_fft 7
+        assert any(isinstance(m, TemporalCentering) for m in net.decoder)
+
+    def test_paper_options_keep_the_kernel_1_conv_and_leaky_relu_mlp(self) -> None:
+        net = VQPAE(9, 61, 60.0, phase_kernel=1, freq_hidden_elu=False)
         assert net.phase_conv.kernel_size == (1,)
         assert not any(isinstance(m, torch.nn.ELU) for m in net.freq_mlp)
 

@@ -8,7 +8,7 @@ import math
 import lightning as L
 import pytest
 import torch
-from skelagnostic_vqpae.aligner import VqpaeAligner
+from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
 from skelagnostic_vqpae.evaluation import (
     OWN_RATE,
     UNSCALED,
@@ -92,7 +92,8 @@ def tiny_run(helpers, tmp_path):
     L.seed_everything(0, verbose=False)
     dm = helpers["datamodule"](tmp_path / "cache")
     dm.test_fraction = 0.3
-    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000)
+    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000,
+                         **PREVIOUS_DEFAULTS)
     helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
     return model.eval(), held_out(dm)
 
@@ -185,5 +186,10 @@ def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
     assert cfg.model.num_codes == 16 and cfg.model.lr == 1e-3 and cfg.model.pose_mlp == "none"
     assert cfg.data.source == "procedural" and cfg.data.fps == 30 and cfg.threads == 1
     assert cfg.trainer.max_time == "00:00:04:15" and cfg.trainer.max_epochs == -1
+    # the settings it was measured with: the previous defaults (vqpae_plus, the paper's head)
+    for key, value in PREVIOUS_DEFAULTS.items():
+        if key != "pose_mlp":
+            assert cfg.model[key] == value, key
+    assert cfg.data.pair_seconds == 0.1
     default = compose(["model=vqpae", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm)
     assert default.model.num_codes == 32 and default.data.fps == 60  # paper-size defaults

@@ -56,6 +56,7 @@ from skelagnostic.cli.runs import (
     reuse_run_config,
     run_of_overrides,
     summary_table,
+    value_of,
 )
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.data.datamodule import datamodule_options
@@ -365,12 +366,18 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     spec = pm.aligner(cfg.model.name)
     checkpoint: dict[str, Any] | None = None
     source_run: Path | None = None
-    if ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
+    external = pm.checkpoint_reader_of(ckpt) if ckpt else None
+    if external is not None and task != "evaluate":
+        raise ConfigError(f"ckpt_path={ckpt!r} (checkpoint reader {external[0].name!r}) is "
+                          f"read by evaluate and the inference verbs, not by {task}")
+    if external is not None:
+        pass  # read below, once the data are built
+    elif ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
         source_run = find_run_dir(ckpt)  # a run directory stands for its best/last checkpoint
         ckpt = str(checkpoint_of(ckpt))
         checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path",
                                      aligners=pm.aligner_classes())
-    if task == "evaluate" and checkpoint is None:
+    if task == "evaluate" and checkpoint is None and external is None:
         raise ConfigError("evaluate: give ckpt_path=<checkpoint or run directory> of the "
                           "trained model")
     if cfg.seed is not None and (not isinstance(cfg.seed, int) or isinstance(cfg.seed, bool)):
@@ -382,6 +389,12 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         torch.set_num_threads(threads)
     L.seed_everything(cfg.seed, workers=True)
     datamodule = build_datamodule(cfg, pm)
+    if external is not None:  # evaluate a model a plugin's reader builds, on cfg.data
+        from skelagnostic.cli.evaluate import evaluate_checkpoint
+
+        aligner = pm.read_external_checkpoint(ckpt, spec.name)
+        _save_config(cfg, run_dir)
+        return evaluate_checkpoint(cfg, pm, spec.module, datamodule, ckpt, aligner=aligner)
     recorded = read_split(source_run) if source_run is not None else None
     if recorded is not None and hasattr(datamodule, "recorded_splits"):
         datamodule.recorded_splits = recorded  # never evaluate on the run's training clips
@@ -729,8 +742,11 @@ def main(task: str, argv: Sequence[str]) -> int:
         ):
             ours.append("~model")  # --help / --cfg / --info work before a model is chosen
         saved = run_of_overrides(overrides)
+        external = pm.checkpoint_reader_of(value_of(overrides, "ckpt_path") or "")
         if saved is not None and not chosen_keys(overrides) & {"model", "experiment"}:
             ours.append(f"model={saved.model.name}")  # the run's aligner, e.g. for test
+        elif external is not None and not chosen_keys(overrides) & {"model", "experiment"}:
+            ours.append(f"model={external[0].model}")  # the model the reader builds
         ours += max_steps_overrides(overrides)
         hydra_args = [*flags, *ours, *overrides]
         if "--hydra-help" in flags:  # Hydra's own help: no app config, no overrides
@@ -749,7 +765,8 @@ def main(task: str, argv: Sequence[str]) -> int:
                 try:
                     metrics = run(cfg, pm)
                     ckpt = checkpoint_of(cfg.ckpt_path) if cfg.ckpt_path and task != "fit" \
-                        and cfg.ckpt_path not in _CKPT_ALIASES else None
+                        and cfg.ckpt_path not in _CKPT_ALIASES \
+                        and pm.checkpoint_reader_of(cfg.ckpt_path) is None else None
                     results.append((Path(cfg.run_dir), metrics, ckpt))
                 except (SkelagnosticError, MisconfigurationException, HydraException) as exc:
                     failures.append(exc)  # re-raised below, after Hydra cleaned up

@@ -26,7 +26,12 @@ __all__ = ["evaluate_checkpoint", "main", "print_evaluation", "protocols_text"]
 
 
 def evaluate_checkpoint(
-    cfg: DictConfig, pm: PluginManager, module: type, datamodule: Any, ckpt: str
+    cfg: DictConfig,
+    pm: PluginManager,
+    module: type,
+    datamodule: Any,
+    ckpt: str,
+    aligner: Any | None = None,
 ) -> dict[str, float]:
     """Load the checkpoint, run the protocol of ``cfg.protocol`` and write its report.
 
@@ -39,7 +44,10 @@ def evaluate_checkpoint(
         pm: Where the protocol is looked up.
         module: The aligner class of ``cfg.model.name``.
         datamodule: The data module built from ``cfg.data``.
-        ckpt: The checkpoint file.
+        ckpt: The checkpoint file (or the ``<scheme>:<path>`` of ``aligner``).
+        aligner: The aligner already built by a plugin's checkpoint reader
+            (``ckpt_path=<scheme>:<path>``; ``None``: load ``ckpt``). It is evaluated
+            on the held-out clips of ``cfg.data``.
 
     Returns:
         The model's mean figures, ``model/<metric>``.
@@ -50,8 +58,9 @@ def evaluate_checkpoint(
         EvaluationError: No held-out split, or the protocol found nothing to evaluate.
     """
     protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
-    aligner = load_checkpoint(module, ckpt, option="ckpt_path",
-                              aligners=pm.aligner_classes()).eval()
+    if aligner is None:
+        aligner = load_checkpoint(module, ckpt, option="ckpt_path",
+                                  aligners=pm.aligner_classes()).eval()
     held = held_out(datamodule)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

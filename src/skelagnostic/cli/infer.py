@@ -42,7 +42,8 @@ __all__ = ["interpolate", "keyframes_from_options", "load_from_checkpoint", "ret
            "transfer"]
 
 _COMMON = {
-    "ckpt": "checkpoint written by `skelagnostic fit` (required)",
+    "ckpt": "checkpoint written by `skelagnostic fit`, or <scheme>:<path> read by a "
+            "plugin's checkpoint reader (e.g. authors:<run dir>) (required)",
     "model": "registered aligner name; default: model.name of the run's config.yaml",
     "out": "output BVH path (required); written atomically",
     "render": "also draw input and result side by side (.gif, .mp4, .png or .html)",
@@ -88,10 +89,12 @@ def _usage(verb: str) -> str:
 
 
 def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
-    """Build the aligner saved in a ``skelagnostic fit`` checkpoint.
+    """Build the aligner saved in a ``skelagnostic fit`` checkpoint, or read by a plugin.
 
     Args:
-        ckpt: The checkpoint file.
+        ckpt: The checkpoint file, or ``<scheme>:<path>`` for a checkpoint reader a
+            plugin registered (``register_checkpoint_readers``; for example
+            ``authors:<run dir>`` of the VQ-PAE plugin), which also names the model.
         model: Registered aligner name; ``None`` reads ``model.name`` from the
             ``config.yaml`` of the run directory holding the checkpoint
             (``<run>/checkpoints/<file>.ckpt`` or ``<run>/<file>.ckpt``).
@@ -108,12 +111,15 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
     from skelagnostic.aligners.checkpoints import load_checkpoint, read_checkpoint
     from skelagnostic.plugins import get_plugin_manager
 
+    pm = get_plugin_manager()
+    external = pm.read_external_checkpoint(ckpt, model)
+    if external is not None:
+        return external
     path = Path(ckpt)
     if not path.is_file():
         read_checkpoint(path, option="ckpt")  # raises the "no checkpoint file" error
     if model is None:
         model = _model_name_near(path)
-    pm = get_plugin_manager()
     return load_checkpoint(pm.aligner(model).module, path, option="ckpt",
                            aligners=pm.aligner_classes()).eval()
 

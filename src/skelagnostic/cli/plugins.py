@@ -29,6 +29,7 @@ _KINDS = (
     ("data_preset", "data presets", "data="),
     ("dataset", "datasets", "data.source="),
     ("representation", "representations", "data.representation="),
+    ("checkpoint reader", "checkpoint readers", "ckpt=<scheme>:<path>"),
 )
 #: The capabilities ``skelagnostic plugins NAME`` always answers (label, capability).
 HEADLINE_CAPABILITIES = (

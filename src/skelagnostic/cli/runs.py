@@ -28,7 +28,7 @@ from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = ["RecordSplit", "checkpoint_of", "find_run_dir", "quiet_lightning", "read_split",
-           "reuse_run_config", "summary_table"]
+           "reuse_run_config", "summary_table", "value_of"]
 
 #: The resolved config a run writes.
 CONFIG_FILE = "config.yaml"
@@ -66,7 +66,8 @@ def checkpoint_of(path: str | Path) -> Path:
                             "checkpoints/best.ckpt or checkpoints/last.ckpt")
 
 
-def _value_of(overrides: Sequence[str], key: str) -> str | None:
+def value_of(overrides: Sequence[str], key: str) -> str | None:
+    """The value the command-line overrides give ``key`` (as text), if any."""
     for override in overrides:
         name, sep, _ = override.partition("=")
         if sep and name.lstrip("+") == key:
@@ -82,7 +83,7 @@ def chosen_keys(overrides: Sequence[str]) -> set[str]:
 
 def run_of_overrides(overrides: Sequence[str]) -> DictConfig | None:
     """The saved config of the run directory that ``ckpt_path=`` points into, if any."""
-    ckpt = _value_of(overrides, "ckpt_path")
+    ckpt = value_of(overrides, "ckpt_path")
     if not ckpt or "://" in ckpt or ckpt in ("last", "best", "hpc", "registry"):
         return None
     run_dir = find_run_dir(ckpt)
@@ -269,7 +270,7 @@ def max_steps_overrides(overrides: Sequence[str]) -> list[str]:
     """
     chosen = chosen_keys(overrides)
     if "trainer.max_steps" in chosen and "trainer.max_epochs" not in chosen:
-        value = _value_of(overrides, "trainer.max_steps")
+        value = value_of(overrides, "trainer.max_steps")
         if value is not None and re.fullmatch(r"\d+", value) and int(value) > 0:
             return ["trainer.max_epochs=-1"]
     return []

@@ -24,6 +24,7 @@ from skelagnostic.plugins.manager import (
     ENTRY_POINT_GROUP,
     LOAD_PLUGINS_ENV,
     AlignerSpec,
+    CheckpointReaderSpec,
     DatasetSpec,
     EvaluationSpec,
     PluginError,
@@ -43,6 +44,7 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "LOAD_PLUGINS_ENV",
     "AlignerSpec",
+    "CheckpointReaderSpec",
     "DatasetSpec",
     "EvaluationSpec",
     "PluginError",
@@ -91,7 +93,9 @@ def load_aligner(name: str, checkpoint: str | Path | None = None, **overrides: A
 
     Args:
         name: Registered aligner name (see :func:`list_aligners`).
-        checkpoint: A Lightning checkpoint written by ``skelagnostic fit``; ``None``
+        checkpoint: A Lightning checkpoint written by ``skelagnostic fit``, or
+            ``"<scheme>:<path>"`` read by a registered checkpoint reader (for example
+            ``"authors:<run dir>"``; ``overrides`` are then not accepted); ``None``
             builds an untrained aligner from the registered default config.
         **overrides: Keyword arguments replacing the default (or saved) hyper-parameters.
 
@@ -108,12 +112,20 @@ def load_aligner(name: str, checkpoint: str | Path | None = None, **overrides: A
             Python objects a safe load refuses, was written by another aligner or
             has a different architecture.
     """
-    spec = get_plugin_manager().aligner(name)
+    pm = get_plugin_manager()
+    spec = pm.aligner(name)
+    if checkpoint is not None:
+        external = pm.read_external_checkpoint(checkpoint, name)
+        if external is not None:
+            if overrides:
+                raise PluginError(f"checkpoint {str(checkpoint)!r}: a checkpoint reader takes no "
+                                  f"hyperparameter overrides, got {sorted(overrides)}")
+            return external
     if checkpoint is None:
         model = spec.module(**{**spec.config, **overrides})
     else:
         from skelagnostic.aligners.checkpoints import load_checkpoint
 
         model = load_checkpoint(spec.module, Path(checkpoint),
-                                aligners=get_plugin_manager().aligner_classes(), **overrides)
+                                aligners=pm.aligner_classes(), **overrides)
     return model.eval()

@@ -113,3 +113,19 @@ def register_evaluations(register: Callable[..., Any]) -> None:
     Args:
         register: The registration callback.
     """
+
+
+@hookspec
+def register_checkpoint_readers(register: Callable[..., Any]) -> None:
+    """Contribute readers of trained models that ``skelagnostic fit`` did not write.
+
+    Call ``register(scheme, reader, model, description="")`` once per reader:
+    the inference verbs then accept ``ckpt=<scheme>:<path>`` (for example
+    ``ckpt=authors:runs/human_dog`` for a run of a method's official code), and
+    build the aligner with ``reader(path)``, which returns it with its weights
+    loaded (an instance of the class registered as ``model``). ``scheme`` is a
+    lower-case word of two or more letters, digits or underscores.
+
+    Args:
+        register: The registration callback.
+    """

@@ -16,6 +16,7 @@ import importlib
 import importlib.util
 import inspect
 import os
+import re
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
@@ -40,7 +41,11 @@ BUILTIN_NAME = "skelagnostic"
 hookimpl = pluggy.HookimplMarker(ENTRY_POINT_GROUP)
 
 _HOOKS = ("register_aligners", "register_representations", "register_datasets",
-          "register_config_paths", "register_evaluations")
+          "register_config_paths", "register_evaluations", "register_checkpoint_readers")
+
+#: The ``<scheme>`` of ``ckpt=<scheme>:<path>`` (two characters or more, so a Windows drive
+#: letter is never one).
+CHECKPOINT_SCHEME = re.compile(r"[a-z][a-z0-9_]+")
 
 
 class PluginError(SkelagnosticError):
@@ -161,6 +166,25 @@ class EvaluationSpec:
     plugin: str = ""
 
 
+@dataclass(frozen=True)
+class CheckpointReaderSpec:
+    """A reader of ``ckpt=<scheme>:<path>`` contributed through ``register_checkpoint_readers``.
+
+    Attributes:
+        name: The scheme.
+        reader: ``reader(path: str) -> Aligner`` (weights loaded).
+        model: The aligner (``model=<name>``) it builds.
+        description: One line for ``skelagnostic plugins`` and the messages.
+        plugin: Name of the plugin that registered it.
+    """
+
+    name: str
+    reader: Callable[[str], Any]
+    model: str
+    description: str = ""
+    plugin: str = ""
+
+
 @dataclass
 class _Contributions:
     aligners: list[AlignerSpec] = field(default_factory=list)
@@ -168,6 +192,7 @@ class _Contributions:
     datasets: list[DatasetSpec] = field(default_factory=list)
     config_paths: list[tuple[str, str]] = field(default_factory=list)
     evaluations: list[EvaluationSpec] = field(default_factory=list)
+    checkpoint_readers: list[CheckpointReaderSpec] = field(default_factory=list)
 
 
 def _allowed_plugins() -> frozenset[str] | None:
@@ -351,6 +376,66 @@ class PluginManager:
         """Registered evaluation protocols by name."""
         return MappingProxyType({s.name: s for s in self._collect().evaluations})
 
+    @property
+    def checkpoint_readers(self) -> Mapping[str, CheckpointReaderSpec]:
+        """Registered readers of ``ckpt=<scheme>:<path>`` by scheme."""
+        return MappingProxyType({s.name: s for s in self._collect().checkpoint_readers})
+
+    def checkpoint_reader_of(self, ckpt: str | Path) -> tuple[CheckpointReaderSpec, str] | None:
+        """The registered reader and the path of ``ckpt = "<scheme>:<path>"``, else ``None``.
+
+        A value that names an existing file or directory is a path, whatever its form.
+
+        Raises:
+            PluginError: ``ckpt`` has the form ``<scheme>:<path>`` with an unregistered
+                scheme and is no existing path, or its path is empty (the message lists
+                the registered schemes).
+        """
+        text = str(ckpt)
+        scheme, sep, rest = text.partition(":")
+        if not sep or rest.startswith("//") or not CHECKPOINT_SCHEME.fullmatch(scheme):
+            return None
+        if Path(text).exists():
+            return None
+        known = ", ".join(f"{s.name}: ({s.model}) {s.description}"
+                          for s in self.checkpoint_readers.values()) or "none"
+        spec = self.checkpoint_readers.get(scheme)
+        if spec is None:
+            raise PluginError(f"checkpoint {text!r}: no checkpoint reader {scheme!r} is "
+                              f"registered (readers: {known})")
+        if not rest:
+            raise PluginError(f"checkpoint {text!r}: give the path after '{scheme}:'")
+        return spec, rest
+
+    def read_external_checkpoint(self, ckpt: str | Path, model: str | None = None) -> Any | None:
+        """The aligner a registered reader builds from ``ckpt = "<scheme>:<path>"``, else ``None``.
+
+        Args:
+            ckpt: The checkpoint argument as the user gave it.
+            model: The aligner name the user asked for (``None``: the reader's).
+
+        Returns:
+            The aligner in eval mode, or ``None`` when ``ckpt`` is a plain path.
+
+        Raises:
+            PluginError: See :meth:`checkpoint_reader_of`; also when ``model`` is not
+                the reader's model, or the reader returned something else than it.
+        """
+        found = self.checkpoint_reader_of(ckpt)
+        if found is None:
+            return None
+        spec, path = found
+        if model is not None and model != spec.model:
+            raise PluginError(f"checkpoint {str(ckpt)!r} is read as model={spec.model} (plugin "
+                              f"{spec.plugin!r}), not model={model}")
+        cls = self.aligner(spec.model).module
+        aligner = spec.reader(path)
+        if not isinstance(aligner, cls):
+            raise PluginError(f"checkpoint reader {spec.name!r} (plugin {spec.plugin!r}) returned "
+                              f"{type(aligner).__name__}, not the {cls.__name__} of "
+                              f"model={spec.model}")
+        return aligner.eval()
+
     def evaluation(self, name: str | None, model: str) -> EvaluationSpec:
         """The protocol ``name`` of aligner ``model`` (None: ``model``'s default protocol).
 
@@ -408,6 +493,7 @@ class PluginManager:
                 ("representation", mine.representations),
                 ("dataset", mine.datasets),
                 ("evaluation", mine.evaluations),
+                ("checkpoint reader", mine.checkpoint_readers),
             ):
                 for item in items:
                     if (kind, item.name) in owners:
@@ -423,6 +509,7 @@ class PluginManager:
             total.datasets += mine.datasets
             total.config_paths += mine.config_paths
             total.evaluations += mine.evaluations
+            total.checkpoint_readers += mine.checkpoint_readers
             config_urls = [path for path, _ in mine.config_paths]
             if name == BUILTIN_NAME:
                 config_urls.insert(0, "pkg://skelagnostic.conf")
@@ -678,8 +765,23 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
                                               _first_line(function.__doc__), bool(default),
                                               plugin_name))
 
+    def register_checkpoint_reader(scheme: str, reader: Callable[[str], Any], model: str,
+                                   description: str = "") -> None:
+        if not isinstance(scheme, str) or not CHECKPOINT_SCHEME.fullmatch(scheme):
+            raise PluginError(f"checkpoint reader {scheme!r}: the scheme must be a lower-case "
+                              "word of two or more letters, digits or underscores")
+        if not callable(reader):
+            raise PluginError(f"checkpoint reader {scheme!r}: reader must be callable, "
+                              f"got {reader!r}")
+        if not isinstance(model, str) or not model:
+            raise PluginError(f"checkpoint reader {scheme!r}: model must be an aligner name, "
+                              f"got {model!r}")
+        out.checkpoint_readers.append(CheckpointReaderSpec(
+            scheme, reader, model, description or _first_line(reader.__doc__), plugin_name))
+
     callbacks = {
         "register_aligners": register_aligner,
+        "register_checkpoint_readers": register_checkpoint_reader,
         "register_evaluations": register_evaluation,
         "register_representations": register_representation,
         "register_datasets": register_dataset,

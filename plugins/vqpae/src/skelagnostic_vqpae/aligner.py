@@ -12,9 +12,15 @@ backward pass, before the optimiser step, as in the paper).
 
 Optimiser: AdamW (lr 1e-4, weight decay 1e-4) with cosine annealing and warm
 restarts every ``restart_period`` epochs (period doubling, ``restart_mult`` 2),
-stepped per batch like the authors' ``CyclicLRWithRestarts``; the pose MLPs
-have their own parameter group (lr 1e-3, no weight decay; the authors use a
-separate Adam with a constant rate).
+stepped per batch. ``schedule="authors"`` (default) is the authors'
+``CyclicLRWithRestarts`` (:mod:`~skelagnostic_vqpae.schedule`: an epoch is one pass
+over the smallest dataset, a 1e-7 floor, normalised weight decay annealed with
+the rate) and keeps the pose MLPs' rate constant (lr 1e-3, no weight decay: the
+authors' separate Adam); ``"cosine"`` is PyTorch's ``CosineAnnealingWarmRestarts``
+over the data module's epochs, on every group.
+
+The defaults are the authors' training (``train_vq.py``); :data:`PLUS_OPTIONS`
+are skelagnostic's changes, enabled together by ``experiment=vqpae_plus``.
 
 Validation logs ``val/loss``, ``val/rec``, the manifold overlap of the
 validation codes (``val/usage``, ``val/overlap``, ``val/overlap/<dataset>``),
@@ -55,13 +61,41 @@ if TYPE_CHECKING:
 
     from skelagnostic.callbacks import SummaryContent
 
-__all__ = ["DatasetSpec", "VqpaeAligner"]
+__all__ = ["PLUS_OPTIONS", "PREVIOUS_DEFAULTS", "SCHEDULES", "DatasetSpec", "VqpaeAligner"]
 
 POSE_MODES = ("none", "detached", "joint")
 #: What the phase-rate loss trains (``model.phase_rate_grad``).
 PHASE_RATE_GRADS = ("network", "timing", "head")
 
-#: Per dataset: ``{"channels", "window", "fps", "skeleton" (Skeleton.to_dict())}``.
+#: Learning-rate schedules (``model.schedule``).
+SCHEDULES = ("authors", "cosine")
+
+#: skelagnostic's changes to the authors' training, enabled together by
+#: ``experiment=vqpae_plus`` (conf/experiment/vqpae_plus.yaml holds the same values; a test
+#: checks it). docs/reports/vqpae.md lists each with the authors' value and the reason.
+PLUS_OPTIONS: dict[str, Any] = {
+    "freq_layers": 5,
+    "decoder_centering": False,
+    "spectrum": "normalized",
+    "padding_mode": "replicate",
+    "frequency_head": "centroid_residual",
+    "phase_kernel": 1,
+    "freq_hidden_elu": False,
+    "center_windows": True,
+    "lambda_phase_rate": 1.0,
+    "reinit_squared_distance": False,
+    "pose_mlp": "detached",
+}
+
+#: The defaults before they became the authors' (with ``schedule="cosine"``): what a
+#: checkpoint lacking one of these hyperparameters was trained with, and what the presets
+#: written for them (``vqpae_main``, ``vqpae_human_dog``, ``vqpae_stylized``) still use.
+PREVIOUS_DEFAULTS: dict[str, Any] = {**PLUS_OPTIONS, "frequency_head": "mlp", "schedule": "cosine"}
+
+#: Per dataset: ``{"channels", "window", "fps", "skeleton" (Skeleton.to_dict())}``; a run
+#: of the authors' trainer (:mod:`~skelagnostic_vqpae.authors`) has no skeleton unless one
+#: is given, and with its phase decoders ``"pose_channels"`` (their output size) and
+#: ``"pose_features"`` (their feature names).
 DatasetSpec = Mapping[str, Any]
 
 
@@ -85,12 +119,13 @@ class _Character(nn.Module):
                  **pae_options: Any) -> None:
         super().__init__()
         channels, window = int(spec["channels"]), int(spec["window"])
+        pose = int(spec.get("pose_channels") or channels)  # an authors' phase decoder: more
         self.pae = VQPAE(channels, window, float(spec["fps"]), latent, **pae_options)
-        self.pose = AveragePoseMLP(latent, channels, pose_layers)
-        for name in ("input_mean", "pose_mean"):
-            self.register_buffer(name, torch.zeros(channels))
-        for name in ("input_std", "pose_std"):
-            self.register_buffer(name, torch.ones(channels))
+        self.pose = AveragePoseMLP(latent, pose, pose_layers)
+        self.register_buffer("input_mean", torch.zeros(channels))
+        self.register_buffer("input_std", torch.ones(channels))
+        self.register_buffer("pose_mean", torch.zeros(pose))
+        self.register_buffer("pose_std", torch.ones(pose))
         self.register_buffer("pose_fitted", torch.tensor(False))
 
 
@@ -129,29 +164,33 @@ class VqpaeAligner(Aligner):
         latent: ``d``, latent / phase-manifold channels (10).
         num_codes: Codebook size ``K`` (32 human-dog, 64 stylized).
         kernel_size: Encoder/decoder kernel (23).
-        freq_layers: Layers of the frequency MLP (5; the authors' code: 7).
+        freq_layers: Layers of the frequency MLP (7, the authors' ``--n_layers_fft``;
+            the paper: 5).
         amp_layers: Layers of the amplitude MLP (5).
-        decoder_centering: Temporal centering after the first decoder conv (authors' code).
-        spectrum: Frequency-MLP input, ``"normalized"`` or ``"power"`` (authors' code);
-            see :class:`~skelagnostic_vqpae.model.VQPAE`.
+        decoder_centering: Temporal centering after the first decoder conv (default
+            ``True``, the authors' code; the paper has ELU only).
+        spectrum: Frequency-MLP input, ``"power"`` (default, the authors' raw power
+            spectrum) or ``"normalized"``; see :class:`~skelagnostic_vqpae.model.VQPAE`.
         frequency_head: ``"mlp"`` (default, the paper) or ``"centroid_residual"``
             (the MLP corrects PAE's spectral centroid); see
             :class:`~skelagnostic_vqpae.model.VQPAE`. Checkpoints saved before this
             option existed load with ``"mlp"``.
-        padding_mode: Padding of the encoder/decoder convolutions: ``"replicate"``
-            (default) or ``"zeros"`` (PyTorch's default); see
+        padding_mode: Padding of the encoder/decoder convolutions: ``"zeros"``
+            (default, the authors' ``padding='same'``) or ``"replicate"``; see
             :class:`~skelagnostic_vqpae.model.VQPAE` and docs/reports/vqpae.md.
-        phase_kernel: Kernel of the timing branch's convolution (1; the authors' code: 23).
+        phase_kernel: Kernel of the timing branch's convolution (23, the authors'
+            code; the paper's Fig. 3: 1).
         freq_hidden_elu: ELU after every hidden LeakyReLU of the frequency MLP
-            (authors' code); see :class:`~skelagnostic_vqpae.model.VQPAE`.
+            (default ``True``, the authors' code); see :class:`~skelagnostic_vqpae.model.VQPAE`.
         center_windows: Reconstruct each window's deviation from its temporal mean
-            (default) instead of the window itself (the paper's ``L_rec``); the
-            manifold, a sum of sinusoids, cannot carry the mean except by a
-            degenerate frequency near 0 (see docs/reports/vqpae.md).
+            instead of the window itself (default ``False``: the window, the paper's
+            and the authors' ``L_rec``); the manifold, a sum of sinusoids, cannot
+            carry the mean except by a degenerate frequency near 0 (see
+            docs/reports/vqpae.md).
         beta: Commitment weight (0.25).
         lambda_vq: Weight of the codebook loss (1).
-        lambda_phase_rate: Weight of the phase-rate loss (1; not in the paper; 0
-            turns it off, as ``experiment=vqpae_human_dog`` does): the L1 distance, in
+        lambda_phase_rate: Weight of the phase-rate loss (default 0: off, as the
+            paper and the authors; ``experiment=vqpae_plus`` sets 1): the L1 distance, in
             Hz, between the predicted frequency of a training window (and of its
             partner ``data.pair_seconds`` later) and the rate at which the
             predicted pivot phase advances from the one to the other, the phase
@@ -166,13 +205,17 @@ class VqpaeAligner(Aligner):
         reinit: Re-initialise the codebook every step (``False``: ablation).
         reinit_decay: ``gamma`` of the usage EMA (0.99).
         reinit_eps: ``epsilon`` of Eq. 7 (1e-3).
-        reinit_squared_distance: Draw targets with the squared distance (authors' code).
+        reinit_squared_distance: Draw targets with the squared distance (default
+            ``True``, the authors' code; the paper's Eq. 6 has the distance).
         seed: Seed of the re-initialisation generator.
         lr: AdamW learning rate (1e-4).
         weight_decay: AdamW weight decay (1e-4).
         restart_period: Epochs of the first cosine cycle (10).
         restart_mult: Growth of the cycle length at each restart (2).
-        pose_mlp: ``"none"``, ``"detached"`` or ``"joint"`` (see the module docstring).
+        schedule: ``"authors"`` (default) or ``"cosine"`` (see the module docstring).
+            Checkpoints saved before this option existed resume with ``"cosine"``.
+        pose_mlp: ``"none"``, ``"detached"`` or ``"joint"`` (default: the authors'
+            phase decoders train with the VQ-PAE; see the module docstring).
         pose_layers: Layers of the average-pose MLP (8).
         pose_lr: Learning rate of the pose MLPs (1e-3).
         datasets: Dataset name -> :data:`DatasetSpec` (filled in by :meth:`setup`).
@@ -189,29 +232,30 @@ class VqpaeAligner(Aligner):
         latent: int = 10,
         num_codes: int = 32,
         kernel_size: int = 23,
-        freq_layers: int = 5,
+        freq_layers: int = 7,
         amp_layers: int = 5,
-        decoder_centering: bool = False,
-        spectrum: str = "normalized",
-        padding_mode: str = "replicate",
+        decoder_centering: bool = True,
+        spectrum: str = "power",
+        padding_mode: str = "zeros",
         frequency_head: str = "mlp",
-        phase_kernel: int = 1,
-        freq_hidden_elu: bool = False,
-        center_windows: bool = True,
+        phase_kernel: int = 23,
+        freq_hidden_elu: bool = True,
+        center_windows: bool = False,
         beta: float = 0.25,
         lambda_vq: float = 1.0,
-        lambda_phase_rate: float = 1.0,
+        lambda_phase_rate: float = 0.0,
         phase_rate_grad: str = "network",
         reinit: bool = True,
         reinit_decay: float = 0.99,
         reinit_eps: float = 1e-3,
-        reinit_squared_distance: bool = False,
+        reinit_squared_distance: bool = True,
         seed: int = 0,
         lr: float = 1e-4,
         weight_decay: float = 1e-4,
         restart_period: int = 10,
         restart_mult: int = 2,
-        pose_mlp: str = "detached",
+        schedule: str = "authors",
+        pose_mlp: str = "joint",
         pose_layers: int = 8,
         pose_lr: float = 1e-3,
         datasets: Mapping[str, DatasetSpec] | None = None,
@@ -219,6 +263,8 @@ class VqpaeAligner(Aligner):
         super().__init__()
         if pose_mlp not in POSE_MODES:
             raise SkelagnosticError(f"model.pose_mlp must be one of {POSE_MODES}, got {pose_mlp!r}")
+        if schedule not in SCHEDULES:
+            raise SkelagnosticError(f"model.schedule must be one of {SCHEDULES}, got {schedule!r}")
         if phase_rate_grad not in PHASE_RATE_GRADS:
             raise SkelagnosticError(f"model.phase_rate_grad must be one of {PHASE_RATE_GRADS}, "
                                     f"got {phase_rate_grad!r}")
@@ -289,18 +335,21 @@ class VqpaeAligner(Aligner):
             char.pose_std.copy_(pose.std.reshape(-1))
 
     def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
-        """Checkpoints from before an option existed were trained as the paper says.
+        """A checkpoint lacking an option was trained with that option's value of its time.
 
         Without ``frequency_head``: the paper's head; without ``lambda_phase_rate``:
-        no phase-rate loss (a resumed run keeps the objective it was trained with).
+        no phase-rate loss (a resumed run keeps the objective it was trained with);
+        without another key of :data:`PREVIOUS_DEFAULTS` (checkpoints written before
+        the defaults became the authors'): its previous default. The networks are
+        rebuilt when that changes their layout, before the weights are loaded.
         """
         saved = checkpoint.get("hyper_parameters", {})
-        if "frequency_head" not in saved:
-            self.hparams["frequency_head"] = "mlp"
-            for char in self.characters:
-                char.pae.frequency_head = "mlp"
-        if "lambda_phase_rate" not in saved:
-            self.hparams["lambda_phase_rate"] = 0.0
+        legacy = {**PREVIOUS_DEFAULTS, "lambda_phase_rate": 0.0}
+        changed = {k: v for k, v in legacy.items()
+                   if k not in saved and self.hparams.get(k) != v}
+        self.hparams.update(changed)
+        if changed and self.codebook is not None:
+            self._build({name: self.hparams["datasets"][name] for name in self.dataset_names})
 
     def _require_built(self) -> SharedCodebook:
         if self.codebook is None:
@@ -519,7 +568,7 @@ class VqpaeAligner(Aligner):
         self.predictions_path = path
 
     def configure_optimizers(self) -> Any:
-        """AdamW + cosine annealing with warm restarts (per step); pose MLPs in their own group."""
+        """AdamW + the schedule of ``model.schedule`` (per step); pose MLPs in their own group."""
         hp = self.hparams
         book = self._require_built()
         main = [p for c in self.characters for p in c.pae.parameters()] + [book.weight]
@@ -531,11 +580,36 @@ class VqpaeAligner(Aligner):
         # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
         fused = all(p.device.type in ("cpu", "cuda") for p in main)
         optimizer = torch.optim.AdamW(groups, fused=fused, foreach=None if fused else True)
-        steps = steps_per_epoch(self._trainer)
-        scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
-            optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult)
+        if hp.schedule == "authors":
+            from skelagnostic_vqpae.schedule import CyclicRestarts
+
+            epoch_size, batch_size = self._authors_epoch()
+            scheduler: Any = CyclicRestarts(optimizer, epoch_size, batch_size,
+                                            hp.restart_period, hp.restart_mult, groups=1)
+        else:
+            steps = steps_per_epoch(self._trainer)
+            scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
+                optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult)
         return {"optimizer": optimizer,
                 "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+
+    def _authors_epoch(self) -> tuple[int, int]:
+        """``(samples, batch size)`` of the authors' epoch: one pass over the smallest dataset.
+
+        Per rank under DDP. Without a data module's training windows (an aligner
+        trained by hand with a plain loader), the trainer's batches per epoch stand
+        for the samples, with one sample per batch.
+        """
+        trainer = self._trainer
+        dm = getattr(trainer, "datamodule", None) if trainer is not None else None
+        train = getattr(dm, "datasets", {}).get("train") if dm is not None else None
+        batch = getattr(dm, "batch_size", None)
+        if train and isinstance(batch, int) and batch > 0:
+            ranks = max(1, int(getattr(trainer, "world_size", 1)))
+            size = min(len(ds) for ds in train.values()) // ranks
+            if size >= batch:
+                return size, batch
+        return steps_per_epoch(trainer), 1
 
     def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
         """The manifold overlap and pictures of the fit summary (see :mod:`.fit_outputs`)."""
@@ -575,6 +649,42 @@ class VqpaeAligner(Aligner):
         return out
 
     @torch.no_grad()
+    def average_pose(self, points: Tensor, dataset: int | str) -> Tensor:
+        """The average-pose MLP (or the authors' phase decoder) at manifold points, denormalised.
+
+        Args:
+            points: ``[..., d]`` phase-manifold points.
+            dataset: Index or name of the dataset (character).
+
+        Returns:
+            ``[..., P]``: root-local joint positions ``[J * 3]`` for a skelagnostic model;
+            for an authors' run, their phase decoder's features (``pose_features`` of
+            the dataset's spec, concatenated).
+
+        Raises:
+            SkelagnosticError: No datasets yet, an unknown dataset, or its MLP was not trained.
+        """
+        k = self._dataset_index(dataset)
+        char = self.characters[k]
+        if not bool(char.pose_fitted):
+            raise SkelagnosticError(
+                f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not trained")
+        return char.pose(points.to(char.pose_mean)) * char.pose_std + char.pose_mean
+
+    def _dataset_index(self, dataset: int | str) -> int:
+        """Index of a dataset given by index or name (clear errors otherwise)."""
+        self._require_built()
+        if isinstance(dataset, str):
+            if dataset not in self.dataset_names:
+                raise SkelagnosticError(
+                    f"VqpaeAligner: unknown dataset {dataset!r}; known: {self.dataset_names}")
+            return self.dataset_names.index(dataset)
+        if 0 <= dataset < len(self.dataset_names):
+            return int(dataset)
+        raise SkelagnosticError(f"VqpaeAligner: dataset index {dataset} out of range "
+                                f"[0, {len(self.dataset_names)})")
+
+    @torch.no_grad()
     def embed_windows(self, x: Tensor, dataset: int | str) -> dict[str, Tensor]:
         """Embed normalised windows of one dataset (no grouping into clips).
 
@@ -592,17 +702,7 @@ class VqpaeAligner(Aligner):
         Raises:
             SkelagnosticError: No datasets yet, an unknown dataset, or ``x`` of the wrong shape.
         """
-        self._require_built()
-        if isinstance(dataset, str):
-            if dataset not in self.dataset_names:
-                raise SkelagnosticError(
-                    f"VqpaeAligner: unknown dataset {dataset!r}; known: {self.dataset_names}")
-            k = self.dataset_names.index(dataset)
-        elif 0 <= dataset < len(self.dataset_names):
-            k = int(dataset)
-        else:
-            raise SkelagnosticError(f"VqpaeAligner: dataset index {dataset} out of range "
-                                    f"[0, {len(self.dataset_names)})")
+        k = self._dataset_index(dataset)
         rec, p = self.forward_dataset(k, x.to(self.device))
         return {"phase": p.phase, "frequency": p.frequency, "code": p.code,
                 "amplitude": p.amplitude,
@@ -698,7 +798,7 @@ class VqpaeAligner(Aligner):
                           "preprocess": "resample to fps; the window of frame i holds frames "
                                         "i - pivot .. i + pivot (repeat the end frames at "
                                         "the clip edges)"}))
-            if bool(char.pose_fitted):
+            if bool(char.pose_fitted) and not spec.get("pose_features"):
                 graphs.append(ExportGraph(
                     f"pose_decoder_{stem}", Method(char.pose, "forward"),
                     (torch.zeros(2, self.hparams.latent).normal_(),), ("manifold",),
@@ -788,6 +888,12 @@ class VqpaeAligner(Aligner):
         """
         k = self.dataset_of(skeleton)
         char = self.characters[k]
+        features = self.hparams["datasets"][self.dataset_names[k]].get("pose_features")
+        if features:
+            raise SkelagnosticError(
+                f"VqpaeAligner: {self.dataset_names[k]!r} has the authors' phase decoder, which "
+                f"predicts their exporter's features {list(features)}, not root-local joint "
+                "positions: run it with average_pose() (skelagnostic_vqpae.authors)")
         if not bool(char.pose_fitted):
             raise SkelagnosticError(
                 f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not "

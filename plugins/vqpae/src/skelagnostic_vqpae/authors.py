@@ -8,8 +8,19 @@ The authors' ``train_vq.py`` (github PeizhuoLi/walk-the-dog) writes into its
   the state dict of that dataset's ``VQAE`` (``C`` = ``--phase_channels``);
 * per epoch, ``{E}_{C}Channels_VQ.pt``: the state dict of the shared
   ``ResidualVectorQuantizer``;
-* per epoch, the phase decoders (``{name}_{E-1:04d}_Channels.pt`` and ONNX
-  files), which predict the authors' Unity features and are not loaded here.
+* per epoch and dataset, with ``--train_phase_decoder=1`` (their default), the
+  phase decoder (``{name}_{E-1:04d}_Channels.pt``, ``name`` their dataset name,
+  which their trainer takes from the ``--load`` path, and an ONNX export):
+  a ``NormalizedMLP`` from a manifold point to the dataset's
+  ``--needed_channel_names_phase_decoder`` features (default
+  ``Velocities,Positions,Rotations`` of their Unity exporter), trained jointly
+  with the VQ-PAE. It is the paper's average-pose MLP (Sec. 5.2): the same
+  layers (``--n_layers_phase_decoder`` linear layers, LeakyReLU 0.2) as
+  :class:`~skelagnostic_vqpae.model.AveragePoseMLP`, so it loads into the
+  dataset's ``pose`` MLP, its output statistics into ``pose_mean``/``pose_std``
+  (its input statistics, ones and zeros in their trainer, are folded into the
+  first layer). Its outputs are their features, not skelagnostic's root-local
+  positions: :meth:`VqpaeAligner.average_pose` runs it, ``decode`` refuses it.
 
 :func:`load_run` reads the latest complete epoch into a
 :class:`~skelagnostic_vqpae.aligner.VqpaeAligner` configured to compute what
@@ -26,7 +37,21 @@ codebook columns are permuted on loading (:func:`authors_state_order`;
 
 Inputs are windows normalised as the authors' data loader does (their
 dataset's mean and standard deviation, which live with the dataset, not the
-run), so the loaded aligner has identity input statistics.
+run), so the loaded aligner has identity input statistics, and no skeleton:
+:meth:`VqpaeAligner.embed_windows` takes such windows. To run it on motions
+(``skelagnostic transfer ... ckpt=authors:<dir>``, ``evaluate``), put two files
+per dataset ``name`` into the run directory:
+
+* ``<name>.bvh``: a BVH file of that character whose joints, in file order, are
+  the joints of the network's input channels (three per joint); its hierarchy
+  becomes the dataset's skeleton (the motion in it is not used);
+* ``<name>_normalization.npz``: arrays ``mean`` and ``std`` (one value per input
+  channel) that normalise the features, ``(x - mean) / std``.
+
+The windows are then skelagnostic's :class:`~skelagnostic.representations.RootLocalVelocities`
+of the clips; they are what the authors' network saw only if their exporter's
+``Velocities`` are the same quantity in the same frame and units, which this
+loader cannot check.
 """
 
 from __future__ import annotations
@@ -46,6 +71,7 @@ from skelagnostic_vqpae.aligner import VqpaeAligner
 __all__ = [
     "authors_state_order",
     "load_run",
+    "phase_decoder_files",
     "read_args",
     "to_authors_state",
     "vqae_key_map",
@@ -53,6 +79,7 @@ __all__ = [
 
 _ARG = re.compile(r"--([A-Za-z_][A-Za-z0-9_]*)=(.*?)(?=\s+--[A-Za-z_][A-Za-z0-9_]*=|\s*$)")
 _NETWORK = re.compile(r"^(\d+)_(\d+)_(\d+)Channels\.pt$")
+_DECODER = re.compile(r"^(.+)_(\d{4})_Channels\.pt$")
 
 
 def read_args(path: str | Path) -> dict[str, str]:
@@ -194,6 +221,41 @@ def _check_options(args: Mapping[str, str], path: Path) -> None:
         )
 
 
+def phase_decoder_files(run_dir: str | Path, epoch: int) -> dict[str, Path]:
+    """The phase decoders of network epoch ``epoch`` in a run: load path -> file.
+
+    Their trainer writes the decoder of epoch ``E`` (1-based, as the networks'
+    files) as ``{name}_{E-1:04d}_Channels.pt``, ``name`` derived from the
+    dataset's ``--load`` path. A file belongs to the dataset whose lower-cased
+    load path contains its ``name`` (the longest such name when several do).
+
+    Args:
+        run_dir: The run's ``--save`` directory (its ``args.txt`` gives ``--load``).
+        epoch: The networks' epoch ``E``.
+
+    Returns:
+        ``--load`` entry -> decoder file, for the datasets that have one.
+
+    Raises:
+        SkelagnosticError: ``args.txt`` is missing or has no ``--load``.
+    """
+    run = Path(run_dir)
+    loads = [
+        part.strip()
+        for part in _option(read_args(run / "args.txt"), "load", str, run / "args.txt").split(",")
+    ]
+    found: dict[str, tuple[int, Path]] = {}
+    for f in sorted(run.iterdir()):
+        m = _DECODER.match(f.name)
+        if not m or int(m.group(2)) != epoch - 1:
+            continue
+        owners = [load for load in loads if m.group(1).lower() in load.lower()]
+        for load in owners:
+            if len(m.group(1)) > found.get(load, (-1, f))[0]:
+                found[load] = (len(m.group(1)), f)
+    return {load: path for load, (_, path) in found.items()}
+
+
 def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
     """Load an authors' ``train_vq.py`` run into a :class:`VqpaeAligner` (eval mode, CPU).
 
@@ -203,13 +265,16 @@ def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
 
     Returns:
         The aligner, one character per ``--load`` dataset, named after the
-        dataset directory (``Datasets/human`` -> ``human``). It has no skeletons
-        (the run does not store them) and no average-pose MLP.
+        dataset directory (``Datasets/human`` -> ``human``), with the phase decoders
+        of that epoch when the run has them (see the module docstring). Without
+        ``<name>.bvh`` and ``<name>_normalization.npz`` files in the run directory
+        a dataset has no skeleton and identity input statistics.
 
     Raises:
         SkelagnosticError: A file is missing or unreadable, an option is not
             supported, or a weight is missing, unexpected or of the wrong shape
-            (the message names the file and the key).
+            (the message names the file and the key); a skeleton's joints do not
+            match the channels, or its normalisation file is missing or malformed.
     """
     run = Path(run_dir)
     if not run.is_dir():
@@ -253,6 +318,34 @@ def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
             "fps": (grid.numel() - 1) / span,
         }
         states.append((path, state, grid))
+    loads = [part.strip() for part in _option(args, "load", str, args_path).split(",")]
+    decoder_files = phase_decoder_files(run, epoch)
+    decoders: dict[str, tuple[Path, dict[str, Tensor]]] = {}
+    for name, load in zip(names, loads, strict=True):
+        if load in decoder_files:
+            path = decoder_files[load]
+            decoders[name] = (path, _load(path))
+    pose_layers = _option(args, "n_layers_phase_decoder", int, args_path, default=8)
+    if decoders:
+        activation = args.get("activation_phase_decoder", "LeakyReLU")
+        if activation != "LeakyReLU":
+            raise SkelagnosticError(
+                f"authors' run: {args_path}: --activation_phase_decoder={activation} is not "
+                "supported (only LeakyReLU, their default, as skelagnostic's average-pose MLP)"
+            )
+        features = args.get(
+            "needed_channel_names_phase_decoder", "Velocities,Positions,Rotations"
+        ).split(",")
+        for name, (path, state) in decoders.items():
+            out = _tensor(state, "std_out", path)
+            specs[name]["pose_channels"] = int(out.numel())
+            specs[name]["pose_features"] = [f.strip() for f in features]
+    normalization = {}
+    for name in names:
+        skeleton, stats = _character_files(run, name, int(specs[name]["channels"]))
+        if skeleton is not None:
+            specs[name]["skeleton"] = skeleton
+            normalization[name] = stats
 
     book_path = run / f"{epoch}_{phases}Channels_VQ.pt"
     if not book_path.is_file():
@@ -283,15 +376,98 @@ def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
         weight_decay=_option(args, "weight_decay", float, args_path, default=1e-4),
         restart_period=_option(args, "restart_period", int, args_path, default=10),
         restart_mult=_option(args, "restart_mult", int, args_path, default=2),
-        pose_mlp="none",
+        schedule="authors",
+        pose_mlp="joint" if decoders else "none",
+        pose_layers=pose_layers,
+        pose_lr=_option(args, "lr_phase_decoder", float, args_path, default=1e-3),
         datasets=specs,
     )
     order = authors_state_order(latent)
     for (path, state, grid), char in zip(states, model.characters, strict=True):
         _copy_network(state, char.pae, key_map, order, n_state, path)
         char.pae.times.copy_(grid)
+    for name, char in zip(names, model.characters, strict=True):
+        if name in decoders:
+            _copy_decoder(*decoders[name], char, pose_layers)
+        if name in normalization:
+            char.input_mean.copy_(normalization[name][0])
+            char.input_std.copy_(normalization[name][1])
     _copy_codebook(book_state, model, order, book_path)
     return model.eval()
+
+
+def _character_files(
+    run: Path, name: str, channels: int
+) -> tuple[dict[str, Any] | None, tuple[Tensor, Tensor] | None]:
+    """The skeleton (``to_dict``) and input statistics of ``<name>.bvh`` and its ``.npz``."""
+    bvh = run / f"{name}.bvh"
+    if not bvh.is_file():
+        return None, None
+    from skelagnostic.io.bvh import read_bvh
+
+    skeleton = read_bvh(bvh).skeleton
+    if 3 * skeleton.num_joints != channels:
+        raise SkelagnosticError(
+            f"authors' run: {bvh} has {skeleton.num_joints} joints, but the network of "
+            f"dataset {name!r} takes {channels} channels ({channels / 3:g} joints x 3)"
+        )
+    stats_path = run / f"{name}_normalization.npz"
+    if not stats_path.is_file():
+        raise SkelagnosticError(
+            f"authors' run: {bvh} gives dataset {name!r} a skeleton, but {stats_path} is "
+            f"missing: save the input statistics there as arrays 'mean' and 'std' of "
+            f"{channels} values (numpy.savez)"
+        )
+    import numpy as np
+
+    with np.load(stats_path) as stats:
+        values = []
+        for key in ("mean", "std"):
+            if key not in stats.files or stats[key].size != channels:
+                raise SkelagnosticError(
+                    f"authors' run: {stats_path} needs an array {key!r} of {channels} values"
+                )
+            values.append(torch.as_tensor(stats[key], dtype=torch.float32).reshape(-1))
+    if not bool((values[1] > 0).all()):
+        raise SkelagnosticError(f"authors' run: {stats_path}: 'std' must be positive")
+    return skeleton.to_dict(), (values[0], values[1])
+
+
+def _copy_decoder(path: Path, state: Mapping[str, Tensor], char: Any, layers: int) -> None:
+    """An authors' phase decoder into ``char.pose`` and its output statistics."""
+    mlp = char.pose.net
+    linear = [i for i, m in enumerate(mlp) if isinstance(m, torch.nn.Linear)]
+    keys = {f"layers.{2 * j}.{p}" for j in range(layers) for p in ("weight", "bias")}
+    stats = {"std_in", "mean_in", "std_out", "mean_out"}
+    unexpected = sorted(set(state) - keys - stats)
+    missing = sorted(keys - set(state))
+    if unexpected or missing or len(linear) != layers:
+        raise SkelagnosticError(
+            f"authors' run: {path} is not a {layers}-layer phase decoder "
+            f"(--n_layers_phase_decoder): missing {missing}, unexpected {unexpected}"
+        )
+    new = {}
+    for j, index in enumerate(linear):
+        for p in ("weight", "bias"):
+            value = _tensor(state, f"layers.{2 * j}.{p}", path).float()
+            if value.shape != getattr(mlp[index], p).shape:
+                raise SkelagnosticError(
+                    f"authors' run: {path}: 'layers.{2 * j}.{p}' has shape {list(value.shape)}, "
+                    f"skelagnostic's average-pose MLP has {list(getattr(mlp[index], p).shape)}"
+                )
+            new[f"{index}.{p}"] = value
+    # their eval-mode input normalisation (x - mean_in) / std_in, folded into the first layer
+    std_in = _tensor(state, "std_in", path).float()
+    mean_in = _tensor(state, "mean_in", path).float()
+    first = f"{linear[0]}"
+    weight = new[f"{first}.weight"] / std_in
+    new[f"{first}.bias"] = new[f"{first}.bias"] - weight @ mean_in
+    new[f"{first}.weight"] = weight
+    mlp.load_state_dict(new)
+    with torch.no_grad():
+        char.pose_mean.copy_(_tensor(state, "mean_out", path).float().reshape(-1))
+        char.pose_std.copy_(_tensor(state, "std_out", path).float().reshape(-1))
+        char.pose_fitted.fill_(True)
 
 
 def _copy_network(

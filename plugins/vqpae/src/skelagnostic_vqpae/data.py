@@ -326,9 +326,10 @@ class VqpaeDataModule(MotionDataModule):
         std_floor: Lower bound of every channel's standard deviation, as a fraction of
             the dataset's mean channel standard deviation (0 turns the floor off).
         pair_seconds: Offset of the partner window every training window carries
-            (``max(1, round(fps * pair_seconds))`` frames; 0: none), which the
-            aligner's phase-rate loss needs (``model.lambda_phase_rate``). 0.1 s
-            keeps the phase advance between the two windows unambiguous up to 5 Hz.
+            (``max(1, round(fps * pair_seconds))`` frames; default 0: none, as the
+            authors), which the aligner's phase-rate loss needs
+            (``model.lambda_phase_rate``; ``experiment=vqpae_plus`` sets 0.1 s, which
+            keeps the phase advance between the two windows unambiguous up to 5 Hz).
         **kwargs: The other options of :class:`~skelagnostic.data.MotionDataModule`
             (``representation``: default :class:`RootLocalVelocities`; ``batch_size``:
             windows per batch and dataset, 32; ``cache_dir``: cache of the per-clip
@@ -348,7 +349,7 @@ class VqpaeDataModule(MotionDataModule):
         stride: int = 1,
         window_seconds: float | None = 1.0,
         std_floor: float = 0.01,
-        pair_seconds: float = 0.1,
+        pair_seconds: float = 0.0,
         **kwargs: Any,
     ) -> None:
         if "per_element_stats" in kwargs:

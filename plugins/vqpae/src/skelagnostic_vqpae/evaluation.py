@@ -122,12 +122,19 @@ def manifold_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
     codes = {n: torch.cat([e.code for e in embs]) for n, embs in by_character.items()}
     overlap = code_overlap(codes, num_codes)
     shared = set.intersection(*(set(c.tolist()) for c in codes.values()))
-    pose_ready = all(bool(c.pose_fitted) for c in aligner.characters)
+    specs = aligner.hparams["datasets"] or {}
+    authors = [n for n in aligner.dataset_names if (specs.get(n) or {}).get("pose_features")]
+    pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
     notes = [
         f"shared codes: {len(shared)} of {num_codes}, over the held-out clips of "
         f"{', '.join(by_character)}; chance = shared / K"
     ]
-    if not pose_ready:
+    if authors:
+        notes.append(
+            f"pose_mpjpe_cm omitted: the phase decoders of {', '.join(authors)} (an authors' "
+            "run) predict their exporter's features, not joint positions"
+        )
+    elif not pose_ready:
         notes.append(
             "pose_mpjpe_cm omitted: the average-pose MLPs are not trained (model.pose_mlp=none)"
         )

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import torch
 
+from skelagnostic.errors import SkelagnosticError
 from skelagnostic.metrics.functional import manifold_overlap
 
 if TYPE_CHECKING:
@@ -102,6 +103,9 @@ def transfer_summary(
         else ``metrics`` (the split, the source and database clip ids, per-clip
         rows and the per-method means), ``renders`` (``transfer``: the first clip,
         its transfer and the two baselines') and ``notes`` (a Markdown table).
+        When the transfer cannot run (for example a model whose frequencies have
+        periods longer than every database clip), ``metrics`` is ``{"skipped":
+        reason}``, no render, and the notes say why: the fit still succeeds.
     """
     from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
     from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_rows, transition_note
@@ -121,7 +125,11 @@ def transfer_summary(
     if not sources or not database:
         return {}
     excerpts = [c[: int(SUMMARY_TRANSFER_SECONDS * c.fps) + 1] for c in sources[:max_clips]]
-    rows, outputs = transfer_rows(aligner, excerpts, database)
+    try:
+        rows, outputs = transfer_rows(aligner, excerpts, database)
+    except SkelagnosticError as error:  # e.g. frequencies whose periods no clip holds
+        return {"metrics": {"skipped": str(error)}, "renders": {},
+                "notes": f"## Transfer of held-out clips\n\nNot run: {error}\n"}
     means = mean_rows(rows)
     source, target = aligner.dataset_names[0], aligner.dataset_names[1]
     lines = [

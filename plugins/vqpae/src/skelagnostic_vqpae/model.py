@@ -6,14 +6,19 @@ Shapes follow PyTorch's ``Conv1d`` layout: an input window is ``[B, C_in, T]``
 
 * encoder: two ``Conv1d`` (kernel 23, "same" padding, ``C_in -> C_in // 3 -> d``),
   each followed by :class:`TemporalCentering` and ELU (Fig. 2, supplement 2.1);
-* timing branch: ``Conv1d(d -> 1, kernel 1)`` (option ``phase_kernel``), the FFT
-  power spectrum of that signal through a 5-layer MLP for the frequency ``f`` (Fig. 3) and
+* timing branch: ``Conv1d(d -> 1)`` (kernel 23 as the authors' code, option
+  ``phase_kernel``; the paper's Fig. 3 draws kernel 1), the FFT power spectrum of that
+  signal through an MLP (7 layers as the authors, 5 in the paper) for the frequency ``f`` and
   :func:`mason_phase` for the pivot phase ``phi`` (supplement Eq. 1);
 * amplitude branch: temporal mean of the latent, a 5-layer MLP to the raw
   amplitude ``A~`` (size ``2d``), quantised by the shared codebook
   (:class:`~skelagnostic_vqpae.codebook.SharedCodebook`);
 * manifold: :func:`phase_manifold` of Eq. 1 with ``Phi = phi + f * t``;
-* decoder: two ``Conv1d`` (kernel 23, ELU between, ``d -> C_in // 3 -> C_in``).
+* decoder: two ``Conv1d`` (kernel 23, temporal centering and ELU between,
+  ``d -> C_in // 3 -> C_in``).
+
+The defaults compute what the authors' ``VQAE`` computes (zero "same" padding, raw
+power spectrum); the options hold skelagnostic's variants (``experiment=vqpae_plus``).
 
 :class:`AveragePoseMLP` is the per-dataset MLP of Sec. 5.2 (Eq. 10).
 """
@@ -213,18 +218,19 @@ class VQPAE(nn.Module):
         latent: ``d``, latent channels (10 in the paper).
         kernel_size: Kernel of the encoder/decoder convolutions (23).
         intermediate: Channels between the two convolutions (default ``C_in // 3``).
-        freq_layers: Layers of the frequency MLP (5 in the paper; the authors' code uses 7).
+        freq_layers: Layers of the frequency MLP (default 7, the authors' code; 5 in the paper).
         amp_layers: Layers of the amplitude MLP (5).
         decoder_centering: Also remove the temporal mean after the first decoder
-            convolution, as the authors' code does (the paper only has ELU there).
-        spectrum: Input of the frequency MLP. ``"normalized"`` (default): the power
-            spectrum of the centred signal divided by its sum, so the frequency
-            depends on the spectrum's shape only. ``"power"``: the raw powers (the
-            authors' code); the MLP is then driven by the signal's scale too, and on
-            our data the frequency diverged to thousands of Hz within a few hundred
-            steps (the decoder exploits aliased high-frequency sinusoids).
+            convolution (default ``True``, the authors' code; the paper only has ELU there).
+        spectrum: Input of the frequency MLP. ``"power"`` (default): the raw powers
+            of ``rfft(y) * 2 / T`` (the authors' code); the MLP is then driven by the
+            signal's scale too, and on our data the frequency diverged to thousands
+            of Hz within a few hundred steps (the decoder exploits aliased
+            high-frequency sinusoids). ``"normalized"``: the power spectrum of the
+            centred signal divided by its sum, so the frequency depends on the
+            spectrum's shape only.
         padding_mode: Padding of the encoder and decoder convolutions ("same"
-            length; default ``"replicate"``; the paper does not say).
+            length; default ``"zeros"``, the authors' code; the paper does not say).
             ``"zeros"`` (PyTorch's default) lets a kernel-23 convolution tell every
             frame's distance to the window edges, so the decoder can rebuild a
             window from its pivot manifold point without using the phase (a window
@@ -245,11 +251,11 @@ class VQPAE(nn.Module):
             codes between the characters (see docs/reports/vqpae.md), so it is
             not the default.
         phase_kernel: Kernel of the timing branch's ``Conv1d(d -> 1)`` (odd; default
-            1, the paper's Fig. 3; the authors' code uses the encoder's kernel,
-            23, with "same" padding of ``padding_mode``).
+            23, the authors' code, with "same" padding of ``padding_mode``; the
+            paper's Fig. 3: 1).
         freq_hidden_elu: Apply ELU after the LeakyReLU of every hidden layer of the
             frequency MLP, as the authors' ``MLP(..., last_activation=True)`` does
-            (default ``False``: LeakyReLU only, the paper's description).
+            (default ``True``; ``False``: LeakyReLU only, the paper's description).
 
     Raises:
         SkelagnosticError: A size is not positive, ``window`` is even or ``kernel_size`` even.
@@ -263,14 +269,14 @@ class VQPAE(nn.Module):
         latent: int = 10,
         kernel_size: int = 23,
         intermediate: int | None = None,
-        freq_layers: int = 5,
+        freq_layers: int = 7,
         amp_layers: int = 5,
-        decoder_centering: bool = False,
-        spectrum: str = "normalized",
-        padding_mode: str = "replicate",
+        decoder_centering: bool = True,
+        spectrum: str = "power",
+        padding_mode: str = "zeros",
         frequency_head: str = "mlp",
-        phase_kernel: int = 1,
-        freq_hidden_elu: bool = False,
+        phase_kernel: int = 23,
+        freq_hidden_elu: bool = True,
     ) -> None:
         super().__init__()
         if frequency_head not in FREQUENCY_HEADS:

@@ -84,3 +84,17 @@ def register_evaluations(register: Callable[..., Any]) -> None:
         "(frequency-scaled motion matching): gait-frequency error and smoothness vs "
         "unscaled motion matching",
     )
+
+
+@hookimpl
+def register_checkpoint_readers(register: Callable[..., Any]) -> None:
+    """``ckpt=authors:<dir>``: a run directory of the WalkTheDog authors' ``train_vq.py``."""
+    from skelagnostic_vqpae.authors import load_run
+
+    register(
+        "authors",
+        load_run,
+        model="vqpae",
+        description="a run directory of the WalkTheDog authors' train_vq.py "
+        "(skelagnostic_vqpae.authors.load_run)",
+    )

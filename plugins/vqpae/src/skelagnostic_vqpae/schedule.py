@@ -1,0 +1,145 @@
+r"""The WalkTheDog authors' learning-rate and weight-decay schedule (``model.schedule=authors``).
+
+Their ``train_vq.py`` trains with AdamW and ``CyclicLRWithRestarts`` (Loshchilov &
+Hutter, "Decoupled weight decay regularization", policy ``cosine``). Per
+optimiser step, with ``t`` the epoch position (epochs since the cycle's start
+plus the fraction of the epoch done, ``i / n`` for the ``i``-th batch, where
+``n`` is the batches per epoch, plus one when the dataset is not a whole number
+of batches) and ``P`` the cycle length in epochs:
+
+* $\eta = (1 + \cos(\pi t / P)) / 2$;
+* learning rate $\mathrm{lr}_{\min} + (\mathrm{lr} - \mathrm{lr}_{\min})\,\eta$ with
+  $\mathrm{lr}_{\min} = 10^{-7}$;
+* weight decay $w\,\eta\,\sqrt{b / (N P)}$ ("normalised" weight decay: ``b`` the batch
+  size, ``N`` the samples per epoch), applied as ``p <- p (1 - wd)``, not scaled by the
+  learning rate (PyTorch's ``AdamW`` multiplies it by the rate, so this schedule
+  sets the group's ``weight_decay`` to ``wd / lr``);
+* a cycle lasts ``P`` epochs, then ``P <- ceil(P * mult)``; the first step of a
+  restart epoch still belongs to the ending cycle (``t = P``: the minimum rate and no
+  weight decay), as in their scheduler.
+
+Their epoch is one pass over the smallest dataset.
+"""
+
+from __future__ import annotations
+
+import math
+
+from torch.optim import Optimizer
+from torch.optim.lr_scheduler import LRScheduler
+
+from skelagnostic.errors import SkelagnosticError
+
+__all__ = ["AUTHORS_MIN_LR", "CyclicRestarts", "cyclic_restart_factors"]
+
+#: The floor of the authors' learning rate (``CyclicLRWithRestarts(min_lr=1e-7)``).
+AUTHORS_MIN_LR = 1e-7
+
+
+def cyclic_restart_factors(
+    step: int, epoch_size: int, batch_size: int, period: int, mult: float
+) -> tuple[float, float]:
+    """``(eta, P)`` at optimiser step ``step`` (0-based) of the authors' schedule.
+
+    Args:
+        step: Optimiser steps taken before this one.
+        epoch_size: ``N``, samples per epoch (the smallest dataset's windows).
+        batch_size: ``b``, samples per step (incomplete batches are dropped).
+        period: Epochs of the first cycle.
+        mult: Growth of the cycle length at each restart.
+
+    Returns:
+        The cosine factor ``eta`` in ``[0, 1]`` and the cycle length ``P`` (epochs)
+        it was computed with (the weight decay's normalisation uses it).
+
+    Raises:
+        SkelagnosticError: ``epoch_size < batch_size`` or a non-positive argument.
+
+    Example:
+        >>> [round(cyclic_restart_factors(s, 64, 32, 1, 2)[0], 3) for s in range(6)]
+        [1.0, 0.5, 0.0, 0.854, 0.5, 0.146]
+    """
+    if batch_size <= 0 or period <= 0 or mult <= 0 or step < 0:
+        raise SkelagnosticError(
+            f"cyclic restarts: batch_size, period and mult must be positive and step >= 0, "
+            f"got {batch_size}, {period}, {mult}, {step}"
+        )
+    batches, rest = divmod(epoch_size, batch_size)
+    if batches == 0:
+        raise SkelagnosticError(
+            f"cyclic restarts: an epoch of {epoch_size} samples has no batch of {batch_size}"
+        )
+    fraction_steps = batches + (1 if rest else 0)  # their linspace(0, 1, batches + 1 or + 2)
+    epoch, i = divmod(step, batches)
+    start, length = 0, math.ceil(period)
+    while epoch >= start + length:
+        start, length = start + length, math.ceil(length * mult)
+    if start > 0 and epoch == start and i == 0:  # the restart epoch's first step: old cycle ends
+        previous = _previous_length(period, mult, start)
+        return 0.5 * (1.0 + math.cos(math.pi)), previous
+    t = epoch - start + i / fraction_steps
+    return 0.5 * (1.0 + math.cos(math.pi * t / length)), length
+
+
+def _previous_length(period: int, mult: float, start: int) -> int:
+    """Length of the cycle that ends at epoch ``start``."""
+    begin, length = 0, math.ceil(period)
+    while begin + length < start:
+        begin, length = begin + length, math.ceil(length * mult)
+    return length
+
+
+class CyclicRestarts(LRScheduler):
+    """The authors' schedule on the first ``groups`` parameter groups, stepped per batch.
+
+    Other groups (the average-pose MLPs, which the authors train with their own
+    constant-rate Adam) keep their rate and weight decay.
+
+    Args:
+        optimizer: A ``torch.optim.AdamW`` (decoupled weight decay ``p *= 1 - lr * wd``).
+        epoch_size: Samples per epoch (the smallest dataset's training windows).
+        batch_size: Samples per step and dataset.
+        period: Epochs of the first cycle (``--restart_period``, 10).
+        mult: Cycle growth (``--restart_mult``, 2).
+        groups: How many leading parameter groups follow the schedule.
+        min_lr: Floor of the rate.
+    """
+
+    def __init__(
+        self,
+        optimizer: Optimizer,
+        epoch_size: int,
+        batch_size: int,
+        period: int,
+        mult: float,
+        groups: int = 1,
+        min_lr: float = AUTHORS_MIN_LR,
+    ) -> None:
+        self.epoch_size, self.batch_size = int(epoch_size), int(batch_size)
+        self.period, self.mult, self.groups, self.min_lr = period, mult, groups, min_lr
+        cyclic_restart_factors(0, self.epoch_size, self.batch_size, period, mult)  # validates
+        self.base_weight_decays = [g["weight_decay"] for g in optimizer.param_groups]
+        super().__init__(optimizer)
+
+    def factors(self) -> tuple[float, float]:
+        """``(eta, P)`` of the coming optimiser step (:func:`cyclic_restart_factors`)."""
+        return cyclic_restart_factors(
+            self.last_epoch, self.epoch_size, self.batch_size, self.period, self.mult
+        )
+
+    def get_lr(self) -> list[float]:  # type: ignore[override]
+        """Learning rates of the coming step; sets the groups' weight decay too."""
+        eta, length = self.factors()
+        norm = math.sqrt(self.batch_size / (self.epoch_size * length))
+        rates = []
+        for k, (group, base) in enumerate(
+            zip(self.optimizer.param_groups, self.base_lrs, strict=True)
+        ):
+            if k >= self.groups:
+                rates.append(group["lr"])
+                continue
+            lr = self.min_lr + (base - self.min_lr) * eta
+            # their AdamW: p *= 1 - wd; torch's: p *= 1 - lr * wd
+            group["weight_decay"] = self.base_weight_decays[k] * eta * norm / lr
+            rates.append(lr)
+        return rates
