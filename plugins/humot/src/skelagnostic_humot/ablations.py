@@ -15,8 +15,9 @@ Every variant, the evaluated checkpoint itself (:data:`~skelagnostic.evaluation.
 and the ground-truth baselines of :func:`~skelagnostic_humot.evaluation.reconstruction`
 are then measured on the held-out clips: the reconstruction MPJPE on the clip's
 own template (Table 2), the temporal bone-length consistency of the reconstruction
-(Eq. 2; what the BLC loss targets) and the MPJPE of joint upsampling from half of
-the joints (Fig. 9; what subsampling trains for).
+(Eq. 2, over the bones of non-zero length; what the BLC loss targets) and the
+MPJPE of joint upsampling from half of the joints (Fig. 9; what subsampling
+trains for).
 """
 
 from __future__ import annotations
@@ -108,7 +109,13 @@ def _measure(model: HumotAligner, chunks: torch.Tensor, clip: Any) -> dict[str, 
     topo = model.topology(sk)
     pos, tmpl = prepare_chunks(chunks, topo, sk.up_axis)
     rec = _run(model, pos, tmpl, tmpl)
-    blc = bone_length_consistency(rec.double(), pos.double(), topo.skeleton.bones())
+    # Eq. 2 divides by the true length: bones of zero length (CMU's hip joints) are left out
+    bones = [
+        (p, c)
+        for p, c in topo.skeleton.bones()
+        if bool(((pos[..., c, :] - pos[..., p, :]).norm(dim=-1) > 1e-6).all())
+    ]
+    blc = bone_length_consistency(rec.double(), pos.double(), bones)
     up = upsampling_curve(model, chunks, topo, fractions=(0.5,), up_axis=sk.up_axis)
     return {
         "mpjpe_cm": 100 * float((rec - pos).norm(dim=-1).mean()),
