@@ -138,6 +138,8 @@ def test_evaluate_errors_name_the_way_out(
         ("protocol=other.nothing",): "protocol 'other.nothing' evaluates model=other, not "
         "model=example",
         ("model=other",): "is a checkpoint of model=example, this is model=other",
+        ("+protocol_options.steps=3",): "protocol_options: protocol 'example.reconstruction' "
+        "takes no option ['steps']; its options: none",
     }
     for extra, message in cases.items():
         assert cli.main(["evaluate", f"ckpt_path={fitted}", *extra]) == 1

@@ -18,7 +18,9 @@ from skelagnostic.errors import SkelagnosticError
 def model(pcmrl_tiny) -> PcmrlReconAligner:
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning, match="LHipJoint, RHipJoint, LowerBack"):
-        return PcmrlReconAligner(target="biped31", chunk=16, **pcmrl_tiny).eval()
+        # the floor- and heading-free frames of the CPU presets (off by default: not the paper's)
+        return PcmrlReconAligner(target="biped31", chunk=16, centre_up=True, canonical_yaw=True,
+                                 **pcmrl_tiny).eval()
 
 
 def test_paper_sized_encoder_pools_256_points_to_one_1024_vector() -> None:

@@ -1,15 +1,17 @@
 """``skelagnostic evaluate``: a registered protocol on the held-out clips of a run.
 
-``skelagnostic evaluate ckpt_path=RUN_OR_CKPT [protocol=NAME] [overrides]`` takes
-the model and data of the checkpoint's run (as ``validate`` and ``test`` do),
-loads the weights, collects the run's test clips (else its validation clips),
-runs the protocol (default: the model's default protocol) and writes
+``skelagnostic evaluate ckpt_path=RUN_OR_CKPT [protocol=NAME] [+protocol_options.KEY=VALUE]
+[overrides]`` takes the model and data of the checkpoint's run (as ``validate`` and
+``test`` do), loads the weights, collects the run's test clips (else its validation
+clips), runs the protocol (default: the model's default protocol; ``protocol_options``
+become its keyword arguments) and writes
 ``evaluation.json``, ``evaluation.md`` and plots into its own run directory
 (``runs/<model>/evaluate/<time>``); see :mod:`skelagnostic.evaluation`.
 """
 
 from __future__ import annotations
 
+import inspect
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -19,7 +21,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from skelagnostic.aligners.checkpoints import load_checkpoint
-from skelagnostic.evaluation import MODEL, held_out, write_evaluation
+from skelagnostic.evaluation import MODEL, EvaluationError, held_out, write_evaluation
 from skelagnostic.plugins import PluginManager
 
 __all__ = ["evaluate_checkpoint", "main", "print_evaluation", "protocols_text"]
@@ -40,7 +42,8 @@ def evaluate_checkpoint(
     hyperparameters, which include the layers an aligner builds from its data).
 
     Args:
-        cfg: The composed config (``model``, ``data``, ``protocol``, ``run_dir``).
+        cfg: The composed config (``model``, ``data``, ``protocol``, ``run_dir``, optional
+            ``protocol_options``: keyword arguments of the protocol function).
         pm: Where the protocol is looked up.
         module: The aligner class of ``cfg.model.name``.
         datamodule: The data module built from ``cfg.data``.
@@ -55,9 +58,11 @@ def evaluate_checkpoint(
     Raises:
         PluginError: Unknown protocol, or one of another model (the message lists the
             model's protocols).
-        EvaluationError: No held-out split, or the protocol found nothing to evaluate.
+        EvaluationError: No held-out split, the protocol found nothing to evaluate, or
+            ``protocol_options`` names an argument the protocol does not take.
     """
     protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
+    options = _protocol_options(cfg, protocol.name, protocol.function)
     if aligner is None:
         aligner = load_checkpoint(module, ckpt, option="ckpt_path",
                                   aligners=pm.aligner_classes()).eval()
@@ -65,7 +70,7 @@ def evaluate_checkpoint(
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     with torch.no_grad():
-        result = protocol.function(aligner, held, run_dir)
+        result = protocol.function(aligner, held, run_dir, **options)
     data = OmegaConf.to_container(cfg.data, resolve=True)
     report = write_evaluation(
         result,
@@ -79,6 +84,30 @@ def evaluate_checkpoint(
     )
     print_evaluation(report, run_dir)
     return {f"{MODEL}/{k}": v for k, v in report["mean"][MODEL].items()}
+
+
+def _protocol_options(cfg: DictConfig, name: str, function: Any) -> dict[str, Any]:
+    """``cfg.protocol_options`` as keyword arguments of ``function``, checked by its signature."""
+    raw = cfg.get("protocol_options")
+    if raw is None:
+        return {}
+    options = OmegaConf.to_container(raw, resolve=True) if isinstance(raw, DictConfig) else raw
+    if not isinstance(options, dict):
+        raise EvaluationError(f"protocol_options must be a mapping, got {options!r}")
+    params = inspect.signature(function).parameters
+    accepted = [
+        n
+        for n, p in list(params.items())[3:]
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    ]
+    takes_any = any(p.kind is p.VAR_KEYWORD for p in params.values())
+    unknown = sorted(set(options) - set(accepted))
+    if unknown and not takes_any:
+        raise EvaluationError(
+            f"protocol_options: protocol {name!r} takes no option {unknown}; its options: "
+            f"{accepted or 'none'}"
+        )
+    return dict(options)
 
 
 def print_evaluation(report: Mapping[str, Any], run_dir: Path) -> None:

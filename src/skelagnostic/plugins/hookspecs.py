@@ -106,7 +106,9 @@ def register_evaluations(register: Callable[..., Any]) -> None:
     :class:`~skelagnostic.evaluation.Evaluation`: ``aligner`` is the trained
     aligner (weights loaded, eval mode), ``held_out`` the
     :class:`~skelagnostic.evaluation.HeldOut` clips of the run's data, and
-    ``out_dir`` the directory for the protocol's plots. ``default=True`` marks
+    ``out_dir`` the directory for the protocol's plots; keyword arguments after
+    these three are the protocol's options (``+protocol_options.KEY=VALUE`` on the
+    command line). ``default=True`` marks
     the protocol ``evaluate`` runs when the command line names none (one per
     model).
 

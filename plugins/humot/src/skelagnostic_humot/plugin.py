@@ -66,7 +66,8 @@ def register_config_paths(register: Callable[..., Any]) -> None:
 
 @hookimpl
 def register_evaluations(register: Callable[..., Any]) -> None:
-    """Register ``humot.reconstruction`` (the default) and ``humot.retarget``."""
+    """Register ``humot.reconstruction`` (the default), ``humot.retarget``, ``humot.ablations``."""
+    from skelagnostic_humot.ablations import ablation_protocol
     from skelagnostic_humot.evaluation import reconstruction_protocol, retarget_protocol
 
     register(
@@ -83,4 +84,12 @@ def register_evaluations(register: Callable[..., Any]) -> None:
         model="humot",
         description="cycle retargeting error of held-out clips via another rig beside "
         "name-copy and primal-copy baselines; paired procedural retargeting",
+    )
+    register(
+        "humot.ablations",
+        ablation_protocol,
+        model="humot",
+        description="the paper's ablations (no joint subsampling, no bone-length loss) and the "
+        "full model retrained at an equal budget (+protocol_options.steps=N, default 200) on the "
+        "run's training clips, measured on held-out clips beside the checkpoint and baselines",
     )

@@ -83,7 +83,7 @@ INTERP_CONFIG: dict[str, Any] = {
     "interm_tokens": "zero",
     "canonical_heading": False,
     "lr": 1e-4,
-    "weight_decay": 0.01,
+    "weight_decay": 0.0,
     "warmup_steps": 10000,
     "w_root": 1.0,
     "w_foq": 1.0,

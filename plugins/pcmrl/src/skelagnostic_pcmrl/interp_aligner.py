@@ -68,8 +68,10 @@ class PcmrlInterpAligner(Aligner):
             model exactly heading-equivariant, so it need not learn every heading
             from data; in measured 15-minute CPU runs it did not change the result.
         lr: AdamW learning rate (paper 1e-4).
-        weight_decay: AdamW weight decay.
-        warmup_steps: Linear warm-up steps (paper 10000).
+        weight_decay: AdamW weight decay (0: the authors' ``train_inpainter.py`` uses Adam,
+            without decay).
+        warmup_steps: Linear warm-up steps (paper 10000). The learning rate then stays
+            at ``lr``; the authors' decays linearly to 0 at the last step.
         w_root: Weight of L1(root).
         w_foq: Weight of L1(FOQ).
         w_fk: Weight of L1(FK positions) (paper 0.1).
@@ -100,7 +102,7 @@ class PcmrlInterpAligner(Aligner):
         interm_tokens: str = "zero",
         canonical_heading: bool = False,
         lr: float = 1e-4,
-        weight_decay: float = 0.01,
+        weight_decay: float = 0.0,
         warmup_steps: int = 10000,
         w_root: float = 1.0,
         w_foq: float = 1.0,

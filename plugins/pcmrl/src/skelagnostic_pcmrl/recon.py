@@ -98,15 +98,19 @@ class PcmrlReconAligner(Aligner):
             ``trainer.max_steps`` (:func:`~skelagnostic_pcmrl.losses.authors_alpha`;
             500 in the authors' code; 0: ``alpha = 1`` throughout; no decay when
             ``trainer.max_steps`` is not set).
-        knn_reduction: ``"mean"`` (per point, neighbour and frame) or ``"sum"`` (Eq. 5 as is).
+        knn_reduction: ``"sum"`` (Eq. 5 as is) or ``"mean"`` (per point, neighbour and
+            frame: the same minimum at another scale, relative to ``lambda_q``).
         lambda_q: Weight of the unit-norm penalty (0.01).
         lambda_end: Weight of the end-effector loss (0: off; the paper's loss is optional).
-        lr: AdamW learning rate.
-        weight_decay: AdamW weight decay.
+        lr: AdamW learning rate (1e-4, the authors' ``config.json``; the paper gives none).
+        weight_decay: AdamW weight decay (0.01, the default of the authors' ``torch.optim.AdamW``).
         centre: Subtract the source cloud's (horizontal) centroid in every frame before
             encoding and add it back to the root (horizontal translation invariance:
             the network predicts the root relative to the cloud's centroid, so clips
-            of any length and position stay in the training distribution).
+            of any length and position stay in the training distribution). The paper
+            does not say; the authors subtract each window's mean point (all axes).
+        centre_up: With ``centre``, subtract the centroid's height too (not in the paper:
+            datasets disagree on the floor height).
         canonical_yaw: Also remove the heading: rotate every centred cloud about the
             up axis so that its left-minus-right direction
             (:func:`~skelagnostic_pcmrl.points.heading_frames`, from the body groups)
@@ -153,14 +157,14 @@ class PcmrlReconAligner(Aligner):
         knn_k: int = 8,
         knn_variant: str = "paper",
         knn_alpha_warmup: int = 500,
-        knn_reduction: str = "mean",
+        knn_reduction: str = "sum",
         lambda_q: float = 0.01,
         lambda_end: float = 0.0,
         lr: float = 1e-4,
-        weight_decay: float = 0.0,
+        weight_decay: float = 0.01,
         centre: bool = True,
-        centre_up: bool = True,
-        canonical_yaw: bool = True,
+        centre_up: bool = False,
+        canonical_yaw: bool = False,
         yaw_window: int = 15,
         chunk: int | None = None,
         target: str | None = None,
