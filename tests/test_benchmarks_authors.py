@@ -198,3 +198,19 @@ def test_authors_trainer_runs_and_is_timed(tmp_path: Path) -> None:
     )  # fmt: skip
     assert 0 < out["median_step_s"] < 60 and out["iterations_per_epoch"] >= 4
     assert rss > 0
+
+
+@pytest.mark.slow
+def test_authors_matching_kernel_picks_the_same_windows() -> None:
+    from benchmarks.harness import run_child
+
+    repo = walkthedog_checkout()
+    ours, _ = run_child(
+        "benchmarks.suites.matching:child_fast", frames=5000, query_frames=240, repeats=1
+    )
+    theirs, _ = run_child(
+        "benchmarks.suites.matching:child_authors",
+        frames=5000, query_frames=240, queries=4, repo=str(repo),
+    )  # fmt: skip
+    assert len(theirs["windows"]) == 4
+    assert theirs["windows"] == ours["windows"][:4]
