@@ -214,3 +214,19 @@ def test_authors_matching_kernel_picks_the_same_windows() -> None:
     )  # fmt: skip
     assert len(theirs["windows"]) == 4
     assert theirs["windows"] == ours["windows"][:4]
+
+
+def test_report_updates_a_named_block_and_leaves_the_main_one(tmp_path: Path) -> None:
+    from benchmarks.report import update
+
+    page = tmp_path / "page.md"
+    page.write_text(
+        "a\n<!-- benchmarks:start -->\nmain\n<!-- benchmarks:end -->\n"
+        "b\n<!-- benchmarks:authors:start -->\nold\n<!-- benchmarks:authors:end -->\nc\n"
+    )
+    update(page, "new\n", "authors")
+    text = page.read_text()
+    assert "main" in text and "old" not in text
+    assert "<!-- benchmarks:authors:start -->\nnew\n<!-- benchmarks:authors:end -->" in text
+    with pytest.raises(SystemExit, match="benchmarks:other:start"):
+        update(page, "x\n", "other")
