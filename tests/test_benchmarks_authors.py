@@ -230,3 +230,100 @@ def test_report_updates_a_named_block_and_leaves_the_main_one(tmp_path: Path) ->
     assert "<!-- benchmarks:authors:start -->\nnew\n<!-- benchmarks:authors:end -->" in text
     with pytest.raises(SystemExit, match="benchmarks:other:start"):
         update(page, "x\n", "other")
+
+
+#: Checkout of the PC-MRL authors' repository for the test that runs their stage 1.
+PCMRL_ENV = "SKELAGNOSTIC_PCMRL_REPO"
+
+
+def test_pcmrl_baseline_only_on_stage_1_and_absent_without_the_option(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, clean_env: None
+) -> None:
+    from benchmarks.suites import training_pcmrl
+
+    monkeypatch.setattr(training_pcmrl, "accelerators", lambda: ["cpu"])
+    monkeypatch.setattr(training_pcmrl, "run_child", lambda target, **kw: _fake_measure())
+    monkeypatch.setattr(training_pcmrl, "authors_stage1", pytest.fail)
+    assert all(r.baseline_value is None for r in training_pcmrl.run("smoke"))
+    export_authors_repos({"pcmrl": fake_checkout(tmp_path / "pc", "pcmrl")})
+    monkeypatch.setattr(
+        training_pcmrl, "authors_stage1", lambda repo, steps: ({"median_step_s": 0.5}, 900.0)
+    )
+    try:
+        by_name = {r.name: r for r in training_pcmrl.run("smoke")}
+    finally:
+        export_authors_repos({})
+    assert by_name["pcmrl_recon_steps_per_s"].speedup == pytest.approx(10.0)
+    assert by_name["pcmrl_recon_windows_per_s"].baseline_value == pytest.approx(32.0)
+    assert by_name["pcmrl_recon_peak_rss_mib"].baseline_value == 900.0
+    assert by_name["pcmrl_interp_steps_per_s"].baseline_value is None
+
+
+def test_pytorch3d_stand_ins_compute_the_definitions() -> None:
+    import torch
+    from benchmarks.suites.authors_pcmrl import (
+        euler_angles_to_matrix,
+        knn_gather,
+        knn_points,
+        matrix_to_quaternion,
+        sample_farthest_points,
+    )
+
+    gen = torch.Generator().manual_seed(0)
+    points = torch.randn(3, 40, 3, generator=gen)
+    picked, idx = sample_farthest_points(points, K=10)
+    for b in range(3):  # the greedy definition, one cloud at a time
+        chosen = [0]
+        closest = (points[b] - points[b, 0]).square().sum(-1)
+        while len(chosen) < 10:
+            chosen.append(int(closest.argmax()))
+            closest = torch.minimum(closest, (points[b] - points[b, chosen[-1]]).square().sum(-1))
+        assert idx[b].tolist() == chosen
+        assert torch.equal(picked[b], points[b, chosen])
+    knn = knn_points(picked, points, K=4)
+    brute = (picked[:, :, None] - points[:, None]).square().sum(-1)
+    assert torch.equal(knn.dists, brute.sort(-1).values[..., :4])
+    assert torch.equal(brute.gather(-1, knn.idx), knn.dists)
+    feats = torch.randn(3, 40, 5, generator=gen)
+    gathered = knn_gather(feats, knn.idx)
+    assert gathered.shape == (3, 10, 4, 5)
+    assert torch.equal(gathered[1, 2, 3], feats[1, knn.idx[1, 2, 3]])
+    angles = torch.randn(20, 3, generator=gen, dtype=torch.float64)
+    matrix = euler_angles_to_matrix(angles, "ZYX")
+    rz, ry, rx = (euler_angles_to_matrix(a, "XYZ") for a in (
+        torch.stack([torch.zeros(20), torch.zeros(20), angles[:, 0]], -1).double(),
+        torch.stack([torch.zeros(20), angles[:, 1], torch.zeros(20)], -1).double(),
+        torch.stack([angles[:, 2], torch.zeros(20), torch.zeros(20)], -1).double(),
+    ))  # fmt: skip
+    assert torch.allclose(matrix, rz @ ry @ rx)
+    assert torch.allclose(matrix.transpose(-1, -2) @ matrix, torch.eye(3, dtype=torch.float64))
+    q = matrix_to_quaternion(matrix)  # w, x, y, z: rotating by q is multiplying by the matrix
+    w, v = q[:, :1], q[:, 1:]
+    x = torch.randn(20, 3, generator=gen, dtype=torch.float64)
+    rotated = (
+        x
+        + 2 * w * torch.cross(v, x, dim=-1)
+        + 2 * torch.cross(v, torch.cross(v, x, dim=-1), dim=-1)
+    )
+    assert torch.allclose(rotated, (matrix @ x[..., None])[..., 0])
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_authors_stage1_runs_and_is_timed() -> None:
+    from benchmarks.harness import run_child, shared_data
+
+    path = os.environ.get(PCMRL_ENV)
+    if not path:
+        pytest.skip(f"set {PCMRL_ENV} to a checkout of github MiniEval/PC-MRL")
+    repo = authors.check_checkout("pcmrl", path)
+    root = shared_data("human/lafan1", "human/xia_cmu")
+    if root is None:
+        pytest.skip("needs the shared clips")
+    out, rss = run_child(
+        "benchmarks.suites.authors_pcmrl:train_stage1", repo=str(repo),
+        source=str(root / "human" / "lafan1" / "Lafan1_example.bvh"),
+        target=str(root / "human" / "xia_cmu" / "neutral_01_000.bvh"),
+        steps=1, batch_size=4, window=16,
+    )  # fmt: skip
+    assert out["median_step_s"] > 0 and out["parameters"] > 0 and rss > 0
