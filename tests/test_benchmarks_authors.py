@@ -323,7 +323,7 @@ def test_authors_stage1_runs_and_is_timed() -> None:
     out, rss = run_child(
         "benchmarks.suites.authors_pcmrl:train_stage1", repo=str(repo),
         source=str(root / "human" / "lafan1" / "Lafan1_example.bvh"),
-        target=str(root / "human" / "xia_cmu" / "neutral_01_000.bvh"),
+        target_skeleton=str(root / "human" / "xia_cmu" / "neutral_01_000.bvh"),
         steps=1, batch_size=4, window=16,
     )  # fmt: skip
     assert out["median_step_s"] > 0 and out["parameters"] > 0 and rss > 0

@@ -177,7 +177,7 @@ class _Stop(Exception):
 def train_stage1(
     repo: str,
     source: str,
-    target: str,
+    target_skeleton: str,
     steps: int,
     warmup: int = 1,
     batch_size: int = 16,
@@ -189,7 +189,7 @@ def train_stage1(
         repo: Checkout of github MiniEval/PC-MRL.
         source: A LaFAN1 BVH file: the training clip (their ``LaFANDataLoader``
             reads the directory it is linked into; 30 fps, as they subsample).
-        target: A CMU BVH file whose skeleton is the target (``cmu_skeleton``).
+        target_skeleton: A CMU BVH file whose skeleton is the target (``cmu_skeleton``).
         steps: Timed iterations.
         warmup: Untimed iterations first (at least 1).
         batch_size: Windows per step (their ``PC-MRL.batch_size``, default 12).
@@ -226,7 +226,7 @@ def train_stage1(
         try:
             (Path(tmp) / "ckpt_pc-mrl").mkdir()
             loaders = [LaFANDataLoader(str(clips), source, min_length=window)]
-            skeleton = CMUDataLoader.setup_skeleton(target, "cpu")
+            skeleton = CMUDataLoader.setup_skeleton(target_skeleton, "cpu")
             trainer = train_pointcloud.PointCloudTrainer(loaders, skeleton, cfg=cfg, device="cpu")
             train_pointcloud.print = mark
             try:

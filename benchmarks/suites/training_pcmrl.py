@@ -124,7 +124,7 @@ def authors_stage1(repo: Path, steps: int) -> tuple[dict[str, Any], float]:
         "benchmarks.suites.authors_pcmrl:train_stage1",
         repo=str(repo),
         source=str(root / "human" / "lafan1" / "walk4_subject1.bvh"),
-        target=str(root / "human" / "xia_cmu" / "neutral_01_000.bvh"),
+        target_skeleton=str(root / "human" / "xia_cmu" / "neutral_01_000.bvh"),
         steps=steps,
         batch_size=BATCH,
         window=64,
