@@ -6,7 +6,10 @@ Usage::
     python benchmarks/report.py results/*.json --update docs/performance.md
 
 ``--update`` replaces what lies between the ``<!-- benchmarks:start -->`` and
-``<!-- benchmarks:end -->`` lines of the file.
+``<!-- benchmarks:end -->`` lines of the file; with ``--block NAME``, between
+``<!-- benchmarks:NAME:start -->`` and ``<!-- benchmarks:NAME:end -->`` (a page can
+hold several generated blocks, e.g. ``--block authors`` for the comparison with
+the official code).
 """
 
 from __future__ import annotations
@@ -33,8 +36,12 @@ def render(reports: list[dict[str, Any]]) -> str:
             f"**Suite `{report['suite']}`**: {machine['cpu_count']} CPUs "
             f"({machine['processor']}), {machine['ram_gib']} GiB RAM"
             + (f", {threads} torch thread(s)" if threads else "")
-            + (f", load average {machine['load_average_start']:g} -> "
-               f"{machine['load_average_end']:g}" if "load_average_start" in machine else "")
+            + (
+                f", load average {machine['load_average_start']:g} -> "
+                f"{machine['load_average_end']:g}"
+                if "load_average_start" in machine
+                else ""
+            )
             + "; "
             + ", ".join(f"{name} {version}" for name, version in versions.items() if version)
             + "\n"
@@ -53,26 +60,37 @@ def render(reports: list[dict[str, Any]]) -> str:
     return "\n".join(parts)
 
 
-def update(path: Path, table: str) -> None:
-    """Replace the marked block of ``path`` with ``table``."""
+def markers(block: str | None) -> tuple[str, str]:
+    """The start and end lines of the generated block ``block`` (None: the main block)."""
+    if block is None:
+        return START, END
+    return f"<!-- benchmarks:{block}:start -->", f"<!-- benchmarks:{block}:end -->"
+
+
+def update(path: Path, table: str, block: str | None = None) -> None:
+    """Replace the marked block of ``path`` (the main one, or ``block``) with ``table``."""
+    start, end = markers(block)
     text = path.read_text()
-    if START not in text or END not in text:
-        raise SystemExit(f"{path}: no {START} ... {END} block to update")
-    head, rest = text.split(START, 1)
-    _, tail = rest.split(END, 1)
-    path.write_text(f"{head}{START}\n{table}{END}{tail}")
+    if start not in text or end not in text:
+        raise SystemExit(f"{path}: no {start} ... {end} block to update")
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    path.write_text(f"{head}{start}\n{table}{end}{tail}")
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("reports", nargs="+", type=Path, help="JSON files from run.py --json")
     parser.add_argument("--update", type=Path, default=None, help="Markdown file to update")
+    parser.add_argument(
+        "--block", default=None, help="generated block to update (default: the main one)"
+    )
     args = parser.parse_args(argv)
     table = render([json.loads(p.read_text()) for p in args.reports])
     if args.update is None:
         print(table)
     else:
-        update(args.update, table)
+        update(args.update, table, args.block)
     return 0
 
 

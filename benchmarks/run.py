@@ -5,6 +5,12 @@ Usage::
     python benchmarks/run.py --suite matching [--size smoke|default|large] [--json OUT]
                              [--threads N]
     python benchmarks/run.py --suite all --size smoke
+    python benchmarks/run.py --suite training --authors-repo walkthedog=DIR,pcmrl=DIR
+
+``--authors-repo`` names checkouts of the methods' official repositories; the
+suites that compare with them (``training``, ``matching``) then time the authors'
+code in the same run as the baseline of their rows (see ``benchmarks/authors.py``).
+Without it those baselines are absent (``null``).
 
 The JSON (read by external tooling; keep the format stable) is::
 
@@ -34,6 +40,11 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 if str(REPO_ROOT) not in sys.path:
     sys.path.insert(0, str(REPO_ROOT))
 
+from benchmarks.authors import (  # noqa: E402
+    AuthorsRepoError,
+    export_authors_repos,
+    parse_authors_repos,
+)
 from benchmarks.harness import (  # noqa: E402
     SIZES,
     THREADS_ENV,
@@ -116,7 +127,20 @@ def main(argv: list[str] | None = None) -> int:
         help="torch intra-op threads for every measurement (default: torch's choice); "
         "1 gives steadier figures on a busy machine",
     )
+    parser.add_argument(
+        "--authors-repo",
+        action="append",
+        default=[],
+        metavar="NAME=DIR[,NAME=DIR]",
+        help="checkouts of the official code to time in the same run as the baseline: "
+        "walkthedog=DIR (github PeizhuoLi/walk-the-dog), pcmrl=DIR (github MiniEval/PC-MRL)",
+    )
     args = parser.parse_args(argv)
+    try:
+        repos = parse_authors_repos(args.authors_repo)
+    except AuthorsRepoError as err:
+        parser.error(str(err))
+    export_authors_repos(repos)
     if args.threads is not None:
         os.environ[THREADS_ENV] = str(args.threads)
     apply_threads()
@@ -130,7 +154,10 @@ def main(argv: list[str] | None = None) -> int:
     report: dict[str, Any] = {
         "suite": args.suite,
         "machine": machine,
-        "versions": versions(baselines),
+        "versions": {
+            **versions(baselines),
+            **{f"{name} (official code)": str(path) for name, path in repos.items()},
+        },
         "results": [r.to_dict() for r in results],
     }
     if args.json is not None:

@@ -22,10 +22,12 @@ Each side runs in its own subprocess so the peak memory belongs to it alone.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import torch
 
+from benchmarks.authors import authors_repo
 from benchmarks.harness import Result, run_child, timeit_median
 
 SIZES: dict[str, list[int]] = {
@@ -42,6 +44,7 @@ FPS = 60.0
 FRAMES_PER_CLIP = 1000
 LAMBDA1, LAMBDA2 = 0.5, 1.0
 BASELINE = "authors' dense scan"
+AUTHORS_CODE = "authors' find_nn_separate (official code)"
 
 
 def _label(frames: int) -> str:
@@ -67,10 +70,22 @@ def _query(query_frames: int) -> dict[str, torch.Tensor]:
     return features
 
 
+def _current_rss_mib() -> float | None:
+    """Resident memory of this process now (MiB), from ``/proc``; None where unavailable."""
+    try:
+        for line in open("/proc/self/status").read().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
 def child_fast(frames: int, query_frames: int, repeats: int) -> dict[str, Any]:
     """Build + frequency-scaled matching with the exact bounded search."""
     from skelagnostic.matching import frequency_scaled_motion_matching
 
+    start_rss = _current_rss_mib()  # python, torch and skelagnostic loaded, no data yet
     db, index, _, build = _setup(frames)
     query = _query(query_frames)
     out: dict[str, Any] = {}
@@ -86,6 +101,7 @@ def child_fast(frames: int, query_frames: int, repeats: int) -> dict[str, Any]:
         "build_s": build,
         "database_bytes": db.nbytes + index.nbytes,
         "num_windows": index.num_windows,
+        "start_rss_mib": start_rss,
         "query_s": seconds / len(out["windows"]),
         "windows": out["windows"],
     }
@@ -108,22 +124,68 @@ def _loop_build_ms_per_window(db: Any, index: Any, count: int = 2000) -> float:
     return (time.perf_counter() - start) / count * 1000
 
 
-def child_naive(frames: int, query_frames: int, naive_queries: int) -> dict[str, Any]:
-    """The baseline: precomputed 600-D window features, dense brute-force scan per query."""
-    from skelagnostic.matching.windows import cycle_lengths, sample_frames
+def _dense_features(index: Any) -> torch.Tensor:
+    """``[W, samples * Dc]`` float32: every window's resampled control features, precomputed."""
+    from skelagnostic.matching.windows import sample_frames
 
-    db, index, _, _ = _setup(frames)
-    loop_ms = _loop_build_ms_per_window(db, index)
     starts, lengths, samples = index.starts, index.lengths, index.samples
-    dim = samples * index.control.shape[1]
-    table = torch.empty(index.num_windows, dim)
+    table = torch.empty(index.num_windows, samples * index.control.shape[1])
     for lo in range(0, index.num_windows, 16384):
         s, w = starts[lo : lo + 16384], lengths[lo : lo + 16384]
         resampled = sample_frames(index.control, s, w, samples, samples, s + w)
-        table[lo : lo + s.numel()] = resampled.reshape(s.numel(), dim)
-    start_pose = index.pose[starts]
-    next_pose = index.pose[starts + lengths]
-    period = lengths.float()
+        table[lo : lo + s.numel()] = resampled.reshape(s.numel(), -1)
+    return table
+
+
+def _replay(
+    db: Any,
+    index: Any,
+    query_frames: int,
+    count: int,
+    scan: Callable[[torch.Tensor, float, torch.Tensor | None], int],
+) -> tuple[list[int], list[float]]:
+    """Frequency-scaled matching of the benchmark query with ``scan`` as the search.
+
+    ``scan(q, t, pose)`` returns the window minimising Eq. 9 for the resampled query
+    window ``q``, its period ``t`` (frames) and the normalised start pose (``None``
+    for the first query). The first ``count`` queries are timed (the first one also
+    runs once untimed, as a warm-up).
+
+    Returns:
+        The chosen windows and the time of each search (seconds).
+    """
+    from skelagnostic.matching.windows import cycle_lengths, sample_frames
+
+    query = _query(query_frames)
+    control = db.normalize("manifold", query["manifold"])
+    periods = cycle_lengths(query["frequency"][:, 0], FPS)
+    last = torch.tensor([query_frames - 1])
+    next_pose = index.pose[index.starts + index.lengths]
+    samples = index.samples
+    chosen: list[int] = []
+    times: list[float] = []
+    i, pose = 0, None
+    while i < query_frames and len(chosen) < count:
+        t = periods[i : i + 1]
+        q = sample_frames(control, torch.tensor([i]), t, samples, samples, last).reshape(-1).float()
+        if not chosen:
+            scan(q, float(t), pose)  # warm-up
+        begin = time.perf_counter()
+        best = scan(q, float(t), pose)
+        times.append(time.perf_counter() - begin)
+        chosen.append(best)
+        pose = next_pose[best]
+        i += int(t)
+    return chosen, times
+
+
+def child_naive(frames: int, query_frames: int, naive_queries: int) -> dict[str, Any]:
+    """The baseline: precomputed 600-D window features, dense brute-force scan per query."""
+    db, index, _, _ = _setup(frames)
+    loop_ms = _loop_build_ms_per_window(db, index)
+    table = _dense_features(index)
+    start_pose = index.pose[index.starts]
+    period = index.lengths.float()
 
     def scan(q: torch.Tensor, t: float, pose: torch.Tensor | None) -> int:
         best_cost, best = float("inf"), -1
@@ -137,24 +199,7 @@ def child_naive(frames: int, query_frames: int, naive_queries: int) -> dict[str,
                 best_cost, best = float(cost[k]), lo + k
         return best
 
-    query = _query(query_frames)
-    control = db.normalize("manifold", query["manifold"])
-    periods = cycle_lengths(query["frequency"][:, 0], FPS)
-    last = torch.tensor([query_frames - 1])
-    chosen: list[int] = []
-    times: list[float] = []
-    i, pose = 0, None
-    while i < query_frames and len(chosen) < naive_queries:
-        t = periods[i : i + 1]
-        q = sample_frames(control, torch.tensor([i]), t, samples, samples, last).reshape(-1).float()
-        if not chosen:
-            scan(q, float(t), pose)  # warm-up
-        begin = time.perf_counter()
-        best = scan(q, float(t), pose)
-        times.append(time.perf_counter() - begin)
-        chosen.append(best)
-        pose = next_pose[best]
-        i += int(t)
+    chosen, times = _replay(db, index, query_frames, naive_queries, scan)
     table_bytes = sum(t.numel() * t.element_size() for t in (table, start_pose, period))
     return {
         "loop_build_ms": loop_ms,
@@ -164,9 +209,58 @@ def child_naive(frames: int, query_frames: int, naive_queries: int) -> dict[str,
     }
 
 
+def child_authors(frames: int, query_frames: int, queries: int, repo: str) -> dict[str, Any]:
+    """The authors' own matching kernel, ``find_nn_separate``, on the same database and queries.
+
+    Their database holds one row per window (``MotionMatchingDatabase.controls``,
+    built here from the same windows); their kernel returns the argmin of
+    ``||c - C|| + w_p ||p - P|| + w_f max(f / F, F / f)``. It is called as
+    ``offline_motion_matching.py`` calls it once per query, with each row laid out
+    as ``[C, sqrt(lambda2) t(k), sqrt(lambda1) J_k]`` and no separate pose or
+    frequency (``None``: those terms are 0), so its Euclidean norm is the square
+    root of Eq. 9's cost and its argmin is Eq. 9's. The first query has no start
+    pose: it is matched against the leading ``[C, t]`` columns (a view, no copy).
+    """
+    from benchmarks.suites.authors_walkthedog import find_nn
+
+    find_nn_separate = find_nn(repo)
+    db, index, _, _ = _setup(frames)
+    control = _dense_features(index)
+    dim = control.shape[1]
+    rows = torch.empty(index.num_windows, dim + 1 + index.pose.shape[1])
+    rows[:, :dim] = control
+    del control
+    rows[:, dim] = LAMBDA2**0.5 * index.lengths.float()
+    rows[:, dim + 1 :] = LAMBDA1**0.5 * index.pose[index.starts]
+    periods = index.lengths.float()
+
+    def scan(q: torch.Tensor, t: float, pose: torch.Tensor | None) -> int:
+        parts = [q[None], torch.tensor([[LAMBDA2**0.5 * t]])]
+        if pose is not None:
+            parts.append(LAMBDA1**0.5 * pose[None].float())
+        features = torch.cat(parts, dim=1)
+        nn, _, _ = find_nn_separate(
+            features, None, rows[:, : features.shape[1]], None, 0.0, None, periods, 0.0
+        )
+        return int(nn)
+
+    chosen, times = _replay(db, index, query_frames, queries, scan)
+    return {
+        "database_bytes": rows.numel() * rows.element_size(),
+        "query_s": sorted(times)[len(times) // 2],
+        "windows": chosen,
+    }
+
+
 def run(size: str) -> list[Result]:
-    """Run the suite at one size (``smoke``, ``default`` or ``large``)."""
+    """Run the suite at one size (``smoke``, ``default`` or ``large``).
+
+    With ``--authors-repo walkthedog=DIR`` it also times the authors' own kernel
+    (:func:`child_authors`) and adds ``query_ms_<N>_authors_code``,
+    ``identical_matches_authors_code_<N>`` and ``peak_rss_mib_<N>_authors_code``.
+    """
     settings = SETTINGS[size]
+    repo = authors_repo("walkthedog")
     results: list[Result] = []
     for frames in SIZES[size]:
         label = _label(frames)
@@ -184,6 +278,7 @@ def run(size: str) -> list[Result]:
         )
         compared = len(naive["windows"])
         same = sum(a == b for a, b in zip(fast["windows"], naive["windows"], strict=False))
+        database_mib = fast["database_bytes"] / 2**20
         results += [
             Result(f"query_ms_{label}", "ms", fast["query_s"] * 1e3, BASELINE,
                    naive["query_s"] * 1e3),
@@ -192,8 +287,44 @@ def run(size: str) -> list[Result]:
             Result(f"build_ms_per_window_{label}", "ms",
                    fast["build_s"] / fast["num_windows"] * 1e3,
                    "authors' per-window build", naive["loop_build_ms"]),
-            Result(f"database_mib_{label}", "MiB", fast["database_bytes"] / 2**20, BASELINE,
+            Result(f"database_mib_{label}", "MiB", database_mib, BASELINE,
                    naive["database_bytes"] / 2**20),
             Result(f"peak_rss_mib_{label}", "MiB", fast_rss, BASELINE, naive_rss),
+            Result(f"peak_rss_over_database_{label}", "ratio", fast_rss / database_mib),
         ]  # fmt: skip
+        if fast["start_rss_mib"] is not None:
+            results.append(
+                Result(
+                    f"rss_growth_over_database_{label}",
+                    "ratio",
+                    (fast_rss - fast["start_rss_mib"]) / database_mib,
+                )
+            )
+        if repo is not None:
+            theirs, theirs_rss = run_child(
+                "benchmarks.suites.matching:child_authors",
+                frames=frames,
+                query_frames=settings["query_frames"],
+                queries=settings["naive_queries"],
+                repo=str(repo),
+            )
+            same = sum(a == b for a, b in zip(fast["windows"], theirs["windows"], strict=False))
+            results += [
+                Result(
+                    f"query_ms_{label}_authors_code",
+                    "ms",
+                    fast["query_s"] * 1e3,
+                    AUTHORS_CODE,
+                    theirs["query_s"] * 1e3,
+                ),
+                Result(
+                    f"identical_matches_authors_code_{label}",
+                    "fraction",
+                    same / len(theirs["windows"]),
+                    higher_is_better=True,
+                ),
+                Result(
+                    f"peak_rss_mib_{label}_authors_code", "MiB", fast_rss, AUTHORS_CODE, theirs_rss
+                ),
+            ]
     return results

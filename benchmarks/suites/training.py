@@ -4,7 +4,8 @@ Runs each method's part in turn (each in a child process, as the parts do
 themselves) and concatenates their results:
 
 * ``benchmarks.suites.training_vqpae``: VQ-PAE windows/s with and without the
-  average-pose MLPs, against the authors' trainer's figures from the issue;
+  average-pose MLPs, against the authors' ``train_vq.py`` run in the same suite
+  when ``run.py --authors-repo walkthedog=DIR`` is given (absent otherwise);
 * ``benchmarks.suites.training_humot``: HuMoT steps/s, windows/s and the
   data-loading share of the paper-size network;
 * ``benchmarks.suites.training_pcmrl``: PC-MRL steps/s, windows/s and the
