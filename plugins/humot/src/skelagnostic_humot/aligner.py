@@ -89,6 +89,9 @@ class HumotAligner(Aligner):
         lr_period_epochs: Full period of the triangular cycle in epochs (paper: 10).
         betas: Adam betas (paper: 0.9, 0.999).
         chunk: Frames per chunk at inference (paper's training chunks: 30).
+        fast_path: Compute the network on the valid joints of each chunk only (packed
+            tokens); ``False`` runs the padded computation, same values and gradients to
+            float rounding, kept as the benchmarks' same-run baseline.
 
     Raises:
         SkelagnosticError: A hyper-parameter is out of range (the message names it).
@@ -103,7 +106,7 @@ class HumotAligner(Aligner):
                  lambda_blc: float = 0.5, subsampling: bool = True, p_major: float = 0.1,
                  p_other: float = 0.5, lr_min: float = 1e-5, lr_max: float = 1e-4,
                  lr_period_epochs: float = 10.0, betas: Sequence[float] = (0.9, 0.999),
-                 chunk: int = 30) -> None:
+                 chunk: int = 30, fast_path: bool = True) -> None:
         super().__init__()
         checks = (("dim", dim > 0 and dim % heads == 0, "a positive multiple of heads"),
                   ("lambda_blc", lambda_blc >= 0, ">= 0"),
@@ -117,7 +120,8 @@ class HumotAligner(Aligner):
             if not ok:
                 raise SkelagnosticError(f"model.{name} must be {what}, got {locals()[name]!r}")
         self.save_hyperparameters()
-        self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale)
+        self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale,
+                         fast_path)
         self._topologies: dict[tuple[Any, ...], Topology] = {}
 
     # ----------------------------------------------------------------- topology

@@ -5,6 +5,13 @@ Shapes: motions are ``[B, F, J, 3]`` joint positions (frames first, like
 ``[B, F, Z]``. Batches may mix joint counts: pass a ``mask`` ``[B, J]`` whose
 valid joints come first (padding last); padded joints do not influence the
 valid ones (see :mod:`skelagnostic_humot.xcit`).
+
+With ``fast_path=True`` (the default) the XCiT blocks, and the decoder's
+output layers, compute on the valid tokens only (packed, see
+:class:`~skelagnostic_humot.xcit.TokenLayout`); ``fast_path=False`` keeps the
+padded computation. Both give the same values and gradients (to float
+rounding); the fast path does not spend time on the padding of mixed joint
+counts, which stochastic joint subsampling makes about a fifth of the grid.
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ from itertools import pairwise
 import torch
 from torch import nn
 
-from skelagnostic_humot.xcit import XCiTBlock
+from skelagnostic_humot.xcit import TokenLayout, XCiTBlock
 
 __all__ = [
     "HuMoT",
@@ -27,15 +34,17 @@ __all__ = [
 ]
 
 
-def temporal_positional_encoding(frames: int, dim: int, device: torch.device | None = None,
-                                 dtype: torch.dtype = torch.float32) -> torch.Tensor:
+def temporal_positional_encoding(
+    frames: int, dim: int, device: torch.device | None = None, dtype: torch.dtype = torch.float32
+) -> torch.Tensor:
     """Sinusoidal encoding of the frame index (Vaswani et al. 2017), ``[frames, dim]``.
 
     Channel ``2i`` is ``sin(t / 10000^(2i/dim))``, channel ``2i+1`` the cosine.
     """
     t = torch.arange(frames, device=device, dtype=torch.float64)[:, None]
-    freq = torch.exp(-math.log(10000.0) * torch.arange(0, dim, 2, device=device,
-                                                        dtype=torch.float64) / dim)
+    freq = torch.exp(
+        -math.log(10000.0) * torch.arange(0, dim, 2, device=device, dtype=torch.float64) / dim
+    )
     pe = torch.zeros(frames, dim, device=device, dtype=torch.float64)
     pe[:, 0::2] = torch.sin(t * freq)
     pe[:, 1::2] = torch.cos(t * freq)[:, : dim // 2]
@@ -90,12 +99,23 @@ class HuMoTEncoder(nn.Module):
         kernel_size: Temporal kernel of the Conv1d layers (not given by the paper).
         mlp_ratio: XCiT MLP width ratio.
         layer_scale: Initial XCiT layer scale.
+        fast_path: Compute the blocks on the valid tokens only (same values).
     """
 
-    def __init__(self, dim: int = 128, latent: int = 128, blocks: int = 4, heads: int = 8,
-                 kernel_size: int = 5, mlp_ratio: float = 4.0, layer_scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        dim: int = 128,
+        latent: int = 128,
+        blocks: int = 4,
+        heads: int = 8,
+        kernel_size: int = 5,
+        mlp_ratio: float = 4.0,
+        layer_scale: float = 1.0,
+        fast_path: bool = True,
+    ) -> None:
         super().__init__()
         self.dim = dim
+        self.fast_path = fast_path
         self.template_mlp = _mlp([3, 16, 32, 64], nn.ELU, last_act=True)
         self.motion_cnn = _conv_stack([3, 3, 16, 32, 64], kernel_size)
         self.motion_mlp = _mlp([64, 64, 64, 64], nn.ELU, last_act=True)
@@ -106,8 +126,9 @@ class HuMoTEncoder(nn.Module):
         )
         self.to_latent = nn.Linear(dim, latent)
 
-    def forward(self, motion: torch.Tensor, template: torch.Tensor,
-                mask: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, motion: torch.Tensor, template: torch.Tensor, mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Encode.
 
         Args:
@@ -130,15 +151,29 @@ class HuMoTEncoder(nn.Module):
         count = torch.full((b,), j, device=motion.device) if mask is None else mask.sum(1)
         slot = torch.arange(j + 1, device=motion.device)[None] == count[:, None]  # [B, J+1]
         tokens = torch.cat([tokens, tokens.new_zeros(b, 1, f, self.dim)], dim=1)
-        tokens = torch.where(slot[:, :, None, None], self.latent_token.expand(b, j + 1, f, -1),
-                             tokens)
+        tokens = torch.where(
+            slot[:, :, None, None], self.latent_token.expand(b, j + 1, f, -1), tokens
+        )
         full = None
         if mask is not None:
             full = torch.cat([mask, mask.new_zeros(b, 1)], dim=1) | slot
             tokens = tokens * full[:, :, None, None].to(tokens.dtype)
-        for block in self.blocks:
-            tokens = block(tokens, full)
-        return self.to_latent(tokens[torch.arange(b, device=motion.device), count])
+        if not self.fast_path:
+            for block in self.blocks:
+                tokens = block(tokens, full)
+            return self.to_latent(tokens[torch.arange(b, device=motion.device), count])
+        layout = TokenLayout.of(full, f, b, j + 1)
+        x = layout.pack(tokens)
+        # packed rows of the latent token: cells (b, count_b, 0..F-1); only those leave the
+        # last block, so its MLP runs on them alone
+        cell = (
+            torch.arange(b, device=motion.device)[:, None] * (j + 1) + count[:, None]
+        ) * f + torch.arange(f, device=motion.device)
+        rows = cell if layout.index is None else torch.searchsorted(layout.index, cell)
+        last = len(self.blocks) - 1
+        for i, block in enumerate(self.blocks):
+            x = block.forward_packed(x, layout, rows if i == last else None)
+        return self.to_latent(x if self.blocks else x[rows])
 
 
 class HuMoTDecoder(nn.Module):
@@ -160,12 +195,23 @@ class HuMoTDecoder(nn.Module):
         kernel_size: Temporal kernel of the Conv1d layers (not given by the paper).
         mlp_ratio: XCiT MLP width ratio.
         layer_scale: Initial XCiT layer scale.
+        fast_path: Compute the blocks and output layers on the valid joints only (same values).
     """
 
-    def __init__(self, dim: int = 128, latent: int = 128, blocks: int = 4, heads: int = 8,
-                 kernel_size: int = 5, mlp_ratio: float = 4.0, layer_scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        dim: int = 128,
+        latent: int = 128,
+        blocks: int = 4,
+        heads: int = 8,
+        kernel_size: int = 5,
+        mlp_ratio: float = 4.0,
+        layer_scale: float = 1.0,
+        fast_path: bool = True,
+    ) -> None:
         super().__init__()
         self.dim = dim
+        self.fast_path = fast_path
         self.template_mlp = _mlp([3, 16, 32, 64, dim], nn.ReLU, last_act=False)
         self.latent_cnn = _conv_stack([latent, dim, dim, dim], kernel_size)
         self.latent_linear = nn.Sequential(nn.Linear(dim, dim), nn.ELU())
@@ -179,8 +225,9 @@ class HuMoTDecoder(nn.Module):
         self.output_cnn = _conv_stack([dim, dim, dim, dim], kernel_size)
         self.output_mlp = _mlp([dim, dim, dim, 3], nn.ELU, last_act=False)
 
-    def forward(self, z: torch.Tensor, template: torch.Tensor,
-                mask: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, z: torch.Tensor, template: torch.Tensor, mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Decode.
 
         Args:
@@ -197,6 +244,8 @@ class HuMoTDecoder(nn.Module):
         tokens = self.template_mlp(template)[:, :, None].expand(b, j, f, self.dim)
         tokens = tokens + temporal_positional_encoding(f, self.dim, z.device, z.dtype)
         h = self.latent_linear(self.latent_cnn(z.transpose(1, 2)).transpose(1, 2))  # [B, F, D]
+        if self.fast_path:
+            return self._decode_packed(tokens, h, mask)
         if mask is not None:
             tokens = tokens * mask[:, :, None, None].to(tokens.dtype)
         for style, block in zip(self.styles, self.blocks, strict=True):
@@ -206,6 +255,36 @@ class HuMoTDecoder(nn.Module):
         if mask is not None:
             out = out * mask[:, None, :, None].to(out.dtype)
         return out
+
+    def _decode_packed(
+        self, tokens: torch.Tensor, h: torch.Tensor, mask: torch.Tensor | None
+    ) -> torch.Tensor:
+        """The blocks and output layers of :meth:`forward` on the valid joints only.
+
+        Args:
+            tokens: ``[B, J, F, D]`` input tokens (template features + frame encoding).
+            h: ``[B, F, D]`` latent features for the style modules.
+            mask: ``[B, J]`` valid joints (``None``: all).
+
+        Returns:
+            ``[B, F, J, 3]`` (zero on padded joints).
+        """
+        b, j, f, d = tokens.shape
+        layout = TokenLayout.of(mask, f, b, j)
+        x = layout.pack(tokens)
+        frame_rows = layout.frame_rows()
+        for style, block in zip(self.styles, self.blocks, strict=True):
+            s = style(h).reshape(b * f, d)  # per (sample, frame)
+            if frame_rows is None:
+                x = block.forward_packed(
+                    (x.reshape(b, j, f, d) * s.reshape(b, 1, f, d)).reshape(-1, d), layout
+                )
+            else:
+                x = block.forward_packed(x * s.index_select(0, frame_rows), layout)
+        # every valid joint keeps its F frames: one output sequence per valid joint
+        seq = x.reshape(-1, f, d).transpose(1, 2)
+        out = self.output_mlp(self.output_cnn(seq).transpose(1, 2)).reshape(-1, 3)
+        return layout.unpack(out).permute(0, 2, 1, 3)
 
 
 class HuMoT(nn.Module):
@@ -219,6 +298,8 @@ class HuMoT(nn.Module):
         kernel_size: Temporal Conv1d kernel size.
         mlp_ratio: XCiT MLP width ratio.
         layer_scale: Initial XCiT layer scale.
+        fast_path: Compute on the valid (unpadded) tokens only; ``False`` keeps the padded
+            computation (same values, slower on batches of mixed joint counts).
 
     Example:
         >>> import torch
@@ -228,23 +309,38 @@ class HuMoT(nn.Module):
         ((2, 30, 128), (2, 30, 31, 3))
     """
 
-    def __init__(self, dim: int = 128, latent: int = 128, blocks: int = 4, heads: int = 8,
-                 kernel_size: int = 5, mlp_ratio: float = 4.0, layer_scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        dim: int = 128,
+        latent: int = 128,
+        blocks: int = 4,
+        heads: int = 8,
+        kernel_size: int = 5,
+        mlp_ratio: float = 4.0,
+        layer_scale: float = 1.0,
+        fast_path: bool = True,
+    ) -> None:
         super().__init__()
-        args = (dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale)
+        args = (dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
         self.encoder = HuMoTEncoder(*args)
         self.decoder = HuMoTDecoder(*args)
 
-    def forward(self, motion: torch.Tensor, source_template: torch.Tensor,
-                target_template: torch.Tensor, source_mask: torch.Tensor | None = None,
-                target_mask: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self,
+        motion: torch.Tensor,
+        source_template: torch.Tensor,
+        target_template: torch.Tensor,
+        source_mask: torch.Tensor | None = None,
+        target_mask: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """Encode with the source template, decode with the target one: ``[B, F, J', 3]``."""
         z = self.encoder(motion, source_template, source_mask)
         return self.decoder(z, target_template, target_mask)
 
 
-def reconstruction_loss(preds: torch.Tensor, target: torch.Tensor,
-                        mask: torch.Tensor | None = None) -> torch.Tensor:
+def reconstruction_loss(
+    preds: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None
+) -> torch.Tensor:
     """HuMoT Eq. 1: squared position error averaged over frames and (valid) joints.
 
     Args:
@@ -263,9 +359,13 @@ def reconstruction_loss(preds: torch.Tensor, target: torch.Tensor,
     return per_sample.mean()
 
 
-def bone_length_consistency_loss(preds: torch.Tensor, target: torch.Tensor, bones: torch.Tensor,
-                                 bone_mask: torch.Tensor | None = None,
-                                 min_length: float = 1e-4) -> torch.Tensor:
+def bone_length_consistency_loss(
+    preds: torch.Tensor,
+    target: torch.Tensor,
+    bones: torch.Tensor,
+    bone_mask: torch.Tensor | None = None,
+    min_length: float = 1e-4,
+) -> torch.Tensor:
     """HuMoT Eq. 2: per bone, temporal variance of predicted / true length; mean over bones.
 
     The same formula as :func:`skelagnostic.metrics.functional.bone_length_consistency`
@@ -287,8 +387,7 @@ def bone_length_consistency_loss(preds: torch.Tensor, target: torch.Tensor, bone
 
     def lengths(x: torch.Tensor) -> torch.Tensor:  # [B, F, K]
         xb = x.transpose(0, 1)  # [F, B, J, 3]
-        return (xb[:, idx, bones[..., 1]] - xb[:, idx, bones[..., 0]]).norm(dim=-1).permute(
-            1, 0, 2)
+        return (xb[:, idx, bones[..., 1]] - xb[:, idx, bones[..., 0]]).norm(dim=-1).permute(1, 0, 2)
 
     true = lengths(target)
     valid = true.amin(dim=1) >= min_length  # [B, K]

@@ -14,15 +14,102 @@ Variable joint counts in one batch are handled with a token mask ``[B, G]``
 operation that mixes tokens (the q/k/v of XCA, the LPI convolutions, the
 LPI batch norm statistics) and after every sub-layer, so a padded sample gives
 exactly the output of the same sample without padding.
+
+**Packed tokens.** The same blocks also run on the valid tokens alone
+(:meth:`XCiTBlock.forward_packed`): a :class:`TokenLayout` lists the valid
+cells of the grid, the token-wise layers (layer norms, q/k/v and output
+projections, MLP, batch norm) see only those ``N`` rows ``[N, C]``, and the grid
+is rebuilt (zeros on padding) only where tokens mix: the ``d x d`` attention
+of XCA and the LPI convolutions. The values are those of the padded
+computation (the padded cells it computes are zeros or discarded), at the
+cost of the valid tokens instead of the worst case of the batch.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import torch
 from torch import nn
 from torch.nn import functional as F
 
-__all__ = ["XCA", "LocalPatchInteraction", "MaskedBatchNorm", "XCiTBlock"]
+__all__ = ["XCA", "LocalPatchInteraction", "MaskedBatchNorm", "TokenLayout", "XCiTBlock"]
+
+
+@dataclass(frozen=True)
+class TokenLayout:
+    """The valid cells of a ``[B, G, F]`` token grid, to compute on them alone.
+
+    Build it with :meth:`of`. ``index`` lists the flat indices (in ``B, G, F``
+    order) of the cells of the valid rows ``G``; ``None`` means every cell is
+    valid, and :meth:`pack` / :meth:`unpack` are then reshapes. Because a valid
+    row keeps all its frames, the packed tokens ``[N, C]`` reshape to
+    ``[N / F, F, C]``: one sequence per valid (sample, row).
+
+    Attributes:
+        batch: ``B``.
+        rows: ``G``.
+        frames: ``F``.
+        index: ``[N]`` flat indices of the valid cells, ascending (``None``: all).
+    """
+
+    batch: int
+    rows: int
+    frames: int
+    index: torch.Tensor | None
+
+    @classmethod
+    def of(
+        cls,
+        mask: torch.Tensor | None,
+        frames: int,
+        batch: int | None = None,
+        rows: int | None = None,
+    ) -> TokenLayout:
+        """The layout of the rows ``mask`` ``[B, G]`` marks valid, each with ``frames`` frames.
+
+        Args:
+            mask: ``[B, G]`` valid rows (``None``: all, then ``batch`` and ``rows`` are needed).
+            frames: ``F``.
+            batch: ``B`` when ``mask`` is ``None``.
+            rows: ``G`` when ``mask`` is ``None``.
+
+        Raises:
+            ValueError: Neither a mask nor both sizes are given.
+        """
+        if mask is None:
+            if batch is None or rows is None:
+                raise ValueError("TokenLayout.of: give a mask or both batch and rows")
+            return cls(batch, rows, frames, None)
+        b, g = mask.shape
+        if bool(mask.all()):
+            return cls(b, g, frames, None)
+        cells = mask.bool()[:, :, None].expand(b, g, frames)
+        return cls(b, g, frames, cells.reshape(-1).nonzero().flatten())
+
+    @property
+    def cells(self) -> int:
+        """``B * G * F``."""
+        return self.batch * self.rows * self.frames
+
+    def pack(self, grid: torch.Tensor) -> torch.Tensor:
+        """``[B, G, F, C]`` -> ``[N, C]``: the valid cells."""
+        flat = grid.reshape(self.cells, grid.shape[-1])
+        return flat if self.index is None else flat.index_select(0, self.index)
+
+    def unpack(self, tokens: torch.Tensor) -> torch.Tensor:
+        """``[N, C]`` -> ``[B, G, F, C]``, zero on padded cells."""
+        c = tokens.shape[-1]
+        if self.index is not None:
+            tokens = tokens.new_zeros(self.cells, c).index_copy(0, self.index, tokens)
+        return tokens.reshape(self.batch, self.rows, self.frames, c)
+
+    def frame_rows(self) -> torch.Tensor | None:
+        """``[N]`` index ``b * F + f`` of each valid cell into ``[B * F]`` (``None``: all cells)."""
+        if self.index is None:
+            return None
+        sample = self.index // (self.rows * self.frames)
+        return sample * self.frames + self.index % self.frames
 
 
 class XCA(nn.Module):
@@ -65,10 +152,30 @@ class XCA(nn.Module):
         Returns:
             ``[B, N, C]``, zero on padded tokens.
         """
-        b, n, c = x.shape
         qkv = self.qkv(x)
         if mask is not None:
             qkv = qkv * mask[..., None].to(qkv.dtype)
+        out = self.proj(self._attend(qkv))
+        if mask is not None:
+            out = out * mask[..., None].to(out.dtype)
+        return out
+
+    def forward_packed(self, x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
+        """:meth:`forward` on the valid tokens ``x`` ``[N, C]`` of ``layout``: ``[N, C]``.
+
+        The q/k/v and output projections see the ``N`` valid tokens only; the
+        channel attention runs on the grid rebuilt with zeros on padded cells,
+        exactly as :meth:`forward` with the layout's mask.
+        """
+        qkv = layout.unpack(self.qkv(x))
+        b, g, f, c3 = qkv.shape
+        out = self._attend(qkv.reshape(b, g * f, c3))
+        return self.proj(layout.pack(out.reshape(b, g, f, c3 // 3)))
+
+    def _attend(self, qkv: torch.Tensor) -> torch.Tensor:
+        """``[B, N, 3C]`` queries, keys, values (zero on padded tokens) -> ``[B, N, C]``."""
+        b, n, c3 = qkv.shape
+        c = c3 // 3
         q, k, v = qkv.reshape(b, n, 3, self.heads, c // self.heads).permute(2, 0, 3, 1, 4)
         # F.normalize(q, dim=tokens) == q / max(|q|, eps)
         q_norm = torch.linalg.vector_norm(q, dim=-2).clamp_min(1e-12)  # [B, H, d]
@@ -76,10 +183,7 @@ class XCA(nn.Module):
         attn = (q.transpose(-2, -1) @ k) / (q_norm[..., :, None] * k_norm[..., None, :])
         attn = (attn * self.temperature).softmax(dim=-1)  # [B, H, d, d]
         out = v @ attn.transpose(-2, -1)  # [B, H, N, d]: out[n, i] = sum_j attn[i, j] v[n, j]
-        out = self.proj(out.transpose(1, 2).reshape(b, n, c))
-        if mask is not None:
-            out = out * mask[..., None].to(out.dtype)
-        return out
+        return out.transpose(1, 2).reshape(b, n, c)
 
 
 class MaskedBatchNorm(nn.BatchNorm2d):
@@ -100,18 +204,37 @@ class MaskedBatchNorm(nn.BatchNorm2d):
         if not self.training:
             return super().forward(x) * mask[:, None, :, None].to(x.dtype)
         b, c, g, f = x.shape
-        factor = 0.0
-        if self.track_running_stats and self.num_batches_tracked is not None:
-            self.num_batches_tracked.add_(1)
-            factor = (self.momentum if self.momentum is not None
-                      else 1.0 / float(self.num_batches_tracked))
         grid = x.permute(0, 2, 3, 1)  # [B, G, F, C]: contiguous for channels-last input
         valid = grid[mask]  # [N, F, C]
-        normed = F.batch_norm(valid.reshape(-1, c), self.running_mean, self.running_var,
-                              self.weight, self.bias, True, factor, self.eps)
+        normed = self.normalize_tokens(valid.reshape(-1, c))
         out = grid.new_zeros(b, g, f, c)
         out[mask] = normed.reshape(valid.shape)
         return out.permute(0, 3, 1, 2)
+
+    def normalize_tokens(self, tokens: torch.Tensor) -> torch.Tensor:
+        """Batch-normalise ``[N, C]`` valid cells (batch statistics in training, running in eval).
+
+        In training, updates the running statistics as :class:`torch.nn.BatchNorm2d`
+        would on these cells alone.
+        """
+        factor = 0.0
+        if self.training and self.track_running_stats and self.num_batches_tracked is not None:
+            self.num_batches_tracked.add_(1)
+            factor = (
+                self.momentum
+                if self.momentum is not None
+                else 1.0 / float(self.num_batches_tracked)
+            )
+        return F.batch_norm(
+            tokens,
+            self.running_mean,
+            self.running_var,
+            self.weight,
+            self.bias,
+            self.training or not self.track_running_stats,
+            factor,
+            self.eps,
+        )
 
 
 class LocalPatchInteraction(nn.Module):
@@ -145,6 +268,17 @@ class LocalPatchInteraction(nn.Module):
             h = h * cells
         return h
 
+    def forward_packed(self, x: torch.Tensor, layout: TokenLayout) -> torch.Tensor:
+        """:meth:`forward` on the valid tokens ``x`` ``[N, C]`` of ``layout``: ``[N, C]``.
+
+        The convolutions run on the grid rebuilt with zeros on padded cells; the
+        GELU and the batch norm (plain batch statistics of the valid cells) on
+        the valid tokens only.
+        """
+        h = self.conv1(layout.unpack(x).permute(0, 3, 1, 2)).permute(0, 2, 3, 1)
+        h = self.bn.normalize_tokens(self.act(layout.pack(h)))
+        return layout.pack(self.conv2(layout.unpack(h).permute(0, 3, 1, 2)).permute(0, 2, 3, 1))
+
 
 class XCiTBlock(nn.Module):
     """Pre-norm XCiT block: XCA, local patch interaction and MLP, each with a layer scale.
@@ -157,8 +291,14 @@ class XCiTBlock(nn.Module):
         lpi_kernel: Kernel size of the local patch interaction.
     """
 
-    def __init__(self, dim: int = 128, heads: int = 8, mlp_ratio: float = 4.0,
-                 layer_scale: float = 1.0, lpi_kernel: int = 3) -> None:
+    def __init__(
+        self,
+        dim: int = 128,
+        heads: int = 8,
+        mlp_ratio: float = 4.0,
+        layer_scale: float = 1.0,
+        lpi_kernel: int = 3,
+    ) -> None:
         super().__init__()
         hidden = int(dim * mlp_ratio)
         self.norm1 = nn.LayerNorm(dim)
@@ -185,9 +325,35 @@ class XCiTBlock(nn.Module):
         cells = None if mask is None else mask[:, :, None, None].to(x.dtype)
         flat_mask = None if mask is None else mask[:, :, None].expand(b, g, f).reshape(b, g * f)
         x = x + self.gamma1 * self.attn(self.norm1(x).reshape(b, g * f, c), flat_mask).reshape(
-            b, g, f, c)
+            b, g, f, c
+        )
         x = x + self.gamma3 * self.local_mp(self.norm3(x), mask)
         x = x + self.gamma2 * self.mlp(self.norm2(x))
         if cells is not None:
             x = x * cells
         return x
+
+    def forward_packed(
+        self, x: torch.Tensor, layout: TokenLayout, rows: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """:meth:`forward` on the valid tokens ``x`` ``[N, C]`` of ``layout``.
+
+        Gives the valid cells of ``forward(layout.unpack(x), mask)`` at the cost
+        of the ``N`` valid tokens (see :class:`TokenLayout`).
+
+        Args:
+            x: ``[N, C]`` valid tokens.
+            layout: Where they sit on the grid.
+            rows: ``[...]`` packed rows whose output is wanted (``None``: all). The
+                attention and the local interaction still see every token (they mix
+                tokens and their batch statistics span the batch); the MLP, the
+                largest part, runs on these rows only.
+
+        Returns:
+            ``[N, C]``, or ``[..., C]`` for ``rows``.
+        """
+        x = x + self.gamma1 * self.attn.forward_packed(self.norm1(x), layout)
+        x = x + self.gamma3 * self.local_mp.forward_packed(self.norm3(x), layout)
+        if rows is not None:
+            x = x[rows]
+        return x + self.gamma2 * self.mlp(self.norm2(x))
