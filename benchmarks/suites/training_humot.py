@@ -12,12 +12,15 @@ topologies (CMU-31 and LaFAN1-22 clips from ``$SKELAGNOSTIC_TEST_DATA`` or
   plus the data fetch before it);
 * ``humot_windows_per_s``: 64 chunks per step / median step time;
 * ``humot_data_share``: share of the wall time spent fetching batches (the gap
-  between the end of one step and the start of the next).
+  between the end of one step and the start of the next), of the packed network.
 
-No baseline column: no implementation of HuMoT is public. For orientation,
-docs/reports/humot.md measures 11-13 s per step with one thread on the
-project's busy 2-core machine (~0.4 TFLOP per step) and 8.6 s with two
-threads on a nearly idle one; the paper trained on an A100.
+Baseline (sizes ``default`` and ``large``): the same steps of the padded
+network (``model.fast_path=false``: every block computes on the batch's widest
+joint subset, padding included), same weights, data and seed, timed in the
+same run after the packed one; its figures are the "before" of issue 28. At
+``smoke`` size only the packed network runs (the CI smoke test stays short),
+so the figures have no baseline. No implementation of HuMoT is public; the
+paper trained on an A100.
 """
 
 from __future__ import annotations
@@ -30,15 +33,22 @@ from typing import Any
 from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
 from benchmarks.suites.steptime import accelerators, suffix, time_fit
 
-#: Timed steps per size (after one warm-up step); a step takes ~10 s on one core.
+#: Timed steps per size (after one warm-up step), for each network.
 STEPS = {"smoke": 2, "default": 6, "large": 20}
 
 #: Chunks per step: batch 32 (the paper's) x two topologies.
 WINDOWS_PER_STEP = 64
 
 
-def measure(steps: int, accelerator: str = "cpu") -> dict[str, Any]:
-    """Median step time, median data-fetch time and their share over ``steps`` steps."""
+def paper_setup(fast_path: bool = True) -> tuple[Any, Any, str]:
+    """The paper-size aligner (seed 0) and the data module of the benchmark's two topologies.
+
+    Args:
+        fast_path: ``model.fast_path`` (``False``: the padded network).
+
+    Returns:
+        ``(HumotAligner, HumotDataModule, description of the data)``.
+    """
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "humot" / "src"))
     import torch
     from skelagnostic_humot import HumotAligner, HumotDataModule
@@ -54,29 +64,70 @@ def measure(steps: int, accelerator: str = "cpu") -> dict[str, Any]:
         ]
         data = "CMU-31 (131_01) + LaFAN1-22 (walk4_subject1)"
     else:
-        sources = [ProceduralSource(kinds=["biped31", "biped22"], gaits=["walk", "run"],
-                                    clips_per_gait=2, seconds=8.0)]
+        sources = [
+            ProceduralSource(
+                kinds=["biped31", "biped22"], gaits=["walk", "run"], clips_per_gait=2, seconds=8.0
+            )
+        ]
         data = "procedural biped31 + biped22"
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
     dm = HumotDataModule(sources, batch_size=32, val_fraction=0.0, cache_dir=cache)
     torch.manual_seed(0)
-    model = HumotAligner()
+    return HumotAligner(fast_path=fast_path), dm, data
+
+
+def measure(steps: int, accelerator: str = "cpu", fast_path: bool = True) -> dict[str, Any]:
+    """Median step time, median data-fetch time and their share over ``steps`` steps."""
+    import lightning as L
+    import torch
+
+    model, dm, data = paper_setup(fast_path)
+    L.seed_everything(0, verbose=False)  # the same subsets and batches for both networks
     timing = time_fit(model, dm, steps, accelerator=accelerator)
-    return {**timing, "data": data, "threads": torch.get_num_threads(),
-            "parameters": sum(p.numel() for p in model.parameters())}
+    return {
+        **timing,
+        "data": data,
+        "threads": torch.get_num_threads(),
+        "parameters": sum(p.numel() for p in model.parameters()),
+    }
 
 
 def run(size: str) -> list[Result]:
-    """Steps/s, windows/s and the data-loading share of the paper-size training step."""
+    """Steps/s, windows/s and the data-loading share, against the padded network."""
     results = []
+    baseline = "padded network (fast_path=false), same run"
     for device in accelerators():
-        out, _ = run_child("benchmarks.suites.training_humot:measure", steps=STEPS[size],
-                           accelerator=device)
+        out, _ = run_child(
+            "benchmarks.suites.training_humot:measure", steps=STEPS[size], accelerator=device
+        )
+        before: dict[str, Any] | None = None
+        if size != "smoke":
+            before, _ = run_child(
+                "benchmarks.suites.training_humot:measure",
+                steps=STEPS[size],
+                accelerator=device,
+                fast_path=False,
+            )
         step, tag = out["median_step_s"], suffix(device)
+        old = None if before is None else before["median_step_s"]
+        name = None if before is None else baseline
         results += [
-            Result(f"humot_steps_per_s{tag}", "steps/s", 1.0 / step, higher_is_better=True),
-            Result(f"humot_windows_per_s{tag}", "windows/s", WINDOWS_PER_STEP / step,
-                   higher_is_better=True),
+            Result(
+                f"humot_steps_per_s{tag}",
+                "steps/s",
+                1.0 / step,
+                name,
+                None if old is None else 1.0 / old,
+                higher_is_better=True,
+            ),
+            Result(
+                f"humot_windows_per_s{tag}",
+                "windows/s",
+                WINDOWS_PER_STEP / step,
+                name,
+                None if old is None else WINDOWS_PER_STEP / old,
+                higher_is_better=True,
+            ),
             Result(f"humot_data_share{tag}", "fraction", out["data_share"]),
         ]
     return results
