@@ -32,6 +32,7 @@ per sub-layer, forward and backward.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import nn
@@ -46,6 +47,27 @@ def _scaled_linear(x: torch.Tensor, linear: nn.Linear, scale: torch.Tensor | Non
         return linear(x)
     bias = None if linear.bias is None else linear.bias * scale
     return F.linear(x, linear.weight * scale[:, None], bias)
+
+
+class _Pack(torch.autograd.Function):
+    """``rows.index_select(0, index)`` for unique ``index``, with a scatter-free backward.
+
+    The gradient goes back with :meth:`torch.Tensor.index_copy_` (each row
+    receives one value) instead of ``index_select``'s accumulating
+    ``index_add``, which is several times slower on CPU with two threads.
+    """
+
+    @staticmethod
+    def forward(ctx: Any, rows: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(index)
+        ctx.num_rows = rows.shape[0]
+        return rows.index_select(0, index)
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        (index,) = ctx.saved_tensors
+        out = grad.new_zeros(ctx.num_rows, *grad.shape[1:])
+        return out.index_copy_(0, index, grad), None
 
 
 @dataclass(frozen=True)
@@ -107,7 +129,7 @@ class TokenLayout:
     def pack(self, grid: torch.Tensor) -> torch.Tensor:
         """``[B, G, F, C]`` -> ``[N, C]``: the valid cells."""
         flat = grid.reshape(self.cells, grid.shape[-1])
-        return flat if self.index is None else flat.index_select(0, self.index)
+        return flat if self.index is None else _Pack.apply(flat, self.index)
 
     def unpack(self, tokens: torch.Tensor) -> torch.Tensor:
         """``[N, C]`` -> ``[B, G, F, C]``, zero on padded cells."""
