@@ -41,8 +41,10 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
 
     Returns:
         ``median_step_s`` (compute + fetch of a step, median), ``median_compute_s``,
-        ``median_fetch_s`` and ``data_share`` (total fetch time over total time of the
-        timed steps).
+        ``median_fetch_s``, ``data_share`` (total fetch time over total time of the
+        timed steps) and ``median_step_cpu_s``: the process CPU time of a step
+        (fetch + compute, all threads; from the second timed step when there is no
+        warm-up), which other jobs on the machine do not inflate as they do wall time.
     """
     import lightning as L
     import torch
@@ -50,9 +52,11 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
     compute: list[float] = []
     sync = torch.cuda.synchronize if accelerator == "gpu" else (lambda: None)
     fetch: list[float] = []
+    cpu: list[float] = []  # process CPU time from the end of a step to the end of the next
 
     class Timer(L.Callback):
         end: float | None = None
+        cpu_end: float | None = None
         start = 0.0
 
         def on_train_batch_start(self, *args: Any) -> None:
@@ -65,6 +69,10 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
             sync()
             self.end = time.perf_counter()
             compute.append(self.end - self.start)
+            now = time.process_time()
+            if self.cpu_end is not None:
+                cpu.append(now - self.cpu_end)
+            self.cpu_end = now
 
     with tempfile.TemporaryDirectory() as run_dir:  # aligners may write renders here
         trainer = L.Trainer(max_steps=warmup + steps, accelerator=accelerator, devices=1,
@@ -79,6 +87,7 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
     totals = [c + f for c, f in zip(timed_compute, timed_fetch, strict=True)]
     return {
         "median_step_s": statistics.median(totals),
+        "median_step_cpu_s": statistics.median(cpu[warmup - 1 :] if warmup else cpu),
         "median_compute_s": statistics.median(timed_compute),
         "median_fetch_s": statistics.median(timed_fetch),
         "data_share": sum(timed_fetch) / sum(totals),

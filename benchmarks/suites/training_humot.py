@@ -11,6 +11,9 @@ topologies (CMU-31 and LaFAN1-22 clips from ``$SKELAGNOSTIC_TEST_DATA`` or
   from the median step time (``on_train_batch_start`` -> ``on_train_batch_end``
   plus the data fetch before it);
 * ``humot_windows_per_s``: 64 chunks per step / median step time;
+* ``humot_windows_per_cpu_s``: 64 chunks / median process CPU time of a step
+  (all threads): other jobs on a shared machine stretch wall time, not this;
+  with one thread it is the windows/s of an idle core;
 * ``humot_data_share``: share of the wall time spent fetching batches (the gap
   between the end of one step and the start of the next), of the packed network.
 
@@ -126,6 +129,14 @@ def run(size: str) -> list[Result]:
                 WINDOWS_PER_STEP / step,
                 name,
                 None if old is None else WINDOWS_PER_STEP / old,
+                higher_is_better=True,
+            ),
+            Result(
+                f"humot_windows_per_cpu_s{tag}",
+                "windows/CPU-s",
+                WINDOWS_PER_STEP / out["median_step_cpu_s"],
+                name,
+                None if before is None else WINDOWS_PER_STEP / before["median_step_cpu_s"],
                 higher_is_better=True,
             ),
             Result(f"humot_data_share{tag}", "fraction", out["data_share"]),
