@@ -13,6 +13,11 @@ from skelagnostic.plugins import LOAD_PLUGINS_ENV, get_plugin_manager
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE_SRC = REPO / "plugins" / "example-aligner" / "src"
+# Test modules import the example aligner's classes (the third-party plugin of the
+# repository, not installed by the test command): importable before collection, so
+# that does not depend on which test module another one put it on the path.
+if str(EXAMPLE_SRC) not in sys.path:
+    sys.path.append(str(EXAMPLE_SRC))
 
 
 def write_dist(site: Path, name: str, version: str, entry_points: dict[str, str]) -> Path:

@@ -27,7 +27,7 @@ def test_epoch_line_has_no_negative_total(limits: dict[str, int], expected: str)
     assert _description(**limits) == expected
 
 
-def test_default_callbacks_use_it() -> None:
+def test_default_callbacks_use_it(example_plugin: object) -> None:
     from hydra.utils import instantiate
 
     from skelagnostic.cli import app
