@@ -247,14 +247,16 @@ def test_pcmrl_baseline_only_on_stage_1_and_absent_without_the_option(
     assert all(r.baseline_value is None for r in training_pcmrl.run("smoke"))
     export_authors_repos({"pcmrl": fake_checkout(tmp_path / "pc", "pcmrl")})
     monkeypatch.setattr(
-        training_pcmrl, "authors_stage1", lambda repo, steps: ({"median_step_s": 0.5}, 900.0)
+        training_pcmrl, "authors_stage1", lambda repo, steps, batch: ({"median_step_s": 0.5}, 900.0)
     )
     try:
         by_name = {r.name: r for r in training_pcmrl.run("smoke")}
     finally:
         export_authors_repos({})
     assert by_name["pcmrl_recon_steps_per_s"].speedup == pytest.approx(10.0)
-    assert by_name["pcmrl_recon_windows_per_s"].baseline_value == pytest.approx(32.0)
+    assert by_name["pcmrl_recon_windows_per_s"].baseline_value == pytest.approx(
+        training_pcmrl.BATCH["smoke"] / 0.5
+    )
     assert by_name["pcmrl_recon_peak_rss_mib"].baseline_value == 900.0
     assert by_name["pcmrl_interp_steps_per_s"].baseline_value is None
 
