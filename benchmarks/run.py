@@ -62,6 +62,7 @@ SUITES: dict[str, str] = {
     "bigdata": "benchmarks.suites.bigdata",
     "training": "benchmarks.suites.training",
     "quality": "benchmarks.suites.quality",
+    "inference": "benchmarks.suites.inference",
 }
 #: Parts of a suite that also run alone (``--suite training_humot``); ``all`` runs them only
 #: inside their suite.
