@@ -370,9 +370,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     if external is not None and task != "evaluate":
         raise ConfigError(f"ckpt_path={ckpt!r} (checkpoint reader {external[0].name!r}) is "
                           f"read by evaluate and the inference verbs, not by {task}")
-    if external is not None:
-        pass  # read below, once the data are built
-    elif ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
+    # an external checkpoint (a plugin's reader) is read below, once the data are built
+    if external is None and ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
         source_run = find_run_dir(ckpt)  # a run directory stands for its best/last checkpoint
         ckpt = str(checkpoint_of(ckpt))
         checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path",
