@@ -471,7 +471,8 @@ def _build_motion(
         root_positions = local[:, 0]
         # position channels of non-root joints that only repeat their OFFSETs (six
         # channels on every joint) animate nothing: the motion is then the ordinary one
-        if not np.array_equal(local[:, 1:], np.broadcast_to(offsets[None, 1:], local[:, 1:].shape)):
+        moved = [(c, k, a) for c, k, a in pos if k > 0]
+        if moved and any(not np.all(values[:, c] == offsets[k, a]) for c, k, a in moved):
             translations = local
     by_order: dict[str, list[int]] = {}
     for k, order in enumerate(orders):
