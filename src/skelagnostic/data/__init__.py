@@ -10,6 +10,8 @@ Examples:
 from skelagnostic.data.cache import CacheEntry, WindowCache, default_cache_dir
 from skelagnostic.data.datamodule import MotionDataModule, WindowDataset, datamodule_options
 from skelagnostic.data.sources import (
+    DATA_ROOT_ENV,
+    MANN_DOG_TEST,
     PRESETS,
     BVHSource,
     ClipRef,
@@ -19,12 +21,15 @@ from skelagnostic.data.sources import (
     MultiSource,
     ProceduralSource,
     bvh_sources,
+    dataset_root,
     flatten_sources,
     preset_source,
     reroot,
 )
 
 __all__ = [
+    "DATA_ROOT_ENV",
+    "MANN_DOG_TEST",
     "PRESETS",
     "BVHSource",
     "CacheEntry",
@@ -39,6 +44,7 @@ __all__ = [
     "WindowDataset",
     "bvh_sources",
     "datamodule_options",
+    "dataset_root",
     "default_cache_dir",
     "flatten_sources",
     "preset_source",

@@ -15,6 +15,7 @@ that do not know theirs.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
@@ -29,6 +30,8 @@ from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = [
+    "DATA_ROOT_ENV",
+    "MANN_DOG_TEST",
     "PRESETS",
     "BVHSource",
     "ClipRef",
@@ -38,6 +41,7 @@ __all__ = [
     "MultiSource",
     "ProceduralSource",
     "bvh_sources",
+    "dataset_root",
     "flatten_sources",
     "preset_source",
     "reroot",
@@ -431,6 +435,10 @@ class ProceduralSource(ClipSource):
         return state
 
 
+#: Environment variable naming the folder that holds the dataset folders (``lafan1/``, ...).
+DATA_ROOT_ENV = "SKELAGNOSTIC_DATA"
+
+
 @dataclass(frozen=True)
 class DatasetPreset:
     """Known layout of a public dataset: file pattern, units, test split, root fix.
@@ -440,9 +448,12 @@ class DatasetPreset:
         description: One line.
         units: Length unit of the files.
         pattern: Glob below the dataset root.
-        test_pattern: Regular expression selecting the test clips, if the
+        test_pattern: Regular expression selecting the test clips by path, if the
             dataset defines a test split.
+        test_clips: File names (without ``.bvh``) of a fixed held-out list; joined
+            with ``test_pattern`` when both are given.
         root_joint: Joint to re-root at (rigs whose file root is a fixed helper).
+        directory: Folder of the dataset below ``$SKELAGNOSTIC_DATA`` (default: ``name``).
     """
 
     name: str
@@ -450,8 +461,30 @@ class DatasetPreset:
     units: str
     pattern: str = "**/*.bvh"
     test_pattern: str | None = None
+    test_clips: tuple[str, ...] = ()
     root_joint: str | None = None
+    directory: str | None = None
 
+    @property
+    def split_pattern(self) -> str | None:
+        """The regular expression of the test split (``test_pattern`` or ``test_clips``)."""
+        parts = [self.test_pattern] if self.test_pattern else []
+        if self.test_clips:
+            names = "|".join(re.escape(n) for n in self.test_clips)
+            parts.append(rf"(^|[\\/])({names})\.bvh$")
+        return "|".join(f"(?:{p})" for p in parts) if parts else None
+
+
+#: MANN dog clips held out of training (``data=mann_dog``'s test split). Chosen once by
+#: the median root speed of each clip (``../shared/datasets/README.md``) to cover the
+#: dog's gaits: idle, a slow mixed clip, walk, trot and canter (docs/data.md).
+MANN_DOG_TEST = (
+    "D1_004_KAN01_001",  # idle, 0.01 m/s
+    "D1_053_KAN01_002",  # slow, mixed standing and walking, 0.30 m/s
+    "D1_008_KAN01_001",  # walk, 0.84 m/s
+    "D1_ex04_KAN02_002",  # trot, 1.31 m/s
+    "D1_010_KAN01_003",  # canter, 3.13 m/s
+)
 
 #: Presets of the datasets users have (see METHODS.md "Datasets").
 PRESETS: dict[str, DatasetPreset] = {
@@ -464,7 +497,13 @@ PRESETS: dict[str, DatasetPreset] = {
             test_pattern=r"subject5",
         ),
         DatasetPreset("cmu", "CMU mocap (BVH conversions): 31 joints, 120 fps, CMU units", "cmu"),
-        DatasetPreset("mann_dog", "MANN dog: 21 joints, 60 fps, cm, human-style joint names", "cm"),
+        DatasetPreset(
+            "mann_dog",
+            "MANN dog: 21 joints, 60 fps, cm, human-style joint names; 5 fixed test clips "
+            "(idle to canter)",
+            "cm",
+            test_clips=MANN_DOG_TEST,
+        ),
         DatasetPreset(
             "bandai",
             "Bandai-Namco: joint_Root fixed at the origin, Hips carry the "
@@ -476,15 +515,43 @@ PRESETS: dict[str, DatasetPreset] = {
 }
 
 
-def preset_source(preset: str, root: str | Path) -> BVHSource:
-    """The :class:`BVHSource` of a dataset preset below ``root``.
+def dataset_root(preset: str, root: str | Path | None = None) -> Path:
+    """The folder of a dataset preset: ``root``, else ``$SKELAGNOSTIC_DATA/<directory>``.
 
     Raises:
-        SkelagnosticError: Unknown preset, or ``root`` missing or without matching files.
+        SkelagnosticError: ``root`` is ``None`` and ``$SKELAGNOSTIC_DATA`` is not set.
+    """
+    if root is not None and str(root) not in ("", "???"):
+        return expand_path(root)
+    directory = (PRESETS[preset].directory or preset) if preset in PRESETS else preset
+    base = os.environ.get(DATA_ROOT_ENV)
+    if not base:
+        raise SkelagnosticError(
+            f"data.root is not set for the {preset!r} files: pass data.root=DIR, or set "
+            f"{DATA_ROOT_ENV}=DIR to a folder holding {directory}/ (docs/data.md)"
+        )
+    return expand_path(base) / directory
+
+
+def preset_source(preset: str, root: str | Path | None = None) -> BVHSource:
+    """The :class:`BVHSource` of a dataset preset below ``root``.
+
+    Args:
+        preset: A key of :data:`PRESETS`.
+        root: Folder of the files; ``None``: ``$SKELAGNOSTIC_DATA/<preset>``.
+
+    Raises:
+        SkelagnosticError: Unknown preset, no root, or ``root`` missing or without
+            matching files.
     """
     if preset not in PRESETS:
         raise SkelagnosticError(f"unknown dataset preset {preset!r}; known: {', '.join(PRESETS)}")
     p = PRESETS[preset]
     return BVHSource(
-        [expand_path(root)], p.pattern, p.test_pattern, p.units, p.root_joint, name=p.name
+        [dataset_root(preset, root)],
+        p.pattern,
+        p.split_pattern,
+        p.units,
+        p.root_joint,
+        name=p.name,
     )

@@ -61,16 +61,17 @@ _LAYOUT = "vqpae-frames-1"
 
 
 def human_dog_source(
-    human_root: str | Path,
-    dog_root: str | Path,
+    human_root: str | Path | None = None,
+    dog_root: str | Path | None = None,
     human_preset: str = "lafan1",
     dog_preset: str = "mann_dog",
 ) -> MultiSource:
     """The human-dog setting: a human dataset preset plus the MANN dog (``data.source=human_dog``).
 
     Args:
-        human_root: Directory of the human BVH files.
-        dog_root: Directory of the dog BVH files.
+        human_root: Directory of the human BVH files; ``None``:
+            ``$SKELAGNOSTIC_DATA/<human_preset>``.
+        dog_root: Directory of the dog BVH files; ``None``: ``$SKELAGNOSTIC_DATA/<dog_preset>``.
         human_preset: Preset of the human files (``lafan1``, ``cmu``, ``bandai``, ...).
         dog_preset: Preset of the dog files.
 
