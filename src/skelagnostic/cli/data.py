@@ -133,14 +133,7 @@ def prepare(
     with _bar(console, "checksum", archive.stat().st_size, True) as (step, _):
         verify_archive(archive, expected, step)
     with _bar(console, "extract", None, True) as (step, set_total):
-        import zipfile
-
-        try:
-            with zipfile.ZipFile(archive) as zf:
-                set_total(sum(i.file_size for i in zf.infolist()))
-        except (zipfile.BadZipFile, OSError) as exc:
-            raise DataPrepareError(f"{archive}: not a readable zip file ({exc})") from exc
-        files, written = extract_archive(archive, root, step)
+        files, written = extract_archive(archive, root, step, set_total)
     bvhs = sorted(p for p in files if p.suffix.lower() == ".bvh")
     if not bvhs:
         raise DataPrepareError(f"{archive}: the archive holds no .bvh file")
@@ -149,9 +142,8 @@ def prepare(
     windows, where = 0, None
     if cache:
         datamodule = _datamodule(preset, root, cache_dir, overrides)
-        clips = sum(len(source.clips()) for source in datamodule.sources)
-        with _bar(console, "cache", clips, False) as (step, _):
-            windows = write_window_cache(datamodule, step)
+        with _bar(console, "cache", None, False) as (step, set_total):
+            windows = write_window_cache(datamodule, step, set_total)
         where = Path(datamodule.cache.root)
     return PreparedDataset(
         preset,

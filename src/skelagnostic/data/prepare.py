@@ -177,7 +177,9 @@ def check_writable(dest: Path) -> None:
         ) from exc
 
 
-def extract_archive(archive: Path, dest: Path, step: Step | None = None) -> tuple[list[Path], int]:
+def extract_archive(
+    archive: Path, dest: Path, step: Step | None = None, total: Step | None = None
+) -> tuple[list[Path], int]:
     """Extract every member of the zip ``archive`` below ``dest``, safely and idempotently.
 
     Every member name is checked first (:func:`safe_member_path`), so a bad
@@ -188,6 +190,7 @@ def extract_archive(archive: Path, dest: Path, step: Step | None = None) -> tupl
         archive: The zip file.
         dest: Folder to extract into (created).
         step: Called with the bytes of each member done.
+        total: Called once with the bytes of all members, before the first ``step``.
 
     Returns:
         The files of the archive below ``dest`` (in archive order) and how many
@@ -212,6 +215,8 @@ def extract_archive(archive: Path, dest: Path, step: Step | None = None) -> tupl
             raise DataPrepareError(
                 f"--dest {dest}: the archive needs {needed} bytes, only {free} are free"
             )
+        if total is not None:
+            total(sum(info.file_size for info, _ in files))
         for i, (info, target) in enumerate(files):
             if i in todo:
                 _extract_member(zf, info, target, archive)
@@ -281,7 +286,7 @@ def held_out_files(preset: str, root: Path) -> list[Path]:
     return sorted(Path(c.id) for c in _source(preset, root).clips() if c.split == "test")
 
 
-def write_window_cache(datamodule: Any, step: Step | None = None) -> int:
+def write_window_cache(datamodule: Any, step: Step | None = None, total: Step | None = None) -> int:
     """Write the window cache of every clip of ``datamodule``'s sources.
 
     Args:
@@ -289,17 +294,20 @@ def write_window_cache(datamodule: Any, step: Step | None = None) -> int:
             its :meth:`~skelagnostic.data.MotionDataModule.cache_entry` decides what
             is cached (representation, fps, window, stride).
         step: Called with 1 after each clip.
+        total: Called once with the number of clips, before the first ``step``.
 
     Returns:
         The number of cached windows.
     """
-    total = 0
-    for source in datamodule.sources:
-        for clip in source.clips():
-            total += datamodule.cache_entry(source, clip).num_windows
-            if step is not None:
-                step(1)
-    return total
+    clips = [(source, clip) for source in datamodule.sources for clip in source.clips()]
+    if total is not None:
+        total(len(clips))
+    windows = 0
+    for source, clip in clips:
+        windows += datamodule.cache_entry(source, clip).num_windows
+        if step is not None:
+            step(1)
+    return windows
 
 
 def download(
