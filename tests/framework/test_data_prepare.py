@@ -51,6 +51,23 @@ def sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def prepare_argv(archive: Path, dest: Path, cache: Path) -> list[str]:
+    """``skelagnostic data prepare mann_dog`` of ``archive`` with its checksum."""
+    return [
+        "data",
+        "prepare",
+        "mann_dog",
+        "--zip",
+        str(archive),
+        "--dest",
+        str(dest),
+        "--sha256",
+        sha256(archive),
+        "--cache-dir",
+        str(cache),
+    ]
+
+
 @pytest.fixture
 def dog_zip(tmp_path: Path) -> Path:
     """A zip of two dog clips in ``MotionCapture/``: the MANN names of a test and a train clip."""
@@ -193,19 +210,7 @@ def test_check_bvh_files_passes_good_files(tmp_path: Path) -> None:
 
 def test_cli_prepare(dog_zip: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     dest = tmp_path / "data"
-    argv = [
-        "data",
-        "prepare",
-        "mann_dog",
-        "--zip",
-        str(dog_zip),
-        "--dest",
-        str(dest),
-        "--sha256",
-        sha256(dog_zip),
-        "--cache-dir",
-        str(tmp_path / "cache"),
-    ]
+    argv = prepare_argv(dog_zip, dest, tmp_path / "cache")
     assert cli.main(argv) == 0
     out = capsys.readouterr().out
     assert f"data=mann_dog data.root={dest / 'mann_dog'}" in out
@@ -219,19 +224,7 @@ def test_cli_overrides_pick_an_aligners_data_module(
     example_plugin: Path, dog_zip: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     cache = tmp_path / "cache"
-    argv = [
-        "data",
-        "prepare",
-        "mann_dog",
-        "--zip",
-        str(dog_zip),
-        "--dest",
-        str(tmp_path / "d"),
-        "--sha256",
-        sha256(dog_zip),
-        "--cache-dir",
-        str(cache),
-    ]
+    argv = prepare_argv(dog_zip, tmp_path / "d", cache)
     assert cli.main([*argv, "data.window=16"]) == 1
     assert "add model=NAME" in capsys.readouterr().err
     assert cli.main([*argv, "model=example", "data.window=16", "data.stride=4"]) == 0

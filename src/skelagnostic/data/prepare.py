@@ -21,7 +21,6 @@ Nothing is converted: the files stay as the archive has them.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 import urllib.request
@@ -32,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any, BinaryIO
 
-from skelagnostic.data.sources import PRESETS, Archive, BVHSource, preset_source
+from skelagnostic.data.sources import PRESETS, Archive, BVHSource, file_sha256, preset_source
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.io.atomic import atomic_write
 
@@ -89,17 +88,6 @@ class PreparedDataset:
     extracted: int
     cached_windows: int = 0
     cache_dir: Path | None = None
-
-
-def file_sha256(path: Path, step: Step | None = None) -> str:
-    """Hex SHA-256 of the file at ``path``, read in blocks (``step`` gets the bytes read)."""
-    digest = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(_BLOCK), b""):
-            digest.update(block)
-            if step is not None:
-                step(len(block))
-    return digest.hexdigest()
 
 
 def verify_archive(path: Path, expected: str, step: Step | None = None) -> str:

@@ -18,7 +18,7 @@ import hashlib
 import os
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -233,11 +233,14 @@ def reroot(motion: Motion, joint: str | int) -> Motion:
     )
 
 
-def _file_key(path: Path) -> str:
+def file_sha256(path: Path, step: Callable[[int], None] | None = None) -> str:
+    """Hex SHA-256 of the file at ``path``, read in blocks (``step`` gets the bytes of each)."""
     digest = hashlib.sha256()
     with path.open("rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
+            if step is not None:
+                step(len(block))
     return digest.hexdigest()
 
 
@@ -296,7 +299,9 @@ class BVHSource(ClipSource):
         """One clip per file, keyed by the file's SHA-256."""
         test = re.compile(self.test_pattern) if self.test_pattern else None
         return [
-            ClipRef(str(path), _file_key(path), "test" if test and test.search(str(path)) else None)
+            ClipRef(
+                str(path), file_sha256(path), "test" if test and test.search(str(path)) else None
+            )
             for path in self._files
         ]
 
