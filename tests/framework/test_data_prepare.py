@@ -102,6 +102,16 @@ def test_prepare_verifies_extracts_and_caches(
     assert "test split: 1 file(s): D1_004_KAN01_001.bvh" in text
 
 
+def test_prepare_bvh_puts_any_archive_in_a_folder_of_its_own(tmp_path: Path) -> None:
+    archive = make_zip(tmp_path / "mine.zip", {"takes/a.bvh": bvh_bytes(tmp_path, "biped22")})
+    dest = tmp_path / "data"
+    result = data_cli.prepare("bvh", archive, dest, sha256=sha256(archive).upper(), cache=False)
+    assert result.files == (dest / "bvh" / "takes" / "a.bvh",)
+    assert result.test_files == () and result.cache_dir is None
+    text = data_cli.report(result, dest)
+    assert f"data=bvh data.paths=[{dest / 'bvh'}]" in text and "SKELAGNOSTIC_DATA" not in text
+
+
 def test_prepare_is_idempotent(dog_zip: Path, tmp_path: Path) -> None:
     dest = tmp_path / "data"
     first = data_cli.prepare("mann_dog", dog_zip, dest, sha256=sha256(dog_zip), cache=False)
