@@ -25,6 +25,8 @@ VERBS: dict[str, tuple[str, str, str]] = {
     "new-plugin": ("skelagnostic.cli.new_plugin", "main",
                    "write a third-party aligner package: new-plugin NAME [--dir DIR]"),
     "cache": ("skelagnostic.cli.cache", "main", "window cache: info (entries, size) or clear"),
+    "data": ("skelagnostic.cli.data", "main",
+             "install a dataset: data prepare PRESET --zip FILE --dest DIR, or data get"),
     "render": ("skelagnostic.cli.render", "main", "render a motion to PNG/GIF"),
     "retarget": ("skelagnostic.cli.infer", "retarget",
                  "a trained aligner moves a BVH onto another skeleton"),

@@ -18,7 +18,7 @@ import hashlib
 import os
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ __all__ = [
     "DATA_ROOT_ENV",
     "MANN_DOG_TEST",
     "PRESETS",
+    "Archive",
     "BVHSource",
     "ClipRef",
     "ClipSource",
@@ -232,11 +233,14 @@ def reroot(motion: Motion, joint: str | int) -> Motion:
     )
 
 
-def _file_key(path: Path) -> str:
+def file_sha256(path: Path, step: Callable[[int], None] | None = None) -> str:
+    """Hex SHA-256 of the file at ``path``, read in blocks (``step`` gets the bytes of each)."""
     digest = hashlib.sha256()
     with path.open("rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
+            if step is not None:
+                step(len(block))
     return digest.hexdigest()
 
 
@@ -295,7 +299,9 @@ class BVHSource(ClipSource):
         """One clip per file, keyed by the file's SHA-256."""
         test = re.compile(self.test_pattern) if self.test_pattern else None
         return [
-            ClipRef(str(path), _file_key(path), "test" if test and test.search(str(path)) else None)
+            ClipRef(
+                str(path), file_sha256(path), "test" if test and test.search(str(path)) else None
+            )
             for path in self._files
         ]
 
@@ -440,6 +446,32 @@ DATA_ROOT_ENV = "SKELAGNOSTIC_DATA"
 
 
 @dataclass(frozen=True)
+class Archive:
+    """A public archive of a dataset: where to download it and its checksum.
+
+    ``skelagnostic data get`` downloads ``url`` and ``skelagnostic data prepare``
+    refuses an archive whose SHA-256 is not ``sha256``.
+
+    Attributes:
+        url: Download address of the zip file.
+        sha256: Hex SHA-256 of the whole file.
+        size: Size in bytes (shown before a download; ``None``: unknown).
+        source: Where the URL and checksum come from (a repository file, a page).
+    """
+
+    url: str
+    sha256: str
+    size: int | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if not re.fullmatch(r"[0-9a-f]{64}", self.sha256):
+            raise SkelagnosticError(
+                f"archive {self.url}: sha256 must be 64 lowercase hex digits, got {self.sha256!r}"
+            )
+
+
+@dataclass(frozen=True)
 class DatasetPreset:
     """Known layout of a public dataset: file pattern, units, test split, root fix.
 
@@ -454,6 +486,8 @@ class DatasetPreset:
             with ``test_pattern`` when both are given.
         root_joint: Joint to re-root at (rigs whose file root is a fixed helper).
         directory: Folder of the dataset below ``$SKELAGNOSTIC_DATA`` (default: ``name``).
+        archive: The public archive ``skelagnostic data get`` downloads, if one with a
+            fixed layout and a published checksum is known.
     """
 
     name: str
@@ -464,6 +498,12 @@ class DatasetPreset:
     test_clips: tuple[str, ...] = ()
     root_joint: str | None = None
     directory: str | None = None
+    archive: Archive | None = None
+
+    @property
+    def folder(self) -> str:
+        """The dataset's folder name below ``$SKELAGNOSTIC_DATA`` (``directory`` or ``name``)."""
+        return self.directory or self.name
 
     @property
     def split_pattern(self) -> str | None:
@@ -486,6 +526,17 @@ MANN_DOG_TEST = (
     "D1_010_KAN01_003",  # canter, 3.13 m/s
 )
 
+#: LaFAN1's public archive: ``lafan1/lafan1.zip`` of ubisoft/ubisoft-laforge-animation-dataset,
+#: stored with Git LFS; the checksum and size are those of the file's LFS pointer (commit
+#: 610f0658, unchanged on the default branch since). The BVH files sit at the top of the zip.
+LAFAN1_ARCHIVE = Archive(
+    url="https://media.githubusercontent.com/media/ubisoft/ubisoft-laforge-animation-dataset/"
+    "610f0658a561c7ef208c396f5d3439844bd3459b/lafan1/lafan1.zip",
+    sha256="ea918082b500a5d158e9d3aa39039df04cd42e25f5c02fe8f7e88e8e9365a977",
+    size=144051503,
+    source="Git LFS pointer of lafan1/lafan1.zip in ubisoft/ubisoft-laforge-animation-dataset",
+)
+
 #: Presets of the datasets users have (see METHODS.md "Datasets").
 PRESETS: dict[str, DatasetPreset] = {
     p.name: p
@@ -494,7 +545,8 @@ PRESETS: dict[str, DatasetPreset] = {
             "lafan1",
             "Ubisoft LaFAN1: 22 joints, 30 fps, cm; subject 5 is the test set",
             "cm",
-            test_pattern=r"subject5",
+            test_pattern=r"_subject5\.bvh$",
+            archive=LAFAN1_ARCHIVE,
         ),
         DatasetPreset("cmu", "CMU mocap (BVH conversions): 31 joints, 120 fps, CMU units", "cmu"),
         DatasetPreset(
@@ -523,7 +575,7 @@ def dataset_root(preset: str, root: str | Path | None = None) -> Path:
     """
     if root is not None and str(root) not in ("", "???"):
         return expand_path(root)
-    directory = (PRESETS[preset].directory or preset) if preset in PRESETS else preset
+    directory = PRESETS[preset].folder if preset in PRESETS else preset
     base = os.environ.get(DATA_ROOT_ENV)
     if not base:
         raise SkelagnosticError(
