@@ -14,13 +14,17 @@ An entry is a directory ``benchmarks/results/heldout/<entry>/`` with two files:
     commands:
       fit: skelagnostic fit model=vqpae experiment=vqpae_cpu2h ...     # or a list
       evaluate: skelagnostic evaluate ckpt_path=runs/vqpae/fit/<stamp>  # or a list
-    quote: [shared_code_share, pose_mpjpe_cm]   # metrics of the JSON's mean table
-    paper:                                      # one per quoted metric
+    quote:                          # metrics of the JSON's mean table, or keys of its extra
+      - shared_code_share
+      - pose_mpjpe_cm
+      - extra.table1.dog.pose_mpjpe_cm   # a number, or a mapping method -> number
+    paper:                          # one per quoted figure
       shared_code_share: {value: 0.98, source: "Table 2"}
       pose_mpjpe_cm: {value: null, why: "the paper reports it per character"}
-    targets:                                    # issue #27's targets on quoted metrics
+      extra.table1.dog.pose_mpjpe_cm: {value: 1.41, source: "Table 1"}
+    targets:                        # issue #27's targets on quoted figures
       - shared_code_share >= 0.98
-      - pose_mpjpe_cm <= 0.5 * mean_pose        # a number, a method of the run, or k * method
+      - pose_mpjpe_cm <= 0.5 * mean_pose    # a number, a baseline of the run, or k * baseline
     notes: ["optional sentences"]
 
 The page lists, per method, the quoted mean figures of the model beside every
@@ -106,14 +110,14 @@ class ResultsError(Exception):
 
 @dataclass(frozen=True)
 class Target:
-    """One target of a quoted metric: ``metric op factor [* reference]``.
+    """One target of a quoted figure: ``metric op factor [* reference]``.
 
     Attributes:
-        metric: The metric (a key of the evaluation's ``metrics``).
+        metric: The quoted figure (an item of ``quote``).
         op: ``<``, ``<=``, ``>`` or ``>=``.
         factor: The bound, or its factor when ``reference`` is set.
-        reference: A method of the same run whose mean is the bound (times ``factor``),
-            or None for a fixed bound.
+        reference: A baseline of the same run whose figure is the bound (times
+            ``factor``), or None for a fixed bound.
     """
 
     metric: str
@@ -128,16 +132,16 @@ class Target:
             return _fmt(self.factor)
         return self.reference if self.factor == 1 else f"{_fmt(self.factor)} × {self.reference}"
 
-    def bound(self, mean: Mapping[str, Mapping[str, float]]) -> float | None:
-        """The bound's value in a mean table, None when the reference has no value."""
+    def bound(self, figure: Mapping[str, float]) -> float | None:
+        """The bound, given the figure's ``method -> value``; None when the reference has none."""
         if self.reference is None:
             return self.factor
-        value = mean.get(self.reference, {}).get(self.metric)
+        value = figure.get(self.reference)
         return None if value is None else self.factor * float(value)
 
-    def met(self, mean: Mapping[str, Mapping[str, float]]) -> bool | None:
-        """Whether the model's mean meets the target; None when a value is missing."""
-        value, bound = mean.get(MODEL, {}).get(self.metric), self.bound(mean)
+    def met(self, figure: Mapping[str, float]) -> bool | None:
+        """Whether the model's value meets the target; None when a value is missing."""
+        value, bound = figure.get(MODEL), self.bound(figure)
         if value is None or bound is None or not math.isfinite(float(value)):
             return None
         return _OPS[self.op](float(value), bound)
@@ -151,18 +155,30 @@ class Entry:
         name: The entry's directory name.
         run: The validated ``run.yaml`` (``date`` as ``YYYY-MM-DD``, commands as lists).
         report: The ``evaluation.json``.
+        figures: Each quoted figure's ``method -> value`` (:func:`quoted_figure`).
         targets: The parsed targets, in the file's order.
     """
 
     name: str
     run: dict[str, Any]
     report: dict[str, Any]
+    figures: dict[str, dict[str, float]]
     targets: list[Target]
 
     @property
-    def mean(self) -> dict[str, dict[str, float]]:
-        """The evaluation's mean table, ``method -> metric -> value``."""
-        return self.report["mean"]
+    def methods(self) -> list[str]:
+        """The methods of the quoted figures: the evaluation's, then any other of ``extra``."""
+        names = dict.fromkeys(self.report["methods"])
+        names.update(dict.fromkeys(m for figure in self.figures.values() for m in figure))
+        return list(names)
+
+    def description(self, quoted: str) -> str:
+        """What a quoted figure is: its metric's description, or where in ``extra`` it is."""
+        if quoted in self.report["metrics"]:
+            return self.report["metrics"][quoted]
+        metric = next((m for m in self.report["metrics"] if quoted.endswith("." + m)), None)
+        where = "corpus-level figure from the evaluation's `extra`"
+        return f"{self.report['metrics'][metric]} ({where})" if metric else where
 
     @property
     def anchor(self) -> str:
@@ -226,18 +242,25 @@ def _date(where: str, value: Any) -> str:
     raise ResultsError(f"{where}: expected a date YYYY-MM-DD, got {value!r}")
 
 
+def _read(path: Path, parse: Callable[[str], Any], hint: str) -> Any:
+    """``parse`` of a file's text; errors name the file (``hint``: how to provide it)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ResultsError(f"{path}: missing ({hint})") from None
+    try:
+        return parse(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as err:
+        raise ResultsError(f"{path}: does not parse ({err})") from None
+
+
 def load_report(path: Path) -> dict[str, Any]:
     """Read and check an ``evaluation.json`` (the keys this script uses).
 
     Raises:
         ResultsError: The file is missing, not JSON, of another schema or lacks a key.
     """
-    try:
-        report = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ResultsError(f"{path}: missing (copy it from the evaluate run directory)") from None
-    except json.JSONDecodeError as err:
-        raise ResultsError(f"{path}: not JSON ({err})") from None
+    report = _read(path, json.loads, "copy it from the evaluate run directory")
     if not isinstance(report, dict):
         raise ResultsError(f"{path}: expected a JSON object")
     if report.get("schema") != SCHEMA:
@@ -253,11 +276,17 @@ def load_report(path: Path) -> dict[str, Any]:
     return report
 
 
-def parse_target(where: str, text: Any, report: Mapping[str, Any]) -> Target:
-    """Parse ``"metric op bound"`` (bound: a number, a method of the run, or ``k * method``).
+def parse_target(where: str, text: Any, figures: Mapping[str, Mapping[str, float]]) -> Target:
+    """Parse ``"metric op bound"`` (bound: a number, a baseline of the run, or ``k * baseline``).
+
+    Args:
+        where: The file and key, for errors.
+        text: The target as written.
+        figures: The quoted figures, ``quote item -> method -> value``.
 
     Raises:
-        ResultsError: The text does not parse, or names a metric or method the run lacks.
+        ResultsError: The text does not parse, or names a figure that is not quoted or a
+            baseline the figure lacks.
     """
     match = _TARGET.match(text) if isinstance(text, str) else None
     if match is None:
@@ -266,11 +295,8 @@ def parse_target(where: str, text: Any, report: Mapping[str, Any]) -> Target:
             "number, a method of the run or 'FACTOR * method')"
         )
     metric, rhs = match["metric"], match["rhs"]
-    if metric not in report["metrics"]:
-        raise ResultsError(
-            f"{where}: metric {metric!r} is not in the evaluation "
-            f"(its metrics: {', '.join(report['metrics'])})"
-        )
+    if metric not in figures:
+        raise ResultsError(f"{where}: {metric!r} is not quoted (quote: {', '.join(figures)})")
     try:
         return Target(metric, match["op"], float(rhs), None)
     except ValueError:
@@ -281,10 +307,11 @@ def parse_target(where: str, text: Any, report: Mapping[str, Any]) -> Target:
         factor = float(factor)
     except ValueError:
         raise ResultsError(f"{where}: {factor!r} in {rhs!r} is not a number") from None
-    if method not in report["methods"] or method == MODEL:
+    baselines = [m for m in figures[metric] if m != MODEL]
+    if method not in baselines:
         raise ResultsError(
-            f"{where}: {rhs!r} is neither a number nor a baseline of the run "
-            f"(its baselines: {', '.join(m for m in report['methods'] if m != MODEL)})"
+            f"{where}: {rhs!r} is neither a number nor a baseline of the run with a value of "
+            f"{metric!r} (its baselines: {', '.join(baselines) or 'none'})"
         )
     return Target(metric, match["op"], factor, method)
 
@@ -306,12 +333,7 @@ def load_entry(directory: Path, methods: Sequence[str] = tuple(METHODS)) -> Entr
         raise ResultsError(f"{directory}: entry names are letters, digits, '_', '-' and '.'")
     report = load_report(directory / "evaluation.json")
     path = directory / "run.yaml"
-    try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ResultsError(f"{path}: missing (see scripts/results.py for its keys)") from None
-    except yaml.YAMLError as err:
-        raise ResultsError(f"{path}: not YAML ({err})") from None
+    raw = _read(path, yaml.safe_load, "see scripts/results.py for its keys")
     run = _keys(f"{path}:", raw, _RUN_KEYS)
     where = f"{path}: "
     if run["method"] not in methods:
@@ -344,25 +366,66 @@ def load_entry(directory: Path, methods: Sequence[str] = tuple(METHODS)) -> Entr
     quote = run["quote"]
     if not isinstance(quote, list) or not quote:
         raise ResultsError(f"{where}quote: expected a non-empty list of metrics")
-    for i, metric in enumerate(quote):
-        if metric not in report["metrics"] or metric not in report["mean"][MODEL]:
-            raise ResultsError(
-                f"{where}quote[{i}]: {metric!r} is not a metric with a mean value of the model "
-                f"in evaluation.json (its metrics: {', '.join(report['metrics'])})"
-            )
-    if len(set(quote)) != len(quote):
+    if len(set(map(str, quote))) != len(quote):
         raise ResultsError(f"{where}quote: a metric is listed twice")
+    figures = {
+        str(item): quoted_figure(f"{where}quote[{i}]", item, report) for i, item in enumerate(quote)
+    }
     run["paper"] = _paper(f"{where}paper", run["paper"], quote)
     if not isinstance(run["targets"], list):
         raise ResultsError(f"{where}targets: expected a list of 'metric OP bound' (may be empty)")
     targets = [
-        parse_target(f"{where}targets[{i}]", text, report) for i, text in enumerate(run["targets"])
+        parse_target(f"{where}targets[{i}]", text, figures) for i, text in enumerate(run["targets"])
     ]
-    for i, target in enumerate(targets):
-        if target.metric not in quote:
-            raise ResultsError(f"{where}targets[{i}]: {target.metric!r} is not quoted (quote:)")
     run["notes"] = _lines(f"{where}notes", run["notes"]) if run.get("notes") else []
-    return Entry(directory.name, run, report, targets)
+    return Entry(directory.name, run, report, figures, targets)
+
+
+def quoted_figure(where: str, item: Any, report: Mapping[str, Any]) -> dict[str, float]:
+    """``method -> value`` of a quoted figure.
+
+    ``item`` is a metric of the mean table (every method's mean), or ``extra.<key>.<key>...``:
+    a number of the evaluation's ``extra`` (the model's figure, e.g. a corpus-level count)
+    or a mapping ``method -> number`` there (the model beside baselines, e.g. one
+    character's means). Keys may contain dots: the longest key that matches is taken.
+
+    Raises:
+        ResultsError: The item names no such metric or key, or the key holds something else.
+    """
+    if not isinstance(item, str):
+        raise ResultsError(f"{where}: expected a metric name or 'extra.<key>...', got {item!r}")
+    if not item.startswith("extra."):
+        if item not in report["metrics"] or item not in report["mean"][MODEL]:
+            raise ResultsError(
+                f"{where}: {item!r} is not a metric with a mean value of the model in "
+                f"evaluation.json (its metrics: {', '.join(report['metrics'])}; or 'extra.<key>')"
+            )
+        return {m: float(v[item]) for m, v in report["mean"].items() if v.get(item) is not None}
+    node: Any = report.get("extra", {})
+    path, rest = "extra", item[len("extra.") :]
+    while rest:
+        if not isinstance(node, Mapping):
+            raise ResultsError(f"{where}: {item!r}: evaluation.json's {path} is not a mapping")
+        keys = [k for k in node if rest == k or rest.startswith(f"{k}.")]
+        if not keys:
+            raise ResultsError(
+                f"{where}: {item!r}: evaluation.json's {path} has no key {rest.split('.')[0]!r} "
+                f"(its keys: {', '.join(map(str, node)) or 'none'})"
+            )
+        key = max(keys, key=len)
+        node, path, rest = node[key], f"{path}.{key}", rest[len(key) + 1 :]
+    if _number(node):
+        return {MODEL: float(node)}
+    if isinstance(node, Mapping) and _number(node.get(MODEL)):
+        return {str(m): float(v) for m, v in node.items() if _number(v)}
+    raise ResultsError(
+        f"{where}: {item!r} holds neither a number nor a mapping method -> number with a "
+        f"{MODEL!r} value"
+    )
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _paper(where: str, paper: Any, quote: Sequence[str]) -> dict[str, dict[str, Any]]:
@@ -415,12 +478,13 @@ def _paper_cell(figure: Mapping[str, Any]) -> str:
 
 def _target_cell(entry: Entry, metric: str) -> str:
     cells = []
+    figure = entry.figures[metric]
     for target in (t for t in entry.targets if t.metric == metric):
-        bound = target.bound(entry.mean)
+        bound = target.bound(figure)
         text = f"{target.op} {target.rhs}"
         if target.reference is not None:
             text += f" (= {_fmt(bound)})"
-        met = target.met(entry.mean)
+        met = target.met(figure)
         verdict = "no value" if met is None else ("**met**" if met else "**not met**")
         cells.append(f"{text}: {verdict}")
     return "; ".join(cells) or "-"
@@ -432,11 +496,11 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
 
 
 def _quoted_table(entry: Entry) -> list[str]:
-    methods = entry.report["methods"]
+    methods = entry.methods
     rows = [
         [
             f"`{metric}`",
-            *(_fmt(entry.mean.get(m, {}).get(metric)) for m in methods),
+            *(_fmt(entry.figures[metric].get(m)) for m in methods),
             _paper_cell(entry.run["paper"][metric]),
             _target_cell(entry, metric),
         ]
@@ -485,7 +549,7 @@ def _entry_section(entry: Entry) -> list[str]:
         "",
         *_quoted_table(entry),
         "",
-        *(f"- `{m}`: {report['metrics'][m]}" for m in run["quote"]),
+        *(f"- `{m}`: {entry.description(m)}" for m in run["quote"]),
         "",
         f"- Held out: the {data['split_name']} of `{data['source']}`, "
         f"{len(data['clips'])} clips: {clips}",
@@ -578,17 +642,14 @@ def render_readme_block(entries: Sequence[Entry], methods: Sequence[str] = tuple
             rows.append([_title(method), "no held-out result committed yet", "-", "-", "-", "-"])
         for entry in mine:
             for metric in entry.run["quote"]:
-                baselines = ", ".join(
-                    f"{m} {_fmt(entry.mean[m][metric])}"
-                    for m in entry.report["methods"]
-                    if m != MODEL and metric in entry.mean.get(m, {})
-                )
+                figure = entry.figures[metric]
+                baselines = ", ".join(f"{m} {_fmt(v)}" for m, v in figure.items() if m != MODEL)
                 paper = entry.run["paper"][metric]
                 rows.append(
                     [
                         _title(method),
                         f"`{metric}`, `{entry.name}` ({entry.run['date']})",
-                        _fmt(entry.mean[MODEL][metric]),
+                        _fmt(figure[MODEL]),
                         baselines or "-",
                         "-" if paper["value"] is None else _paper_cell(paper),
                         _target_cell(entry, metric),

@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -15,12 +16,9 @@ from typing import Any
 import pytest
 import yaml
 
-from skelagnostic import cli
-
 REPO = Path(__file__).resolve().parents[2]
 
 FIT = [
-    "model=example",
     "experiment=smoke",
     "model.hidden=8",
     "model.latent=4",
@@ -60,7 +58,7 @@ def _run_yaml(**changes: Any) -> dict[str, Any]:
         "machine": {"cores": 2, "load": "about 3"},
         "budget": {"steps": 40, "cpu_time": "10 s"},
         "commands": {
-            "fit": "skelagnostic fit " + " ".join(FIT),
+            "fit": "skelagnostic fit model=example " + " ".join(FIT),
             "evaluate": "skelagnostic evaluate ckpt_path=runs/example/fit/<stamp>",
         },
         "quote": ["mpjpe_cm", "mpjpe_over_height"],
@@ -75,23 +73,21 @@ def _run_yaml(**changes: Any) -> dict[str, Any]:
     return run
 
 
+@pytest.fixture(scope="module")
+def evaluation(tmp_path_factory: pytest.TempPathFactory, fit_example: Callable[..., Path]) -> Path:
+    """A real ``evaluation.json``: the example aligner trained briefly, then ``evaluate``."""
+    root = tmp_path_factory.mktemp("evaluated")
+    fitted = fit_example(root, FIT)
+    evaluated = fit_example(root, [*FIT, f"ckpt_path={fitted}"], task="evaluate")
+    return evaluated / "evaluation.json"
+
+
 @pytest.fixture
-def heldout(
-    example_plugin: Path,
-    tmp_path: Path,
-    monkeypatch: pytest.MonkeyPatch,
-    capsys: pytest.CaptureFixture[str],
-) -> Path:
-    """A real entry: the example aligner trained a few steps, evaluated, committed as an entry."""
-    monkeypatch.chdir(tmp_path)
-    assert cli.main(["fit", *FIT]) == 0, capsys.readouterr().err
-    (fitted,) = (tmp_path / "runs" / "example" / "fit").iterdir()
-    assert cli.main(["evaluate", f"ckpt_path={fitted}"]) == 0, capsys.readouterr().err
-    capsys.readouterr()
-    (evaluated,) = (tmp_path / "runs" / "example" / "evaluate").iterdir()
+def heldout(evaluation: Path, tmp_path: Path) -> Path:
+    """A directory of entries with one entry: that evaluation and its run.yaml."""
     entry = tmp_path / "heldout" / "example_smoke"
     entry.mkdir(parents=True)
-    shutil.copy(evaluated / "evaluation.json", entry / "evaluation.json")
+    shutil.copy(evaluation, entry / "evaluation.json")
     (entry / "run.yaml").write_text(yaml.safe_dump(_run_yaml()))
     return entry.parent
 
@@ -170,6 +166,59 @@ def test_page_quotes_the_evaluation_and_judges_the_targets(heldout: Path, tmp_pa
     assert "$ skelagnostic evaluate ckpt_path=runs/example/fit/<stamp>" in page
     assert "## HuMoT\n\nNo held-out result committed yet." in page
     assert '<a id="per-clip-example-smoke"></a>' in page and "(#per-clip-example-smoke)" in page
+
+
+def test_figures_of_extra_are_quoted_with_their_baselines(
+    heldout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Per-group means and corpus-level counts in ``extra`` (as VQ-PAE's Table 2 is reported)."""
+    report_file = heldout / "example_smoke" / "evaluation.json"
+    report = json.loads(report_file.read_text())
+    groups: dict[str, dict[str, list[float]]] = {}
+    for row in report["per_clip"]:
+        kind = row["clip"].split("_")[0]  # biped22 / quadruped: the clip's skeleton
+        for method, values in row["values"].items():
+            groups.setdefault(kind, {}).setdefault(method, []).append(values["mpjpe_cm"])
+    by_kind = {k: {m: sum(v) / len(v) for m, v in g.items()} for k, g in groups.items()}
+    report["extra"] = {"by_kind": by_kind, "clips.seen": {"count": len(report["per_clip"])}}
+    report_file.write_text(json.dumps(report))
+    quote = [f"extra.by_kind.{kind}" for kind in sorted(by_kind)] + ["extra.clips.seen.count"]
+    run = _run_yaml(
+        quote=quote,
+        paper={q: {"value": None, "why": "not in the paper"} for q in quote},
+        targets=[f"{quote[0]} < mean_pose", f"{quote[-1]} >= 3", f"{quote[-1]} > 99"],
+    )
+    (heldout / "example_smoke" / "run.yaml").write_text(yaml.safe_dump(run))
+    out = tmp_path / "results.md"
+    assert results.main(_args(heldout, out)) == 0
+    (quoted,) = (t for t in _tables(out.read_text()) if "paper" in t[0])
+    rows = {row["metric"].strip("`"): row for row in quoted}
+    for kind, figure in by_kind.items():
+        for method, value in figure.items():
+            assert float(rows[f"extra.by_kind.{kind}"][method]) == pytest.approx(value, rel=5e-4)
+    first = by_kind[sorted(by_kind)[0]]
+    met = first["model"] < first["mean_pose"]
+    assert rows[quote[0]]["target"].endswith("**met**" if met else "**not met**")
+    count = rows["extra.clips.seen.count"]
+    assert count["model"] == str(len(report["per_clip"])) and count["mean_pose"] == "-"
+    expected = ["**met**" if len(report["per_clip"]) >= 3 else "**not met**", "**not met**"]
+    assert [v.split(": ")[-1] for v in count["target"].split("; ")] == expected
+    # a target against a baseline the figure lacks, a key extra does not have
+    for change, message in [
+        ({"targets": [f"{quote[-1]} < mean_pose"]}, "its baselines: none"),
+        (
+            {"quote": ["extra.by_kind.nope"]},
+            f"extra.by_kind has no key 'nope' (its keys: {', '.join(by_kind)})",
+        ),
+        ({"quote": ["extra.by_kind"]}, "holds neither a number nor a mapping"),
+    ]:
+        bad = {**run, **change}
+        if "quote" in change:
+            bad["paper"] = {q: {"value": None, "why": "-"} for q in change["quote"]}
+            bad["targets"] = []
+        (heldout / "example_smoke" / "run.yaml").write_text(yaml.safe_dump(bad))
+        assert results.main(_args(heldout, out)) == 2
+        assert message in capsys.readouterr().err
 
 
 def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
