@@ -142,7 +142,7 @@ class Target:
     def met(self, figure: Mapping[str, float]) -> bool | None:
         """Whether the model's value meets the target; None when a value is missing."""
         value, bound = figure.get(MODEL), self.bound(figure)
-        if value is None or bound is None or not math.isfinite(float(value)):
+        if value is None or bound is None or not math.isfinite(float(value) + bound):
             return None
         return _OPS[self.op](float(value), bound)
 

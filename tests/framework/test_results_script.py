@@ -315,6 +315,22 @@ def test_a_bad_run_yaml_names_the_file_and_key(
     assert f"{report_file}: missing" in capsys.readouterr().err
 
 
+def test_targets_compare_the_model_with_a_bound() -> None:
+    figures = {"l2p@15": {"model": 0.5, "lerp_slerp": 0.6, "nan_baseline": float("nan")}}
+    cases = {
+        "l2p@15 < lerp_slerp": True,
+        "l2p@15 <= 0.8 * lerp_slerp": False,  # 0.5 > 0.48
+        "l2p@15 >= 0.5": True,
+        "l2p@15 > 0.5": False,
+        "l2p@15 < 2x lerp_slerp": True,
+        "l2p@15 < nan_baseline": None,  # no verdict without a value
+    }
+    for text, expected in cases.items():
+        target = results.parse_target("run.yaml: targets[0]", text, figures)
+        assert target.met(figures["l2p@15"]) is expected, text
+    assert results.Target("l2p@15", "<", 1.0, None).met({"lerp_slerp": 0.6}) is None
+
+
 def test_the_committed_results_page_and_readme_block_are_up_to_date() -> None:
     done = subprocess.run(
         [sys.executable, str(REPO / "scripts" / "results.py"), "--check", "--readme", "README.md"],
