@@ -87,14 +87,16 @@ def subprocess_env(tmp_path: Path) -> dict[str, str]:
 
 
 @pytest.fixture(scope="session")
-def fit_example() -> Callable[[Path, Sequence[str]], Path]:
-    """``fit_example(root, overrides)``: train the example aligner in-process; its run directory.
+def fit_example() -> Callable[..., Path]:
+    """``fit_example(root, overrides, task="fit")``: the example aligner in-process; its run dir.
 
+    Trains it (``task="fit"``, into ``root/run``), or runs another verb such as
+    ``task="evaluate"`` with ``ckpt_path=`` in ``overrides`` (into ``root/<task>``).
     The plugin comes from its sources through a private plugin manager, so it
     need not be installed; the run and its window cache live below ``root``.
     """
 
-    def fit(root: Path, overrides: Sequence[str]) -> Path:
+    def fit(root: Path, overrides: Sequence[str], task: str = "fit") -> Path:
         from skelagnostic.cli import app
         from skelagnostic.plugins import PluginManager
 
@@ -104,9 +106,9 @@ def fit_example() -> Callable[[Path, Sequence[str]], Path]:
 
             pm = PluginManager(load_entrypoints=False)
             pm.register(plugin, "example")
-            run_dir = root / "run"
+            run_dir = root / ("run" if task == "fit" else task)
             app.run(app.compose(["model=example", f"data.cache_dir={root / 'cache'}",
-                                 *overrides, f"run_dir={run_dir}"], plugin_manager=pm),
+                                 *overrides, f"run_dir={run_dir}"], task=task, plugin_manager=pm),
                     plugin_manager=pm)
         finally:
             sys.path.remove(str(EXAMPLE_SRC))

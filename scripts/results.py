@@ -1,0 +1,748 @@
+r"""Write ``docs/results.md`` and the README's results block from the committed held-out entries.
+
+An entry is a directory ``benchmarks/results/heldout/<entry>/`` with two files:
+
+* ``evaluation.json``: copied unchanged from the run directory of a
+  ``skelagnostic evaluate`` command (its layout: ``docs/evaluate.md``);
+* ``run.yaml``: what the JSON does not hold::
+
+    method: vqpae                  # vqpae, humot, pcmrl or pcmrl_interp (the JSON's model)
+    title: VQ-PAE, LaFAN1 + MANN dog, K = 32
+    date: 2026-12-03
+    machine: {cores: 2, load: "about 2 (one other run)", cpu: "optional text"}
+    budget: {steps: 15000, cpu_time: "2 h", wall_time: "optional text"}
+    commands:
+      fit: skelagnostic fit model=vqpae experiment=vqpae_cpu2h ...     # or a list
+      evaluate: skelagnostic evaluate ckpt_path=runs/vqpae/fit/<stamp>  # or a list
+    quote:                          # metrics of the JSON's mean table, or keys of its extra
+      - shared_code_share
+      - pose_mpjpe_cm
+      - extra.table1.dog.pose_mpjpe_cm   # a number, or a mapping method -> number
+    paper:                          # one per quoted figure
+      shared_code_share: {value: 0.98, source: "Table 2"}
+      pose_mpjpe_cm: {value: null, why: "the paper reports it per character"}
+      extra.table1.dog.pose_mpjpe_cm: {value: 1.41, source: "Table 1"}
+    targets:                        # issue #27's targets on quoted figures
+      - shared_code_share >= 0.98
+      - pose_mpjpe_cm <= 0.5 * mean_pose    # a number, a baseline of the run, or k * baseline
+    notes: ["optional sentences"]
+
+The page lists, per method, the quoted mean figures of the model beside every
+baseline of the same run, the paper's figure and the target (met or not met),
+then the held-out clips, the budget, the machine, the date and the commands,
+and the per-clip tables at the end. A method without an entry is listed as
+having no held-out result yet.
+
+Usage::
+
+    python scripts/results.py                              # rewrite docs/results.md
+    python scripts/results.py --readme README.md           # and README.md's results block
+    python scripts/results.py --check --readme README.md   # exit 1 when either is stale
+
+Only PyYAML is needed (no torch): the script reads the files and writes Markdown.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import difflib
+import json
+import math
+import operator
+import re
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+#: Where the committed entries live.
+HELDOUT = REPO / "benchmarks" / "results" / "heldout"
+#: The generated page.
+RESULTS_PAGE = REPO / "docs" / "results.md"
+#: The methods of the page, in order, with their section titles.
+METHODS = {
+    "vqpae": "VQ-PAE (WalkTheDog)",
+    "humot": "HuMoT",
+    "pcmrl": "PC-MRL stage 1 (retargeting)",
+    "pcmrl_interp": "PC-MRL stage 2 (interpolation)",
+}
+#: The markers around the README's generated block.
+BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
+#: The method name of the evaluated model in ``evaluation.json``.
+MODEL = "model"
+#: The layout of ``evaluation.json`` this script reads.
+SCHEMA = 1
+
+_OPS: dict[str, Callable[[float, float], bool]] = {
+    "<=": operator.le,
+    ">=": operator.ge,
+    "<": operator.lt,
+    ">": operator.gt,
+}
+_TARGET = re.compile(r"^\s*(?P<metric>[^\s<>=]+)\s*(?P<op><=|>=|<|>)\s*(?P<rhs>.+?)\s*$")
+_SCALED = re.compile(r"^(?P<factor>[-+0-9.eE]+)\s*[*x×]\s*(?P<method>\S+)$")
+_ENTRY_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+_RUN_KEYS = {
+    "method": True,
+    "title": True,
+    "date": True,
+    "machine": True,
+    "budget": True,
+    "commands": True,
+    "quote": True,
+    "paper": True,
+    "targets": True,
+    "notes": False,
+}
+_MACHINE_KEYS = {"cores": True, "load": True, "cpu": False}
+_BUDGET_KEYS = {"steps": True, "cpu_time": True, "wall_time": False}
+_COMMAND_KEYS = {"fit": True, "evaluate": True}
+
+
+class ResultsError(Exception):
+    """A committed entry that cannot be published; the message names the file and key."""
+
+
+@dataclass(frozen=True)
+class Target:
+    """One target of a quoted figure: ``metric op factor [* reference]``.
+
+    Attributes:
+        metric: The quoted figure (an item of ``quote``).
+        op: ``<``, ``<=``, ``>`` or ``>=``.
+        factor: The bound, or its factor when ``reference`` is set.
+        reference: A baseline of the same run whose figure is the bound (times
+            ``factor``), or None for a fixed bound.
+    """
+
+    metric: str
+    op: str
+    factor: float
+    reference: str | None
+
+    @property
+    def rhs(self) -> str:
+        """The right-hand side as written in a table (``0.98``, ``0.5 × mean_pose``)."""
+        if self.reference is None:
+            return _fmt(self.factor)
+        return self.reference if self.factor == 1 else f"{_fmt(self.factor)} × {self.reference}"
+
+    def bound(self, figure: Mapping[str, float]) -> float | None:
+        """The bound, given the figure's ``method -> value``; None when the reference has none."""
+        if self.reference is None:
+            return self.factor
+        value = figure.get(self.reference)
+        return None if value is None else self.factor * float(value)
+
+    def met(self, figure: Mapping[str, float]) -> bool | None:
+        """Whether the model's value meets the target; None when a value is missing."""
+        value, bound = figure.get(MODEL), self.bound(figure)
+        if value is None or bound is None or not math.isfinite(float(value) + bound):
+            return None
+        return _OPS[self.op](float(value), bound)
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A committed held-out result: ``run.yaml`` validated against its ``evaluation.json``.
+
+    Attributes:
+        name: The entry's directory name.
+        run: The validated ``run.yaml`` (``date`` as ``YYYY-MM-DD``, commands as lists).
+        report: The ``evaluation.json``.
+        figures: Each quoted figure's ``method -> value`` (:func:`quoted_figure`).
+        targets: The parsed targets, in the file's order.
+    """
+
+    name: str
+    run: dict[str, Any]
+    report: dict[str, Any]
+    figures: dict[str, dict[str, float]]
+    targets: list[Target]
+
+    @property
+    def methods(self) -> list[str]:
+        """The methods of the quoted figures: the evaluation's, then any other of ``extra``."""
+        names = dict.fromkeys(self.report["methods"])
+        names.update(dict.fromkeys(m for figure in self.figures.values() for m in figure))
+        return list(names)
+
+    def description(self, quoted: str) -> str:
+        """What a quoted figure is: its metric's description, or where in ``extra`` it is."""
+        if quoted in self.report["metrics"]:
+            return self.report["metrics"][quoted]
+        metric = next((m for m in self.report["metrics"] if quoted.endswith("." + m)), None)
+        where = "corpus-level figure from the evaluation's `extra`"
+        return f"{self.report['metrics'][metric]} ({where})" if metric else where
+
+    @property
+    def anchor(self) -> str:
+        """The HTML id of the entry's per-clip tables."""
+        return "per-clip-" + re.sub(r"[^a-z0-9-]+", "-", self.name.lower())
+
+
+def _fmt(value: Any) -> str:
+    """A figure as in ``evaluation.md`` (4 significant digits), ``-`` when absent."""
+    if value is None:
+        return "-"
+    return f"{float(value):.4g}"
+
+
+def _keys(where: str, data: Any, keys: Mapping[str, bool]) -> dict[str, Any]:
+    """``data`` as a mapping with every required key of ``keys`` and no other key."""
+    if not isinstance(data, Mapping):
+        raise ResultsError(f"{where}: expected a mapping, got {type(data).__name__}")
+    required = [k for k, needed in keys.items() if needed]
+    missing = [k for k in required if k not in data]
+    if missing:
+        raise ResultsError(f"{_at(where, missing[0])}: missing (required: {', '.join(required)})")
+    unknown = sorted(str(k) for k in set(data) - set(keys))
+    if unknown:
+        raise ResultsError(f"{_at(where, unknown[0])}: unknown key (known: {', '.join(keys)})")
+    return dict(data)
+
+
+def _at(where: str, key: str) -> str:
+    """``where`` (``"<file>:"`` or ``"<file>: key"``) followed by ``key``."""
+    return f"{where} {key}" if where.endswith(":") else f"{where}.{key}"
+
+
+def _text(where: str, value: Any) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ResultsError(f"{where}: expected a non-empty string, got {value!r}")
+    return value.strip()
+
+
+def _scalar_text(where: str, value: Any) -> str:
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)) or value == "":
+        raise ResultsError(f"{where}: expected a string or a number, got {value!r}")
+    return str(value)
+
+
+def _lines(where: str, value: Any) -> list[str]:
+    items = [value] if isinstance(value, str) else value
+    if not isinstance(items, list) or not items:
+        raise ResultsError(f"{where}: expected a string or a non-empty list of strings")
+    return [_text(f"{where}[{i}]", item) for i, item in enumerate(items)]
+
+
+def _date(where: str, value: Any) -> str:
+    if isinstance(value, datetime.date):
+        return value.isoformat()
+    if isinstance(value, str):
+        try:
+            return datetime.date.fromisoformat(value).isoformat()
+        except ValueError:
+            pass
+    raise ResultsError(f"{where}: expected a date YYYY-MM-DD, got {value!r}")
+
+
+def _read(path: Path, parse: Callable[[str], Any], hint: str) -> Any:
+    """``parse`` of a file's text; errors name the file (``hint``: how to provide it)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ResultsError(f"{path}: missing ({hint})") from None
+    try:
+        return parse(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as err:
+        raise ResultsError(f"{path}: does not parse ({err})") from None
+
+
+def load_report(path: Path) -> dict[str, Any]:
+    """Read and check an ``evaluation.json`` (the keys this script uses).
+
+    Raises:
+        ResultsError: The file is missing, not JSON, of another schema or lacks a key.
+    """
+    report = _read(path, json.loads, "copy it from the evaluate run directory")
+    if not isinstance(report, dict):
+        raise ResultsError(f"{path}: expected a JSON object")
+    if report.get("schema") != SCHEMA:
+        raise ResultsError(f"{path}: schema: {report.get('schema')!r}, this script reads {SCHEMA}")
+    for key in ("protocol", "model", "data", "methods", "metrics", "mean", "per_clip"):
+        if key not in report:
+            raise ResultsError(f"{path}: {key}: missing")
+    for key in ("source", "split_name", "clips"):
+        if key not in report["data"]:
+            raise ResultsError(f"{path}: data.{key}: missing")
+    if MODEL not in report["mean"]:
+        raise ResultsError(f"{path}: mean.{MODEL}: missing")
+    return report
+
+
+def parse_target(where: str, text: Any, figures: Mapping[str, Mapping[str, float]]) -> Target:
+    """Parse ``"metric op bound"`` (bound: a number, a baseline of the run, or ``k * baseline``).
+
+    Args:
+        where: The file and key, for errors.
+        text: The target as written.
+        figures: The quoted figures, ``quote item -> method -> value``.
+
+    Raises:
+        ResultsError: The text does not parse, or names a figure that is not quoted or a
+            baseline the figure lacks.
+    """
+    match = _TARGET.match(text) if isinstance(text, str) else None
+    if match is None:
+        raise ResultsError(
+            f"{where}: {text!r} is not 'metric OP bound' (OP one of <, <=, >, >=; bound a "
+            "number, a method of the run or 'FACTOR * method')"
+        )
+    metric, rhs = match["metric"], match["rhs"]
+    if metric not in figures:
+        raise ResultsError(f"{where}: {metric!r} is not quoted (quote: {', '.join(figures)})")
+    try:
+        return Target(metric, match["op"], float(rhs), None)
+    except ValueError:
+        pass
+    scaled = _SCALED.match(rhs)
+    factor, method = (scaled["factor"], scaled["method"]) if scaled else ("1", rhs)
+    try:
+        factor = float(factor)
+    except ValueError:
+        raise ResultsError(f"{where}: {factor!r} in {rhs!r} is not a number") from None
+    baselines = [m for m in figures[metric] if m != MODEL]
+    if method not in baselines:
+        raise ResultsError(
+            f"{where}: {rhs!r} is neither a number nor a baseline of the run with a value of "
+            f"{metric!r} (its baselines: {', '.join(baselines) or 'none'})"
+        )
+    return Target(metric, match["op"], factor, method)
+
+
+def load_entry(directory: Path, methods: Sequence[str] = tuple(METHODS)) -> Entry:
+    """Read and validate one entry directory.
+
+    Args:
+        directory: ``benchmarks/results/heldout/<entry>``.
+        methods: The method names ``run.yaml`` may give.
+
+    Returns:
+        The entry.
+
+    Raises:
+        ResultsError: A file is missing or malformed; the message names the file and key.
+    """
+    if not _ENTRY_NAME.match(directory.name):
+        raise ResultsError(f"{directory}: entry names are letters, digits, '_', '-' and '.'")
+    report = load_report(directory / "evaluation.json")
+    path = directory / "run.yaml"
+    raw = _read(path, yaml.safe_load, "see scripts/results.py for its keys")
+    run = _keys(f"{path}:", raw, _RUN_KEYS)
+    where = f"{path}: "
+    if run["method"] not in methods:
+        raise ResultsError(f"{where}method: {run['method']!r} is not one of {', '.join(methods)}")
+    if run["method"] != report["model"]:
+        raise ResultsError(
+            f"{where}method: {run['method']!r}, but evaluation.json evaluates "
+            f"model={report['model']}"
+        )
+    run["title"] = _text(f"{where}title", run["title"])
+    run["date"] = _date(f"{where}date", run["date"])
+    machine = _keys(f"{where}machine", run["machine"], _MACHINE_KEYS)
+    cores = machine["cores"]
+    if isinstance(cores, bool) or not isinstance(cores, int) or cores < 1:
+        raise ResultsError(f"{where}machine.cores: expected a positive integer, got {cores!r}")
+    machine["load"] = _scalar_text(f"{where}machine.load", machine["load"])
+    if "cpu" in machine:
+        machine["cpu"] = _text(f"{where}machine.cpu", machine["cpu"])
+    run["machine"] = machine
+    budget = _keys(f"{where}budget", run["budget"], _BUDGET_KEYS)
+    steps = budget["steps"]
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+        raise ResultsError(f"{where}budget.steps: expected an integer >= 0, got {steps!r}")
+    for key in ("cpu_time", "wall_time"):
+        if key in budget:
+            budget[key] = _scalar_text(f"{where}budget.{key}", budget[key])
+    run["budget"] = budget
+    commands = _keys(f"{where}commands", run["commands"], _COMMAND_KEYS)
+    run["commands"] = {k: _lines(f"{where}commands.{k}", v) for k, v in commands.items()}
+    quote = run["quote"]
+    if not isinstance(quote, list) or not quote:
+        raise ResultsError(f"{where}quote: expected a non-empty list of metrics")
+    if len(set(map(str, quote))) != len(quote):
+        raise ResultsError(f"{where}quote: a metric is listed twice")
+    figures = {
+        str(item): quoted_figure(f"{where}quote[{i}]", item, report) for i, item in enumerate(quote)
+    }
+    run["paper"] = _paper(f"{where}paper", run["paper"], quote)
+    if not isinstance(run["targets"], list):
+        raise ResultsError(f"{where}targets: expected a list of 'metric OP bound' (may be empty)")
+    targets = [
+        parse_target(f"{where}targets[{i}]", text, figures) for i, text in enumerate(run["targets"])
+    ]
+    run["notes"] = _lines(f"{where}notes", run["notes"]) if run.get("notes") else []
+    return Entry(directory.name, run, report, figures, targets)
+
+
+def quoted_figure(where: str, item: Any, report: Mapping[str, Any]) -> dict[str, float]:
+    """``method -> value`` of a quoted figure.
+
+    ``item`` is a metric of the mean table (every method's mean), or ``extra.<key>.<key>...``:
+    a number of the evaluation's ``extra`` (the model's figure, e.g. a corpus-level count)
+    or a mapping ``method -> number`` there (the model beside baselines, e.g. one
+    character's means). Keys may contain dots: the longest key that matches is taken.
+
+    Raises:
+        ResultsError: The item names no such metric or key, or the key holds something else.
+    """
+    if not isinstance(item, str):
+        raise ResultsError(f"{where}: expected a metric name or 'extra.<key>...', got {item!r}")
+    if not item.startswith("extra."):
+        if item not in report["metrics"] or item not in report["mean"][MODEL]:
+            raise ResultsError(
+                f"{where}: {item!r} is not a metric with a mean value of the model in "
+                f"evaluation.json (its metrics: {', '.join(report['metrics'])}; or 'extra.<key>')"
+            )
+        return {m: float(v[item]) for m, v in report["mean"].items() if v.get(item) is not None}
+    node: Any = report.get("extra", {})
+    path, rest = "extra", item[len("extra.") :]
+    while rest:
+        if not isinstance(node, Mapping):
+            raise ResultsError(f"{where}: {item!r}: evaluation.json's {path} is not a mapping")
+        keys = [k for k in node if rest == k or rest.startswith(f"{k}.")]
+        if not keys:
+            raise ResultsError(
+                f"{where}: {item!r}: evaluation.json's {path} has no key {rest.split('.')[0]!r} "
+                f"(its keys: {', '.join(map(str, node)) or 'none'})"
+            )
+        key = max(keys, key=len)
+        node, path, rest = node[key], f"{path}.{key}", rest[len(key) + 1 :]
+    if _number(node):
+        return {MODEL: float(node)}
+    if isinstance(node, Mapping) and _number(node.get(MODEL)):
+        return {str(m): float(v) for m, v in node.items() if _number(v)}
+    raise ResultsError(
+        f"{where}: {item!r} holds neither a number nor a mapping method -> number with a "
+        f"{MODEL!r} value"
+    )
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _paper(where: str, paper: Any, quote: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """Validate ``paper``: for each quoted metric a value with its source, or null with why."""
+    keys = {metric: True for metric in quote}
+    paper = _keys(where, paper, keys)
+    out = {}
+    for metric, figure in paper.items():
+        item = f"{where}.{metric}"
+        figure = _keys(item, figure, {"value": True, "source": False, "why": False})
+        value = figure["value"]
+        if value is None:
+            if "why" not in figure:
+                raise ResultsError(f"{item}.why: missing (say why the paper has no such figure)")
+            out[metric] = {"value": None, "why": _text(f"{item}.why", figure["why"])}
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ResultsError(f"{item}.value: expected a number or null, got {value!r}")
+        if "source" not in figure:
+            raise ResultsError(f"{item}.source: missing (where the paper gives it, e.g. Table 2)")
+        out[metric] = {"value": float(value), "source": _text(f"{item}.source", figure["source"])}
+    return out
+
+
+def load_entries(root: Path, methods: Sequence[str] = tuple(METHODS)) -> list[Entry]:
+    """Every entry under ``root``, ordered by method, then date, then name.
+
+    Raises:
+        ResultsError: ``root`` is not a directory, or an entry is malformed.
+    """
+    if not root.is_dir():
+        raise ResultsError(f"{root}: not a directory of held-out entries")
+    entries = [load_entry(d, methods) for d in sorted(root.iterdir()) if d.is_dir()]
+    order = list(methods)
+    return sorted(entries, key=lambda e: (order.index(e.run["method"]), e.run["date"], e.name))
+
+
+# --- rendering ------------------------------------------------------------------------------
+
+
+def _title(method: str) -> str:
+    return METHODS.get(method, method)
+
+
+def _paper_cell(figure: Mapping[str, Any]) -> str:
+    if figure["value"] is None:
+        return f"not comparable: {figure['why']}"
+    return f"{_fmt(figure['value'])} ({figure['source']})"
+
+
+def _target_cell(entry: Entry, metric: str) -> str:
+    cells = []
+    figure = entry.figures[metric]
+    for target in (t for t in entry.targets if t.metric == metric):
+        bound = target.bound(figure)
+        text = f"{target.op} {target.rhs}"
+        if target.reference is not None:
+            text += f" (= {_fmt(bound)})"
+        met = target.met(figure)
+        verdict = "no value" if met is None else ("**met**" if met else "**not met**")
+        cells.append(f"{text}: {verdict}")
+    return "; ".join(cells) or "-"
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|---" * len(header) + "|"]
+    return lines + ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
+
+
+def _quoted_table(entry: Entry) -> list[str]:
+    methods = entry.methods
+    rows = [
+        [
+            f"`{metric}`",
+            *(_fmt(entry.figures[metric].get(m)) for m in methods),
+            _paper_cell(entry.run["paper"][metric]),
+            _target_cell(entry, metric),
+        ]
+        for metric in entry.run["quote"]
+    ]
+    return _table(["metric", *methods, "paper", "target"], rows)
+
+
+def _per_clip_table(entry: Entry) -> list[str]:
+    report = entry.report
+    metrics = list(report["metrics"])
+    character = any("character" in row for row in report["per_clip"])
+    rows = []
+    for row in report["per_clip"]:
+        for method in report["methods"]:
+            if method not in row["values"]:
+                continue
+            values = row["values"][method]
+            first = [f"`{row['clip']}`", *([str(row.get("character", "-"))] if character else [])]
+            rows.append([*first, method, *(_fmt(values.get(k)) for k in metrics)])
+    header = ["clip", *(["character"] if character else []), "method", *metrics]
+    return _table(header, rows)
+
+
+def _budget(run: Mapping[str, Any]) -> str:
+    budget = run["budget"]
+    text = f"{budget['steps']:,} steps, {budget['cpu_time']} CPU time"
+    return text + (f", {budget['wall_time']} wall time" if "wall_time" in budget else "")
+
+
+def _machine(run: Mapping[str, Any]) -> str:
+    machine = run["machine"]
+    text = f"{machine['cores']} cores, load {machine['load']}"
+    return text + (f" ({machine['cpu']})" if "cpu" in machine else "")
+
+
+def _entry_section(entry: Entry) -> list[str]:
+    report, run = entry.report, entry.run
+    data = report["data"]
+    clips = ", ".join(f"`{c}`" for c in data["clips"])
+    lines = [
+        f"### {run['title']}",
+        "",
+        f"Entry `{entry.name}`: protocol `{report['protocol']}`, measured {run['date']}. "
+        "Mean over the held-out clips, the model beside the baselines of the same run:",
+        "",
+        *_quoted_table(entry),
+        "",
+        *(f"- `{m}`: {entry.description(m)}" for m in run["quote"]),
+        "",
+        f"- Held out: the {data['split_name']} of `{data['source']}`, "
+        f"{len(data['clips'])} clips: {clips}",
+        f"- Budget: {_budget(run)}",
+        f"- Machine: {_machine(run)}",
+        f"- Date: {run['date']}",
+        *(f"- Note: {n}" for n in run["notes"]),
+        *(f"- Protocol note: {n}" for n in report.get("notes", [])),
+        f"- Every metric of every clip: [per-clip tables](#{entry.anchor})",
+        "",
+        "Reproduce:",
+        "",
+        "```console",
+        *(f"$ {c}" for c in run["commands"]["fit"]),
+        *(f"$ {c}" for c in run["commands"]["evaluate"]),
+        "```",
+        "",
+    ]
+    return lines
+
+
+def render_page(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS)) -> str:
+    """The text of ``docs/results.md``."""
+    lines = [
+        "# Held-out results",
+        "",
+        "<!-- Generated by scripts/results.py from benchmarks/results/heldout/; do not edit. -->",
+        "",
+        "Every figure on this page was measured by `skelagnostic evaluate` on clips the run "
+        "never trained on (its test split, else its validation split; each entry lists them), "
+        "beside the non-learned [baselines](baselines.md) computed on the same clips in the same "
+        "command. The page is generated by `python scripts/results.py` from the files committed "
+        "under `benchmarks/results/heldout/<entry>/`: `evaluation.json`, copied from the "
+        "evaluate run directory, and `run.yaml`, with the commands, budget, machine, the "
+        "paper's figures and the targets of issue #27 (see "
+        "[Publishing results](evaluate.md#publishing-results)). "
+        "`python scripts/results.py --check` fails when the page is stale.",
+        "",
+        "To reproduce an entry, run its commands: the fit, then the evaluation of the run "
+        "directory the fit wrote, on the corpora of the [data](data.md) page. Budgets are CPU "
+        "budgets on the machine each entry names; a busier machine trains fewer steps in the "
+        "same time.",
+        "",
+    ]
+    if entries:
+        rows = [
+            [
+                _title(e.run["method"]),
+                f"`{e.name}`",
+                f"`{e.report['protocol']}`",
+                e.run["date"],
+                _budget(e.run),
+                _machine(e.run),
+            ]
+            for e in entries
+        ]
+        lines += [
+            *_table(["method", "entry", "protocol", "date", "budget", "machine"], rows),
+            "",
+        ]
+    for method in methods:
+        mine = [e for e in entries if e.run["method"] == method]
+        lines += [f"## {_title(method)}", ""]
+        if not mine:
+            lines += ["No held-out result committed yet.", ""]
+        for entry in mine:
+            lines += _entry_section(entry)
+    if entries:
+        lines += ["## Per-clip tables", ""]
+        for entry in entries:
+            lines += [
+                f'<a id="{entry.anchor}"></a>',
+                "",
+                f"### {entry.run['title']} (`{entry.name}`, per clip)",
+                "",
+                *_per_clip_table(entry),
+                "",
+                *(f"- `{k}`: {v}" for k, v in entry.report["metrics"].items()),
+                "",
+            ]
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def render_readme_block(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS)) -> str:
+    """The README's block between the markers (without them): quoted figures per method."""
+    rows = []
+    for method in methods:
+        mine = [e for e in entries if e.run["method"] == method]
+        if not mine:
+            rows.append([_title(method), "no held-out result committed yet", "-", "-", "-", "-"])
+        for entry in mine:
+            for metric in entry.run["quote"]:
+                figure = entry.figures[metric]
+                baselines = ", ".join(f"{m} {_fmt(v)}" for m, v in figure.items() if m != MODEL)
+                paper = entry.run["paper"][metric]
+                rows.append(
+                    [
+                        _title(method),
+                        f"`{metric}`, `{entry.name}` ({entry.run['date']})",
+                        _fmt(figure[MODEL]),
+                        baselines or "-",
+                        "-" if paper["value"] is None else _paper_cell(paper),
+                        _target_cell(entry, metric),
+                    ]
+                )
+    intro = (
+        "Held-out figures (clips the runs never trained on, baselines computed in the same run; "
+        "generated by `scripts/results.py` from `benchmarks/results/heldout/`; clips, budgets "
+        "and commands in [docs/results.md](docs/results.md)):"
+    )
+    header = ["method", "metric, entry (date)", "model", "baselines (same run)", "paper", "target"]
+    return "\n".join([intro, "", *_table(header, rows)]) + "\n"
+
+
+def replace_block(text: str, block: str, where: str) -> str:
+    """``text`` with the part between :data:`BEGIN` and :data:`END` replaced by ``block``.
+
+    Raises:
+        ResultsError: The markers are missing, repeated or in the wrong order.
+    """
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise ResultsError(
+            f"{where}: needs exactly one {BEGIN} line followed by one {END} line around the "
+            "generated results block"
+        )
+    head, rest = text.split(BEGIN)
+    _, tail = rest.split(END)
+    return f"{head}{BEGIN}\n{block}{END}{tail}"
+
+
+def _diff(path: Path, old: str, new: str, limit: int = 40) -> str:
+    lines = list(
+        difflib.unified_diff(
+            old.splitlines(), new.splitlines(), f"{path} (committed)", f"{path} (generated)", n=1
+        )
+    )
+    more = f"\n... {len(lines) - limit} more diff lines" if len(lines) > limit else ""
+    return "\n".join(lines[:limit]) + more
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Write (or with ``--check`` compare) the results page and the README block."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--root", type=Path, default=HELDOUT, help="directory of the entries")
+    parser.add_argument("--out", type=Path, default=RESULTS_PAGE, help="the page to write")
+    parser.add_argument(
+        "--readme", type=Path, help="also rewrite the block between the results markers"
+    )
+    parser.add_argument(
+        "--methods",
+        default=",".join(METHODS),
+        help="comma-separated methods, one section each, in order (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--check", action="store_true", help="write nothing; exit 1 when a file is stale"
+    )
+    args = parser.parse_args(argv)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    try:
+        entries = load_entries(args.root, methods)
+        outputs = {args.out: render_page(entries, methods)}
+        if args.readme is not None:
+            try:
+                readme = args.readme.read_text(encoding="utf-8")
+            except FileNotFoundError:
+                raise ResultsError(f"{args.readme}: missing") from None
+            block = render_readme_block(entries, methods)
+            outputs[args.readme] = replace_block(readme, block, str(args.readme))
+    except ResultsError as err:
+        print(f"results: {err}", file=sys.stderr)
+        return 2
+    stale = []
+    for path, text in outputs.items():
+        old = path.read_text(encoding="utf-8") if path.is_file() else ""
+        if old == text:
+            continue
+        if args.check:
+            stale.append(_diff(path, old, text))
+        else:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text, encoding="utf-8")
+            print(f"results: wrote {path} ({len(entries)} entries)")
+    if stale:
+        command = "python scripts/results.py" + (" --readme README.md" if args.readme else "")
+        print(
+            f"results: stale, not what the committed entries give (run {command}):",
+            *stale,
+            sep="\n",
+            file=sys.stderr,
+        )
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,342 @@
+"""scripts/results.py: committed held-out evaluations -> docs/results.md and the README block."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[2]
+
+FIT = [
+    "experiment=smoke",
+    "model.hidden=8",
+    "model.latent=4",
+    "data.seconds=2.0",
+    "data.clips_per_gait=2",
+    "data.window=16",
+    "data.stride=8",
+    "data.test_fraction=0.3",
+    "threads=1",
+]
+
+TARGETS = [
+    "mpjpe_cm < mean_pose",
+    "mpjpe_cm <= 0.5 * mean_pose_on_trajectory",
+    "mpjpe_over_height >= 0",
+    "mpjpe_over_height < 1e-9",
+]
+
+
+def _load_script() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("results_script", REPO / "scripts" / "results.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+results = _load_script()
+
+
+def _run_yaml(**changes: Any) -> dict[str, Any]:
+    run: dict[str, Any] = {
+        "method": "example",
+        "title": "Example aligner on procedural clips",
+        "date": "2026-12-03",
+        "machine": {"cores": 2, "load": "about 3"},
+        "budget": {"steps": 40, "cpu_time": "10 s"},
+        "commands": {
+            "fit": "skelagnostic fit model=example " + " ".join(FIT),
+            "evaluate": "skelagnostic evaluate ckpt_path=runs/example/fit/<stamp>",
+        },
+        "quote": ["mpjpe_cm", "mpjpe_over_height"],
+        "paper": {
+            "mpjpe_cm": {"value": 1.19, "source": "Table 1"},
+            "mpjpe_over_height": {"value": None, "why": "no height-relative figure"},
+        },
+        "targets": list(TARGETS),
+        "notes": ["a smoke run"],
+    }
+    run.update(changes)
+    return run
+
+
+@pytest.fixture(scope="module")
+def evaluation(tmp_path_factory: pytest.TempPathFactory, fit_example: Callable[..., Path]) -> Path:
+    """A real ``evaluation.json``: the example aligner trained briefly, then ``evaluate``."""
+    root = tmp_path_factory.mktemp("evaluated")
+    fitted = fit_example(root, FIT)
+    evaluated = fit_example(root, [*FIT, f"ckpt_path={fitted}"], task="evaluate")
+    return evaluated / "evaluation.json"
+
+
+@pytest.fixture
+def heldout(evaluation: Path, tmp_path: Path) -> Path:
+    """A directory of entries with one entry: that evaluation and its run.yaml."""
+    entry = tmp_path / "heldout" / "example_smoke"
+    entry.mkdir(parents=True)
+    shutil.copy(evaluation, entry / "evaluation.json")
+    (entry / "run.yaml").write_text(yaml.safe_dump(_run_yaml()))
+    return entry.parent
+
+
+def _args(root: Path, out: Path, *extra: str) -> list[str]:
+    return ["--root", str(root), "--out", str(out), "--methods", "example,humot", *extra]
+
+
+def _tables(markdown: str) -> list[list[dict[str, str]]]:
+    """Every Markdown table of a page, as rows of ``header -> cell``."""
+    tables, lines = [], markdown.splitlines()
+    for i, line in enumerate(lines[:-1]):
+        if line.startswith("| ") and lines[i + 1].startswith("|---"):
+            header = [c.strip() for c in line.strip("|").split(" | ")]
+            rows = []
+            for row in lines[i + 2 :]:
+                if not row.startswith("| "):
+                    break
+                cells = [c.strip() for c in re.split(r"(?<!\\) \| ", row.strip()[2:-2])]
+                rows.append(dict(zip(header, cells, strict=True)))
+            tables.append(rows)
+    return tables
+
+
+def _independent_mean(report: dict[str, Any], method: str, metric: str) -> float:
+    values = [row["values"][method][metric] for row in report["per_clip"]]
+    return sum(values) / len(values)
+
+
+def test_page_quotes_the_evaluation_and_judges_the_targets(heldout: Path, tmp_path: Path) -> None:
+    out = tmp_path / "results.md"
+    assert results.main(_args(heldout, out)) == 0
+    page = out.read_text()
+    report = json.loads((heldout / "example_smoke" / "evaluation.json").read_text())
+    quoted, per_clip = (t for t in _tables(page) if "paper" in t[0] or "clip" in t[0])
+    # the quoted table: each mean figure of the model and of every baseline
+    assert [row["metric"] for row in quoted] == ["`mpjpe_cm`", "`mpjpe_over_height`"]
+    for row in quoted:
+        metric = row["metric"].strip("`")
+        for method in report["methods"]:
+            assert float(row[method]) == pytest.approx(
+                _independent_mean(report, method, metric), rel=5e-4
+            ), (method, metric)
+    assert quoted[0]["paper"] == "1.19 (Table 1)"
+    assert quoted[1]["paper"] == "not comparable: no height-relative figure"
+    # targets: met / not met recomputed here from the per-clip values
+    model_cm = _independent_mean(report, "model", "mpjpe_cm")
+    expected_cm = [
+        model_cm < _independent_mean(report, "mean_pose", "mpjpe_cm"),
+        model_cm <= 0.5 * _independent_mean(report, "mean_pose_on_trajectory", "mpjpe_cm"),
+    ]
+    verdicts = [v.split(": ")[-1] for v in quoted[0]["target"].split("; ")]
+    assert verdicts == ["**met**" if ok else "**not met**" for ok in expected_cm]
+    assert quoted[1]["target"] == ">= 0: **met**; < 1e-09: **not met**"
+    bounds = [float(b) for b in re.findall(r"\(= ([0-9.e+-]+)\)", quoted[0]["target"])]
+    assert bounds == pytest.approx(
+        [
+            _independent_mean(report, "mean_pose", "mpjpe_cm"),
+            0.5 * _independent_mean(report, "mean_pose_on_trajectory", "mpjpe_cm"),
+        ],
+        rel=5e-4,
+    )
+    # every per-clip figure of every method
+    assert len(per_clip) == len(report["per_clip"]) * len(report["methods"])
+    cells = {(r["clip"].strip("`"), r["method"]): r for r in per_clip}
+    for row in report["per_clip"]:
+        for method, values in row["values"].items():
+            for metric, value in values.items():
+                assert float(cells[row["clip"], method][metric]) == pytest.approx(value, rel=5e-4)
+    # the split, budget, machine, date and commands; a method without entry says so
+    clips = ", ".join(f"`{c}`" for c in report["data"]["clips"])
+    assert f"the test split of `procedural`, {len(report['data']['clips'])} clips: {clips}" in page
+    assert "- Budget: 40 steps, 10 s CPU time" in page
+    assert "- Machine: 2 cores, load about 3" in page and "- Date: 2026-12-03" in page
+    assert "$ skelagnostic fit model=example experiment=smoke" in page
+    assert "$ skelagnostic evaluate ckpt_path=runs/example/fit/<stamp>" in page
+    assert "## HuMoT\n\nNo held-out result committed yet." in page
+    assert '<a id="per-clip-example-smoke"></a>' in page and "(#per-clip-example-smoke)" in page
+
+
+def test_figures_of_extra_are_quoted_with_their_baselines(
+    heldout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Per-group means and corpus-level counts in ``extra`` (as VQ-PAE's Table 2 is reported)."""
+    report_file = heldout / "example_smoke" / "evaluation.json"
+    report = json.loads(report_file.read_text())
+    groups: dict[str, dict[str, list[float]]] = {}
+    for row in report["per_clip"]:
+        kind = row["clip"].split("_")[0]  # biped22 / quadruped: the clip's skeleton
+        for method, values in row["values"].items():
+            groups.setdefault(kind, {}).setdefault(method, []).append(values["mpjpe_cm"])
+    by_kind = {k: {m: sum(v) / len(v) for m, v in g.items()} for k, g in groups.items()}
+    report["extra"] = {"by_kind": by_kind, "clips.seen": {"count": len(report["per_clip"])}}
+    report_file.write_text(json.dumps(report))
+    quote = [f"extra.by_kind.{kind}" for kind in sorted(by_kind)] + ["extra.clips.seen.count"]
+    run = _run_yaml(
+        quote=quote,
+        paper={q: {"value": None, "why": "not in the paper"} for q in quote},
+        targets=[f"{quote[0]} < mean_pose", f"{quote[-1]} >= 3", f"{quote[-1]} > 99"],
+    )
+    (heldout / "example_smoke" / "run.yaml").write_text(yaml.safe_dump(run))
+    out = tmp_path / "results.md"
+    assert results.main(_args(heldout, out)) == 0
+    (quoted,) = (t for t in _tables(out.read_text()) if "paper" in t[0])
+    rows = {row["metric"].strip("`"): row for row in quoted}
+    for kind, figure in by_kind.items():
+        for method, value in figure.items():
+            assert float(rows[f"extra.by_kind.{kind}"][method]) == pytest.approx(value, rel=5e-4)
+    first = by_kind[sorted(by_kind)[0]]
+    met = first["model"] < first["mean_pose"]
+    assert rows[quote[0]]["target"].endswith("**met**" if met else "**not met**")
+    count = rows["extra.clips.seen.count"]
+    assert count["model"] == str(len(report["per_clip"])) and count["mean_pose"] == "-"
+    expected = ["**met**" if len(report["per_clip"]) >= 3 else "**not met**", "**not met**"]
+    assert [v.split(": ")[-1] for v in count["target"].split("; ")] == expected
+    # a target against a baseline the figure lacks, a key extra does not have
+    for change, message in [
+        ({"targets": [f"{quote[-1]} < mean_pose"]}, "its baselines: none"),
+        (
+            {"quote": ["extra.by_kind.nope"]},
+            f"extra.by_kind has no key 'nope' (its keys: {', '.join(by_kind)})",
+        ),
+        ({"quote": ["extra.by_kind"]}, "holds neither a number nor a mapping"),
+    ]:
+        bad = {**run, **change}
+        if "quote" in change:
+            bad["paper"] = {q: {"value": None, "why": "-"} for q in change["quote"]}
+            bad["targets"] = []
+        (heldout / "example_smoke" / "run.yaml").write_text(yaml.safe_dump(bad))
+        assert results.main(_args(heldout, out)) == 2
+        assert message in capsys.readouterr().err
+
+
+def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
+    heldout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "results.md"
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# Title\n\nabove\n{results.BEGIN}\nold\n{results.END}\nbelow\n")
+    assert results.main(_args(heldout, out, "--readme", str(readme))) == 0
+    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
+    text = readme.read_text()
+    assert text.startswith("# Title\n\nabove\n<!-- results:begin -->\nHeld-out figures")
+    assert text.endswith("<!-- results:end -->\nbelow\n") and "\nold\n" not in text
+    rows = {(r["method"], r["metric, entry (date)"].split(",")[0]): r for r in _tables(text)[0]}
+    report = json.loads((heldout / "example_smoke" / "evaluation.json").read_text())
+    for metric in ("mpjpe_cm", "mpjpe_over_height"):
+        row = rows["example", f"`{metric}`"]
+        assert float(row["model"]) == pytest.approx(
+            _independent_mean(report, "model", metric), rel=5e-4
+        )
+        baselines = dict(b.rsplit(" ", 1) for b in row["baselines (same run)"].split(", "))
+        assert set(baselines) == {"mean_pose", "mean_pose_on_trajectory"}
+        for method, value in baselines.items():
+            assert float(value) == pytest.approx(
+                _independent_mean(report, method, metric), rel=5e-4
+            )
+    assert ("HuMoT", "no held-out result committed yet") in rows
+    capsys.readouterr()
+    # a stale page (a figure edited by hand) fails with a diff naming the file
+    page = out.read_text()
+    out.write_text(page.replace("- Date: 2026-12-03", "- Date: 2026-12-02"))
+    assert results.main(_args(heldout, out, "--check")) == 1
+    err = capsys.readouterr().err
+    assert f"{out} (committed)" in err and "-- Date: 2026-12-02" in err
+    # ... and so does a changed entry, until regenerated; --check writes nothing
+    out.write_text(page)
+    run = yaml.safe_load((heldout / "example_smoke" / "run.yaml").read_text())
+    run["budget"]["steps"] = 41
+    (heldout / "example_smoke" / "run.yaml").write_text(yaml.safe_dump(run))
+    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 1
+    assert "+- Budget: 41 steps" in capsys.readouterr().err and out.read_text() == page
+    assert results.main(_args(heldout, out, "--readme", str(readme))) == 0
+    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
+    # the README outside the block is never looked at; inside it is
+    readme.write_text(readme.read_text().replace("below", "elsewhere"))
+    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
+    readme.write_text(readme.read_text().replace("mean_pose ", "mean pose ", 1))
+    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 1
+    assert f"{readme} (committed)" in capsys.readouterr().err
+
+
+BAD_RUNS = [
+    ({"budget": {"cpu_time": "1 h"}}, "run.yaml: budget.steps: missing"),
+    ({"machine": {"cores": 0, "load": 1}}, "run.yaml: machine.cores: expected a positive"),
+    ({"date": "yesterday"}, "run.yaml: date: expected a date YYYY-MM-DD"),
+    ({"method": "humot"}, "run.yaml: method: 'humot', but evaluation.json evaluates "),
+    ({"method": "hmuot"}, "run.yaml: method: 'hmuot' is not one of example, humot"),
+    ({"quote": ["mpjpe_cm", "knn@0"]}, "run.yaml: quote[1]: 'knn@0' is not a metric"),
+    ({"targets": ["mpjpe_cm ~ 3"]}, "run.yaml: targets[0]: 'mpjpe_cm ~ 3' is not"),
+    ({"targets": ["mpjpe_cm < lerp"]}, "run.yaml: targets[0]: 'lerp' is neither a number"),
+    (
+        {"paper": {"mpjpe_cm": {"value": 1.0}, "mpjpe_over_height": {"value": None}}},
+        "run.yaml: paper.mpjpe_cm.source: missing",
+    ),
+    (
+        {"paper": {"mpjpe_cm": {"value": None, "source": "Table 1"}}},
+        "run.yaml: paper.mpjpe_over_height: missing",
+    ),
+    ({"commands": {"fit": "skelagnostic fit"}}, "run.yaml: commands.evaluate: missing"),
+    ({"budjet": 3}, "run.yaml: budjet: unknown key"),
+]
+
+
+def test_a_bad_run_yaml_names_the_file_and_key(
+    heldout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run_file = heldout / "example_smoke" / "run.yaml"
+    for change, message in BAD_RUNS:
+        run_file.write_text(yaml.safe_dump(_run_yaml(**change)))
+        assert results.main(_args(heldout, tmp_path / "results.md")) == 2, change
+        err = capsys.readouterr().err
+        assert f"{run_file}: " in err and message in err, err
+    assert not (tmp_path / "results.md").exists()
+    run_file.write_text(yaml.safe_dump(_run_yaml()))
+    assert results.main(_args(heldout, tmp_path / "results.md")) == 0
+    report_file = heldout / "example_smoke" / "evaluation.json"
+    report = json.loads(report_file.read_text())
+    del report["mean"]
+    report_file.write_text(json.dumps(report))
+    assert results.main(_args(heldout, tmp_path / "results.md")) == 2
+    assert f"{report_file}: mean: missing" in capsys.readouterr().err
+    report_file.unlink()
+    assert results.main(_args(heldout, tmp_path / "results.md")) == 2
+    assert f"{report_file}: missing" in capsys.readouterr().err
+
+
+def test_targets_compare_the_model_with_a_bound() -> None:
+    figures = {"l2p@15": {"model": 0.5, "lerp_slerp": 0.6, "nan_baseline": float("nan")}}
+    cases = {
+        "l2p@15 < lerp_slerp": True,
+        "l2p@15 <= 0.8 * lerp_slerp": False,  # 0.5 > 0.48
+        "l2p@15 >= 0.5": True,
+        "l2p@15 > 0.5": False,
+        "l2p@15 < 2x lerp_slerp": True,
+        "l2p@15 < nan_baseline": None,  # no verdict without a value
+    }
+    for text, expected in cases.items():
+        target = results.parse_target("run.yaml: targets[0]", text, figures)
+        assert target.met(figures["l2p@15"]) is expected, text
+    assert results.Target("l2p@15", "<", 1.0, None).met({"lerp_slerp": 0.6}) is None
+
+
+def test_the_committed_results_page_and_readme_block_are_up_to_date() -> None:
+    done = subprocess.run(
+        [sys.executable, str(REPO / "scripts" / "results.py"), "--check", "--readme", "README.md"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
