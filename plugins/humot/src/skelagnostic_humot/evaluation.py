@@ -555,6 +555,8 @@ def reconstruction_protocol(
         _SEEN_NOTE,
     ]
     more = extra_clips(extra, extra_units, held) if extra else []
+    if more:
+        notes.append(f"{len(more)} clip(s) from protocol_options.extra, outside the run's data")
     trained = trained_hierarchies(held)
     rows: list[dict[str, Any]] = []
     groups: dict[tuple[Any, ...], tuple[str, list[torch.Tensor], Skeleton]] = {}
@@ -639,6 +641,8 @@ def retarget_protocol(
         _SEEN_NOTE,
     ]
     more = extra_clips(extra, extra_units, held) if extra else []
+    if more:
+        notes.append(f"{len(more)} clip(s) from protocol_options.extra, outside the run's data")
     trained = trained_hierarchies(held)
     rows: list[dict[str, Any]] = []
     for clip in _humans(held, notes, more):
