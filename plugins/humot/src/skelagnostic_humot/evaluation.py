@@ -514,6 +514,16 @@ def _humans(held: HeldOut, notes: list[str], extra: Sequence[Motion] = ()) -> li
     return humans
 
 
+def _protocol_clips(
+    held: HeldOut, notes: list[str], extra: str | Sequence[str] | None, units: str | None
+) -> tuple[list[Motion], set[tuple[int, ...]] | None]:
+    """The human clips a protocol measures (held out, then ``extra``); the trained hierarchies."""
+    more = extra_clips(extra, units, held) if extra else []
+    if more:
+        notes.append(f"{len(more)} clip(s) from protocol_options.extra, outside the run's data")
+    return _humans(held, notes, more), trained_hierarchies(held)
+
+
 def _by_topology(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, float]]]:
     """Mean figures of the rows of each topology status (``seen`` / ``unseen`` / ...)."""
     statuses = dict.fromkeys(r["topology"] for r in rows)
@@ -554,13 +564,10 @@ def reconstruction_protocol(
         "baseline of denoising is the curves' input_mpjpe_cm",
         _SEEN_NOTE,
     ]
-    more = extra_clips(extra, extra_units, held) if extra else []
-    if more:
-        notes.append(f"{len(more)} clip(s) from protocol_options.extra, outside the run's data")
-    trained = trained_hierarchies(held)
+    humans, trained = _protocol_clips(held, notes, extra, extra_units)
     rows: list[dict[str, Any]] = []
     groups: dict[tuple[Any, ...], tuple[str, list[torch.Tensor], Skeleton]] = {}
-    for clip in _humans(held, notes, more):
+    for clip in humans:
         chunks = chunks_of(clip, aligner.hparams.chunk)
         if not len(chunks):
             notes.append(
@@ -640,12 +647,9 @@ def retarget_protocol(
         "(skelagnostic.baselines)",
         _SEEN_NOTE,
     ]
-    more = extra_clips(extra, extra_units, held) if extra else []
-    if more:
-        notes.append(f"{len(more)} clip(s) from protocol_options.extra, outside the run's data")
-    trained = trained_hierarchies(held)
+    humans, trained = _protocol_clips(held, notes, extra, extra_units)
     rows: list[dict[str, Any]] = []
-    for clip in _humans(held, notes, more):
+    for clip in humans:
         via_kind = next(
             k
             for k in HUMAN_KINDS
