@@ -127,3 +127,104 @@ def test_retarget_protocol_cycles_through_another_topology(tmp_path, humot_small
     assert set(row["values"]) == {"model", "name_copy", "primal_copy"}
     assert all(v["cycle_over_height"] >= 0 for v in row["values"].values())
     assert "mean" in out.extra["procedural_paired_retargeting"]
+
+
+# --------------------------------------------------------------- seen / unseen topology
+class _RunData:
+    """The parts of a set-up data module the protocols read: training skeletons, splits."""
+
+    def __init__(self, skeletons, assigned=None):
+        self.skeletons = skeletons
+        self.assigned_splits = assigned or {}
+
+
+def test_topology_status_compares_hierarchies_not_names():
+    from skelagnostic_humot.evaluation import topology_status, trained_hierarchies
+
+    from skelagnostic.evaluation import HeldOut
+
+    b22, b31, b17 = (sa.procedural.skeleton(k) for k in ("biped22", "biped31", "biped17"))
+    renamed = b31.subset(b31.joint_names)  # same hierarchy
+    renamed = sa.Skeleton(
+        [f"j{i}" for i in range(renamed.num_joints)], renamed.parents, renamed.offsets
+    )
+    trained = trained_hierarchies(HeldOut("test", [], _RunData({"a": b22, "b": b31})))
+    assert trained == {tuple(b22.parents), tuple(b31.parents)}
+    assert topology_status(renamed, trained) == "seen"
+    assert topology_status(b17, trained) == "unseen"
+    assert topology_status(b17, trained_hierarchies(HeldOut("test", []))) == "unknown"
+
+
+def test_reconstruction_protocol_groups_extra_clips_by_topology(tmp_path, humot_small):
+    from skelagnostic_humot.evaluation import reconstruction_protocol
+
+    from skelagnostic.evaluation import HeldOut
+
+    torch.manual_seed(0)
+    model = HumotAligner(**humot_small).eval()
+    seen = sa.procedural.generate("biped22", "walk", seconds=2.0, fps=30, seed=5)[0]
+    seen.name = "seen"
+    other = sa.procedural.generate("biped17", "run", seconds=1.0, fps=30, seed=6)[0]
+    folder = tmp_path / "extra"
+    folder.mkdir()
+    sa.write_bvh(other, folder / "other.bvh")
+    held = HeldOut("test", [seen], _RunData({"train": seen.skeleton}))
+    with torch.no_grad():
+        out = reconstruction_protocol(model, held, tmp_path, extra=[str(folder)], extra_units="cm")
+        # the extra clip's row, recomputed from the file independently
+        direct = reconstruction(
+            model,
+            chunks_of(sa.read_bvh(folder / "other.bvh"), 30, "cm"),
+            model.topology(other.skeleton),
+            "y",
+        )
+    rows = {r["clip"]: r for r in out.rows}
+    extra_row = rows[str(folder / "other.bvh")]
+    assert rows["seen"]["topology"] == "seen" and extra_row["topology"] == "unseen"
+    assert abs(extra_row["values"]["model"]["mpjpe_cm"] - direct["mpjpe_cm"]) < 1e-4
+    assert abs(extra_row["values"]["mean_pose"]["mpjpe_cm"] - direct["mean_pose_cm"]) < 1e-4
+    groups = out.extra["by_topology"]
+    assert groups["seen"]["model"]["mpjpe_cm"] == rows["seen"]["values"]["model"]["mpjpe_cm"]
+    assert groups["unseen"]["mean_pose"]["mpjpe_cm"] == direct["mean_pose_cm"]
+    assert set(out.extra["curves"]) == {"biped22 (seen)", "other (unseen)"}  # skeleton names
+
+
+def test_extra_clips_refuse_training_clips_and_missing_paths(tmp_path):
+    import pytest
+    from skelagnostic_humot.evaluation import extra_clips
+
+    from skelagnostic.evaluation import EvaluationError, HeldOut
+
+    clip = sa.procedural.generate("biped17", "walk", seconds=1.0, fps=30)[0]
+    path = tmp_path / "a.bvh"
+    sa.write_bvh(clip, path)
+    held = HeldOut("test", [], _RunData({}, {f"corpus:{path}": "train"}))
+    with pytest.raises(EvaluationError, match="training clip"):
+        extra_clips([str(tmp_path)], "cm", held)
+    with pytest.raises(EvaluationError, match="does not exist"):
+        extra_clips(str(tmp_path / "nowhere"))
+    (loaded,) = extra_clips(str(path), "cm")
+    assert loaded.units == "m" and loaded.name == str(path)
+    assert torch.allclose(loaded.global_positions(), clip.global_positions() / 100, atol=1e-4)
+
+
+def test_retarget_protocol_labels_procedural_topologies(tmp_path, humot_small):
+    from skelagnostic_humot.evaluation import retarget_protocol
+
+    from skelagnostic.evaluation import HeldOut
+
+    torch.manual_seed(0)
+    model = HumotAligner(**humot_small).eval()
+    clip = sa.procedural.generate("biped22", "walk", seconds=1.0, fps=30, seed=3)[0]
+    clip.name = "c"
+    held = HeldOut("test", [clip], _RunData({"p": clip.skeleton}))
+    with torch.no_grad():
+        out = retarget_protocol(model, held, tmp_path, paired_seconds=1.0)
+    assert out.extra["procedural_topologies"] == {
+        "biped22": "seen",
+        "biped31": "unseen",
+        "biped17": "unseen",
+    }
+    assert out.rows[0]["topology"] == "seen"
+    paired = out.extra["procedural_paired_retargeting"]
+    assert paired["biped22->biped17"]["clips"] == 2  # walk and run, one clip each

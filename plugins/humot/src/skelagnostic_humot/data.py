@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -26,7 +27,7 @@ import torch
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import ClipSource, MotionDataModule
 from skelagnostic.data.cache import CacheEntry
-from skelagnostic.data.sources import ClipRef
+from skelagnostic.data.sources import ClipRef, MultiSource, ProceduralSource, preset_source
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation
 from skelagnostic_humot.template import major_mask, skeleton_template, to_model_frame
@@ -35,6 +36,7 @@ __all__ = [
     "HumotDataModule",
     "Subset",
     "Topology",
+    "corpus_and_procedural_source",
     "gather_subset",
     "prepare_chunks",
     "sample_keep",
@@ -260,3 +262,58 @@ class HumotDataModule(MotionDataModule):
                     f"found ({', '.join(self.skipped)})"
                 ) from exc
             raise
+
+
+def corpus_and_procedural_source(
+    root: str | Path | None = None,
+    preset: str = "lafan1",
+    kinds: Sequence[str] = ("biped22", "biped17"),
+    gaits: Sequence[str] = ("walk", "run"),
+    clips_per_gait: int = 8,
+    seconds: float = 6.0,
+    seed: int = 0,
+) -> MultiSource:
+    """A real human corpus plus procedural humans (``data.source=humot_mix``).
+
+    The corpus keeps its preset's test split (LaFAN1: subject 5); the procedural
+    clips (seeds from ``seed``) add topologies the corpus lacks, which
+    retargeting between skeletons needs. The procedural ``biped22`` has LaFAN1's
+    joint set, ``biped31`` CMU's, ``biped17`` none of the corpora's.
+
+    Args:
+        root: Directory of the corpus's BVH files; ``None``: ``$SKELAGNOSTIC_DATA/<preset>``.
+        preset: Dataset preset of the corpus (``lafan1``, ``cmu``, ``bandai``, ...).
+        kinds: Procedural human kinds (``biped22``, ``biped31``, ``biped17``); empty: none.
+        gaits: Procedural gaits.
+        clips_per_gait: Procedural clips per (kind, gait).
+        seconds: Duration of each procedural clip.
+        seed: Base seed of the procedural clips (held-out evaluations use 1000 on).
+
+    Returns:
+        A :class:`~skelagnostic.data.MultiSource` with parts ``<preset>`` and
+        ``procedural`` (the latter only when ``kinds`` is not empty).
+
+    Raises:
+        SkelagnosticError: A kind is not a procedural human.
+    """
+    bipeds = ("biped22", "biped31", "biped17")
+    wrong = [k for k in kinds if k not in bipeds]
+    if wrong:
+        raise SkelagnosticError(
+            f"data.kinds: {wrong} are not procedural humans; choose from {list(bipeds)}"
+        )
+    corpus = preset_source(preset, root)
+    corpus.name = preset
+    parts: list[ClipSource] = [corpus]
+    if kinds:
+        parts.append(
+            ProceduralSource(
+                kinds=tuple(kinds),
+                gaits=tuple(gaits),
+                clips_per_gait=clips_per_gait,
+                seconds=seconds,
+                seed=seed,
+                name="procedural",
+            )
+        )
+    return MultiSource(parts, name=f"{preset}+procedural")

@@ -55,7 +55,7 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
+from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut, mean_rows
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks
 
@@ -66,10 +66,13 @@ __all__ = [
     "denoising_curve",
     "evaluate_clips",
     "evaluate_procedural",
+    "extra_clips",
     "reconstruction",
     "reconstruction_protocol",
     "retarget_protocol",
     "retargeting_procedural",
+    "topology_status",
+    "trained_hierarchies",
     "upsampling_curve",
 ]
 
@@ -423,25 +426,148 @@ def plot_results(results: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 # ------------------------------------------------------------------ protocols
-def _humans(held: HeldOut, notes: list[str]) -> list[Motion]:
+def trained_hierarchies(held: HeldOut) -> set[tuple[int, ...]] | None:
+    """The joint hierarchies (parent lists) of the run's training skeletons.
+
+    HuMoT never sees joint names, only the hierarchy and the template geometry,
+    so a topology counts as seen when a training skeleton has its hierarchy
+    (CMU-31 with 3dsMax names and the procedural ``biped31`` share one).
+
+    Returns:
+        The parent tuples, or ``None`` when ``held`` carries no set-up data module.
+    """
+    skeletons = getattr(held.datamodule, "skeletons", None)
+    if not skeletons:
+        return None
+    return {tuple(sk.parents) for sk in skeletons.values()}
+
+
+def topology_status(skeleton: Skeleton, trained: set[tuple[int, ...]] | None) -> str:
+    """``"seen"``, ``"unseen"`` (see :func:`trained_hierarchies`) or ``"unknown"``."""
+    if trained is None:
+        return "unknown"
+    return "seen" if tuple(skeleton.parents) in trained else "unseen"
+
+
+def _clip_path(clip_id: str) -> Path | None:
+    """The file of a clip id (``path`` or ``part:path`` of a multi-source), if it is one."""
+    path = Path(clip_id)
+    if path.is_file():
+        return path.resolve()
+    return _clip_path(clip_id.split(":", 1)[1]) if ":" in clip_id else None
+
+
+def extra_clips(
+    paths: str | Sequence[str], units: str | None = None, held: HeldOut | None = None
+) -> list[Motion]:
+    """BVH clips outside the run's data (``+protocol_options.extra=[DIR_OR_FILE, ...]``).
+
+    Held-out clips of a topology the run never trained on come from here: a
+    run's test split only holds clips of its own datasets.
+
+    Args:
+        paths: BVH files or directories (searched recursively for ``*.bvh``).
+        units: Length unit of the files (``cm``, ``cmu``, ...); ``None``: the file's,
+            else guessed from the skeleton's height.
+        held: The run's held-out clips; clips its data module trained on are refused.
+
+    Returns:
+        The clips in metres, named by their path, in path order.
+
+    Raises:
+        EvaluationError: A path does not exist, holds no BVH file, or names a
+            training clip of the run.
+    """
+    from skelagnostic.io.bvh import read_bvh
+
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    assigned = (getattr(held.datamodule, "assigned_splits", None) or {}) if held else {}
+    trained = {_clip_path(i) for i, split in assigned.items() if split == "train"} - {None}
+    clips = []
+    for entry in paths:
+        root = Path(entry).expanduser()
+        if not root.exists():
+            raise EvaluationError(f"protocol_options.extra: {root} does not exist")
+        files = sorted(root.rglob("*.bvh")) if root.is_dir() else [root]
+        if not files:
+            raise EvaluationError(f"protocol_options.extra: no .bvh file below {root}")
+        for file in files:
+            if file.resolve() in trained:
+                raise EvaluationError(
+                    f"protocol_options.extra: {file} is a training clip of the run; "
+                    "evaluate on clips it never saw"
+                )
+            motion = read_bvh(file).to_metres(units)
+            motion.name = str(file)
+            clips.append(motion)
+    return clips
+
+
+def _humans(held: HeldOut, notes: list[str], extra: Sequence[Motion] = ()) -> list[Motion]:
     """The held-out clips HuMoT models (bipeds); the others are named in ``notes``."""
-    humans = [c for c in held.clips if c.skeleton.morphology == "biped"]
-    others = [str(c.name) for c in held.clips if c.skeleton.morphology != "biped"]
+    clips = [*held.clips, *extra]
+    humans = [c for c in clips if c.skeleton.morphology == "biped"]
+    others = [str(c.name) for c in clips if c.skeleton.morphology != "biped"]
     if others:
         notes.append(f"skipped {len(others)} non-human clip(s): {', '.join(others)}")
     return humans
 
 
-def reconstruction_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path) -> Evaluation:
-    """``humot.reconstruction``: Table 2 per held-out clip, plus the curves of Fig. 8 and 9."""
+def _protocol_clips(
+    held: HeldOut, notes: list[str], extra: str | Sequence[str] | None, units: str | None
+) -> tuple[list[Motion], set[tuple[int, ...]] | None]:
+    """The human clips a protocol measures (held out, then ``extra``); the trained hierarchies."""
+    more = extra_clips(extra, units, held) if extra else []
+    if more:
+        notes.append(f"{len(more)} clip(s) from protocol_options.extra, outside the run's data")
+    return _humans(held, notes, more), trained_hierarchies(held)
+
+
+def _by_topology(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, float]]]:
+    """Mean figures of the rows of each topology status (``seen`` / ``unseen`` / ...)."""
+    statuses = dict.fromkeys(r["topology"] for r in rows)
+    return {s: mean_rows([r for r in rows if r["topology"] == s]) for s in statuses}
+
+
+_SEEN_NOTE = (
+    "topology: 'seen' when a training skeleton of the run has the clip's joint hierarchy "
+    "(HuMoT never sees joint names), 'unseen' otherwise; extra['by_topology'] holds the "
+    "means of each"
+)
+
+
+def reconstruction_protocol(
+    aligner: HumotAligner,
+    held: HeldOut,
+    out_dir: Path,
+    extra: str | Sequence[str] | None = None,
+    extra_units: str | None = None,
+) -> Evaluation:
+    """``humot.reconstruction``: Table 2 per held-out clip, plus the curves of Fig. 8 and 9.
+
+    Args:
+        aligner: The model.
+        held: The run's held-out clips.
+        out_dir: Where the plots go.
+        extra: More BVH files or directories to evaluate (clips outside the run's data,
+            e.g. of a topology it never trained on; see :func:`extra_clips`).
+        extra_units: Length unit of the ``extra`` files.
+
+    Every row names its clip's ``topology`` status (:func:`topology_status`);
+    ``extra["by_topology"]`` has the means of the seen and the unseen clips.
+    """
     notes = [
         "baselines use the ground truth: mean_pose is the chunk's temporal mean pose, "
         "template the neutral template at the chunk centre, mean_pose_on_trajectory "
-        "the chunk's mean root-relative pose along the true root path"
+        "the chunk's mean root-relative pose along the true root path; the identity "
+        "baseline of denoising is the curves' input_mpjpe_cm",
+        _SEEN_NOTE,
     ]
+    humans, trained = _protocol_clips(held, notes, extra, extra_units)
     rows: list[dict[str, Any]] = []
     groups: dict[tuple[Any, ...], tuple[str, list[torch.Tensor], Skeleton]] = {}
-    for clip in _humans(held, notes):
+    for clip in humans:
         chunks = chunks_of(clip, aligner.hparams.chunk)
         if not len(chunks):
             notes.append(
@@ -450,11 +576,13 @@ def reconstruction_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path)
             )
             continue
         sk = clip.skeleton
+        status = topology_status(sk, trained)
         rec = reconstruction(aligner, chunks, aligner.topology(sk), sk.up_axis)
         rows.append(
             {
                 "clip": str(clip.name),
                 "chunks": rec["chunks"],
+                "topology": status,
                 "values": {
                     MODEL: {
                         "mpjpe_cm": rec["mpjpe_cm"],
@@ -467,7 +595,8 @@ def reconstruction_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path)
             }
         )
         name = sk.name or f"{sk.num_joints} joints"
-        groups.setdefault(sk.topology_key(), (name, [], sk))[1].append(chunks)
+        name = name if status == "unknown" else f"{name} ({status})"
+        groups.setdefault((sk.topology_key(), status), (name, [], sk))[1].append(chunks)
     curves = {}
     for name, chunk_list, sk in groups.values():
         chunks, topo = torch.cat(chunk_list), aligner.topology(sk)
@@ -482,21 +611,45 @@ def reconstruction_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path)
             "mpjpe_over_height": "MPJPE / skeleton height, lower is better",
         },
         rows,
-        extra={"curves": curves},
+        extra={"curves": curves, "by_topology": _by_topology(rows)},
         plots=plots,
         notes=notes,
     )
 
 
-def retarget_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path) -> Evaluation:
-    """``humot.retarget``: cycle error of held-out clips via another rig, beside the baselines."""
+def retarget_protocol(
+    aligner: HumotAligner,
+    held: HeldOut,
+    out_dir: Path,
+    extra: str | Sequence[str] | None = None,
+    extra_units: str | None = None,
+    paired_clips: int = 1,
+    paired_seconds: float = 4.0,
+) -> Evaluation:
+    """``humot.retarget``: cycle error of held-out clips via another rig, beside the baselines.
+
+    Args:
+        aligner: The model.
+        held: The run's held-out clips.
+        out_dir: Unused (no plots).
+        extra: More BVH files or directories (see :func:`extra_clips`).
+        extra_units: Length unit of the ``extra`` files.
+        paired_clips: Held-out procedural clips per gait (walk, run) and topology of
+            the paired retargeting in ``extra["procedural_paired_retargeting"]``.
+        paired_seconds: Their duration.
+
+    Rows carry the clip's ``topology`` status; ``extra["procedural_topologies"]``
+    gives the status of each procedural kind of the paired retargeting.
+    """
     notes = [
         "cycle: source -> a procedural human rig of another topology -> source, compared "
         "with the source at 30 fps; baselines: name_copy and primal_copy "
-        "(skelagnostic.baselines)"
+        "(skelagnostic.baselines)",
+        _SEEN_NOTE,
     ]
+    humans, trained = _protocol_clips(held, notes, extra, extra_units)
     rows: list[dict[str, Any]] = []
-    for clip in _humans(held, notes):
+    for clip in humans:
         via_kind = next(
             k
             for k in HUMAN_KINDS
@@ -513,14 +666,26 @@ def retarget_protocol(aligner: HumotAligner, held: HeldOut, out_dir: Path) -> Ev
                 "cycle_over_height": cyc[f"{prefix}_mpjpe_over_height"],
                 "cycle_root_aligned_over_height": cyc[f"{prefix}_root_aligned_over_height"],
             }
-        rows.append({"clip": str(clip.name), "via": via_kind, "values": values})
-    paired = retargeting_procedural(aligner, clips_per_gait=1, seconds=4.0)
+        rows.append(
+            {
+                "clip": str(clip.name),
+                "via": via_kind,
+                "topology": topology_status(clip.skeleton, trained),
+                "values": values,
+            }
+        )
+    paired = retargeting_procedural(aligner, clips_per_gait=paired_clips, seconds=paired_seconds)
+    kinds = {k: topology_status(procedural.skeleton(k), trained) for k in HUMAN_KINDS}
     return Evaluation(
         {
             "cycle_over_height": "MPJPE after the cycle / source height, lower is better",
             "cycle_root_aligned_over_height": "the same with the roots aligned, lower is better",
         },
         rows,
-        extra={"procedural_paired_retargeting": paired},
+        extra={
+            "procedural_paired_retargeting": paired,
+            "procedural_topologies": kinds,
+            "by_topology": _by_topology(rows),
+        },
         notes=notes,
     )

@@ -59,8 +59,21 @@ def register_aligners(register: Callable[..., Any]) -> None:
 
 
 @hookimpl
+def register_datasets(register: Callable[..., Any]) -> None:
+    """``data.source=humot_mix``: a real human corpus plus procedural humans."""
+    from skelagnostic_humot.data import corpus_and_procedural_source
+
+    register(
+        "humot_mix",
+        corpus_and_procedural_source,
+        "a human dataset preset (with its test split) + procedural humans of other "
+        "topologies (HuMoT)",
+    )
+
+
+@hookimpl
 def register_config_paths(register: Callable[..., Any]) -> None:
-    """Ship ``experiment=humot_quick``."""
+    """Ship ``data=humot_mix`` and the ``experiment=humot_*`` presets."""
     register(f"pkg://{CONFIG_PACKAGE}")
 
 
