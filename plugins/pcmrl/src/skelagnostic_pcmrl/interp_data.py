@@ -531,7 +531,12 @@ class PcmrlInterpDataModule(MotionDataModule):
         """Cache and check every clip, split by clip (idempotent).
 
         The clips stay in the cache (:class:`CachedClip`): memory does not grow
-        with the corpus.
+        with the corpus. For a stage other than ``fit`` (``test``, ``validate``,
+        ``skelagnostic evaluate``) the data may hold no training clip, e.g.
+        ``data.test_fraction=1`` to evaluate on every clip of another dataset.
+
+        Raises:
+            SkelagnosticError: No training clip when fitting (or ``stage=None``).
         """
         if self.skeleton is not None:
             return
@@ -547,8 +552,6 @@ class PcmrlInterpDataModule(MotionDataModule):
             for r in extra.clips():
                 self._check(self.cache_entry(extra, r), r.id)
                 procedural.append((f"procedural:{r.id}", extra, r))
-        if not rest and not procedural:
-            raise SkelagnosticError("data: no training clips (every clip is in the test split)")
         order = list(range(len(rest)))
         random.Random(self.split_seed).shuffle(order)
         n_test = round(self.test_fraction * len(rest))
@@ -559,6 +562,11 @@ class PcmrlInterpDataModule(MotionDataModule):
             n_val = max(n_val, 1)
         val_idx = set(order[:n_val])
         train = [rest[i] for i in order if i not in val_idx] + procedural
+        if not train and stage in (None, "fit"):
+            raise SkelagnosticError(
+                "data: no training clips (every clip is in the test or validation split: lower "
+                "data.test_fraction or data.val_fraction, or loosen the test pattern)"
+            )
 
         def clips(items: list[tuple[str, ClipSource, ClipRef]], mirror: bool = False) -> list[Clip]:
             return [
@@ -576,21 +584,22 @@ class PcmrlInterpDataModule(MotionDataModule):
         for part, items in (("train", train), ("val", val), ("test", test)):
             self.assigned_splits.update((ref.id, part) for _, src, ref in items if src is not extra)
         self.skeletons = {"target": self.skeleton}
-        self.train_set = TrainWindows(
-            self.clips["train"],
-            self.window,
-            self.min_keys,
-            self.max_keys,
-            self.rpa_range,
-            self.rpa_prob,
-            self.samples_per_epoch,
-            self.seed,
-            self.key_mode,
-            self.min_gap,
-            self.max_gap,
-            self.rpa_offsets,
-            self.rpa_solve,
-        )
+        if train:  # evaluation data (stage test/validate) may hold no training clip
+            self.train_set = TrainWindows(
+                self.clips["train"],
+                self.window,
+                self.min_keys,
+                self.max_keys,
+                self.rpa_range,
+                self.rpa_prob,
+                self.samples_per_epoch,
+                self.seed,
+                self.key_mode,
+                self.min_gap,
+                self.max_gap,
+                self.rpa_offsets,
+                self.rpa_solve,
+            )
         for split in ("val", "test"):
             short = [c.name for c in self.clips[split] if c.num_frames < self.window]
             if short:
@@ -603,9 +612,18 @@ class PcmrlInterpDataModule(MotionDataModule):
 
     # ------------------------------------------------------------------ loaders
     def train_dataloader(self) -> DataLoader:
-        """Random windows (new draws every epoch)."""
-        if self.train_set is None:
+        """Random windows (new draws every epoch).
+
+        Raises:
+            SkelagnosticError: The data, set up for evaluation, holds no training clip.
+        """
+        if self.skeleton is None:
             self.setup("fit")
+        if self.train_set is None:
+            raise SkelagnosticError(
+                "data: no training clips (every clip is in the test split: lower "
+                "data.test_fraction or loosen the test pattern)"
+            )
         return DataLoader(
             self.train_set,
             batch_size=self.batch_size,
