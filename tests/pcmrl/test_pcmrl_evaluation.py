@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 from skelagnostic_pcmrl.evaluation import (
@@ -14,8 +15,10 @@ from skelagnostic_pcmrl.evaluation import (
 from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
 import skelagnostic as sa
-from skelagnostic.baselines import name_copy, name_match, primal_match
-from skelagnostic.evaluation import HeldOut
+from skelagnostic.baselines import name_copy, name_match, primal_copy, primal_match
+from skelagnostic.core.motion import UNITS
+from skelagnostic.evaluation import EvaluationError, HeldOut
+from skelagnostic.representations import PointCloud
 
 
 @pytest.fixture
@@ -79,3 +82,94 @@ def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
     assert out.methods == ["model", "original", "name_copy", "primal_copy"]
     assert set(row["values"]["model"]) == set(TABLE2_METRICS)
     assert row["values"]["original"]["end"] == 0.0
+
+
+def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate ``v [..., 3]`` by unit quaternions ``q [..., 4]`` (w, x, y, z), by the matrix."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    m = np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+    return np.einsum("...ij,...j->...i", m, v)
+
+
+def _brute_force_knn(
+    result: sa.Motion, source: sa.Motion, sigma: float, seed: int, k: int, points: int, stride: int
+) -> float:
+    """Table 2's KNN distance x100 by brute force: every trajectory pair, numpy only.
+
+    Only the random draw of the points (bone, place, offset) comes from the library.
+    """
+    clouds = []
+    for motion, s in ((source, seed), (result, seed + 1)):
+        m = motion.to_metres().double()
+        draw = PointCloud(points, sigma).sample(m.skeleton, torch.Generator().manual_seed(s))
+        rot = m.global_rotations().numpy()[::stride][:, draw.joints.numpy()]
+        pos = m.global_positions().numpy()[::stride][:, draw.joints.numpy()]
+        local = np.broadcast_to(draw.local.numpy(), (*rot.shape[:-1], 3))
+        clouds.append((pos + _quat_rotate(rot, local), draw.groups.numpy()))
+    (pa, ga), (pb, gb) = clouds
+    frames, total = pa.shape[0], 0.0
+    for i in range(pa.shape[1]):  # every source point: its k nearest result trajectories
+        same = np.flatnonzero(gb == ga[i])
+        delta = np.linalg.norm(pb[:, same] - pa[:, i : i + 1], axis=-1).sum(axis=0)
+        total += np.sort(delta)[:k].sum()
+    return 100.0 * total / (pa.shape[1] * k * frames)
+
+
+def test_table2_figures_equal_a_brute_force_computation(lafan, shared_data) -> None:
+    """knn@sigma (Eq. 5 per point, neighbour and frame, x100) and L_end against numpy."""
+    cmu = sa.read_bvh(shared_data / "human" / "cmu" / "131_01.bvh").skeleton
+    clip = lafan[:8]
+    result = primal_copy(clip, cmu.scaled(1.0))
+    options = {"num_points": 96, "k": 3, "seed": 7, "stride": 2}
+    scores = evaluate_pair(result, clip, sigmas=(0.0, 0.05), **options)
+    for sigma in (0.0, 0.05):
+        expected = _brute_force_knn(result, clip, sigma, 7, 3, 96, 2)
+        assert scores[f"knn@{sigma:g}"] == pytest.approx(expected, rel=1e-9)
+    # L_end: hands, feet and head matched by hand-picked names, metres x100, summed
+    src, res = clip.to_metres().double(), result.to_metres().double()
+    # CMU's hands end at LFingers / RFingers (its lhand / rhand bones have zero length)
+    pairs = {
+        "LeftHand": "LFingers",
+        "RightHand": "RFingers",
+        "Head": "Head",
+        "LeftToe": "LeftToe",
+        "RightToe": "RightToe",
+    }
+    pa = src.global_positions().numpy()[::2]
+    pb = res.global_positions().numpy()[::2]
+    end = sum(
+        np.linalg.norm(pb[:, cmu.index(b)] - pa[:, clip.skeleton.index(a)], axis=-1).mean()
+        for a, b in pairs.items()
+    )
+    assert scores["end"] == pytest.approx(100.0 * end, rel=1e-9)
+
+
+def test_reconstruction_protocol_rows_are_per_clip_figures(lafan, shared_data, tmp_path) -> None:
+    """Each held-out clip's row holds its own Table 2 figures, for the model and baselines."""
+    torch.manual_seed(0)
+    model = PcmrlReconAligner(dim=16, stages=1, target="biped31").eval()
+    a, b = lafan[:14], lafan[14:24]
+    a.name, b.name = "a", "b"
+    with torch.no_grad():
+        held = HeldOut("test", [a, b])
+        out = reconstruction_protocol(model, held, tmp_path, max_frames=8, stride=2)
+        target = model.target_skeleton.scaled(1.0 / UNITS[model.target_units])
+        for row, clip in zip(out.rows, (a[:8], b[:8]), strict=True):
+            assert row["frames"] == 8
+            for name, result in (
+                ("name_copy", name_copy(clip, target)),
+                ("primal_copy", primal_copy(clip, target)),
+                ("model", model.retarget(clip, target)),
+            ):
+                assert row["values"][name] == evaluate_pair(result, clip, stride=2), name
+        assert [r["clip"] for r in out.rows] == ["a", "b"]
+        assert out.extra["options"] == {"stride": 2, "max_frames": 8}
+        with pytest.raises(EvaluationError, match="stride"):
+            reconstruction_protocol(model, held, tmp_path, stride=0)

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from types import SimpleNamespace
 
 import lightning as L
+import numpy as np
 import pytest
 import torch
 from skelagnostic_pcmrl.evaluation import interpolation_protocol
@@ -15,7 +17,8 @@ from skelagnostic_pcmrl.interp_eval import evaluate, format_table, position_stat
 
 from skelagnostic import Motion, procedural
 from skelagnostic.baselines import lerp_slerp
-from skelagnostic.evaluation import HeldOut
+from skelagnostic.core import quaternion as Q
+from skelagnostic.evaluation import EvaluationError, HeldOut, held_out
 
 
 def _clips() -> list[Motion]:
@@ -64,7 +67,8 @@ def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
     assert "| oracle | 0.0000" in table
 
 
-def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
+def _tiny_trained(tmp_path: Path) -> PcmrlInterpAligner:
+    """A stage-2 model of the procedural biped31 (CMU-31) hierarchy after 2 steps."""
     L.seed_everything(0)
     dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=8)
     model = PcmrlInterpAligner(
@@ -80,7 +84,11 @@ def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
         limit_val_batches=0,
     )
     trainer.fit(model, datamodule=dm)
-    model.eval()
+    return model.eval()
+
+
+def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
+    model = _tiny_trained(tmp_path)
     clips = _clips()
     clips[0].name, clips[1].name = "walk", "run"
     short = clips[1][:20]
@@ -132,3 +140,142 @@ def test_authors_metrics_of_lerp_by_hand() -> None:
     assert "| LERP |" in format_table(report)
     with pytest.raises(SkelagnosticError, match="metrics"):
         evaluate({"LERP": lerp_slerp}, clips, window=32, metrics=("paper",))
+
+
+def _centred(motion: Motion) -> np.ndarray:
+    """``[T, J*3]`` global positions minus the mean horizontal root position (numpy)."""
+    pos = motion.double().global_positions().numpy()
+    centre = motion.double().root_positions.numpy().mean(axis=0)
+    centre[motion.skeleton.up_index] = 0.0
+    return (pos - centre).reshape(len(pos), -1)
+
+
+def test_lafan1_l2p_is_normalised_with_the_training_clips(tmp_path: Path) -> None:
+    """lafan1_l2p z-scores with the run's training clips (the benchmark's subjects 1-4)."""
+    model = _tiny_trained(tmp_path)
+    dm = PcmrlInterpDataModule(
+        fps=30, window=32, val_fraction=0.0, test_fraction=0.25, cache_dir=tmp_path / "c"
+    )
+    held = held_out(dm)
+    splits = list(dm.assigned_splits.values())
+    assert held.split == "test" and len(held.clips) == splits.count("test") >= 1
+    with torch.no_grad():
+        out = interpolation_protocol(model, held, tmp_path)
+    assert any("training clips" in n for n in out.notes)
+    # by hand: statistics of the training clips' 32-frame windows every 16 frames
+    train = [
+        source.load(ref).resample(30.0)
+        for source in dm.sources
+        for ref in source.clips()
+        if dm.assigned_splits[ref.id] == "train"
+    ]
+    assert len(train) == splits.count("train") >= 2
+    flat = np.concatenate(
+        [_centred(m[s : s + 32]) for m in train for s in range(0, m.num_frames - 31, 16)]
+    )
+    mean, std = flat.mean(axis=0), np.maximum(flat.std(axis=0, ddof=1), 1e-3)
+    clip = held.clips[0]
+    keys = [0, 15, 30, 31]
+    errors = []
+    for start in range(0, clip.num_frames - 31, 16):
+        w = clip[start : start + 32]
+        pred = lerp_slerp(w, keys).double().global_positions().numpy().reshape(32, -1)
+        centre = w.double().root_positions.numpy().mean(axis=0)
+        centre[w.skeleton.up_index] = 0.0
+        pred = pred - np.tile(centre, w.skeleton.num_joints)
+        err = np.linalg.norm((pred - mean) / std - (_centred(w) - mean) / std, axis=-1)
+        errors.extend(err[[t for t in range(32) if t not in keys]])
+    value = out.rows[0]["values"]["lerp_slerp"]["lafan1_l2p@15"]
+    assert value == pytest.approx(float(np.mean(errors)), rel=1e-6)
+    # L2Q of LERP by hand: global quaternions (sign-continuous), non-key frames
+    errors = []
+    for start in range(0, clip.num_frames - 31, 16):
+        w = clip[start : start + 32]
+        q = Q.continuity(w.double().global_rotations(), dim=-3).numpy()
+        p = Q.continuity(lerp_slerp(w, keys).double().global_rotations(), dim=-3).numpy()
+        err = np.linalg.norm((p - q).reshape(32, -1), axis=-1)
+        errors.extend(err[[t for t in range(32) if t not in keys]])
+    value = out.rows[0]["values"]["lerp_slerp"]["lafan1_l2q@15"]
+    assert value == pytest.approx(float(np.mean(errors)), rel=1e-6)
+
+
+def test_evaluation_data_may_hold_only_test_clips(tmp_path: Path) -> None:
+    """Every clip held out (data.test_pattern=.), e.g. CMU clips for a CMU-hierarchy model."""
+    from skelagnostic import write_bvh
+    from skelagnostic.data import bvh_sources
+    from skelagnostic.errors import SkelagnosticError
+
+    model = _tiny_trained(tmp_path)
+    for seed in (3, 4):
+        motion, _ = procedural.generate("biped31", "walk", seconds=2.5, fps=30, seed=seed)
+        write_bvh(motion, tmp_path / f"walk{seed}.bvh")
+
+    def data() -> PcmrlInterpDataModule:
+        sources = bvh_sources([tmp_path], test_pattern=".", units="cm")
+        return PcmrlInterpDataModule(sources, fps=30, window=32, cache_dir=tmp_path / "c")
+
+    dm = data()
+    held = held_out(dm)
+    assert held.split == "test" and sorted(Path(n).stem for n in held.names) == ["walk3", "walk4"]
+    with pytest.raises(SkelagnosticError, match="no training clips"):
+        dm.train_dataloader()
+    with torch.no_grad():
+        out = interpolation_protocol(model, held, tmp_path)
+    assert len(out.rows) == 2
+    assert any("evaluated windows (no training clip)" in n for n in out.notes)
+    with pytest.raises(SkelagnosticError, match="no training clips"):
+        data().setup("fit")
+
+
+def test_interpolation_protocol_refuses_another_hierarchy(tmp_path: Path) -> None:
+    model = _tiny_trained(tmp_path)
+    motion, _ = procedural.generate("biped22", "walk", seconds=2.2, fps=30, seed=1)
+    motion.name = "biped22_walk"
+    with pytest.raises(EvaluationError, match=r"biped22_walk.*another hierarchy.*data=cmu"):
+        interpolation_protocol(model, HeldOut("test", [motion.convert_units("m")]), tmp_path)
+
+
+@pytest.mark.data
+def test_cli_evaluates_a_cmu_hierarchy_model_on_every_cmu_clip(
+    shared_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """`evaluate ckpt_path=RUN data=bvh data.paths=[DIR] data.test_pattern=.` (Table 1 on CMU)."""
+    from skelagnostic import cli
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    fit = [
+        "model=pcmrl_interp",
+        "experiment=pcmrl_interp_cpu",
+        "threads=1",
+        "model.dim=16",
+        "model.heads=2",
+        "model.layers=1",
+        "data.clips_per_gait=1",
+        "data.val_fraction=0",
+        "data.samples_per_epoch=8",
+        "trainer.max_steps=2",
+        "logger=csv",
+        "run_dir=s2",
+    ]
+    assert cli.main(["fit", *fit]) == 0, capsys.readouterr().err
+    cmu = shared_data / "human" / "cmu"
+    args = [
+        "evaluate",
+        "ckpt_path=s2",
+        "data=bvh",
+        f"data.paths=[{cmu}]",
+        "data.units=cmu",
+        "data.test_pattern=.",
+        "run_dir=ev",
+    ]
+    assert cli.main(args) == 0, capsys.readouterr().err
+    report = json.loads((tmp_path / "ev" / "evaluation.json").read_text())
+    assert report["protocol"] == "pcmrl.interpolation" and report["data"]["source"] == "bvh"
+    assert report["data"]["split"] == "test"
+    assert sorted(Path(c).stem for c in report["data"]["clips"]) == ["131_01", "131_03"]
+    assert report["methods"] == ["model", "lerp_slerp"]
+    assert len(report["per_clip"]) == 2
+    for metric in ("l2p@15", "lafan1_l2p@30"):
+        values = [r["values"]["lerp_slerp"][metric] for r in report["per_clip"]]
+        assert report["mean"]["lerp_slerp"][metric] == pytest.approx(sum(values) / 2)

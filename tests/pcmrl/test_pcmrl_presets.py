@@ -69,7 +69,28 @@ def test_every_preset_is_checked() -> None:
         "pcmrl_interp_cpu",
         "pcmrl_interp_cmu",
         "pcmrl_interp_stage1",
+        "pcmrl_cpu2h",
+        "pcmrl_interp_cpu2h",
     } <= set(PRESETS)
+
+
+@pytest.mark.parametrize(
+    ("model", "preset", "steps"),
+    [("pcmrl", "pcmrl_cpu2h", 7700), ("pcmrl_interp", "pcmrl_interp_cpu2h", 32000)],
+)
+def test_budget_presets_train_on_the_lafan1_train_split(pcmrl_pm, tmp_path, model, preset, steps):
+    """The 2-hour presets: data=lafan1 (subject 5 held out), a step budget and a time guard."""
+    cfg = app.compose(
+        [f"model={model}", f"experiment={preset}", f"run_dir={tmp_path}"], plugin_manager=pcmrl_pm
+    )
+    assert cfg.model.name == model and cfg.data.source == "lafan1" and cfg.data.root is None
+    assert cfg.trainer.max_steps == steps and cfg.trainer.max_time == "00:02:30:00"
+    if model == "pcmrl":
+        assert str(cfg.data.target).endswith("human/cmu/131_01.bvh")
+        assert cfg.data.target_units == "cmu"
+    else:
+        assert cfg.data.val_fraction == 0.0
+        assert cfg.callbacks.ema._target_ == "skelagnostic.callbacks.EMAWeights"
 
 
 @pytest.mark.parametrize("preset", PRESETS)

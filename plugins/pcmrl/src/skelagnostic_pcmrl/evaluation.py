@@ -43,7 +43,7 @@ from skelagnostic.baselines import lerp_slerp, name_copy, primal_copy
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
+from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut, clips_of_split
 from skelagnostic.metrics.functional import end_effector_error, temporal_knn_distance
 from skelagnostic.representations import PointCloud
 from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, position_stats, windows
@@ -191,47 +191,142 @@ TABLE2_METRICS = {
 }
 
 
-def reconstruction_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
-    """``pcmrl.reconstruction``: Table 2 of every held-out clip retargeted onto the target."""
+#: Frames of a held-out clip the Table 2 protocol scores by default: the first 60 s at
+#: 30 fps, every 3rd frame (the metrics are exact but slow on a CPU; docs/reports/pcmrl.md).
+MAX_FRAMES, FRAME_STRIDE = 1800, 3
+
+
+def reconstruction_protocol(
+    aligner: Any,
+    held: HeldOut,
+    out_dir: Path,
+    max_frames: int | None = MAX_FRAMES,
+    stride: int = FRAME_STRIDE,
+) -> Evaluation:
+    """``pcmrl.reconstruction``: Table 2 of every held-out clip retargeted onto the target.
+
+    Args:
+        aligner: A trained :class:`~skelagnostic_pcmrl.recon.PcmrlReconAligner`.
+        held: The held-out clips.
+        out_dir: The evaluation's directory (unused: no plots of its own).
+        max_frames: Each clip is cut to its first ``max_frames`` frames before it is
+            retargeted (``None``: whole clips); ``+protocol_options.max_frames=N``.
+        stride: The metrics read every ``stride``-th frame of the retargeted part.
+
+    Raises:
+        EvaluationError: ``max_frames`` or ``stride`` is not positive.
+    """
+    if (max_frames is not None and max_frames < 1) or stride < 1:
+        raise EvaluationError(
+            f"pcmrl.reconstruction: max_frames ({max_frames}) and stride ({stride}) must be "
+            "positive (max_frames may be null: whole clips)"
+        )
     target = aligner.target_skeleton.scaled(1.0 / UNITS[aligner.target_units])
-    result = evaluate_clips(held.clips, target, aligner)
+    clips = [c if max_frames is None else c[:max_frames] for c in held.clips]
+    result = evaluate_clips(clips, target, aligner, stride=stride)
     rows = []
-    for clip, per in zip(held.clips, result["per_clip"], strict=True):
+    for clip, per in zip(clips, result["per_clip"], strict=True):
         values = {MODEL: per["rows"]["pcmrl"]}
         values |= {k: v for k, v in per["rows"].items() if k != "pcmrl"}
         rows.append({"clip": str(clip.name), "frames": per["frames"], "values": values})
     return Evaluation(
         dict(TABLE2_METRICS),
         rows,
-        extra={"options": result["options"]},
+        extra={"options": result["options"] | {"max_frames": max_frames}},
         notes=[
             f"target skeleton: {target.name or f'{target.num_joints} joints'}; 'original' is an "
-            "independent cloud on the source motion (the best reachable KNN value)"
+            "independent cloud on the source motion (the best reachable KNN value)",
+            (
+                "each clip whole"
+                if max_frames is None
+                else f"the first {max_frames} frames of each clip"
+            )
+            + f" retargeted; the metrics read every {stride}. frame",
         ],
     )
 
 
+def _check_hierarchy(aligner: Any, clips: Sequence[Motion]) -> None:
+    """Raise :class:`EvaluationError` when a clip's hierarchy is not the model's."""
+    skeleton = getattr(aligner, "skeleton", None)
+    if skeleton is None:
+        return
+    for clip in clips:
+        if list(clip.skeleton.parents) != list(skeleton.parents):
+            raise EvaluationError(
+                f"pcmrl.interpolation: clip {clip.name!r} has {clip.skeleton.num_joints} joints "
+                f"in another hierarchy than the model's {skeleton.num_joints}-joint skeleton "
+                f"{skeleton.name or ''!r}; stage 2 interpolates only the hierarchy it was trained "
+                "on. Evaluate on clips of that hierarchy (a model trained with data=lafan1 on "
+                "data=lafan1); CMU clips (data=cmu) need a model trained on the CMU hierarchy "
+                "(experiment=pcmrl_interp_stage1 on stage-1 output, or pcmrl_interp_cmu)"
+            )
+
+
+def lafan1_statistics(
+    held: HeldOut, clips: Sequence[Motion], window: int, stride: int
+) -> tuple[tuple[torch.Tensor, torch.Tensor], str]:
+    """Normalisation of ``lafan1_l2p``: the run's training clips, as the LaFAN1 benchmark.
+
+    The benchmark z-scores positions with per-channel statistics of its training
+    set (subjects 1-4). The training clips of the run's data module (its
+    ``train`` split, loaded again from their sources like the held-out clips)
+    are cut into the protocol's windows; without training clips of the
+    evaluated hierarchy (e.g. ``data.test_fraction=1`` on another dataset) the
+    evaluated windows give the statistics.
+
+    Args:
+        held: The held-out clips and their data module.
+        clips: The evaluated clips (at least ``window`` frames).
+        window: Window length.
+        stride: Frames between window starts.
+
+    Returns:
+        ``((mean, std), what they were computed from)``.
+    """
+    dm = held.datamodule
+    assigned = getattr(dm, "assigned_splits", None) or {}
+    parents = list(clips[0].skeleton.parents)
+    if dm is not None and hasattr(dm, "sources") and "train" in assigned.values():
+        train = [
+            c
+            for c in clips_of_split(dm, "train")
+            if c.num_frames >= window and list(c.skeleton.parents) == parents
+        ]
+        if train:
+            wins = windows(train, window, stride)
+            return position_stats(wins), f"{len(wins)} windows of {len(train)} training clips"
+    wins = windows(clips, window, stride)
+    return position_stats(wins), f"the {len(wins)} evaluated windows (no training clip)"
+
+
 def interpolation_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
-    """``pcmrl.interpolation``: Table 1 (L2P, L2Q, NPSS per gap) per held-out clip vs LERP/SLERP."""
+    """``pcmrl.interpolation``: Table 1 (L2P, L2Q, NPSS per gap) per held-out clip vs LERP/SLERP.
+
+    Raises:
+        EvaluationError: A held-out clip is not on the model's skeleton hierarchy.
+    """
     window = int(getattr(held.datamodule, "window", None) or 128)
     stride = max(1, window // 2)
     clips = [c for c in held.clips if c.num_frames >= window]
+    _check_hierarchy(aligner, held.clips)
+    stats, stats_from = lafan1_statistics(held, clips, window, stride) if clips else (None, "")
     notes = [
         f"windows of {window} frames every {stride}, keys every gap frames and on the last "
         f"frame, clips at {getattr(held.datamodule, 'fps', None) or 'their'} fps (the authors: "
         "128-frame windows of CMU at 30 fps). l2p/l2q/npss: Table 1 as the authors' "
         "eval_inpainter.py (keys pasted, positions in metres centred on the keyframes, over "
         "all frames; NPSS on positions + quaternions, power-weighted over a clip's windows). "
-        "lafan1_*: the LaFAN1 benchmark's definitions (L2P normalised with the statistics of "
-        "all evaluated windows; L2P/L2Q over non-key frames, NPSS on quaternions over the "
-        "window)"
+        "lafan1_*: the LaFAN1 benchmark's metric definitions (L2P z-scored per channel with "
+        f"statistics of {stats_from}; L2P/L2Q over non-key frames, NPSS on quaternions over "
+        "the window) on this protocol's windows and keys, not the benchmark's 65-frame "
+        "windows with 10 context frames"
     ]
     short = [str(c.name) for c in held.clips if c.num_frames < window]
     if short:
         notes.append(
             f"skipped {len(short)} clip(s) shorter than {window} frames: {', '.join(short)}"
         )
-    stats = position_stats(windows(clips, window, stride)) if clips else None
     methods = {MODEL: aligner.interpolate, "lerp_slerp": lerp_slerp}
     rows = []
     for clip in clips:

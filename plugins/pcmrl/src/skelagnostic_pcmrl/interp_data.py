@@ -51,8 +51,7 @@ from skelagnostic_pcmrl.rpa import (
     random_tail_offsets,
 )
 
-__all__ = ["CachedClip", "Clip", "PcmrlInterpDataModule", "gap_keys", "random_keys",
-           "regular_keys"]
+__all__ = ["CachedClip", "Clip", "PcmrlInterpDataModule", "gap_keys", "random_keys", "regular_keys"]
 
 log = logging.getLogger(__name__)
 
@@ -87,8 +86,14 @@ class Clip:
     def from_motion(cls, motion: Motion, name: str) -> Clip:
         """Precompute the global rotations of ``motion``."""
         m = motion.float()
-        return cls(name, m.skeleton, m.global_rotations(), m.root_positions.clone(),
-                   m.skeleton.offsets.float(), bone_tails(m.skeleton).tails.float())
+        return cls(
+            name,
+            m.skeleton,
+            m.global_rotations(),
+            m.root_positions.clone(),
+            m.skeleton.offsets.float(),
+            bone_tails(m.skeleton).tails.float(),
+        )
 
     @property
     def num_frames(self) -> int:
@@ -118,8 +123,16 @@ class CachedClip(Clip):
         sk = Skeleton.from_dict(meta["skeleton"])
         # the float32 skeleton of Clip.from_motion (motion.float() converts its offsets)
         self.name, self.entry = name, entry
-        self.skeleton = Motion(sk, torch.zeros(1, sk.num_joints, 4).index_fill_(
-            -1, torch.tensor([0]), 1.0), torch.zeros(1, 3), float(meta["fps"])).float().skeleton
+        self.skeleton = (
+            Motion(
+                sk,
+                torch.zeros(1, sk.num_joints, 4).index_fill_(-1, torch.tensor([0]), 1.0),
+                torch.zeros(1, 3),
+                float(meta["fps"]),
+            )
+            .float()
+            .skeleton
+        )
         self.offsets = torch.tensor(meta["offsets"], dtype=torch.float32)
         self.tails = torch.tensor(meta["tails"], dtype=torch.float32)
 
@@ -173,7 +186,7 @@ def regular_keys(length: int, min_gap: int, max_gap: int, rng: random.Random) ->
     """
     gap = rng.randint(min_gap, max_gap)
     mask = torch.zeros(length, dtype=torch.bool)
-    mask[rng.randrange(gap)::gap] = True
+    mask[rng.randrange(gap) :: gap] = True
     mask[0] = mask[-1] = True
     return mask
 
@@ -190,17 +203,34 @@ def gap_keys(length: int, gap: int) -> torch.Tensor:
 
 def _window(clip: Clip, start: int, length: int, keys: torch.Tensor) -> dict[str, torch.Tensor]:
     rotations, root = clip.frames(start, start + length)
-    return {"global_rotations": rotations, "root": root,
-            "offsets": clip.offsets, "tails": clip.tails, "keys": keys}
+    return {
+        "global_rotations": rotations,
+        "root": root,
+        "offsets": clip.offsets,
+        "tails": clip.tails,
+        "keys": keys,
+    }
 
 
 class TrainWindows(Dataset):
     """Random windows with random keyframes and RPA (map-style; DDP shards the indices)."""
 
-    def __init__(self, clips: Sequence[Clip], window: int, min_keys: int, max_keys: int,
-                 rpa_range: float, rpa_prob: float, samples: int, seed: int,
-                 key_mode: str = "random", min_gap: int = 5, max_gap: int = 30,
-                 rpa_offsets: str = "independent", rpa_solve: str = "directions") -> None:
+    def __init__(
+        self,
+        clips: Sequence[Clip],
+        window: int,
+        min_keys: int,
+        max_keys: int,
+        rpa_range: float,
+        rpa_prob: float,
+        samples: int,
+        seed: int,
+        key_mode: str = "random",
+        min_gap: int = 5,
+        max_gap: int = 30,
+        rpa_offsets: str = "independent",
+        rpa_solve: str = "directions",
+    ) -> None:
         self.clips = [c for c in clips if c.num_frames >= window]
         if not self.clips:
             raise SkelagnosticError(
@@ -234,13 +264,19 @@ class TrainWindows(Dataset):
             else:
                 delta = random_tail_offsets(clip.skeleton.num_joints, self.rpa_range, gen)
             if self.rpa_solve == "authors":
-                grot = authors_rest_pose_rotations(item["global_rotations"], item["root"],
-                                                   clip.offsets, clip.tails,
-                                                   clip.skeleton.parents, delta)
+                grot = authors_rest_pose_rotations(
+                    item["global_rotations"],
+                    item["root"],
+                    clip.offsets,
+                    clip.tails,
+                    clip.skeleton.parents,
+                    delta,
+                )
                 item.update(global_rotations=grot)
                 return item
-            offsets, grot, tails = augment_rest_pose(clip.skeleton, item["global_rotations"],
-                                                     delta, offsets=clip.offsets)
+            offsets, grot, tails = augment_rest_pose(
+                clip.skeleton, item["global_rotations"], delta, offsets=clip.offsets
+            )
             item.update(offsets=offsets, global_rotations=grot, tails=tails)
         return item
 
@@ -249,8 +285,12 @@ class FixedWindows(Dataset):
     """Windows every ``stride`` frames with a key every ``gap`` frames (validation/test)."""
 
     def __init__(self, clips: Sequence[Clip], window: int, stride: int, gap: int) -> None:
-        self.items = [(c, s) for c in clips if c.num_frames >= window
-                      for s in range(0, c.num_frames - window + 1, stride)]
+        self.items = [
+            (c, s)
+            for c in clips
+            if c.num_frames >= window
+            for s in range(0, c.num_frames - window + 1, stride)
+        ]
         self.keys = gap_keys(window, gap)
         self.window = window
 
@@ -343,9 +383,14 @@ class PcmrlInterpDataModule(MotionDataModule):
             raise SkelagnosticError(
                 "data.representation is not used by pcmrl_interp (it computes FOQ features)"
             )
-        checks = (("window", window, 2), ("stride", stride, 0),
-                  ("batch_size", batch_size, 0), ("samples_per_epoch", samples_per_epoch, 0),
-                  ("val_gap", val_gap, 0), ("min_keys", min_keys, 1))
+        checks = (
+            ("window", window, 2),
+            ("stride", stride, 0),
+            ("batch_size", batch_size, 0),
+            ("samples_per_epoch", samples_per_epoch, 0),
+            ("val_gap", val_gap, 0),
+            ("min_keys", min_keys, 1),
+        )
         for arg, value, low in checks:
             if value <= low:
                 raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
@@ -372,8 +417,14 @@ class PcmrlInterpDataModule(MotionDataModule):
             )
         if sources is None:
             sources = [ProceduralSource(kinds=("biped31",), gaits=("walk", "run"))]
-        super().__init__(sources=sources, representation=None, window=window, stride=stride,
-                         batch_size=batch_size, **kwargs)
+        super().__init__(
+            sources=sources,
+            representation=None,
+            window=window,
+            stride=stride,
+            batch_size=batch_size,
+            **kwargs,
+        )
         self.min_keys, self.max_keys = int(min_keys), int(max_keys)
         self.key_mode, self.min_gap, self.max_gap = key_mode, int(min_gap), int(max_gap)
         self.samples_per_epoch, self.val_gap = int(samples_per_epoch), int(val_gap)
@@ -399,9 +450,14 @@ class PcmrlInterpDataModule(MotionDataModule):
     def _extra(self) -> ProceduralSource | None:
         if not (self.procedural_kind and self.procedural_clips > 0):
             return None
-        return ProceduralSource(kinds=(self.procedural_kind,), gaits=("walk", "run"),
-                                clips_per_gait=self.procedural_clips, seconds=8.0,
-                                seed=self.seed + 1000, name="procedural_extra")
+        return ProceduralSource(
+            kinds=(self.procedural_kind,),
+            gaits=("walk", "run"),
+            clips_per_gait=self.procedural_clips,
+            seconds=8.0,
+            seed=self.seed + 1000,
+            name="procedural_extra",
+        )
 
     def _refs(self) -> list[tuple[ClipSource, ClipRef, bool]]:
         """Every clip to cache: ``(source, clip, mirrored)`` (mirrors of all non-test clips)."""
@@ -409,9 +465,12 @@ class PcmrlInterpDataModule(MotionDataModule):
         extra = self._extra()
         if extra is not None:
             sources.append(extra)
-        return [(src, ref, mirror) for src in sources for ref in src.clips()
-                for mirror in ((False, True) if self.mirror and ref.split != "test"
-                               else (False,))]
+        return [
+            (src, ref, mirror)
+            for src in sources
+            for ref in src.clips()
+            for mirror in ((False, True) if self.mirror and ref.split != "test" else (False,))
+        ]
 
     def cache_entry(self, source: ClipSource, clip: ClipRef, mirror: bool = False) -> CacheEntry:
         """The cached frames of ``clip`` (resampled, mirrored if asked), built when missing.
@@ -420,8 +479,10 @@ class PcmrlInterpDataModule(MotionDataModule):
         global rotations and, as the last row, the root position (padded to 4).
         """
         # what the source does to the clip's content when loading it (class, units, re-rooting)
-        loading = {"class": f"{type(source).__module__}.{type(source).__qualname__}",
-                   **source.loading()}
+        loading = {
+            "class": f"{type(source).__module__}.{type(source).__qualname__}",
+            **source.loading(),
+        }
         pre = {"layout": _LAYOUT, "fps": self.fps, "mirror": mirror, "source": loading}
         key = cache_key(clip.key, pre)
         entry = self.cache.get(key)
@@ -432,11 +493,17 @@ class PcmrlInterpDataModule(MotionDataModule):
             if mirror:
                 motion = motion.mirror()
             m = motion.float()
-            frames = torch.cat([m.global_rotations(),
-                                F.pad(m.root_positions, (0, 1))[:, None]], dim=1)
-            meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(), "starts": [0],
-                    "fps": self.fps, "offsets": m.skeleton.offsets.float().tolist(),
-                    "tails": bone_tails(m.skeleton).tails.float().tolist()}
+            frames = torch.cat(
+                [m.global_rotations(), F.pad(m.root_positions, (0, 1))[:, None]], dim=1
+            )
+            meta = {
+                "clip": clip.id,
+                "skeleton": motion.skeleton.to_dict(),
+                "starts": [0],
+                "fps": self.fps,
+                "offsets": m.skeleton.offsets.float().tolist(),
+                "tails": bone_tails(m.skeleton).tails.float().tolist(),
+            }
             entry = self.cache.put(key, frames.numpy()[None], meta)
         if os.path.isfile(clip.id):  # an edited file's earlier entry is deleted
             self.cache.track(slot_key(os.path.abspath(clip.id), pre), key)
@@ -464,7 +531,12 @@ class PcmrlInterpDataModule(MotionDataModule):
         """Cache and check every clip, split by clip (idempotent).
 
         The clips stay in the cache (:class:`CachedClip`): memory does not grow
-        with the corpus.
+        with the corpus. For a stage other than ``fit`` (``test``, ``validate``,
+        ``skelagnostic evaluate``) the data may hold no training clip, e.g.
+        ``data.test_fraction=1`` to evaluate on every clip of another dataset.
+
+        Raises:
+            SkelagnosticError: No training clip when fitting (or ``stage=None``).
         """
         if self.skeleton is not None:
             return
@@ -480,8 +552,6 @@ class PcmrlInterpDataModule(MotionDataModule):
             for r in extra.clips():
                 self._check(self.cache_entry(extra, r), r.id)
                 procedural.append((f"procedural:{r.id}", extra, r))
-        if not rest and not procedural:
-            raise SkelagnosticError("data: no training clips (every clip is in the test split)")
         order = list(range(len(rest)))
         random.Random(self.split_seed).shuffle(order)
         n_test = round(self.test_fraction * len(rest))
@@ -492,11 +562,17 @@ class PcmrlInterpDataModule(MotionDataModule):
             n_val = max(n_val, 1)
         val_idx = set(order[:n_val])
         train = [rest[i] for i in order if i not in val_idx] + procedural
+        if not train and stage in (None, "fit"):
+            raise SkelagnosticError(
+                "data: no training clips (every clip is in the test or validation split: lower "
+                "data.test_fraction or data.val_fraction, or loosen the test pattern)"
+            )
 
-        def clips(items: list[tuple[str, ClipSource, ClipRef]],
-                  mirror: bool = False) -> list[Clip]:
-            return [CachedClip(f"{n}:mirror" if mirror else n, self.cache_entry(src, ref, mirror))
-                    for n, src, ref in items]
+        def clips(items: list[tuple[str, ClipSource, ClipRef]], mirror: bool = False) -> list[Clip]:
+            return [
+                CachedClip(f"{n}:mirror" if mirror else n, self.cache_entry(src, ref, mirror))
+                for n, src, ref in items
+            ]
 
         val = [rest[i] for i in sorted(val_idx)]
         self.clips = {
@@ -506,27 +582,55 @@ class PcmrlInterpDataModule(MotionDataModule):
         }
         # the split of the source clips, for split.json and skelagnostic evaluate
         for part, items in (("train", train), ("val", val), ("test", test)):
-            self.assigned_splits.update((ref.id, part) for _, src, ref in items
-                                        if src is not extra)
+            self.assigned_splits.update((ref.id, part) for _, src, ref in items if src is not extra)
         self.skeletons = {"target": self.skeleton}
-        self.train_set = TrainWindows(self.clips["train"], self.window, self.min_keys,
-                                      self.max_keys, self.rpa_range, self.rpa_prob,
-                                      self.samples_per_epoch, self.seed, self.key_mode,
-                                      self.min_gap, self.max_gap, self.rpa_offsets,
-                                      self.rpa_solve)
+        if train:  # evaluation data (stage test/validate) may hold no training clip
+            self.train_set = TrainWindows(
+                self.clips["train"],
+                self.window,
+                self.min_keys,
+                self.max_keys,
+                self.rpa_range,
+                self.rpa_prob,
+                self.samples_per_epoch,
+                self.seed,
+                self.key_mode,
+                self.min_gap,
+                self.max_gap,
+                self.rpa_offsets,
+                self.rpa_solve,
+            )
         for split in ("val", "test"):
             short = [c.name for c in self.clips[split] if c.num_frames < self.window]
             if short:
-                log.warning("data: %s clips shorter than %d frames are skipped: %s", split,
-                            self.window, ", ".join(short))
+                log.warning(
+                    "data: %s clips shorter than %d frames are skipped: %s",
+                    split,
+                    self.window,
+                    ", ".join(short),
+                )
 
     # ------------------------------------------------------------------ loaders
     def train_dataloader(self) -> DataLoader:
-        """Random windows (new draws every epoch)."""
-        if self.train_set is None:
+        """Random windows (new draws every epoch).
+
+        Raises:
+            SkelagnosticError: The data, set up for evaluation, holds no training clip.
+        """
+        if self.skeleton is None:
             self.setup("fit")
-        return DataLoader(self.train_set, batch_size=self.batch_size, shuffle=False,
-                          num_workers=self.num_workers, drop_last=True)
+        if self.train_set is None:
+            raise SkelagnosticError(
+                "data: no training clips (every clip is in the test split: lower "
+                "data.test_fraction or loosen the test pattern)"
+            )
+        return DataLoader(
+            self.train_set,
+            batch_size=self.batch_size,
+            shuffle=False,
+            num_workers=self.num_workers,
+            drop_last=True,
+        )
 
     def _fixed(self, split: str) -> DataLoader:
         self.setup(split)
