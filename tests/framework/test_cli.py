@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -194,6 +195,22 @@ def test_cli_fit_ddp_two_cpu_processes(subprocess_env: dict[str, str], tmp_path:
     assert (run_dir / "checkpoints" / "last.ckpt").is_file()
     assert (run_dir / "train_ddp_process_1.log").is_file()  # rank 1 re-ran the command line
     assert {row["epoch"] for row in read_metrics(run_dir)} == {"0", "1"}
+
+
+@pytest.mark.slow
+def test_cli_commands_started_together_get_their_own_run_dirs(
+    subprocess_env: dict[str, str], tmp_path: Path
+) -> None:
+    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", "model=example", *FAST,
+           f"runs_dir={tmp_path / 'runs'}"]
+    procs = [subprocess.Popen(cmd, env=subprocess_env, cwd=tmp_path, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True) for _ in range(2)]
+    for proc in procs:
+        out, _ = proc.communicate(timeout=170)
+        assert proc.returncode == 0, out[-3000:]
+    run_dirs = sorted(p.name for p in (tmp_path / "runs" / "example" / "fit").iterdir())
+    assert len(run_dirs) == 2, run_dirs  # one directory each, even within the same second
+    assert all(re.fullmatch(r"\d{4}-\d{2}-\d{2}_\d{2}-\d{2}-\d{2}_\d{6}", n) for n in run_dirs)
 
 
 def _copy_filter(root: Path):
