@@ -297,3 +297,34 @@ def test_transfer_protocol_reports_the_contact_rhythm(tiny, tmp_path) -> None:
                     100 * abs(values["contact_hz"] / row["source_hz"] - 1)
                 )
                 assert values["contact_rhythm_within_10pct"] == float(error <= 10)
+
+
+def _turned(clip: Motion, angle: float, shift: tuple[float, float, float]) -> Motion:
+    """``clip`` turned by ``angle`` radians about the up (Y) axis and moved by ``shift``."""
+    from skelagnostic.core import quaternion as Q
+
+    half = torch.tensor(angle / 2, dtype=torch.float64)
+    yaw = torch.stack([half.cos(), torch.zeros(()), half.sin(), torch.zeros(())])
+    yaw = yaw.to(clip.dtype).expand(clip.num_frames, 4)
+    rotations = clip.rotations.clone()
+    rotations[:, 0] = Q.mul(yaw, rotations[:, 0])
+    root = Q.rotate(yaw, clip.root_positions) + torch.tensor(shift, dtype=clip.dtype)
+    return Motion(clip.skeleton, rotations, root, clip.fps, name=clip.name, units=clip.units)
+
+
+def test_average_pose_error_ignores_heading_and_place(tiny, tmp_path) -> None:
+    """Table 1 compares poses in the root's facing frame: turning a clip changes nothing."""
+    model, held = tiny
+    turned = type(held)(
+        held.split, [_turned(c, 2.1, (3.0, 0.0, -2.0)) for c in held.clips], held.datamodule
+    )
+    with torch.no_grad():
+        before = manifold_protocol(model, held, tmp_path, procedural_seeds=0)
+        after = manifold_protocol(model, turned, tmp_path, procedural_seeds=0)
+    for a, b in zip(after.rows, before.rows, strict=True):
+        for method in (MODEL, "mean_pose"):
+            for metric in ("pose_mpjpe_cm", "pose_mpjpe_locomotion_cm"):
+                x, y = a["values"][method][metric], b["values"][method][metric]
+                assert x == pytest.approx(y, rel=1e-4, abs=1e-4) or (
+                    math.isnan(x) and math.isnan(y)
+                )

@@ -11,13 +11,22 @@ character and reports, per clip:
 * ``phase_r2``: the R^2 of a line through the unwrapped phase over time (a
   periodic motion advances its phase steadily), model only;
 * ``pose_mpjpe_cm``: when the average-pose MLPs are trained, the error of the
-  average pose decoded at each frame's manifold point (root-relative joint
-  positions, cm), beside ``mean_pose``: the clip's own mean root-relative pose
-  (:func:`skelagnostic.baselines.mean_pose`).
+  average pose decoded at each frame's manifold point (joint positions relative to
+  the root, in the character's facing frame, cm), beside ``mean_pose``: the clip's
+  own mean pose in that frame (:func:`skelagnostic.baselines.mean_pose`);
+  ``pose_mpjpe_locomotion_cm``: the same on its locomotion frames
+  (:func:`locomotion_frames`).
 
-``extra`` holds codebook usage and overlap over the held-out characters
-(:func:`code_overlap`, WalkTheDog Table 2); the plot ``manifold.png`` is the
-phase manifold (Fig. 1) with the held-out frames.
+``extra`` holds the paper's Table 2 (:func:`table2`) and Table 1 (:func:`table1`)
+per character, codebook usage and overlap (:func:`code_overlap`), per-character
+means, and phase linearity and frequency error on held-out procedural gaits
+(:func:`procedural_gaits`); the plot ``manifold.png`` is the phase manifold
+(Fig. 1) with the held-out frames.
+
+``vqpae.transfer`` (:func:`transfer_protocol`) re-enacts held-out clips of the
+first character with the second's training clips and times the outputs' feet
+against the source's (:func:`gait_frequency`, :func:`contact_frequency`,
+:func:`rhythm_figures`).
 """
 
 from __future__ import annotations
@@ -158,7 +167,11 @@ def locomotion_frames(
 
 
 def _pose_errors(aligner: Any, clip: Any, emb: ClipEmbedding) -> tuple[torch.Tensor, ...]:
-    """Per-frame root-relative joint error (m) of the decoded average pose and of the mean pose.
+    """Per-frame joint error (m) of the decoded average pose and of the clip's mean pose.
+
+    Both poses are compared in the character's root frame (positions relative to the
+    root joint, turned into the facing frame: the frame the average-pose MLP predicts),
+    so the error does not count where the character walks or which way it faces.
 
     Returns:
         ``(model [F], mean_pose [F], locomotion [F] bool)`` on the frames both cover.
@@ -171,9 +184,10 @@ def _pose_errors(aligner: Any, clip: Any, emb: ClipEmbedding) -> tuple[torch.Ten
     if truth_motion.fps != emb.fps:
         truth_motion = truth_motion.resample(emb.fps)
     frames = min(len(emb), truth_motion.num_frames)
-    truth = truth_motion.global_positions()[:frames].double()
+    local = GlobalPositions(frame="root")
+    truth = local.encode(truth_motion)[:frames].double()
     truth = truth - truth[:, :1]
-    pred = decoded.global_positions()[:frames].double()
+    pred = local.encode(decoded)[:frames].double()
     pred = pred - pred[:, :1]
     return (
         (pred - truth).norm(dim=-1).mean(-1),
@@ -479,7 +493,8 @@ def manifold_protocol(
     }
     if pose_ready:
         metrics["pose_mpjpe_cm"] = (
-            "root-relative MPJPE of the decoded average pose, cm, lower is better"
+            "MPJPE of the decoded average pose in the root's facing frame, relative to the "
+            "root joint, cm, lower is better"
         )
         metrics["pose_mpjpe_locomotion_cm"] = (
             "the same on the clip's locomotion frames only (root speed >= "
