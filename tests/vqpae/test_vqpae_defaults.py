@@ -149,3 +149,18 @@ def test_checkpoints_without_the_new_options_keep_their_previous_values(tmp_path
     torch.testing.assert_close(
         loaded.embed_windows(x, 0)["reconstruction"], old.embed_windows(x, 0)["reconstruction"]
     )
+
+
+def test_noreinit_preset_is_the_cpu2h_run_without_reinitialisation(vqpae_pm) -> None:
+    from skelagnostic.cli.app import compose
+
+    base = compose(
+        ["model=vqpae", "experiment=vqpae_cpu2h", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm
+    )
+    ablation = compose(
+        ["model=vqpae", "experiment=vqpae_cpu2h_noreinit", "run_dir=/tmp/unused"],
+        plugin_manager=vqpae_pm,
+    )
+    assert base.model.reinit is True and ablation.model.reinit is False
+    ablation.model.reinit = True
+    assert ablation == base

@@ -11,13 +11,22 @@ character and reports, per clip:
 * ``phase_r2``: the R^2 of a line through the unwrapped phase over time (a
   periodic motion advances its phase steadily), model only;
 * ``pose_mpjpe_cm``: when the average-pose MLPs are trained, the error of the
-  average pose decoded at each frame's manifold point (root-relative joint
-  positions, cm), beside ``mean_pose``: the clip's own mean root-relative pose
-  (:func:`skelagnostic.baselines.mean_pose`).
+  average pose decoded at each frame's manifold point (joint positions relative to
+  the root, in the character's facing frame, cm), beside ``mean_pose``: the clip's
+  own mean pose in that frame (:func:`skelagnostic.baselines.mean_pose`);
+  ``pose_mpjpe_locomotion_cm``: the same on its locomotion frames
+  (:func:`locomotion_frames`).
 
-``extra`` holds codebook usage and overlap over the held-out characters
-(:func:`code_overlap`, WalkTheDog Table 2); the plot ``manifold.png`` is the
-phase manifold (Fig. 1) with the held-out frames.
+``extra`` holds the paper's Table 2 (:func:`table2`) and Table 1 (:func:`table1`)
+per character, codebook usage and overlap (:func:`code_overlap`), per-character
+means, and phase linearity and frequency error on held-out procedural gaits
+(:func:`procedural_gaits`); the plot ``manifold.png`` is the phase manifold
+(Fig. 1) with the held-out frames.
+
+``vqpae.transfer`` (:func:`transfer_protocol`) re-enacts held-out clips of the
+first character with the second's training clips and times the outputs' feet
+against the source's (:func:`gait_frequency`, :func:`contact_frequency`,
+:func:`rhythm_figures`).
 """
 
 from __future__ import annotations
@@ -32,22 +41,46 @@ import torch
 
 from skelagnostic.baselines import mean_pose
 from skelagnostic.core.motion import Motion
-from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut, clips_of_split
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.evaluation import (
+    MODEL,
+    Evaluation,
+    EvaluationError,
+    HeldOut,
+    clips_of_split,
+    mean_rows,
+)
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import GlobalPositions
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip, plot_manifold
 from skelagnostic_vqpae.transfer import FREQUENCY_TOLERANCE, HALFLIFE, build_database, transfer
 
 __all__ = [
+    "CONTACT_ENTER",
+    "LOCOMOTION_SPAN",
+    "LOCOMOTION_SPEED",
     "OWN_RATE",
+    "PROCEDURAL_SECONDS",
+    "PROCEDURAL_SEED",
+    "RHYTHM_TOLERANCE",
     "TRANSFER_METRICS",
     "UNSCALED",
     "acceleration",
     "code_overlap",
+    "contact_frequency",
+    "contact_lock",
+    "contact_onsets",
+    "foot_heights",
     "foot_joints",
     "gait_frequency",
+    "locomotion_frames",
     "manifold_protocol",
     "phase_line",
+    "procedural_gaits",
+    "procedural_kind",
+    "rhythm_figures",
+    "table1",
+    "table2",
     "transfer_protocol",
     "transfer_rows",
     "transition_note",
@@ -92,8 +125,57 @@ def code_overlap(codes: Mapping[str, torch.Tensor], num_codes: int) -> dict[str,
     }
 
 
-def _pose_error(aligner: Any, clip: Any, emb: ClipEmbedding) -> dict[str, dict[str, float]]:
-    """Root-relative MPJPE (cm) of the decoded average pose and of the mean-pose baseline."""
+#: Locomotion rule of :func:`locomotion_frames`: root speed over the skeleton height, 1/s.
+LOCOMOTION_SPEED = 0.25
+
+#: Span (seconds) over which :func:`locomotion_frames` measures the root's displacement.
+LOCOMOTION_SPAN = 0.5
+
+
+def locomotion_frames(
+    motion: Motion, threshold: float = LOCOMOTION_SPEED, span: float = LOCOMOTION_SPAN
+) -> torch.Tensor:
+    """Which frames of a clip are locomotion: the character travels over the ground.
+
+    A frame is locomotion when its root's horizontal displacement over a centred
+    ``span`` (seconds), divided by that span and by the skeleton height
+    (:meth:`~skelagnostic.core.skeleton.Skeleton.height`), reaches ``threshold``
+    heights per second. The rule needs neither joint names nor clip names: a
+    standing or idling character stays below it (the MANN dog's idle clip: a median
+    of 0.006 heights/s), a walking human (1.2 m/s over 1.6 m: 0.75/s) or dog
+    (0.84 m/s over 0.43 m: 2/s) is far above it; a quarter of the height per second
+    is a slow stroll.
+
+    Args:
+        motion: A clip.
+        threshold: Smallest speed, in skeleton heights per second.
+        span: Seconds over which the displacement is measured (at least one frame).
+
+    Returns:
+        ``[F]`` boolean tensor.
+    """
+    up = motion.skeleton.up_index
+    flat = [a for a in range(3) if a != up]
+    root = motion.root_positions.double()[:, flat]
+    frames = root.shape[0]
+    half = max(1, round(span * motion.fps / 2))
+    idx = torch.arange(frames)
+    ahead, behind = (idx + half).clamp(max=frames - 1), (idx - half).clamp(min=0)
+    elapsed = (ahead - behind).double().clamp(min=1) / motion.fps
+    speed = (root[ahead] - root[behind]).norm(dim=-1) / elapsed
+    return speed >= threshold * max(motion.skeleton.height(), 1e-9)
+
+
+def _pose_errors(aligner: Any, clip: Any, emb: ClipEmbedding) -> tuple[torch.Tensor, ...]:
+    """Per-frame joint error (m) of the decoded average pose and of the clip's mean pose.
+
+    Both poses are compared in the character's root frame (positions relative to the
+    root joint, turned into the facing frame: the frame the average-pose MLP predicts),
+    so the error does not count where the character walks or which way it faces.
+
+    Returns:
+        ``(model [F], mean_pose [F], locomotion [F] bool)`` on the frames both cover.
+    """
     from skelagnostic.aligners import Latent
 
     decoded = aligner.decode(Latent(emb.manifold, emb.fps), clip.skeleton)
@@ -102,18 +184,252 @@ def _pose_error(aligner: Any, clip: Any, emb: ClipEmbedding) -> dict[str, dict[s
     if truth_motion.fps != emb.fps:
         truth_motion = truth_motion.resample(emb.fps)
     frames = min(len(emb), truth_motion.num_frames)
-    truth = truth_motion.global_positions()[:frames].double()
+    local = GlobalPositions(frame="root")
+    truth = local.encode(truth_motion)[:frames].double()
     truth = truth - truth[:, :1]
-    pred = decoded.global_positions()[:frames].double()
+    pred = local.encode(decoded)[:frames].double()
     pred = pred - pred[:, :1]
+    return (
+        (pred - truth).norm(dim=-1).mean(-1),
+        (mean_pose(truth) - truth).norm(dim=-1).mean(-1),
+        locomotion_frames(truth_motion)[:frames],
+    )
+
+
+def table2(codes: Mapping[str, torch.Tensor]) -> dict[str, Any]:
+    """WalkTheDog Table 2 per character, from the code of every frame of its clips.
+
+    Args:
+        codes: ``character -> [F]`` code of every frame of its (held-out) clips.
+
+    Returns:
+        ``characters``; ``codes_used`` (character -> number of distinct codes its
+        frames use); ``codes_shared``: codes used by every character;
+        ``codes_used_any``: codes used by any character; ``shared_of_used``:
+        ``codes_shared / codes_used_any`` (the issue's "codes used that are shared",
+        target >= 0.75); ``shared_of_own`` (character -> ``codes_shared`` / its
+        ``codes_used``); ``frame_share`` (character -> share of its frames on a
+        shared code, the paper's Table 2 figure); ``frames`` per character.
+
+    Example:
+        >>> out = table2({"human": torch.tensor([0, 0, 1, 2]), "dog": torch.tensor([1, 1, 3])})
+        >>> out["codes_shared"], out["shared_of_used"], out["frame_share"]
+        (1, 0.25, {'human': 0.25, 'dog': 0.6666666666666666})
+    """
+    used = {name: set(c.tolist()) for name, c in codes.items()}
+    shared = set.intersection(*used.values()) if used else set()
+    union = set.union(*used.values()) if used else set()
     return {
-        MODEL: {"pose_mpjpe_cm": 100 * float((pred - truth).norm(dim=-1).mean())},
-        "mean_pose": {"pose_mpjpe_cm": 100 * float((mean_pose(truth) - truth).norm(dim=-1).mean())},
+        "characters": list(codes),
+        "codes_used": {name: len(u) for name, u in used.items()},
+        "codes_shared": len(shared),
+        "codes_used_any": len(union),
+        "shared_of_used": len(shared) / len(union) if union else math.nan,
+        "shared_of_own": {
+            name: len(shared) / len(u) if u else math.nan for name, u in used.items()
+        },
+        "frame_share": {
+            name: float(np.isin(c.numpy(), sorted(shared)).mean()) if len(c) else math.nan
+            for name, c in codes.items()
+        },
+        "frames": {name: len(c) for name, c in codes.items()},
     }
 
 
-def manifold_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
-    """``vqpae.manifold``: shared codes, phase linearity and pose error of held-out clips."""
+def table1(errors: Mapping[str, Sequence[tuple[torch.Tensor, ...]]]) -> dict[str, Any]:
+    """WalkTheDog Table 1 per character: per-frame average-pose error, cm, beside the mean pose.
+
+    Args:
+        errors: ``character -> [(model [F], mean_pose [F], locomotion [F])]`` per clip,
+            per-frame errors in metres (:func:`_pose_errors`).
+
+    Returns:
+        ``character -> {"all": ..., "locomotion": ...}``, each ``{"model": cm,
+        "mean_pose": cm, "ratio": model / mean_pose, "frames": n}``: the mean over every
+        frame of the character's clips, and over its locomotion frames
+        (:func:`locomotion_frames`; NaN figures when it has none).
+    """
+    out: dict[str, Any] = {}
+    for name, clips in errors.items():
+        model = torch.cat([c[0] for c in clips])
+        base = torch.cat([c[1] for c in clips])
+        loco = torch.cat([c[2] for c in clips])
+        out[name] = {}
+        for subset, mask in (("all", torch.ones_like(loco)), ("locomotion", loco)):
+            n = int(mask.sum())
+            m = 100 * float(model[mask].mean()) if n else math.nan
+            b = 100 * float(base[mask].mean()) if n else math.nan
+            out[name][subset] = {
+                "model": m,
+                "mean_pose": b,
+                "ratio": m / b if n and b > 0 else math.nan,
+                "frames": n,
+            }
+    return out
+
+
+#: Smallest seed of :func:`procedural_gaits`' clips (higher when a training source reaches it).
+PROCEDURAL_SEED = 1000
+
+#: Duration (seconds) of each held-out procedural gait.
+PROCEDURAL_SECONDS = 6.0
+
+
+def procedural_kind(skeleton: Skeleton, tolerance: float = 0.02) -> str | None:
+    """The :mod:`skelagnostic.procedural` kind whose rig ``skeleton`` is, if any.
+
+    The generator animates only its own skeletons (:data:`skelagnostic.procedural.KINDS`):
+    a rig is one of them when it has the same joints and parents and the same rest
+    offsets up to scale (every offset over the skeleton height within ``tolerance``).
+    A real rig with the same joint names (LaFAN1 and ``biped22``) has other rest
+    offsets, so the generator's joint angles would not play on it.
+
+    Args:
+        skeleton: A character's skeleton.
+        tolerance: Largest difference of an offset coordinate, in skeleton heights.
+
+    Returns:
+        The kind, or None.
+    """
+    from skelagnostic import procedural
+
+    height = max(skeleton.height(), 1e-9)
+    for kind in procedural.KINDS:
+        ref = procedural.skeleton(kind)
+        if list(ref.joint_names) != list(skeleton.joint_names) or list(ref.parents) != list(
+            skeleton.parents
+        ):
+            continue
+        diff = ref.offsets.double() / ref.height() - skeleton.offsets.double() / height
+        if float(diff.abs().max()) <= tolerance:
+            return kind
+    return None
+
+
+def _first_unseen_seed(datamodule: Any) -> int:
+    """A seed above every seed the run's procedural training sources used."""
+    from skelagnostic.data import ProceduralSource
+
+    first = PROCEDURAL_SEED
+    for source in getattr(datamodule, "sources", None) or []:
+        if isinstance(source, ProceduralSource):
+            first = max(first, source.seed + len(source.clips()))
+    return first
+
+
+def procedural_gaits(aligner: Any, held: HeldOut, seeds_per_gait: int = 2) -> dict[str, Any]:
+    """Phase linearity and frequency error on held-out procedural gaits, per character.
+
+    For every character whose rig is a procedural kind (:func:`procedural_kind`),
+    ``seeds_per_gait`` clips of each of its morphology's gaits except ``idle``,
+    :data:`PROCEDURAL_SECONDS` long at the character's frame rate, with seeds from
+    :data:`PROCEDURAL_SEED` upwards, above every seed a procedural training source of
+    the run used (a seed sets the body size, stride frequency and turning, so these
+    clips were never seen). The clips are scaled to the training skeleton's length
+    unit (the power of ten nearest the ratio of the heights). Per clip, on the
+    frames whose window lies inside the clip: the median of the frequency head
+    against the generator's stride frequency, the rate at which the phase advances
+    (slope of :func:`phase_line`) against the same, and the phase's R^2.
+
+    Args:
+        aligner: A trained aligner.
+        held: The run's held-out clips (for its data module's training sources).
+        seeds_per_gait: Clips per gait and character; 0: none.
+
+    Returns:
+        ``characters`` (name -> kind or None), ``seeds``, ``seconds``, ``clips``
+        (rows with ``character``, ``kind``, ``gait``, ``seed``, ``true_hz``,
+        ``predicted_hz``, ``frequency_error_pct``, ``phase_hz``,
+        ``phase_rate_error_pct``, ``phase_r2``), ``mean`` (of the numeric row
+        figures) and ``note`` (why characters have no clip, or None).
+    """
+    from skelagnostic import procedural
+
+    specs = aligner.hparams["datasets"] or {}
+    kinds: dict[str, str | None] = {}
+    for name in aligner.dataset_names:
+        sk = (specs.get(name) or {}).get("skeleton")
+        kinds[name] = procedural_kind(Skeleton.from_dict(sk)) if sk else None
+    seed = _first_unseen_seed(held.datamodule) if seeds_per_gait > 0 else PROCEDURAL_SEED
+    rows: list[dict[str, Any]] = []
+    for name, kind in kinds.items():
+        if kind is None or seeds_per_gait <= 0:
+            continue
+        spec = specs[name]
+        fps, half = float(spec["fps"]), int(spec["window"]) // 2
+        train_height = Skeleton.from_dict(spec["skeleton"]).height()
+        factor = 10.0 ** round(math.log10(train_height / procedural.skeleton(kind).height()))
+        morphology = "quadruped" if kind == "quadruped" else "biped"
+        for gait in procedural.GAITS[morphology]:
+            if gait == "idle":
+                continue
+            for _ in range(seeds_per_gait):
+                motion, info = procedural.generate(
+                    kind, gait, seconds=PROCEDURAL_SECONDS, fps=fps, seed=seed
+                )
+                emb = embed_clip(aligner, motion.scaled(factor))
+                inner = slice(half, max(len(emb) - half, half + 2))
+                truth = float(info["frequency"])
+                predicted = float(emb.frequency[inner].median())
+                r2, slope = phase_line(emb.phase[inner])
+                phase_hz = abs(slope) * emb.fps
+                rows.append(
+                    {
+                        "clip": str(motion.name),
+                        "character": name,
+                        "kind": kind,
+                        "gait": gait,
+                        "seed": seed,
+                        "true_hz": truth,
+                        "predicted_hz": predicted,
+                        "frequency_error_pct": 100 * abs(predicted - truth) / truth,
+                        "phase_hz": phase_hz,
+                        "phase_rate_error_pct": 100 * abs(phase_hz - truth) / truth,
+                        "phase_r2": r2,
+                    }
+                )
+                seed += 1
+    figures = ("frequency_error_pct", "phase_rate_error_pct", "phase_r2")
+    absent = [n for n, k in kinds.items() if k is None]
+    note = None
+    if absent and seeds_per_gait > 0:
+        note = (
+            f"no procedural gaits for {', '.join(absent)}: their rigs are not a procedural "
+            "kind's (skelagnostic.procedural animates only its own skeletons), so no clip of "
+            "known gait frequency exists on them; phase linearity on held-out procedural gaits "
+            "needs a model trained on procedural characters"
+        )
+    return {
+        "characters": kinds,
+        "seeds": sorted({r["seed"] for r in rows}),
+        "seconds": PROCEDURAL_SECONDS,
+        "clips": rows,
+        "mean": {f: float(np.mean([r[f] for r in rows])) for f in figures} if rows else {},
+        "note": note,
+    }
+
+
+def manifold_protocol(
+    aligner: Any, held: HeldOut, out_dir: Path, procedural_seeds: int = 2
+) -> Evaluation:
+    """``vqpae.manifold``: Tables 1 and 2 per character, phase linearity, procedural gaits.
+
+    Args:
+        aligner: A trained :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`.
+        held: The run's held-out clips.
+        out_dir: Where ``manifold.png`` goes.
+        procedural_seeds: Held-out procedural clips per gait and character
+            (:func:`procedural_gaits`; 0: none).
+
+    Returns:
+        Per-clip rows (``character``, ``frames``, ``locomotion_frames``; metrics
+        ``shared_code_share``, ``phase_r2``, ``pose_mpjpe_cm``,
+        ``pose_mpjpe_locomotion_cm``) and ``extra``: ``overlap``
+        (:func:`code_overlap`), ``table2`` (:func:`table2`), ``table1``
+        (:func:`table1`), ``per_character`` (character -> method -> metric -> mean
+        of its clips), ``locomotion_rule`` and ``procedural``
+        (:func:`procedural_gaits`).
+    """
     num_codes = int(aligner.hparams.num_codes)
     embeddings = [embed_clip(aligner, clip) for clip in held.clips]
     by_character: dict[str, list[ClipEmbedding]] = {}
@@ -121,13 +437,15 @@ def manifold_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
         by_character.setdefault(emb.dataset, []).append(emb)
     codes = {n: torch.cat([e.code for e in embs]) for n, embs in by_character.items()}
     overlap = code_overlap(codes, num_codes)
+    table = table2(codes)
     shared = set.intersection(*(set(c.tolist()) for c in codes.values()))
     specs = aligner.hparams["datasets"] or {}
     authors = [n for n in aligner.dataset_names if (specs.get(n) or {}).get("pose_features")]
     pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
     notes = [
         f"shared codes: {len(shared)} of {num_codes}, over the held-out clips of "
-        f"{', '.join(by_character)}; chance = shared / K"
+        f"{', '.join(by_character)}; chance = shared / K; codes shared / codes used by any "
+        f"character: {table['codes_shared']} / {table['codes_used_any']}",
     ]
     if authors:
         notes.append(
@@ -139,30 +457,60 @@ def manifold_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
             "pose_mpjpe_cm omitted: the average-pose MLPs are not trained (model.pose_mlp=none)"
         )
     rows = []
+    errors: dict[str, list[tuple[torch.Tensor, ...]]] = {}
     for clip, emb in zip(held.clips, embeddings, strict=True):
         share = float(np.isin(emb.code.numpy(), sorted(shared)).mean()) if len(emb) else 0.0
         values: dict[str, dict[str, float]] = {
             MODEL: {"shared_code_share": share, "phase_r2": phase_line(emb.phase)[0]},
             "chance": {"shared_code_share": len(shared) / num_codes},
         }
+        row: dict[str, Any] = {"clip": str(clip.name), "character": emb.dataset, "frames": len(emb)}
         if pose_ready:
-            for method, figures in _pose_error(aligner, clip, emb).items():
-                values.setdefault(method, {}).update(figures)
-        rows.append(
-            {"clip": str(clip.name), "character": emb.dataset, "frames": len(emb), "values": values}
-        )
+            model_err, base_err, loco = _pose_errors(aligner, clip, emb)
+            errors.setdefault(emb.dataset, []).append((model_err, base_err, loco))
+            row["locomotion_frames"] = int(loco.sum())
+            for method, err in ((MODEL, model_err), ("mean_pose", base_err)):
+                values.setdefault(method, {}).update(
+                    {
+                        "pose_mpjpe_cm": 100 * float(err.mean()),
+                        "pose_mpjpe_locomotion_cm": (
+                            100 * float(err[loco].mean()) if bool(loco.any()) else math.nan
+                        ),
+                    }
+                )
+        rows.append({**row, "values": values})
     plot_manifold(aligner, by_character, out=out_dir / "manifold.png")
     metrics = {
         "shared_code_share": "share of frames on codes every character uses, higher is better",
         "phase_r2": "R^2 of a line through the unwrapped phase, higher is better",
     }
+    extra: dict[str, Any] = {
+        "overlap": overlap,
+        "table2": table,
+        "per_character": {
+            name: mean_rows([r for r in rows if r["character"] == name]) for name in by_character
+        },
+    }
     if pose_ready:
         metrics["pose_mpjpe_cm"] = (
-            "root-relative MPJPE of the decoded average pose, cm, lower is better"
+            "MPJPE of the decoded average pose in the root's facing frame, relative to the "
+            "root joint, cm, lower is better"
         )
-    return Evaluation(
-        metrics, rows, extra={"overlap": overlap}, plots=["manifold.png"], notes=notes
-    )
+        metrics["pose_mpjpe_locomotion_cm"] = (
+            "the same on the clip's locomotion frames only (root speed >= "
+            f"{LOCOMOTION_SPEED:g} skeleton heights/s), cm, lower is better"
+        )
+        extra["table1"] = table1(errors)
+        extra["locomotion_rule"] = {
+            "min_speed_heights_per_s": LOCOMOTION_SPEED,
+            "span_seconds": LOCOMOTION_SPAN,
+            "rule": "frames whose root travels at least min_speed_heights_per_s skeleton "
+            "heights per second horizontally, over a centred span of span_seconds",
+        }
+    extra["procedural"] = procedural_gaits(aligner, held, procedural_seeds)
+    if extra["procedural"].get("note"):
+        notes.append(extra["procedural"]["note"])
+    return Evaluation(metrics, rows, extra=extra, plots=["manifold.png"], notes=notes)
 
 
 # --- vqpae.transfer ---------------------------------------------------------------------------
@@ -172,6 +520,15 @@ TRANSFER_METRICS = {
     "frequency_error_pct": "|output gait frequency - source gait frequency| / source, %, "
     "lower is better (both measured from the feet, independently of the model)",
     "output_hz": "gait frequency of the output, Hz (forward swings of the feet per second)",
+    "gait_ratio": "output gait frequency / source gait frequency (1: the source's tempo)",
+    "contact_hz": "foot-contact frequency of the output, Hz (touch-downs per second and foot)",
+    "contact_rhythm_error_pct": "|output contact frequency / source contact frequency - 1|, "
+    "%, both touch-downs per second and foot (one per stride), lower is better (the issue's "
+    "target: at most 10)",
+    "contact_rhythm_within_10pct": "1 when contact_rhythm_error_pct <= 10, else 0; the mean "
+    "is the share of clips meeting the target, higher is better",
+    "contact_lock": "phase locking of the output's touch-downs to the source's stride cycle, "
+    "0-1, higher is better",
     "accel_height_per_s2": "mean joint acceleration of the output over the skeleton height, "
     "1/s^2 (frame-to-frame smoothness), lower is smoother",
     "accel_max_height_per_s2": "largest per-frame joint acceleration over the skeleton height, "
@@ -281,6 +638,192 @@ def gait_frequency(motion: Motion, hysteresis: float = 0.25) -> float:
     return float(motion.fps * strides / span)
 
 
+#: Contact rule of :func:`contact_onsets`: a foot touches down when its height above its
+#: local lowest drops below this share of its local height range (and lifts off above twice
+#: that).
+CONTACT_ENTER = 0.25
+
+#: Seconds of the centred window over which :func:`contact_onsets` takes a foot's local
+#: lowest and highest level (about one stride of a walk).
+CONTACT_WINDOW = 1.0
+
+#: Smallest local height range of a foot that counts as stepping, in skeleton heights.
+CONTACT_MIN_LIFT = 0.02
+
+#: The issue's target for :data:`TRANSFER_METRICS` ``contact_rhythm_within_10pct``.
+RHYTHM_TOLERANCE = 0.10
+
+
+def contact_onsets(
+    heights: np.ndarray,
+    fps: float,
+    min_lift: float,
+    enter: float = CONTACT_ENTER,
+    window: float = CONTACT_WINDOW,
+) -> list[np.ndarray]:
+    """Touch-down times (fractional frames) of each foot, from its height over time.
+
+    Each foot's height is measured from its local lowest level and scaled by its local
+    range (minimum and maximum over a centred ``window`` of seconds), so the rule is the
+    same for a human's toes and a dog's paws, needs no ground plane and follows a
+    floor that changes (steps, obstacles). A foot is in contact below ``enter`` of its
+    range and lifted above ``2 * enter`` (hysteresis), and only while its local range
+    reaches ``min_lift`` (a foot that stays put does not step); each touch-down is
+    timed to a fraction of a frame by linear interpolation at the ``enter`` level.
+
+    Args:
+        heights: ``[F, N]`` height of N feet.
+        fps: Frame rate.
+        min_lift: Smallest local range of a stepping foot, in the units of ``heights``.
+        enter: Contact level, share of the local range.
+        window: Seconds of the centred window of the local range.
+
+    Returns:
+        One array of onset times (frames) per foot.
+
+    Example:
+        >>> t = np.arange(400) / 100.0
+        >>> feet = np.stack([np.sin(np.pi * 1.5 * t) ** 2], 1)  # one foot, 1.5 steps/s
+        >>> onsets = contact_onsets(feet, fps=100.0, min_lift=0.1)[0]
+        >>> np.round(np.diff(onsets) / 100.0, 2).tolist()
+        [0.67, 0.67, 0.67, 0.67, 0.67]
+    """
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    half = max(1, round(window * fps / 2))
+    out = []
+    for h in np.asarray(heights, dtype=np.float64).T:
+        padded = sliding_window_view(np.pad(h, half, mode="edge"), 2 * half + 1)
+        low, span = padded.min(1), np.ptp(padded, axis=1)
+        stepping = span >= min_lift
+        level = np.where(stepping, (h - low) / np.maximum(span, 1e-12), 0.0)
+        onsets, lifted = [], False
+        for t in range(1, len(level)):
+            if stepping[t] and level[t] > 2 * enter:
+                lifted = True
+            elif lifted and level[t - 1] >= enter > level[t]:
+                onsets.append(t - 1 + (level[t - 1] - enter) / (level[t - 1] - level[t]))
+                lifted = False
+        out.append(np.asarray(onsets))
+    return out
+
+
+def _onset_rate(onsets: Sequence[np.ndarray], fps: float) -> float:
+    """Onsets per second and foot: intervals between each foot's first and last onset."""
+    intervals = sum(max(len(o) - 1, 0) for o in onsets)
+    span = sum(float(o[-1] - o[0]) for o in onsets if len(o) >= 2)
+    return float(fps * intervals / span) if intervals and span > 0 else math.nan
+
+
+def foot_heights(motion: Motion) -> np.ndarray:
+    """``[F, N]`` heights (along the up axis) of the feet (:func:`foot_joints`)."""
+    feet = foot_joints(motion)
+    up = motion.skeleton.up_index
+    return motion.global_positions()[:, feet, up].double().numpy()
+
+
+def motion_onsets(motion: Motion) -> list[np.ndarray]:
+    """Touch-down times (frames) of a clip's feet (:func:`contact_onsets`).
+
+    A stepping foot lifts at least :data:`CONTACT_MIN_LIFT` of the skeleton height.
+    """
+    min_lift = CONTACT_MIN_LIFT * max(motion.skeleton.height(), 1e-9)
+    return contact_onsets(foot_heights(motion), motion.fps, min_lift)
+
+
+def contact_frequency(motion: Motion) -> float:
+    """Foot-contact frequency in Hz: touch-downs per second of each foot.
+
+    :func:`motion_onsets` of the feet (:func:`foot_joints`), counted like
+    :func:`gait_frequency` counts swings (intervals between each foot's first and
+    last touch-down, summed over the feet). On captured steady gaits each foot
+    touches down once per stride, so this is the stride frequency measured from the
+    feet's heights instead of their fore-aft swing (within a few % on the LaFAN1
+    walks and MANN dog gaits of the tests). The procedural generator's feet are not
+    grounded: they dip twice per stride, so on its clips this reads up to twice the
+    stride frequency. Nothing of any model is used.
+
+    Returns:
+        Hz, or NaN when no foot touches down twice.
+    """
+    return _onset_rate(motion_onsets(motion), motion.fps)
+
+
+def contact_lock(source_onsets: Sequence[np.ndarray], output_onsets: Sequence[np.ndarray]) -> float:
+    """How steadily the output's touch-downs keep their place in the source's stride cycle.
+
+    The source's cycle is read from its first foot with at least two onsets: cycle
+    ``k`` runs from its ``k``-th to its ``k+1``-th touch-down, so the source's phase at
+    any time between them is ``(t - o_k) / (o_{k+1} - o_k)`` (the source's own tempo,
+    even when it changes). Each output foot's touch-downs inside that span get a
+    source phase; the lock of the foot is the length of the mean of
+    ``exp(2 pi i phase)`` (1: every touch-down of that foot at the same point of the
+    source's cycle, one per cycle or a whole multiple; about 0: no relation). The
+    result is the mean over the output feet with at least two such touch-downs. It
+    does not need to know which output foot matches which source foot, nor the lag.
+
+    Args:
+        source_onsets: Onset times (frames) per source foot (:func:`contact_onsets`).
+        output_onsets: The same for the output, on the same time axis.
+
+    Returns:
+        A value in [0, 1], NaN when either side has too few touch-downs.
+
+    Example:
+        >>> src = [np.array([0.0, 10.0, 20.0, 30.0])]
+        >>> round(contact_lock(src, [np.array([3.0, 13.0, 23.0])]), 6)  # lag 0.3 cycle
+        1.0
+        >>> round(contact_lock(src, [np.array([3.0, 18.0, 28.0])]), 3)  # one off by half
+        0.333
+    """
+    reference = next((np.sort(o) for o in source_onsets if len(o) >= 2), None)
+    if reference is None:
+        return math.nan
+    locks = []
+    for onsets in output_onsets:
+        inside = onsets[(onsets >= reference[0]) & (onsets < reference[-1])]
+        if len(inside) < 2:
+            continue
+        k = np.searchsorted(reference, inside, side="right") - 1
+        phase = (inside - reference[k]) / (reference[k + 1] - reference[k])
+        locks.append(float(np.abs(np.exp(2j * math.pi * phase).mean())))
+    return float(np.mean(locks)) if locks else math.nan
+
+
+def rhythm_figures(source: Motion, output: Motion) -> dict[str, float]:
+    """Foot-contact timing of a transfer's output against its source (same time axis).
+
+    Both sides are measured by the same rule (:func:`motion_onsets`), so the source's
+    gait frequency here is its contact frequency: touch-downs per second and foot,
+    one per stride on either character.
+
+    Args:
+        source: The source clip.
+        output: The transferred clip (played over the same time as ``source``).
+
+    Returns:
+        ``contact_hz`` (:func:`contact_frequency` of the output),
+        ``contact_rhythm_error_pct`` (``|contact_hz / source contact_hz - 1|``, %),
+        ``contact_rhythm_within_10pct`` (1.0 when that error is at most
+        :data:`RHYTHM_TOLERANCE`, else 0.0; NaN when either side has no rhythm) and
+        ``contact_lock`` (:func:`contact_lock` of the output's touch-downs in the
+        source's cycle).
+    """
+    src_onsets, out_onsets = motion_onsets(source), motion_onsets(output)
+    source_hz = _onset_rate(src_onsets, source.fps)
+    contact_hz = _onset_rate(out_onsets, output.fps)
+    error = abs(contact_hz / source_hz - 1) if source_hz > 0 else math.nan
+    scale = output.fps / source.fps  # the output's frames on the source's time axis
+    return {
+        "contact_hz": contact_hz,
+        "contact_rhythm_error_pct": 100 * error,
+        "contact_rhythm_within_10pct": (
+            math.nan if math.isnan(error) else float(error <= RHYTHM_TOLERANCE)
+        ),
+        "contact_lock": contact_lock(src_onsets, [o / scale for o in out_onsets]),
+    }
+
+
 def acceleration(motion: Motion) -> tuple[float, float]:
     """Mean and largest per-frame joint acceleration over the skeleton height, 1/s^2.
 
@@ -364,6 +907,8 @@ def transfer_rows(
             values[method] = {
                 "frequency_error_pct": 100 * abs(hz - source_hz) / source_hz,
                 "output_hz": hz,
+                "gait_ratio": hz / source_hz,
+                **rhythm_figures(clip, out),
                 "accel_height_per_s2": mean_acc,
                 "accel_max_height_per_s2": max_acc,
             }
@@ -371,6 +916,7 @@ def transfer_rows(
             {
                 "clip": str(clip.name),
                 "source_hz": source_hz,
+                "source_contact_hz": contact_frequency(clip),
                 "frames": clip.num_frames,
                 "values": values,
             }

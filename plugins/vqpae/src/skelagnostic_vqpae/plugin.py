@@ -74,15 +74,16 @@ def register_evaluations(register: Callable[..., Any]) -> None:
         model="vqpae",
         default=True,
         description="shared codes (vs chance), phase linearity and average-pose error "
-        "(vs the mean pose) of held-out clips; codebook usage and overlap",
+        "(vs the mean pose, all and locomotion frames) of held-out clips; Tables 1 and 2 "
+        "per character; phase and frequency on held-out procedural gaits",
     )
     register(
         "vqpae.transfer",
         transfer_protocol,
         model="vqpae",
         description="held-out clips of the first character re-enacted by the second "
-        "(frequency-scaled motion matching): gait-frequency error and smoothness vs "
-        "unscaled motion matching",
+        "(frequency-scaled motion matching): gait-frequency error and ratio, foot-contact "
+        "rhythm against the source's, smoothness vs unscaled motion matching",
     )
 
 

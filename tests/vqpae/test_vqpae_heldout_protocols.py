@@ -1,0 +1,331 @@
+"""Issue #27's VQ-PAE figures: Tables 1 and 2 per character, procedural gaits, contact rhythm.
+
+Each figure is checked against a value computed another way: codes and errors built by
+hand, the generator's known stride frequencies, synthetic contact signals.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+import lightning as L
+import numpy as np
+import pytest
+import torch
+from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+from skelagnostic_vqpae.embed import embed_clip
+from skelagnostic_vqpae.evaluation import (
+    LOCOMOTION_SPEED,
+    PROCEDURAL_SEED,
+    contact_frequency,
+    contact_lock,
+    contact_onsets,
+    gait_frequency,
+    locomotion_frames,
+    manifold_protocol,
+    procedural_kind,
+    rhythm_figures,
+    table1,
+    table2,
+    transfer_protocol,
+)
+
+from skelagnostic import procedural
+from skelagnostic.core.motion import Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.evaluation import MODEL, held_out
+
+# --- Table 2 -------------------------------------------------------------------------------
+
+
+def test_table2_of_hand_made_codes() -> None:
+    human = torch.tensor([0, 0, 1, 2, 5, 5])  # codes {0, 1, 2, 5}
+    dog = torch.tensor([1, 1, 2, 3, 3, 3, 3])  # codes {1, 2, 3}
+    out = table2({"human": human, "dog": dog})
+    assert out["characters"] == ["human", "dog"]
+    assert out["codes_used"] == {"human": 4, "dog": 3}
+    assert out["codes_shared"] == 2 and out["codes_used_any"] == 5  # {1, 2} of {0, 1, 2, 3, 5}
+    assert out["shared_of_used"] == pytest.approx(2 / 5)
+    assert out["shared_of_own"] == {"human": pytest.approx(2 / 4), "dog": pytest.approx(2 / 3)}
+    # human: frames 2 and 3 of 6 on {1, 2}; dog: frames 0, 1, 2 of 7
+    assert out["frame_share"] == {"human": pytest.approx(2 / 6), "dog": pytest.approx(3 / 7)}
+    assert out["frames"] == {"human": 6, "dog": 7}
+
+
+def test_table2_against_counting_three_characters() -> None:
+    gen = torch.Generator().manual_seed(0)
+    codes = {
+        name: torch.randint(lo, hi, (n,), generator=gen)
+        for name, lo, hi, n in (("a", 0, 12, 400), ("b", 4, 16, 300), ("c", 2, 10, 50))
+    }
+    out = table2(codes)
+    counts = {name: Counter(c.tolist()) for name, c in codes.items()}
+    every = [k for k in range(16) if all(counts[n][k] > 0 for n in counts)]
+    anyone = [k for k in range(16) if any(counts[n][k] > 0 for n in counts)]
+    assert out["codes_shared"] == len(every) and out["codes_used_any"] == len(anyone)
+    for name, count in counts.items():
+        on_shared = sum(count[k] for k in every)
+        assert out["frame_share"][name] == pytest.approx(on_shared / sum(count.values()))
+        assert out["codes_used"][name] == len(count)
+
+
+# --- Table 1 and the locomotion rule ---------------------------------------------------------
+
+
+def test_table1_weights_frames_and_keeps_locomotion_apart() -> None:
+    yes, no = True, False
+    errors = {
+        "human": [
+            # model, mean pose (m), locomotion
+            (torch.tensor([0.01, 0.03]), torch.tensor([0.04, 0.04]), torch.tensor([yes, no])),
+            (
+                torch.tensor([0.02, 0.02, 0.05]),
+                torch.tensor([0.1, 0.1, 0.1]),
+                torch.tensor([yes, yes, no]),
+            ),
+        ],
+        "dog": [(torch.tensor([0.01]), torch.tensor([0.02]), torch.tensor([no]))],
+    }
+    out = table1(errors)
+    human = out["human"]
+    assert human["all"]["model"] == pytest.approx(100 * 0.13 / 5)  # per frame, cm
+    assert human["all"]["mean_pose"] == pytest.approx(100 * 0.38 / 5)
+    assert human["all"]["frames"] == 5
+    assert human["locomotion"]["model"] == pytest.approx(100 * 0.05 / 3)
+    assert human["locomotion"]["mean_pose"] == pytest.approx(100 * 0.24 / 3)
+    assert human["locomotion"]["ratio"] == pytest.approx(0.05 / 0.24)
+    assert out["dog"]["all"]["ratio"] == pytest.approx(0.5)
+    assert out["dog"]["locomotion"]["frames"] == 0
+    assert math.isnan(out["dog"]["locomotion"]["model"])
+
+
+def test_locomotion_frames_follow_the_root_speed() -> None:
+    clip, _ = procedural.generate("quadruped", "idle", seconds=4.0, fps=30, seed=0)
+    height = clip.skeleton.height()
+    t = torch.arange(clip.num_frames, dtype=torch.float64) / clip.fps
+    speed = 2 * LOCOMOTION_SPEED * height  # twice the threshold after 2 s, still before
+    z = torch.where(t < 2.0, torch.zeros_like(t), speed * (t - 2.0))
+    root = clip.root_positions.double().clone()
+    root[:, 2] = z
+    moved = Motion(clip.skeleton, clip.rotations, root, clip.fps)
+    loco = locomotion_frames(moved)
+    margin = 9  # the centred 0.5 s span reaches 7-8 frames across the start
+    assert not loco[: 60 - margin].any() and loco[60 + margin :].all()
+    walk, _ = procedural.generate("biped22", "walk", seconds=4.0, fps=30, seed=1)
+    assert locomotion_frames(walk).all()
+    assert not locomotion_frames(procedural.generate("biped22", "idle", seconds=4.0)[0]).any()
+
+
+# --- procedural gaits --------------------------------------------------------------------------
+
+
+def test_procedural_kind_recognises_the_generator_rigs_only() -> None:
+    for kind in procedural.KINDS:
+        assert procedural_kind(procedural.skeleton(kind, scale=0.0093)) == kind
+    rig = procedural.skeleton("biped22")
+    turned = Skeleton(  # same joints, rest offsets along another axis (a LaFAN1-like rig)
+        rig.joint_names, rig.parents, rig.offsets[:, [1, 2, 0]], name="turned"
+    )
+    assert procedural_kind(turned) is None
+
+
+# --- foot contacts -----------------------------------------------------------------------------
+
+
+def test_contact_onsets_of_a_synthetic_signal() -> None:
+    fps, hz = 60.0, 1.3
+    t = np.arange(int(8 * fps)) / fps
+    # two feet half a cycle apart; each lifts once per cycle and rests on the ground between
+    feet = np.stack([np.maximum(np.sin(2 * np.pi * hz * t + p), 0.0) ** 2 for p in (0, np.pi)], 1)
+    onsets = contact_onsets(feet, fps, min_lift=0.1)
+    for foot in onsets:
+        assert np.diff(foot) / fps == pytest.approx(np.full(len(foot) - 1, 1 / hz), abs=1e-3)
+    # touch-down where the lifted arch ends: sin(...)^2 falls through 0.25 at phase 5 pi / 6
+    assert onsets[0][0] / fps == pytest.approx((5 / 6) / (2 * hz), abs=2e-3)
+    # on a raised floor (a step up after 4 s) the touch-downs keep their rhythm
+    stepped = feet + np.where(t >= 4.0, 3.0, 0.0)[:, None]
+    raised = contact_onsets(stepped, fps, min_lift=0.1)[0]
+    assert np.diff(raised[raised / fps > 5.0]) / fps == pytest.approx(1 / hz, abs=1e-3)
+    # a foot that barely moves does not step
+    assert all(len(o) == 0 for o in contact_onsets(0.01 * feet, fps, min_lift=0.1))
+
+
+@pytest.fixture(scope="module")
+def walks(shared_data):
+    """Steady real gaits: a LaFAN1 walk (frames 600-1800) and a MANN dog walk, in metres."""
+    from skelagnostic.io import read_bvh
+
+    human = read_bvh(shared_data / "human" / "lafan1" / "walk4_subject1.bvh").to_metres()
+    dog = read_bvh(shared_data / "dog" / "mann" / "D1_008_KAN01_001.bvh").to_metres()
+    return human[600:1800], dog
+
+
+def test_contact_frequency_of_real_walks_is_their_gait_frequency(walks) -> None:
+    for clip in walks:
+        assert contact_frequency(clip) == pytest.approx(gait_frequency(clip), rel=0.1)
+        # the same frames played 1.3x faster: 1.3x the touch-downs per second (the local
+        # range window is in seconds, so it spans fewer frames: not exactly)
+        faster = Motion(clip.skeleton, clip.rotations, clip.root_positions, 1.3 * clip.fps)
+        assert contact_frequency(faster) == pytest.approx(1.3 * contact_frequency(clip), rel=0.05)
+
+
+def test_contact_lock_of_hand_made_onsets() -> None:
+    source = [np.arange(0.0, 100.0, 10.0), np.arange(5.0, 100.0, 10.0)]
+    lagged = [np.arange(2.0, 100.0, 10.0) + 0.5 * k for k in range(4)]  # 4 feet, fixed lags
+    assert contact_lock(source, lagged) == pytest.approx(1.0)
+    drifting = [np.arange(0.0, 100.0, 12.5)]  # 0.8 of the source's rate: phase walks around
+    assert contact_lock(source, drifting) < 0.5
+    assert math.isnan(contact_lock([np.array([1.0])], lagged))
+
+
+def _retimed(clip: Motion, hz: float, target_hz: float) -> Motion:
+    """``clip``'s frames played so that its gait frequency ``hz`` becomes ``target_hz``."""
+    return Motion(clip.skeleton, clip.rotations, clip.root_positions, clip.fps * target_hz / hz)
+
+
+def test_rhythm_of_a_dog_following_a_human_walk(walks) -> None:
+    human, dog = walks
+    source_hz, dog_hz = contact_frequency(human), contact_frequency(dog)
+    itself = rhythm_figures(human, human)
+    assert itself["contact_rhythm_error_pct"] == 0.0
+    # the first foot locks to its own cycles (1), the other to a steady half cycle (less)
+    assert itself["contact_lock"] > 0.75 and itself["contact_rhythm_within_10pct"] == 1.0
+    follows = rhythm_figures(human, _retimed(dog, dog_hz, source_hz))
+    assert follows["contact_rhythm_error_pct"] < 5  # the local range window is in seconds
+    assert follows["contact_rhythm_within_10pct"] == 1.0
+    expected = 100 * abs(follows["contact_hz"] / source_hz - 1)
+    assert follows["contact_rhythm_error_pct"] == pytest.approx(expected)
+    rushed = rhythm_figures(human, _retimed(dog, dog_hz, 1.3 * source_hz))
+    assert 20 < rushed["contact_rhythm_error_pct"] < 40  # played 30 % too fast
+    assert rushed["contact_rhythm_within_10pct"] == 0.0
+    drifting = rhythm_figures(human, _retimed(human, 1.0, 1.3))["contact_lock"]
+    assert drifting < 0.5 * itself["contact_lock"]
+
+
+# --- the protocols on a tiny model -------------------------------------------------------------
+
+
+@pytest.fixture
+def tiny(helpers, tmp_path):
+    """A VQ-PAE trained a few steps on procedural biped + quadruped (no quality expected)."""
+    L.seed_everything(0, verbose=False)
+    dm = helpers["datamodule"](tmp_path / "cache")
+    dm.test_fraction = 0.3
+    model = VqpaeAligner(
+        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+    )
+    helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
+    return model.eval(), held_out(dm)
+
+
+def test_manifold_protocol_tables_per_character(tiny, tmp_path) -> None:
+    model, held = tiny
+    with torch.no_grad():
+        out = manifold_protocol(model, held, tmp_path, procedural_seeds=1)
+        codes: dict[str, list[int]] = {}
+        for clip in held.clips:  # codes again, straight from the encoder
+            latent = model.encode(clip)
+            name = model.dataset_names[int(latent.extras["dataset"])]
+            codes.setdefault(name, []).extend(latent.extras["code"].tolist())
+    t2 = out.extra["table2"]
+    every = set.intersection(*(set(c) for c in codes.values()))
+    for name, c in codes.items():
+        assert t2["codes_used"][name] == len(set(c))
+        assert t2["frame_share"][name] == pytest.approx(sum(k in every for k in c) / len(c))
+    assert t2["codes_shared"] == len(every)
+    assert out.extra["overlap"]["overlap"] == pytest.approx(len(every) / 8)  # kept as before
+    # Table 1 from the rows: frame-weighted mean of the per-clip figures
+    assert "pose_mpjpe_locomotion_cm" in out.metrics
+    for name, figures in out.extra["table1"].items():
+        rows = [r for r in out.rows if r["character"] == name]
+        frames = sum(r["frames"] for r in rows)
+        for method in (MODEL, "mean_pose"):
+            weighted = sum(r["frames"] * r["values"][method]["pose_mpjpe_cm"] for r in rows)
+            assert figures["all"][method] == pytest.approx(weighted / frames, rel=1e-6)
+        assert figures["locomotion"]["frames"] == sum(r["locomotion_frames"] for r in rows)
+        clip_mean = np.mean([r["values"][MODEL]["phase_r2"] for r in rows])
+        assert out.extra["per_character"][name][MODEL]["phase_r2"] == pytest.approx(clip_mean)
+    # held-out procedural gaits: unseen seeds, the generator's frequencies
+    gaits = out.extra["procedural"]
+    assert gaits["characters"] == {
+        "procedural/biped22": "biped22",
+        "procedural/quadruped": "quadruped",
+    }
+    assert len(gaits["clips"]) == 2 + 3  # walk, run; walk, trot, gallop
+    assert min(gaits["seeds"]) >= PROCEDURAL_SEED and gaits["note"] is None
+    trained_ids = {c.id for s in held.datamodule.sources for c in s.clips()}
+    for row in gaits["clips"]:
+        assert row["clip"] not in trained_ids
+        _, info = procedural.generate(row["kind"], row["gait"], seconds=6.0, seed=row["seed"])
+        assert row["true_hz"] == pytest.approx(info["frequency"])
+        assert row["frequency_error_pct"] == pytest.approx(
+            100 * abs(row["predicted_hz"] - row["true_hz"]) / row["true_hz"]
+        )
+    clip, _ = procedural.generate("biped22", "walk", seconds=6.0, fps=20, seed=gaits["seeds"][0])
+    with torch.no_grad():
+        emb = embed_clip(model, clip.scaled(0.01))
+    first = gaits["clips"][0]
+    assert first["gait"] == "walk" and first["kind"] == "biped22"
+    assert first["predicted_hz"] == pytest.approx(float(emb.frequency[10:-10].median()))
+
+
+def test_procedural_gaits_are_absent_for_real_rigs(tiny, tmp_path) -> None:
+    model, held = tiny
+    spec = model.hparams["datasets"]["procedural/biped22"]
+    sk = Skeleton.from_dict(spec["skeleton"])
+    spec["skeleton"] = Skeleton(sk.joint_names, sk.parents, sk.offsets[:, [1, 2, 0]]).to_dict()
+    with torch.no_grad():
+        out = manifold_protocol(model, held, tmp_path, procedural_seeds=1)
+    gaits = out.extra["procedural"]
+    assert gaits["characters"]["procedural/biped22"] is None
+    assert {r["character"] for r in gaits["clips"]} == {"procedural/quadruped"}
+    assert (
+        "no procedural gaits for procedural/biped22" in gaits["note"] and gaits["note"] in out.notes
+    )
+
+
+def test_transfer_protocol_reports_the_contact_rhythm(tiny, tmp_path) -> None:
+    model, held = tiny
+    with torch.no_grad():
+        out = transfer_protocol(model, held, tmp_path)
+    for row in out.rows:
+        for values in row["values"].values():
+            assert values["gait_ratio"] == pytest.approx(values["output_hz"] / row["source_hz"])
+            error = values["contact_rhythm_error_pct"]
+            if math.isfinite(error):
+                assert error == pytest.approx(
+                    100 * abs(values["contact_hz"] / row["source_contact_hz"] - 1)
+                )
+                assert values["contact_rhythm_within_10pct"] == float(error <= 10)
+
+
+def _turned(clip: Motion, angle: float, shift: tuple[float, float, float]) -> Motion:
+    """``clip`` turned by ``angle`` radians about the up (Y) axis and moved by ``shift``."""
+    from skelagnostic.core import quaternion as Q
+
+    half = torch.tensor(angle / 2, dtype=torch.float64)
+    yaw = torch.stack([half.cos(), torch.zeros(()), half.sin(), torch.zeros(())])
+    yaw = yaw.to(clip.dtype).expand(clip.num_frames, 4)
+    rotations = clip.rotations.clone()
+    rotations[:, 0] = Q.mul(yaw, rotations[:, 0])
+    root = Q.rotate(yaw, clip.root_positions) + torch.tensor(shift, dtype=clip.dtype)
+    return Motion(clip.skeleton, rotations, root, clip.fps, name=clip.name, units=clip.units)
+
+
+def test_average_pose_error_ignores_heading_and_place(tiny, tmp_path) -> None:
+    """Table 1 compares poses in the root's facing frame: turning a clip changes nothing."""
+    model, held = tiny
+    turned = type(held)(
+        held.split, [_turned(c, 2.1, (3.0, 0.0, -2.0)) for c in held.clips], held.datamodule
+    )
+    with torch.no_grad():
+        before = manifold_protocol(model, held, tmp_path, procedural_seeds=0)
+        after = manifold_protocol(model, turned, tmp_path, procedural_seeds=0)
+    for a, b in zip(after.rows, before.rows, strict=True):
+        for method in (MODEL, "mean_pose"):
+            for metric in ("pose_mpjpe_cm", "pose_mpjpe_locomotion_cm"):
+                x, y = a["values"][method][metric], b["values"][method][metric]
+                assert x == pytest.approx(y, rel=1e-4, abs=1e-4) or (
+                    math.isnan(x) and math.isnan(y)
+                )
