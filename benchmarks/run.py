@@ -16,7 +16,7 @@ Without it those baselines are absent (``null``).
 ``--data-root DIR`` is the folder of the training corpora (``DIR/lafan1``) the
 ``scaling`` suite reads (default ``$SKELAGNOSTIC_DATA``, else ``../shared/datasets``);
 ``--compile`` also times ``torch.compile``d models there; ``--plot DIR`` writes the
-figures of the suites that draw some (a module-level ``plot(report, out_dir, date)``)
+figures of the suites that draw some (a module-level ``plot(report, out_dir, date, size)``)
 as PNG files into ``DIR``.
 
 The JSON (read by external tooling; keep the format stable) is::
@@ -203,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
         for name in names:
             module = importlib.import_module({**SUITES, **PARTS}[name])
             if hasattr(module, "plot"):
-                for path in module.plot(report, args.plot, date=time.strftime("%Y-%m-%d")):
+                date = time.strftime("%Y-%m-%d")
+                for path in module.plot(report, args.plot, date=date, size=args.size):
                     print(f"wrote {path}")
     return 0
 

@@ -95,8 +95,10 @@ def test_results_carry_same_run_baselines() -> None:
 
 
 def test_results_leave_absent_figures_absent() -> None:
-    rows = _by_name(scaling.results(_raw(train_peak=None), "smoke"))
-    assert not any("train_peak" in name for name in rows)
+    raw = _raw(train_peak=None)
+    raw["base_rss_mib"] = None  # no /proc
+    rows = _by_name(scaling.results(raw, "smoke"))
+    assert not any("train_peak" in name for name in rows) and "base_rss_mib" not in rows
     assert "humot_prepare_peak_rss_mib_lafan1_2clips" in rows
 
 

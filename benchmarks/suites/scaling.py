@@ -35,7 +35,8 @@ before it, median over the timed steps) on the first clips of the LaFAN1 corpus
 
 Every measurement runs in its own process, forked from one child process that
 imported torch, Lightning and the four plugins once (``base_rss_mib`` is that
-process's RSS: every peak includes it). Peak RSS is the process's high-water mark
+process's RSS after the imports; a forked process shares those pages and counts
+the ones it maps, so its peaks include most of them). Peak RSS is the process's high-water mark
 (``VmHWM``; reset between filling the cache and training, ``/proc/self/clear_refs``).
 The corpus root is ``run.py --data-root`` (``$SKELAGNOSTIC_BENCH_DATA``), else
 ``$SKELAGNOSTIC_DATA``, else ``../shared/datasets``; its ``lafan1/*.bvh`` files are
@@ -398,14 +399,21 @@ class Job:
         return build(self.method, SETTINGS[self.size].tiny, clips, self.batch, self.cache_dir)
 
 
-def throughput(
-    job: Job,
-    threads: int,
-    accelerator: str = "cpu",
-    precision: str | None = None,
-    compiled: bool = False,
+def _timed(
+    job: Job, threads: int, ranks: int = 1, extra_warmup: int = 0, **options: Any
 ) -> dict[str, float]:
-    """Windows/s of ``job`` with ``threads`` torch threads (a forked child)."""
+    """Time ``job``'s training steps with ``threads`` torch threads (in a forked child).
+
+    Args:
+        job: The measurement.
+        threads: Torch threads.
+        ranks: DDP processes the step's windows are counted over.
+        extra_warmup: Untimed steps added to the size's warm-up.
+        **options: More arguments of :func:`~benchmarks.suites.steptime.time_fit`.
+
+    Returns:
+        :func:`~benchmarks.suites.steptime.time_fit`'s figures and ``windows_per_s``.
+    """
     import lightning as L
     import torch
 
@@ -415,40 +423,34 @@ def throughput(
     model, dm, windows = job.setup()
     L.seed_everything(0, verbose=False)
     settings = SETTINGS[job.size]
-    # compiled: one more warm-up step finds the networks, the next compiles them
-    timing = time_fit(
-        model,
-        dm,
-        settings.steps,
-        settings.warmup + (2 if compiled else 0),
-        accelerator,
+    timing = time_fit(model, dm, settings.steps, settings.warmup + extra_warmup, **options)
+    return {**timing, "windows_per_s": ranks * windows / timing["median_step_s"]}
+
+
+def throughput(
+    job: Job,
+    threads: int,
+    accelerator: str = "cpu",
+    precision: str | None = None,
+    compiled: bool = False,
+) -> dict[str, float]:
+    """Windows/s of ``job`` with ``threads`` torch threads (a forked child).
+
+    Compiled: one more warm-up step finds the networks, the next compiles them.
+    """
+    return _timed(
+        job,
+        threads,
+        extra_warmup=2 if compiled else 0,
+        accelerator=accelerator,
         precision=precision,
         callbacks=[compile_networks()] if compiled else [],
     )
-    return {**timing, "windows_per_s": windows / timing["median_step_s"]}
 
 
 def ddp_rank(job: Job) -> dict[str, float]:
     """One of two DDP ranks (gloo, 1 thread): windows/s of both ranks together."""
-    import lightning as L
-    import torch
-
-    from benchmarks.suites.steptime import time_fit
-
-    torch.set_num_threads(1)
-    model, dm, windows = job.setup()
-    L.seed_everything(0, verbose=False)
-    settings = SETTINGS[job.size]
-    timing = time_fit(
-        model,
-        dm,
-        settings.steps,
-        settings.warmup,
-        "cpu",
-        devices=2,
-        strategy=DDP_STRATEGY[job.method],
-    )
-    return {**timing, "windows_per_s": 2 * windows / timing["median_step_s"]}
+    return _timed(job, 1, ranks=2, accelerator="cpu", devices=2, strategy=DDP_STRATEGY[job.method])
 
 
 def memory(job: Job, threads: int) -> dict[str, float | None]:
@@ -533,7 +535,7 @@ def measure_all(size: str, compiled: bool = False) -> dict[str, Any]:
     threads = settings.threads
     devices = accelerators()
     raw: dict[str, Any] = {
-        "base_rss_mib": (_status_kib("VmRSS") or 0) / 1024,
+        "base_rss_mib": None if (rss := _status_kib("VmRSS")) is None else rss / 1024,
         "devices": devices,
         "corpus_frames": {},
         "methods": {},
@@ -619,7 +621,9 @@ def results(raw: dict[str, Any], size: str) -> list[Result]:
     """The suite's results from the raw figures of :func:`measure_all` (see the module doc)."""
     settings = SETTINGS[size]
     t1 = settings.threads[0]
-    out = [Result("base_rss_mib", "MiB", raw["base_rss_mib"])]
+    out = []
+    if raw["base_rss_mib"] is not None:  # Linux only (/proc)
+        out.append(Result("base_rss_mib", "MiB", raw["base_rss_mib"]))
     out += [
         Result(f"corpus_frames_{label}", "frames", float(frames), higher_is_better=True)
         for label, frames in raw["corpus_frames"].items()
@@ -733,7 +737,9 @@ def _series(values: dict[str, float], pattern: str) -> list[tuple[int, float]]:
     return sorted(found)
 
 
-def plot(report: dict[str, Any], out_dir: Path, date: str | None = None) -> list[Path]:
+def plot(
+    report: dict[str, Any], out_dir: Path, date: str | None = None, size: str | None = None
+) -> list[Path]:
     """Draw the scaling figure of a report (``scaling.png`` in ``out_dir``).
 
     Panels: windows/s against batch size (1 thread solid, 2 threads dashed, GPU
@@ -745,6 +751,7 @@ def plot(report: dict[str, Any], out_dir: Path, date: str | None = None) -> list
         report: A ``run.py --json`` report of the ``scaling`` suite (or ``all``).
         out_dir: Folder of the PNG (created).
         date: Date of the run, shown in the title.
+        size: The run's ``--size``, shown in the title.
 
     Returns:
         The written files.
@@ -753,6 +760,7 @@ def plot(report: dict[str, Any], out_dir: Path, date: str | None = None) -> list
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import ScalarFormatter
 
     values = _figures(report)
     if not values:
@@ -791,15 +799,15 @@ def plot(report: dict[str, Any], out_dir: Path, date: str | None = None) -> list
                     marker="o",
                     label=f"{method} {kind}",
                 )
+    axes[0].set_xscale("log", base=2)
     axes[0].set(
-        xscale="log",
         yscale="log",
         xlabel="batch (windows per dataset)",
         ylabel="windows/s",
         title="throughput against batch",
     )
+    axes[1].set_xscale("log")
     axes[1].set(
-        xscale="log",
         xlabel="corpus frames",
         ylabel="peak RSS (MiB)",
         title="memory against corpus size",
@@ -828,12 +836,17 @@ def plot(report: dict[str, Any], out_dir: Path, date: str | None = None) -> list
     axes[2].axhline(1.0, color="k", lw=0.8)
     axes[2].set_xticks(range(len(bars)), [b[0] for b in bars])
     axes[2].set(ylabel="x 1 process, 1 thread", title="2 cores: threads or DDP")
+    for ax in axes[:2]:
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(ScalarFormatter())
+        ax.legend(fontsize=6, ncol=2)
+    axes[2].legend(fontsize=7)
     for ax in axes:
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
     load = machine.get("load_average_start"), machine.get("load_average_end")
     fig.suptitle(
-        f"scaling suite{f', {date}' if date else ''}: {machine['cpu_count']} CPUs "
+        f"scaling suite{f' --size {size}' if size else ''}{f', {date}' if date else ''}: "
+        f"{machine['cpu_count']} CPUs "
         f"({machine['processor']}), {machine['ram_gib']} GiB"
         + (f", load average {load[0]:g} -> {load[1]:g}" if None not in load else ""),
         fontsize=9,
@@ -856,15 +869,16 @@ def _series_labels(values: dict[str, float]) -> list[tuple[str, float]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m benchmarks.suites.scaling REPORT.json OUT_DIR [--date D]``: redraw the figure."""
+    """``python -m benchmarks.suites.scaling REPORT.json OUT_DIR [--date D] [--size S]``: redraw."""
     import argparse
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("report", type=Path)
     parser.add_argument("out_dir", type=Path)
     parser.add_argument("--date", default=None, help="date of the run, for the title")
+    parser.add_argument("--size", default=None, help="the run's --size, for the title")
     args = parser.parse_args(argv)
-    for path in plot(json.loads(args.report.read_text()), args.out_dir, args.date):
+    for path in plot(json.loads(args.report.read_text()), args.out_dir, args.date, args.size):
         print(f"wrote {path}")
     return 0
 
