@@ -778,13 +778,7 @@ def plot(
         ):
             points = _series(values, rf"{method}_windows_per_s_b(\d+){suffix}")
             if points:
-                axes[0].plot(
-                    *zip(*points, strict=True),
-                    style,
-                    color=color,
-                    marker="o",
-                    label=f"{method} {what}",
-                )
+                _line(axes[0], points, style, color, f"{method} {what}")
         for style, kind in (("-", "train"), ("--", "prepare")):
             points = sorted(
                 (frames[label], v)
@@ -792,13 +786,7 @@ def plot(
                 if (v := values.get(f"{method}_{kind}_peak_rss_mib_{label}")) is not None
             )
             if points:
-                axes[1].plot(
-                    *zip(*points, strict=True),
-                    style,
-                    color=color,
-                    marker="o",
-                    label=f"{method} {kind}",
-                )
+                _line(axes[1], points, style, color, f"{method} {kind}")
     axes[0].set_xscale("log", base=2)
     axes[0].set(
         yscale="log",
@@ -857,6 +845,11 @@ def plot(
     fig.savefig(path, dpi=80, metadata={"Software": None})
     plt.close(fig)
     return [path]
+
+
+def _line(ax: Any, points: list[tuple[float, float]], style: str, color: str, label: str) -> None:
+    """Draw ``points`` as one marked line of ``ax``."""
+    ax.plot(*zip(*points, strict=True), style, color=color, marker="o", label=label)
 
 
 def _series_labels(values: dict[str, float]) -> list[tuple[str, float]]:
