@@ -6,11 +6,18 @@ Usage::
                              [--threads N]
     python benchmarks/run.py --suite all --size smoke
     python benchmarks/run.py --suite training --authors-repo walkthedog=DIR,pcmrl=DIR
+    python benchmarks/run.py --suite scaling [--data-root DIR] [--compile] [--plot DIR]
 
 ``--authors-repo`` names checkouts of the methods' official repositories; the
 suites that compare with them (``training``, ``matching``) then time the authors'
 code in the same run as the baseline of their rows (see ``benchmarks/authors.py``).
 Without it those baselines are absent (``null``).
+
+``--data-root DIR`` is the folder of the training corpora (``DIR/lafan1``) the
+``scaling`` suite reads (default ``$SKELAGNOSTIC_DATA``, else ``../shared/datasets``);
+``--compile`` also times ``torch.compile``d models there; ``--plot DIR`` writes the
+figures of the suites that draw some (a module-level ``plot(report, out_dir, date, size)``)
+as PNG files into ``DIR``.
 
 The JSON (read by external tooling; keep the format stable) is::
 
@@ -53,6 +60,7 @@ from benchmarks.harness import (  # noqa: E402
     machine_info,
     versions,
 )
+from benchmarks.suites.scaling import COMPILE_ENV, DATA_ENV  # noqa: E402
 
 #: Suite name -> module exposing ``run(size) -> list[Result]``.
 SUITES: dict[str, str] = {
@@ -63,6 +71,7 @@ SUITES: dict[str, str] = {
     "training": "benchmarks.suites.training",
     "quality": "benchmarks.suites.quality",
     "inference": "benchmarks.suites.inference",
+    "scaling": "benchmarks.suites.scaling",
 }
 #: Parts of a suite that also run alone (``--suite training_humot``); ``all`` runs them only
 #: inside their suite.
@@ -141,6 +150,21 @@ def main(argv: list[str] | None = None) -> int:
         help="checkouts of the official code to time in the same run as the baseline: "
         "walkthedog=DIR (github PeizhuoLi/walk-the-dog), pcmrl=DIR (github MiniEval/PC-MRL)",
     )
+    parser.add_argument(
+        "--data-root",
+        type=Path,
+        default=None,
+        help="folder of the training corpora, e.g. DIR/lafan1 (scaling suite; default "
+        "$SKELAGNOSTIC_DATA, else ../shared/datasets)",
+    )
+    parser.add_argument(
+        "--compile",
+        action="store_true",
+        help="scaling suite: also time every method with torch.compile (against eager)",
+    )
+    parser.add_argument(
+        "--plot", type=Path, default=None, metavar="DIR", help="write the suites' figures here"
+    )
     args = parser.parse_args(argv)
     try:
         repos = parse_authors_repos(args.authors_repo)
@@ -149,6 +173,12 @@ def main(argv: list[str] | None = None) -> int:
     export_authors_repos(repos)
     if args.threads is not None:
         os.environ[THREADS_ENV] = str(args.threads)
+    if args.data_root is not None:
+        if not (args.data_root / "lafan1").is_dir():
+            parser.error(f"--data-root {args.data_root}: no lafan1/ folder of BVH files in it")
+        os.environ[DATA_ENV] = str(args.data_root.expanduser().resolve())
+    if args.compile:
+        os.environ[COMPILE_ENV] = "1"
     apply_threads()
     names = list(SUITES) if args.suite == "all" else [args.suite]
     load_start = os.getloadavg()[0]
@@ -169,6 +199,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=2) + "\n")
+    if args.plot is not None:
+        for name in names:
+            module = importlib.import_module({**SUITES, **PARTS}[name])
+            if hasattr(module, "plot"):
+                date = time.strftime("%Y-%m-%d")
+                for path in module.plot(report, args.plot, date=date, size=args.size):
+                    print(f"wrote {path}")
     return 0
 
 

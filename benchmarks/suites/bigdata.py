@@ -39,36 +39,53 @@ SIZES = {"smoke": 18_000, "default": 1_000_000, "large": 10_080_000}
 WINDOW = 32
 
 
-def _source(num_clips: int) -> Any:
+def generated_walks(num_clips: int, frames: int = FRAMES_PER_CLIP, name: str = "bigdata") -> Any:
+    """A :class:`~skelagnostic.data.ClipSource` of ``num_clips`` procedural biped22 walks.
+
+    Each clip (``frames`` frames at 30 fps, seed = its index) is generated when the
+    cache loads it, so the corpus is never in memory as a whole; clip keys depend on
+    the package version, ``frames`` and the index.
+    """
     from skelagnostic import __version__, procedural
     from skelagnostic.data import ClipRef, ClipSource
 
     class GeneratedWalks(ClipSource):
         """``num_clips`` procedural walks, each generated when loaded (deterministic seeds)."""
 
-        name = "bigdata"
-
         def clips(self) -> list[ClipRef]:
-            return [ClipRef(f"walk_{i}", hashlib.sha256(
-                f"bigdata:{__version__}:{FRAMES_PER_CLIP}:{i}".encode()).hexdigest())
-                for i in range(num_clips)]
+            return [
+                ClipRef(
+                    f"walk_{i}",
+                    hashlib.sha256(f"bigdata:{__version__}:{frames}:{i}".encode()).hexdigest(),
+                )
+                for i in range(num_clips)
+            ]
 
         def load(self, clip: ClipRef) -> Any:
             seed = int(clip.id.removeprefix("walk_"))
-            motion, _ = procedural.generate("biped22", "walk", seconds=(FRAMES_PER_CLIP - 1) / 30,
-                                            fps=30, seed=seed)
+            motion, _ = procedural.generate(
+                "biped22", "walk", seconds=(frames - 1) / 30, fps=30, seed=seed
+            )
             return motion
 
-    return GeneratedWalks()
+    source = GeneratedWalks()
+    source.name = name
+    return source
 
 
 def _datamodule(num_clips: int, cache_dir: str) -> Any:
     from skelagnostic.data import MotionDataModule
     from skelagnostic.representations import GlobalPositions
 
-    return MotionDataModule(_source(num_clips), GlobalPositions(frame="root"), window=WINDOW,
-                            stride=WINDOW, batch_size=64, val_fraction=0.01,
-                            cache_dir=cache_dir)
+    return MotionDataModule(
+        generated_walks(num_clips),
+        GlobalPositions(frame="root"),
+        window=WINDOW,
+        stride=WINDOW,
+        batch_size=64,
+        val_fraction=0.01,
+        cache_dir=cache_dir,
+    )
 
 
 def _status_kib(field: str) -> int:
@@ -101,9 +118,14 @@ def read(num_clips: int, cache_dir: str) -> dict[str, float]:
         if step % 64 == 0:
             anon = max(anon, _status_kib("RssAnon"))
             rss_file = max(rss_file, _status_kib("RssFile"))
-    return {"setup_seconds": setup_s, "read_seconds": time.perf_counter() - start,
-            "windows": windows, "anon_mib": anon / 1024, "file_mib": rss_file / 1024,
-            "setup_peak_mib": setup_peak / 1024}
+    return {
+        "setup_seconds": setup_s,
+        "read_seconds": time.perf_counter() - start,
+        "windows": windows,
+        "anon_mib": anon / 1024,
+        "file_mib": rss_file / 1024,
+        "setup_peak_mib": setup_peak / 1024,
+    }
 
 
 def run(size: str) -> list[Result]:
@@ -113,24 +135,29 @@ def run(size: str) -> list[Result]:
     workdir = Path(tempfile.mkdtemp(prefix="skelagnostic-bigdata-"))
     try:
         cache = str(workdir / "cache")
-        prep, prep_rss = run_child("benchmarks.suites.bigdata:prepare", num_clips=num_clips,
-                                   cache_dir=cache)
+        prep, prep_rss = run_child(
+            "benchmarks.suites.bigdata:prepare", num_clips=num_clips, cache_dir=cache
+        )
         cache_bytes = sum(p.stat().st_size for p in Path(cache).rglob("*") if p.is_file())
-        got, read_rss = run_child("benchmarks.suites.bigdata:read", num_clips=num_clips,
-                                  cache_dir=cache)
+        got, read_rss = run_child(
+            "benchmarks.suites.bigdata:read", num_clips=num_clips, cache_dir=cache
+        )
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     return [
         Result("frames", "frames", float(frames), higher_is_better=True),
         Result("cache_size", "MiB", cache_bytes / 2**20),
         Result("prepare_time", "s", prep["seconds"]),
-        Result("prepare_frames_per_s", "frames/s", frames / prep["seconds"],
-               higher_is_better=True),
+        Result("prepare_frames_per_s", "frames/s", frames / prep["seconds"], higher_is_better=True),
         Result("prepare_peak_rss", "MiB", prep_rss),
         Result("read_setup_time", "s", got["setup_seconds"]),
         Result("read_setup_peak_rss", "MiB", got["setup_peak_mib"]),
-        Result("read_windows_per_s", "windows/s", got["windows"] / got["read_seconds"],
-               higher_is_better=True),
+        Result(
+            "read_windows_per_s",
+            "windows/s",
+            got["windows"] / got["read_seconds"],
+            higher_is_better=True,
+        ),
         Result("read_peak_rss", "MiB", read_rss),
         Result("read_peak_anon_rss", "MiB", got["anon_mib"]),
         Result("read_peak_file_rss", "MiB", got["file_mib"]),

@@ -13,6 +13,7 @@ from __future__ import annotations
 import statistics
 import tempfile
 import time
+from collections.abc import Sequence
 from typing import Any
 
 
@@ -28,8 +29,18 @@ def suffix(accelerator: str) -> str:
     return "" if accelerator == "cpu" else f"_{accelerator}"
 
 
-def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
-             accelerator: str = "cpu") -> dict[str, float]:
+def time_fit(
+    model: Any,
+    datamodule: Any,
+    steps: int,
+    warmup: int = 1,
+    accelerator: str = "cpu",
+    *,
+    devices: int = 1,
+    strategy: str = "auto",
+    precision: str | None = None,
+    callbacks: Sequence[Any] = (),
+) -> dict[str, float]:
     """Median step time and data-loading share of ``steps`` timed training steps.
 
     Args:
@@ -37,7 +48,12 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
         datamodule: Its LightningDataModule.
         steps: Timed steps.
         warmup: Untimed steps first (allocator, caches, lazy builds).
-        accelerator: Lightning accelerator, ``"cpu"`` or ``"gpu"`` (one device).
+        accelerator: Lightning accelerator, ``"cpu"`` or ``"gpu"``.
+        devices: Lightning devices (processes under ``strategy="ddp"``, each started
+            by the caller with Lightning's environment variables, ``LOCAL_RANK`` etc.).
+        strategy: Lightning strategy (``"ddp"``: the times are this rank's).
+        precision: Lightning precision (``None``: Lightning's default, 32-bit).
+        callbacks: More Lightning callbacks (run after the timer's hooks).
 
     Returns:
         ``median_step_s`` (compute + fetch of a step, median), ``median_compute_s``,
@@ -75,15 +91,25 @@ def time_fit(model: Any, datamodule: Any, steps: int, warmup: int = 1,
             self.cpu_end = now
 
     with tempfile.TemporaryDirectory() as run_dir:  # aligners may write renders here
-        trainer = L.Trainer(max_steps=warmup + steps, accelerator=accelerator, devices=1,
-                            logger=False, enable_checkpointing=False,
-                            enable_progress_bar=False, enable_model_summary=False,
-                            limit_val_batches=0, num_sanity_val_steps=0,
-                            callbacks=[Timer()], default_root_dir=run_dir)
+        trainer = L.Trainer(
+            max_steps=warmup + steps,
+            accelerator=accelerator,
+            devices=devices,
+            strategy=strategy,
+            precision=precision,
+            logger=False,
+            enable_checkpointing=False,
+            enable_progress_bar=False,
+            enable_model_summary=False,
+            limit_val_batches=0,
+            num_sanity_val_steps=0,
+            callbacks=[Timer(), *callbacks],
+            default_root_dir=run_dir,
+        )
         trainer.fit(model, datamodule=datamodule)
     # fetch[i] is the gap before compute[i + 1]
     timed_compute = compute[warmup:]
-    timed_fetch = fetch[warmup - 1:] if warmup else [0.0, *fetch]
+    timed_fetch = fetch[warmup - 1 :] if warmup else [0.0, *fetch]
     totals = [c + f for c, f in zip(timed_compute, timed_fetch, strict=True)]
     return {
         "median_step_s": statistics.median(totals),
