@@ -36,16 +36,22 @@ class Method:
     """A method plugin and the arguments of a tiny two-process ``fit``.
 
     Attributes:
-        name: Entry-point and ``model=`` name.
+        name: Entry-point name (the plugin's folder under ``plugins/``).
         module: Module of its hook implementations.
         args: Overrides making the run small (model, data, trainer).
         shared: State-dict key prefixes that must exist (the state DDP must keep in sync).
+        model: ``model=`` name (default: ``name``).
     """
 
     name: str
     module: str
     args: tuple[str, ...]
     shared: tuple[str, ...] = ()
+    model: str | None = None
+
+    @property
+    def model_name(self) -> str:
+        return self.model or self.name
 
     @property
     def src(self) -> Path:
@@ -67,6 +73,12 @@ METHODS = [
             "model.num_target_points=128", "data.gaits=[walk]", "data.clips_per_gait=2",
             "data.seconds=1.5", "data.window=12", "data.stride=12", "data.batch_size=2",
             "data.val_fraction=0.5")),
+    # stage 2: its self-attention blocks hold a memory norm they never use (frozen, else
+    # plain ddp stops at the first step on a parameter without a gradient)
+    Method("pcmrl", "skelagnostic_pcmrl.plugin",
+           ("model.dim=16", "model.heads=2", "model.layers=1", "data.clips_per_gait=1",
+            "data.samples_per_epoch=8", "data.batch_size=2"),
+           model="pcmrl_interp"),
 ]
 
 
@@ -75,11 +87,11 @@ def files_under(root: Path) -> list[str]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", METHODS, ids=lambda m: m.name)
+@pytest.mark.parametrize("method", METHODS, ids=lambda m: m.model_name)
 def test_fit_ddp_two_cpu_processes(method: Method, tmp_path: Path) -> None:
     env = plugin_env(tmp_path, method.name, method.module, method.src)
     runs, dumps = tmp_path / "runs", tmp_path / "ranks"
-    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", f"model={method.name}",
+    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", f"model={method.model_name}",
            "experiment=smoke", *method.args, "trainer.strategy=ddp", "trainer.devices=2",
            "trainer.accelerator=cpu", "threads=1", "seed=3", f"runs_dir={runs}",
            "+callbacks.dump._target_=rank_state.DumpRankState", f"+callbacks.dump.path={dumps}"]
@@ -90,7 +102,7 @@ def test_fit_ddp_two_cpu_processes(method: Method, tmp_path: Path) -> None:
     assert "Starting with 2 processes" in out and "distributed_backend=gloo" in out
 
     # rank-zero-only writes: one run directory, one of each output
-    (run_dir,) = (runs / method.name / "fit").iterdir()
+    (run_dir,) = (runs / method.model_name / "fit").iterdir()
     files = files_under(run_dir)
     assert "train_ddp_process_1.log" in files  # rank 1 re-ran the command line, same dir
     assert sum(f.endswith("metrics.csv") for f in files) == 1, files

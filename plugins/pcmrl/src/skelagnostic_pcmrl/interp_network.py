@@ -77,10 +77,20 @@ class Block(nn.Module):
 
     Pre-norm by default; ``post_norm`` (the authors') normalises after each
     residual sum, and then only the frames of ``norm_mask`` when it is given.
+    ``cross=False`` marks a self-attention block: its memory norm ``norm_m``
+    is never used, so it is frozen (kept only so checkpoints keep their keys and
+    optimiser states their sizes); a trainable parameter without a gradient
+    stops Lightning's plain ``ddp`` strategy at the first step.
     """
 
     def __init__(
-        self, dim: int, heads: int, ff_mult: int, max_relative: int, post_norm: bool = False
+        self,
+        dim: int,
+        heads: int,
+        ff_mult: int,
+        max_relative: int,
+        post_norm: bool = False,
+        cross: bool = True,
     ) -> None:
         super().__init__()
         eps = AUTHORS_RMS_EPS if post_norm else None
@@ -88,6 +98,7 @@ class Block(nn.Module):
         self.norm_q = nn.RMSNorm(dim, eps=eps)
         if not post_norm:
             self.norm_m = nn.RMSNorm(dim)
+            self.norm_m.requires_grad_(cross)
         self.attn = RelativeAttention(dim, heads, max_relative)
         self.norm_ff = nn.RMSNorm(dim, eps=eps)
         self.ff = nn.Sequential(
@@ -159,10 +170,10 @@ class CITLInterpolator(nn.Module):
         self.embed = nn.Linear(in_features, dim)
         self.interm_embed = nn.Linear(interm_features, dim) if interm_features > 0 else None
         self.encoder = nn.ModuleList(
-            Block(dim, heads, ff_mult, max_relative, post) for _ in range(layers)
+            Block(dim, heads, ff_mult, max_relative, post, cross=False) for _ in range(layers)
         )
         self.interm = nn.ModuleList(
-            Block(dim, heads, ff_mult, max_relative, post) for _ in range(layers)
+            Block(dim, heads, ff_mult, max_relative, post, cross=True) for _ in range(layers)
         )
         eps = AUTHORS_RMS_EPS if post else None
         self.key_ff = nn.Sequential(
@@ -178,7 +189,7 @@ class CITLInterpolator(nn.Module):
             nn.RMSNorm(dim, eps=eps),
         )
         self.decoder = nn.ModuleList(
-            Block(dim, heads, ff_mult, max_relative, post) for _ in range(layers)
+            Block(dim, heads, ff_mult, max_relative, post, cross=False) for _ in range(layers)
         )
         self.head = nn.Linear(dim, out_features)
         if zero_output:
