@@ -614,7 +614,7 @@ def gait_frequency(motion: Motion, hysteresis: float = 0.25) -> float:
     up = motion.skeleton.up_index
     flat = [a for a in range(3) if a != up]
     positions = GlobalPositions(frame="root").encode(motion).double().numpy()
-    strides, span = 0, 0.0
+    swings = []
     for foot in feet:
         x = positions[:, foot, flat]
         x = x - x.mean(0, keepdims=True)
@@ -630,12 +630,8 @@ def gait_frequency(motion: Motion, hysteresis: float = 0.25) -> float:
             elif armed and signal[t - 1] < 0 <= signal[t]:
                 crossings.append(t - 1 + signal[t - 1] / (signal[t - 1] - signal[t]))
                 armed = False
-        if len(crossings) >= 2:
-            strides += len(crossings) - 1
-            span += crossings[-1] - crossings[0]
-    if strides == 0 or span <= 0:
-        return math.nan
-    return float(motion.fps * strides / span)
+        swings.append(np.asarray(crossings))
+    return _onset_rate(swings, motion.fps)
 
 
 #: Contact rule of :func:`contact_onsets`: a foot touches down when its height above its
@@ -709,7 +705,11 @@ def contact_onsets(
 
 
 def _onset_rate(onsets: Sequence[np.ndarray], fps: float) -> float:
-    """Onsets per second and foot: intervals between each foot's first and last onset."""
+    """Events per second and foot: intervals between each foot's first and last event.
+
+    Counts the touch-downs of :func:`contact_frequency` and the forward swings of
+    :func:`gait_frequency` alike; NaN when no foot has two events.
+    """
     intervals = sum(max(len(o) - 1, 0) for o in onsets)
     span = sum(float(o[-1] - o[0]) for o in onsets if len(o) >= 2)
     return float(fps * intervals / span) if intervals and span > 0 else math.nan
