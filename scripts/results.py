@@ -18,6 +18,7 @@ An entry is a directory ``benchmarks/results/heldout/<entry>/`` with two files:
       - shared_code_share
       - pose_mpjpe_cm
       - extra.table1.dog.pose_mpjpe_cm   # a number, or a mapping method -> number
+      - extra.by_topology.seen.mpjpe_cm  # or the metric of a mapping method -> metric -> number
     paper:                          # one per quoted figure
       shared_code_share: {value: 0.98, source: "Table 2"}
       pose_mpjpe_cm: {value: null, why: "the paper reports it per character"}
@@ -387,7 +388,9 @@ def quoted_figure(where: str, item: Any, report: Mapping[str, Any]) -> dict[str,
     ``item`` is a metric of the mean table (every method's mean), or ``extra.<key>.<key>...``:
     a number of the evaluation's ``extra`` (the model's figure, e.g. a corpus-level count)
     or a mapping ``method -> number`` there (the model beside baselines, e.g. one
-    character's means). Keys may contain dots: the longest key that matches is taken.
+    character's means), or ``extra.<key>...<metric>`` of a method-major mapping
+    ``method -> metric -> number`` (e.g. HuMoT's ``extra.by_topology.unseen.mpjpe_cm``).
+    Keys may contain dots: the longest key that matches is taken.
 
     Raises:
         ResultsError: The item names no such metric or key, or the key holds something else.
@@ -407,6 +410,14 @@ def quoted_figure(where: str, item: Any, report: Mapping[str, Any]) -> dict[str,
         if not isinstance(node, Mapping):
             raise ResultsError(f"{where}: {item!r}: evaluation.json's {path} is not a mapping")
         keys = [k for k in node if rest == k or rest.startswith(f"{k}.")]
+        per_method = node.get(MODEL)
+        if not keys and isinstance(per_method, Mapping) and _number(per_method.get(rest)):
+            # a method-major table (method -> metric -> number): the metric of every method
+            return {
+                str(m): float(v[rest])
+                for m, v in node.items()
+                if isinstance(v, Mapping) and _number(v.get(rest))
+            }
         if not keys:
             raise ResultsError(
                 f"{where}: {item!r}: evaluation.json's {path} has no key {rest.split('.')[0]!r} "
