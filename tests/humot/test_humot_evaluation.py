@@ -126,7 +126,13 @@ def test_retarget_protocol_cycles_through_another_topology(tmp_path, humot_small
     assert row["via"] == "biped31"  # the first human kind of another topology
     assert set(row["values"]) == {"model", "name_copy", "primal_copy"}
     assert all(v["cycle_over_height"] >= 0 for v in row["values"].values())
-    assert "mean" in out.extra["procedural_paired_retargeting"]
+    mean = out.extra["procedural_paired_retargeting"]["mean"]
+    by_method = out.extra["procedural_paired_mean"]
+    assert set(by_method) == {"model", "name_copy", "primal_copy"}
+    for method, prefix in (("model", "humot"), ("name_copy", "name_copy")):
+        for metric in ("mpjpe", "mpjpe_over_height", "root_aligned_mpjpe"):
+            assert by_method[method][metric] == mean[f"{prefix}_{metric}"]
+    assert len(by_method["primal_copy"]) == 4
 
 
 # --------------------------------------------------------------- seen / unseen topology

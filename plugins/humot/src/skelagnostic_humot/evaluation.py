@@ -43,7 +43,7 @@ Functions:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +67,7 @@ __all__ = [
     "evaluate_clips",
     "evaluate_procedural",
     "extra_clips",
+    "paired_by_method",
     "reconstruction",
     "reconstruction_protocol",
     "retarget_protocol",
@@ -617,6 +618,23 @@ def reconstruction_protocol(
     )
 
 
+def paired_by_method(mean: Mapping[str, float]) -> dict[str, dict[str, float]]:
+    """The mean of :func:`retargeting_procedural` as ``method -> metric -> value``.
+
+    Args:
+        mean: Its ``"mean"`` entry, keys ``<method>_<metric>`` (``humot_mpjpe``, ...).
+
+    Returns:
+        ``{"model": {...}, "name_copy": {...}, ...}`` with the metrics ``mpjpe`` (cm),
+        ``mpjpe_over_height``, ``root_aligned_mpjpe``, ``root_aligned_over_height``.
+    """
+    methods = {MODEL: "humot"} | {name: name for name in BASELINES}
+    return {
+        method: {k[len(prefix) + 1 :]: v for k, v in mean.items() if k.startswith(f"{prefix}_")}
+        for method, prefix in methods.items()
+    }
+
+
 def retarget_protocol(
     aligner: HumotAligner,
     held: HeldOut,
@@ -684,6 +702,7 @@ def retarget_protocol(
         rows,
         extra={
             "procedural_paired_retargeting": paired,
+            "procedural_paired_mean": paired_by_method(paired["mean"]),
             "procedural_topologies": kinds,
             "by_topology": _by_topology(rows),
         },
