@@ -20,10 +20,11 @@ before it, median over the timed steps) on the first clips of the LaFAN1 corpus
   walks of :data:`GENERATED_SECONDS`, each generated when the cache asks for it).
   Baseline: the smallest corpus of the same run, so a ratio near 1 means flat
   memory, the streaming datasets' claim.
-* **DDP**: two CPU processes (gloo, 1 thread each, the reference batch per
-  process) against one process at the same batch with 1 thread
-  (``<method>_ddp2_windows_per_s_b<B>``) and with 2 threads
-  (``..._vs_t2``): the same two cores used by threads instead of processes.
+* **DDP**: two CPU processes (Lightning's plain ``ddp`` strategy for every
+  method, gloo, 1 thread each, the reference batch per process) against one
+  process at the same batch with 1 thread (``<method>_ddp2_windows_per_s_b<B>``)
+  and with 2 threads (``..._vs_t2``): the same two cores used by threads instead
+  of processes.
 * **GPU** (when torch sees one): the batch rows again in ``bf16-mixed``
   (``<method>_windows_per_s_b<B>_gpu_bf16``).
 * **torch.compile** (``run.py --compile``): the reference batch with the
@@ -86,10 +87,6 @@ TINY: dict[str, dict[str, Any]] = {
     },
     "pcmrl_interp": {"dim": 16, "heads": 2, "layers": 1, "ff_mult": 2, "max_relative": 16},
 }
-#: Lightning DDP strategy per method: stage 2's network has parameters its loss never
-#: reaches (the blocks' ``norm_m`` weights at the paper's settings), which plain ``ddp``
-#: refuses; DDP then has to look for them after every backward pass.
-DDP_STRATEGY = dict.fromkeys(METHODS, "ddp") | {"pcmrl_interp": "ddp_find_unused_parameters_true"}
 
 
 @dataclass(frozen=True)
@@ -449,8 +446,12 @@ def throughput(
 
 
 def ddp_rank(job: Job) -> dict[str, float]:
-    """One of two DDP ranks (gloo, 1 thread): windows/s of both ranks together."""
-    return _timed(job, 1, ranks=2, accelerator="cpu", devices=2, strategy=DDP_STRATEGY[job.method])
+    """One of two DDP ranks (plain ``ddp``, gloo, 1 thread): windows/s of both ranks together.
+
+    Every method runs under Lightning's plain ``ddp`` strategy: each trainable
+    parameter gets a gradient at every step, so DDP need not search for unused ones.
+    """
+    return _timed(job, 1, ranks=2, accelerator="cpu", devices=2, strategy="ddp")
 
 
 def memory(job: Job, threads: int) -> dict[str, float | None]:
