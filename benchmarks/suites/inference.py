@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -50,7 +49,7 @@ from typing import Any
 
 import torch
 
-from benchmarks.harness import REPO_ROOT, THREADS_ENV, Result, timeit_median
+from benchmarks.harness import REPO_ROOT, THREADS_ENV, Result, run_process, timeit_median
 
 SECONDS = {"smoke": 4.0, "default": 60.0, "large": 120.0}
 REPEATS = {"smoke": 1, "default": 3, "large": 3}
@@ -151,18 +150,11 @@ STARTUP = (
 
 
 def _child_seconds(argv: list[str], threads: int, repeats: int) -> float:
-    """Median wall time of ``python ARGV`` in a fresh process."""
+    """Median wall time of ``python ARGV`` in a fresh process (that dies with this one)."""
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        proc = subprocess.run(
-            [sys.executable, *argv],
-            capture_output=True,
-            text=True,
-            cwd=REPO_ROOT,
-            env=_child_env(threads),
-            check=False,
-        )
+        proc = run_process([sys.executable, *argv], cwd=REPO_ROOT, env=_child_env(threads))
         times.append(time.perf_counter() - start)
         if proc.returncode != 0:
             raise RuntimeError(

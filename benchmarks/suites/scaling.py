@@ -61,7 +61,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT, Result, peak_rss, run_child
+from benchmarks.harness import REPO_ROOT, Result, die_with_parent, peak_rss, run_child
 
 #: The methods, in report order.
 METHODS = ("vqpae", "humot", "pcmrl_recon", "pcmrl_interp")
@@ -289,7 +289,8 @@ def forked(
     """Start ``fn(*args)`` in a forked process (with ``env`` added to its environment).
 
     The child writes ``{"result": ..., "peak_rss_mib": ...}``, or ``{"error": traceback}``,
-    as JSON to a temporary file.
+    as JSON to a temporary file. It dies with this process
+    (:func:`~benchmarks.harness.die_with_parent`).
 
     Returns:
         ``(pid, path of that file)``, for :func:`collect`.
@@ -298,9 +299,11 @@ def forked(
     os.close(fd)
     sys.stdout.flush()
     sys.stderr.flush()
+    parent = os.getpid()
     pid = os.fork()
     if pid:
         return pid, Path(name)
+    die_with_parent(parent)
     code = 1
     try:
         os.environ.update(env or {})
