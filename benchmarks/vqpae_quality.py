@@ -44,6 +44,7 @@ from skelagnostic_vqpae.embed import embed_clip  # noqa: E402
 from skelagnostic_vqpae.evaluation import code_overlap, phase_line  # noqa: E402
 
 from skelagnostic import procedural  # noqa: E402
+from skelagnostic.aligners import quiet_trainer  # noqa: E402
 from skelagnostic.data import BVHSource, ProceduralSource  # noqa: E402
 
 
@@ -66,14 +67,10 @@ def _train(
 ) -> float:
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as run_dir:
-        trainer = L.Trainer(
+        trainer = quiet_trainer(
             max_steps=steps,
             accelerator="cpu",
             devices=1,
-            logger=False,
-            enable_checkpointing=False,
-            enable_progress_bar=False,
-            enable_model_summary=False,
             limit_val_batches=0,
             num_sanity_val_steps=0,
             callbacks=callbacks,

@@ -71,15 +71,9 @@ def _clip(kind: str, gait: str, seconds: float, path: Path, seed: int = 0) -> Pa
 
 def _save(model: Any, path: Path) -> Path:
     """``model`` written as a Lightning checkpoint at ``path``."""
-    import lightning as L
+    from skelagnostic.aligners import quiet_trainer
 
-    trainer = L.Trainer(
-        accelerator="cpu",
-        logger=False,
-        default_root_dir=str(path.parent),
-        enable_progress_bar=False,
-        enable_model_summary=False,
-    )
+    trainer = quiet_trainer(accelerator="cpu", default_root_dir=str(path.parent))
     trainer.strategy.connect(model)
     trainer.save_checkpoint(path)
     return path
@@ -109,6 +103,7 @@ def _vqpae(workdir: Path) -> Path:
     from skelagnostic_vqpae.aligner import VqpaeAligner
     from skelagnostic_vqpae.data import VqpaeDataModule
 
+    from skelagnostic.aligners import quiet_trainer
     from skelagnostic.data import ProceduralSource
 
     L.seed_everything(SEED, verbose=False)
@@ -116,14 +111,10 @@ def _vqpae(workdir: Path) -> Path:
     dm = VqpaeDataModule(source, fps=FPS, cache_dir=workdir / "cache")
     model = VqpaeAligner()
     # max_steps=0: Lightning builds the model from the data (configure_model), trains nothing
-    trainer = L.Trainer(
+    trainer = quiet_trainer(
         max_steps=0,
         accelerator="cpu",
-        logger=False,
         limit_val_batches=0,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        enable_checkpointing=False,
         default_root_dir=str(workdir),
     )
     trainer.fit(model, datamodule=dm)

@@ -99,6 +99,7 @@ def humot(steps: int) -> dict[str, Any]:
     from skelagnostic_humot import HumotAligner, HumotDataModule
     from skelagnostic_humot.evaluation import HUMAN_KINDS, evaluate_procedural
 
+    from skelagnostic.aligners import quiet_trainer
     from skelagnostic.data import ProceduralSource
 
     L.seed_everything(0, verbose=False)
@@ -112,14 +113,10 @@ def humot(steps: int) -> dict[str, Any]:
         dim=64, latent=64, blocks=2, heads=8, lr_min=1e-4, lr_max=1e-3, lr_period_epochs=40
     )
     with tempfile.TemporaryDirectory() as run_dir:
-        trainer = L.Trainer(
+        trainer = quiet_trainer(
             max_steps=steps,
             accelerator="cpu",
             devices=1,
-            logger=False,
-            enable_checkpointing=False,
-            enable_progress_bar=False,
-            enable_model_summary=False,
             limit_val_batches=0,
             num_sanity_val_steps=0,
             default_root_dir=run_dir,
