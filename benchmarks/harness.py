@@ -4,10 +4,17 @@ A suite is a module with ``run(size: str) -> list[Result]`` (``size`` is one of
 :data:`SIZES`) and, optionally, ``BASELINE_PACKAGES``: the distributions whose
 versions the report should record (e.g. ``("pybvh",)``). Register it in
 ``benchmarks/run.py``.
+
+Every process a benchmark starts dies with the process that started it, so
+killing ``benchmarks/run.py`` (even with ``SIGKILL``) leaves no measurement
+running: start subprocesses with :func:`run_process` (or :func:`run_child`), and
+call :func:`die_with_parent` first thing in a forked child.
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import gc
 import importlib
 import importlib.metadata
@@ -15,9 +22,11 @@ import json
 import os
 import platform
 import resource
+import signal
 import statistics
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,6 +38,10 @@ SIZES = ("smoke", "default", "large")
 _CHILD_MARK = "@@benchmark-child@@"
 #: Environment variable holding the torch thread count for suites and children.
 THREADS_ENV = "SKELAGNOSTIC_BENCH_THREADS"
+#: Seconds between two looks at the parent by :func:`watch_parent` (where ``prctl`` is missing).
+PARENT_POLL_S = 0.5
+#: ``prctl`` option asking Linux to signal a process when its parent exits (``linux/prctl.h``).
+_PR_SET_PDEATHSIG = 1
 
 
 @dataclass
@@ -108,11 +121,116 @@ def peak_rss() -> float:
     return peak / 2**20 if sys.platform == "darwin" else peak / 2**10
 
 
+def _set_pdeathsig() -> bool:
+    """Linux: have the kernel send ``SIGKILL`` to this process when its parent exits.
+
+    Returns:
+        False where ``prctl(PR_SET_PDEATHSIG)`` is unavailable (not Linux, or it failed).
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return False
+    return prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+
+
+def watch_parent(parent: int, interval: float = PARENT_POLL_S) -> threading.Thread:
+    """Kill this process (``SIGKILL``) once ``parent`` is no longer its parent.
+
+    The portable fallback of :func:`die_with_parent`: a daemon thread compares
+    ``os.getppid()`` with ``parent`` every ``interval`` seconds (an orphan is
+    re-parented, so its parent pid changes when its parent dies).
+
+    Args:
+        parent: Pid of the process this one must not outlive.
+        interval: Seconds between two looks.
+
+    Returns:
+        The watching thread (started).
+    """
+
+    def poll() -> None:
+        while os.getppid() == parent:
+            time.sleep(interval)
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    thread = threading.Thread(target=poll, name="benchmark-watch-parent", daemon=True)
+    thread.start()
+    return thread
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this process, a child of ``parent``, die when ``parent`` dies.
+
+    On Linux ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (which also holds after ``exec``;
+    a parent that died before the call kills this process at once; the signal
+    comes when the parent's *thread* that started this process ends, so start
+    children from a thread that lives as long as they must), elsewhere
+    :func:`watch_parent`. Call it first thing in a forked child, or as the
+    ``preexec_fn`` of a subprocess (:func:`run_process` does).
+
+    Args:
+        parent: Pid of the process that started this one.
+    """
+    if not _set_pdeathsig():
+        watch_parent(parent)
+    elif os.getppid() != parent:  # the parent died before the call: no signal will come
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def run_process(
+    args: list[str], *, input: str | None = None, **kwargs: Any
+) -> subprocess.CompletedProcess[str]:
+    """``subprocess.run(args, capture_output=True, text=True)`` with a child that dies with us.
+
+    On Linux the child calls :func:`die_with_parent` before ``exec``
+    (``preexec_fn``), so even a ``SIGKILL`` of this process ends it. Elsewhere
+    the child gets a session of its own and is killed with its process group
+    when this process leaves the call early (an exception, Ctrl-C); a Python child
+    can also call :func:`die_with_parent` itself (:func:`run_child` does).
+
+    Args:
+        args: The command line.
+        input: Text written to the child's standard input.
+        **kwargs: More ``subprocess.Popen`` arguments (``cwd``, ``env``, ...).
+
+    Returns:
+        The finished process (``returncode``, ``stdout``, ``stderr``); a failure is
+        not raised (``check=False``).
+    """
+    if sys.platform.startswith("linux"):
+        kwargs["preexec_fn"] = functools.partial(die_with_parent, os.getpid())
+    else:
+        kwargs["start_new_session"] = True
+    with subprocess.Popen(
+        args,
+        stdin=None if input is None else subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kwargs,
+    ) as proc:
+        try:
+            stdout, stderr = proc.communicate(input)
+        except BaseException:
+            if "start_new_session" in kwargs:
+                try:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            proc.kill()
+            raise
+    return subprocess.CompletedProcess(args, proc.returncode, stdout, stderr)
+
+
 def run_child(target: str, **kwargs: Any) -> tuple[Any, float]:
     """Run ``module:function(**kwargs)`` in a fresh Python process.
 
     The function must return something JSON-serialisable. A fresh process makes
-    its peak RSS a measure of that work alone.
+    its peak RSS a measure of that work alone. The child dies with this process
+    (:func:`run_process`, and :func:`die_with_parent` in the child).
 
     Returns:
         ``(return value, peak RSS of the child in MiB)``.
@@ -121,20 +239,14 @@ def run_child(target: str, **kwargs: Any) -> tuple[Any, float]:
     code = (
         "import json, sys\n"
         "from benchmarks.harness import _child_main\n"
-        f"_child_main({module!r}, {function!r}, json.loads(sys.stdin.read()))\n"
+        f"_child_main({module!r}, {function!r}, json.loads(sys.stdin.read()), {os.getpid()})\n"
     )
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(
         p for p in (str(REPO_ROOT), str(REPO_ROOT / "src"), env.get("PYTHONPATH")) if p
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", code],
-        input=json.dumps(kwargs),
-        capture_output=True,
-        text=True,
-        cwd=REPO_ROOT,
-        env=env,
-        check=False,
+    proc = run_process(
+        [sys.executable, "-c", code], input=json.dumps(kwargs), cwd=REPO_ROOT, env=env
     )
     for line in reversed(proc.stdout.splitlines()):
         if line.startswith(_CHILD_MARK):
@@ -154,7 +266,8 @@ def apply_threads() -> None:
         torch.set_num_threads(int(threads))
 
 
-def _child_main(module: str, function: str, kwargs: dict[str, Any]) -> None:
+def _child_main(module: str, function: str, kwargs: dict[str, Any], parent: int) -> None:
+    die_with_parent(parent)
     apply_threads()
     result = getattr(importlib.import_module(module), function)(**kwargs)
     payload = {"result": result, "peak_rss_mib": peak_rss()}

@@ -171,6 +171,24 @@ def test_ranks_are_collected_together_and_a_failure_stops_the_others() -> None:
         os.waitpid(sleeper[0], 0)  # already reaped
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX fork")
+def test_ddp_row_trains_pcmrl_stage_2_under_plain_ddp(tmp_path: Path) -> None:
+    """The DDP row's two forked ranks train stage 2 (tiny) with Lightning's plain ``ddp``.
+
+    Plain ``ddp`` stops at the first step when a trainable parameter gets no gradient,
+    which stage 2's network had before its self-attention blocks froze their memory norm.
+    """
+    import skelagnostic as sa
+
+    motion, _ = sa.procedural.generate("biped22", "walk", seconds=4.0, fps=30.0, seed=0)
+    clip = tmp_path / "walk.bvh"
+    sa.write_bvh(motion, clip)  # centimetres, as LaFAN1 (the suite reads it with units="cm")
+    job = scaling.Job("pcmrl_interp", "smoke", 1, [str(clip)], 2, str(tmp_path / "cache"))
+    got = scaling._ddp(job)
+    assert got["windows_per_s"] > 0 and got["median_step_s"] > 0
+
+
 def test_plot_writes_a_png_from_a_report(tmp_path: Path) -> None:
     results = [r.to_dict() for r in scaling.results(_raw(gpu=True), "smoke")]
     report = {

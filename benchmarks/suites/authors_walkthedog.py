@@ -28,7 +28,6 @@ from __future__ import annotations
 import io
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -36,7 +35,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT
+from benchmarks.harness import REPO_ROOT, run_process
 
 #: Environment variable overriding the path of ``wtd_data.py``.
 WTD_DATA_ENV = "SKELAGNOSTIC_WTD_DATA"
@@ -102,7 +101,7 @@ def write_datasets(
             str(fps),
             "--no-mirror",
         ]
-        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        proc = run_process(cmd)  # dies with the benchmark
         if proc.returncode != 0:
             raise RuntimeError(
                 f"{script} failed for {name} (exit {proc.returncode}):\n"

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -50,7 +49,7 @@ from typing import Any
 
 import torch
 
-from benchmarks.harness import REPO_ROOT, THREADS_ENV, Result, timeit_median
+from benchmarks.harness import REPO_ROOT, THREADS_ENV, Result, run_process, timeit_median
 
 SECONDS = {"smoke": 4.0, "default": 60.0, "large": 120.0}
 REPEATS = {"smoke": 1, "default": 3, "large": 3}
@@ -72,15 +71,9 @@ def _clip(kind: str, gait: str, seconds: float, path: Path, seed: int = 0) -> Pa
 
 def _save(model: Any, path: Path) -> Path:
     """``model`` written as a Lightning checkpoint at ``path``."""
-    import lightning as L
+    from skelagnostic.aligners import quiet_trainer
 
-    trainer = L.Trainer(
-        accelerator="cpu",
-        logger=False,
-        default_root_dir=str(path.parent),
-        enable_progress_bar=False,
-        enable_model_summary=False,
-    )
+    trainer = quiet_trainer(accelerator="cpu", default_root_dir=str(path.parent))
     trainer.strategy.connect(model)
     trainer.save_checkpoint(path)
     return path
@@ -110,6 +103,7 @@ def _vqpae(workdir: Path) -> Path:
     from skelagnostic_vqpae.aligner import VqpaeAligner
     from skelagnostic_vqpae.data import VqpaeDataModule
 
+    from skelagnostic.aligners import quiet_trainer
     from skelagnostic.data import ProceduralSource
 
     L.seed_everything(SEED, verbose=False)
@@ -117,14 +111,10 @@ def _vqpae(workdir: Path) -> Path:
     dm = VqpaeDataModule(source, fps=FPS, cache_dir=workdir / "cache")
     model = VqpaeAligner()
     # max_steps=0: Lightning builds the model from the data (configure_model), trains nothing
-    trainer = L.Trainer(
+    trainer = quiet_trainer(
         max_steps=0,
         accelerator="cpu",
-        logger=False,
         limit_val_batches=0,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        enable_checkpointing=False,
         default_root_dir=str(workdir),
     )
     trainer.fit(model, datamodule=dm)
@@ -151,18 +141,11 @@ STARTUP = (
 
 
 def _child_seconds(argv: list[str], threads: int, repeats: int) -> float:
-    """Median wall time of ``python ARGV`` in a fresh process."""
+    """Median wall time of ``python ARGV`` in a fresh process (that dies with this one)."""
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        proc = subprocess.run(
-            [sys.executable, *argv],
-            capture_output=True,
-            text=True,
-            cwd=REPO_ROOT,
-            env=_child_env(threads),
-            check=False,
-        )
+        proc = run_process([sys.executable, *argv], cwd=REPO_ROOT, env=_child_env(threads))
         times.append(time.perf_counter() - start)
         if proc.returncode != 0:
             raise RuntimeError(

@@ -60,10 +60,20 @@ from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
 #: Training steps per size and method.
 STEPS: dict[str, dict[str, int]] = {
     "smoke": {"humot": 3, "vqpae": 5, "vqpae_overlap": 3, "pcmrl_interp": 3, "pcmrl_recon": 2},
-    "default": {"humot": 120, "vqpae": 2000, "vqpae_overlap": 2500, "pcmrl_interp": 300,
-                "pcmrl_recon": 40},
-    "large": {"humot": 600, "vqpae": 10000, "vqpae_overlap": 25000, "pcmrl_interp": 2000,
-              "pcmrl_recon": 300},
+    "default": {
+        "humot": 120,
+        "vqpae": 2000,
+        "vqpae_overlap": 2500,
+        "pcmrl_interp": 300,
+        "pcmrl_recon": 40,
+    },
+    "large": {
+        "humot": 600,
+        "vqpae": 10000,
+        "vqpae_overlap": 25000,
+        "pcmrl_interp": 2000,
+        "pcmrl_recon": 300,
+    },
 }
 
 
@@ -89,21 +99,28 @@ def humot(steps: int) -> dict[str, Any]:
     from skelagnostic_humot import HumotAligner, HumotDataModule
     from skelagnostic_humot.evaluation import HUMAN_KINDS, evaluate_procedural
 
+    from skelagnostic.aligners import quiet_trainer
     from skelagnostic.data import ProceduralSource
 
     L.seed_everything(0, verbose=False)
-    source = ProceduralSource(kinds=list(HUMAN_KINDS), gaits=["walk", "run"],
-                              clips_per_gait=4, seconds=6.0)
+    source = ProceduralSource(
+        kinds=list(HUMAN_KINDS), gaits=["walk", "run"], clips_per_gait=4, seconds=6.0
+    )
     cache = Path(tempfile.gettempdir()) / "skelagnostic-quality-cache"
     dm = HumotDataModule([source], batch_size=16, val_fraction=0.0, cache_dir=cache)
     # experiment=humot_quick: the CPU configuration (0.41 M parameters)
-    model = HumotAligner(dim=64, latent=64, blocks=2, heads=8, lr_min=1e-4, lr_max=1e-3,
-                         lr_period_epochs=40)
+    model = HumotAligner(
+        dim=64, latent=64, blocks=2, heads=8, lr_min=1e-4, lr_max=1e-3, lr_period_epochs=40
+    )
     with tempfile.TemporaryDirectory() as run_dir:
-        trainer = L.Trainer(max_steps=steps, accelerator="cpu", devices=1, logger=False,
-                            enable_checkpointing=False, enable_progress_bar=False,
-                            enable_model_summary=False, limit_val_batches=0,
-                            num_sanity_val_steps=0, default_root_dir=run_dir)
+        trainer = quiet_trainer(
+            max_steps=steps,
+            accelerator="cpu",
+            devices=1,
+            limit_val_batches=0,
+            num_sanity_val_steps=0,
+            default_root_dir=run_dir,
+        )
         trainer.fit(model, datamodule=dm)
     model.eval()
     clips = 1 if steps < 10 else 2
@@ -120,10 +137,10 @@ def vqpae(steps: int) -> dict[str, Any]:
     _plugin("vqpae")
     from benchmarks.vqpae_quality import check_procedural
 
-    return {"ours": check_procedural(steps, lr=1e-3, fps=30.0,
-                                     options={"lambda_phase_rate": 1.0}),
-            "paper": check_procedural(steps, lr=1e-3, fps=30.0,
-                                      options={"lambda_phase_rate": 0.0})}
+    return {
+        "ours": check_procedural(steps, lr=1e-3, fps=30.0, options={"lambda_phase_rate": 1.0}),
+        "paper": check_procedural(steps, lr=1e-3, fps=30.0, options={"lambda_phase_rate": 0.0}),
+    }
 
 
 def vqpae_overlap(steps: int) -> dict[str, Any] | None:
@@ -137,8 +154,10 @@ def vqpae_overlap(steps: int) -> dict[str, Any] | None:
     _plugin("vqpae")
     from benchmarks.vqpae_quality import check_human_dog
 
-    return {"reinit": check_human_dog(steps, True, 1e-4, 32, {}),
-            "no_reinit": check_human_dog(steps, False, 1e-4, 32, {})}
+    return {
+        "reinit": check_human_dog(steps, True, 1e-4, 32, {}),
+        "no_reinit": check_human_dog(steps, False, 1e-4, 32, {}),
+    }
 
 
 def _fit_pcmrl(overrides: list[str], steps: int, aligner: Any) -> Any:
@@ -151,11 +170,24 @@ def _fit_pcmrl(overrides: list[str], steps: int, aligner: Any) -> Any:
     pm = PluginManager(load_entrypoints=False)
     pm.register(plugin, "pcmrl")
     with tempfile.TemporaryDirectory() as tmp:
-        run(compose([*overrides, f"run_dir={tmp}", f"trainer.max_steps={steps}",
-                     "trainer.max_time=null", "trainer.limit_val_batches=0", "logger=none",
-                     f"data.cache_dir={Path(tmp) / 'cache'}"], plugin_manager=pm), pm)
-        return aligner.load_from_checkpoint(Path(tmp) / "checkpoints" / "last.ckpt",
-                                            map_location="cpu").eval()
+        run(
+            compose(
+                [
+                    *overrides,
+                    f"run_dir={tmp}",
+                    f"trainer.max_steps={steps}",
+                    "trainer.max_time=null",
+                    "trainer.limit_val_batches=0",
+                    "logger=none",
+                    f"data.cache_dir={Path(tmp) / 'cache'}",
+                ],
+                plugin_manager=pm,
+            ),
+            pm,
+        )
+        return aligner.load_from_checkpoint(
+            Path(tmp) / "checkpoints" / "last.ckpt", map_location="cpu"
+        ).eval()
 
 
 def pcmrl_interp(steps: int) -> dict[str, Any]:
@@ -168,10 +200,14 @@ def pcmrl_interp(steps: int) -> dict[str, Any]:
     from skelagnostic import procedural
     from skelagnostic.baselines import lerp_slerp
 
-    model = _fit_pcmrl(["model=pcmrl_interp", "experiment=pcmrl_interp_cpu"], steps,
-                       PcmrlInterpAligner)
-    clips = [procedural.generate("biped31", gait, seconds=8.0, fps=30, seed=777 + k)[0]
-             for gait in ("walk", "run") for k in range(2)]
+    model = _fit_pcmrl(
+        ["model=pcmrl_interp", "experiment=pcmrl_interp_cpu"], steps, PcmrlInterpAligner
+    )
+    clips = [
+        procedural.generate("biped31", gait, seconds=8.0, fps=30, seed=777 + k)[0]
+        for gait in ("walk", "run")
+        for k in range(2)
+    ]
     return evaluate({"model": model.interpolate, "lerp": lerp_slerp}, clips, gaps=GAPS)
 
 
@@ -185,8 +221,10 @@ def pcmrl_recon(steps: int) -> dict[str, Any]:
     from skelagnostic import procedural
 
     model = _fit_pcmrl(["experiment=pcmrl_cpu"], steps, PcmrlReconAligner)
-    clips = [procedural.generate("biped22", gait, seconds=4.0, seed=100 + i)[0]
-             for i, gait in enumerate(["walk", "run"])]
+    clips = [
+        procedural.generate("biped22", gait, seconds=4.0, seed=100 + i)[0]
+        for i, gait in enumerate(["walk", "run"])
+    ]
     return evaluate_clips(clips, procedural.skeleton("biped31"), model, sigmas=(0.0, 0.05))
 
 
@@ -195,12 +233,25 @@ def _humot_results(out: dict[str, Any], steps: int) -> list[Result]:
     tag = f" ({steps} steps)"
     for kind, res in out["kinds"].items():
         rec = res["reconstruction"]
-        results.append(Result(f"humot_reconstruction_mpjpe {kind}{tag}", "cm", rec["mpjpe_cm"],
-                              "mean pose of the clip", rec["mean_pose_cm"]))
+        results.append(
+            Result(
+                f"humot_reconstruction_mpjpe {kind}{tag}",
+                "cm",
+                rec["mpjpe_cm"],
+                "mean pose of the clip",
+                rec["mean_pose_cm"],
+            )
+        )
     mean = out["retargeting"]["mean"]  # over the ordered topology pairs
-    results.append(Result(f"humot_retargeting_error_over_height{tag}", "ratio",
-                          mean["humot_mpjpe_over_height"], "nearest-joint-name copy",
-                          mean["name_copy_mpjpe_over_height"]))
+    results.append(
+        Result(
+            f"humot_retargeting_error_over_height{tag}",
+            "ratio",
+            mean["humot_mpjpe_over_height"],
+            "nearest-joint-name copy",
+            mean["name_copy_mpjpe_over_height"],
+        )
+    )
     return results
 
 
@@ -210,15 +261,35 @@ def _vqpae_results(out: dict[str, Any], steps: int) -> list[Result]:
     paper = "frequency trained by the reconstruction only (paper)"
     for clip, base in zip(out["ours"]["clips"], out["paper"]["clips"], strict=True):
         name = f"{clip['clip']} seed {clip['seed']}"
-        results.append(Result(f"vqpae_frequency_rel_error {name}{tag}", "ratio",
-                              float(clip["rel_error"]), paper, float(base["rel_error"])))
-        results.append(Result(f"vqpae_phase_r2 {name}{tag}", "R^2",
-                              float(clip["phase_r2"]), paper, float(base["phase_r2"]),
-                              higher_is_better=True))
+        results.append(
+            Result(
+                f"vqpae_frequency_rel_error {name}{tag}",
+                "ratio",
+                float(clip["rel_error"]),
+                paper,
+                float(base["rel_error"]),
+            )
+        )
+        results.append(
+            Result(
+                f"vqpae_phase_r2 {name}{tag}",
+                "R^2",
+                float(clip["phase_r2"]),
+                paper,
+                float(base["phase_r2"]),
+                higher_is_better=True,
+            )
+        )
         # how fast the pivot phase advances, against the truth
-        results.append(Result(f"vqpae_phase_rate_rel_error {name}{tag}", "ratio",
-                              abs(clip["phase_hz"] - clip["true_hz"]) / clip["true_hz"], paper,
-                              abs(base["phase_hz"] - base["true_hz"]) / base["true_hz"]))
+        results.append(
+            Result(
+                f"vqpae_phase_rate_rel_error {name}{tag}",
+                "ratio",
+                abs(clip["phase_hz"] - clip["true_hz"]) / clip["true_hz"],
+                paper,
+                abs(base["phase_hz"] - base["true_hz"]) / base["true_hz"],
+            )
+        )
     return results
 
 
@@ -228,14 +299,27 @@ def _vqpae_overlap_results(out: dict[str, Any] | None, steps: int) -> list[Resul
     tag = f" ({steps} steps)"
     ours, ablation = out["reinit"], out["no_reinit"]
     results = [
-        Result(f"vqpae_overlap_{key} lafan1+dog K=32{tag}", "share", float(ours[key]),
-               "no re-initialisation", float(ablation[key]), higher_is_better=True)
+        Result(
+            f"vqpae_overlap_{key} lafan1+dog K=32{tag}",
+            "share",
+            float(ours[key]),
+            "no re-initialisation",
+            float(ablation[key]),
+            higher_is_better=True,
+        )
         for key in ("usage", "overlap")
     ]
     for k, name in enumerate(("human", "dog")):
-        results.append(Result(f"vqpae_overlap_per_dataset {name} K=32{tag}", "share",
-                              float(ours["per_dataset"][k]), "no re-initialisation",
-                              float(ablation["per_dataset"][k]), higher_is_better=True))
+        results.append(
+            Result(
+                f"vqpae_overlap_per_dataset {name} K=32{tag}",
+                "share",
+                float(ours["per_dataset"][k]),
+                "no re-initialisation",
+                float(ablation["per_dataset"][k]),
+                higher_is_better=True,
+            )
+        )
     return results
 
 
@@ -244,9 +328,15 @@ def _pcmrl_interp_results(out: dict[str, Any], steps: int) -> list[Result]:
     model, lerp = out["results"]["model"], out["results"]["lerp"]
     for metric in ("l2p", "l2q", "npss"):
         for gap, figures in model.items():
-            results.append(Result(f"pcmrl_interp_{metric} gap {gap} ({steps} steps)",
-                                  metric.upper(), float(figures[metric]), "LERP/SLERP",
-                                  float(lerp[gap][metric])))
+            results.append(
+                Result(
+                    f"pcmrl_interp_{metric} gap {gap} ({steps} steps)",
+                    metric.upper(),
+                    float(figures[metric]),
+                    "LERP/SLERP",
+                    float(lerp[gap][metric]),
+                )
+            )
     return results
 
 
@@ -255,11 +345,22 @@ def _pcmrl_recon_results(out: dict[str, Any], steps: int) -> list[Result]:
     results = []
     for sigma in ("0", "0.05"):
         metric = f"knn@{sigma}"
-        results.append(Result(f"pcmrl_recon_knn sigma {sigma} ({steps} steps)", "m x 100",
-                              float(rows["pcmrl"][metric]), "joint-name copy",
-                              float(rows["name_copy"][metric])))
-        results.append(Result(f"pcmrl_recon_knn sigma {sigma} floor (source re-sampled)",
-                              "m x 100", float(rows["original"][metric])))
+        results.append(
+            Result(
+                f"pcmrl_recon_knn sigma {sigma} ({steps} steps)",
+                "m x 100",
+                float(rows["pcmrl"][metric]),
+                "joint-name copy",
+                float(rows["name_copy"][metric]),
+            )
+        )
+        results.append(
+            Result(
+                f"pcmrl_recon_knn sigma {sigma} floor (source re-sampled)",
+                "m x 100",
+                float(rows["original"][metric]),
+            )
+        )
     return results
 
 
@@ -290,8 +391,10 @@ def run(size: str) -> list[Result]:
     steps = STEPS[size]
     workers = max(1, min(len(PARTS), os.cpu_count() or 1))
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {name: pool.submit(_timed_child, target, steps[name])
-                   for name, (target, _) in PARTS.items()}
+        futures = {
+            name: pool.submit(_timed_child, target, steps[name])
+            for name, (target, _) in PARTS.items()
+        }
     results: list[Result] = []
     for name in ("humot", "vqpae", "vqpae_overlap", "pcmrl_interp", "pcmrl_recon"):
         out, seconds = futures[name].result()

@@ -20,10 +20,11 @@ before it, median over the timed steps) on the first clips of the LaFAN1 corpus
   walks of :data:`GENERATED_SECONDS`, each generated when the cache asks for it).
   Baseline: the smallest corpus of the same run, so a ratio near 1 means flat
   memory, the streaming datasets' claim.
-* **DDP**: two CPU processes (gloo, 1 thread each, the reference batch per
-  process) against one process at the same batch with 1 thread
-  (``<method>_ddp2_windows_per_s_b<B>``) and with 2 threads
-  (``..._vs_t2``): the same two cores used by threads instead of processes.
+* **DDP**: two CPU processes (Lightning's plain ``ddp`` strategy for every
+  method, gloo, 1 thread each, the reference batch per process) against one
+  process at the same batch with 1 thread (``<method>_ddp2_windows_per_s_b<B>``)
+  and with 2 threads (``..._vs_t2``): the same two cores used by threads instead
+  of processes.
 * **GPU** (when torch sees one): the batch rows again in ``bf16-mixed``
   (``<method>_windows_per_s_b<B>_gpu_bf16``).
 * **torch.compile** (``run.py --compile``): the reference batch with the
@@ -60,7 +61,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT, Result, peak_rss, run_child
+from benchmarks.harness import REPO_ROOT, Result, die_with_parent, peak_rss, run_child
 
 #: The methods, in report order.
 METHODS = ("vqpae", "humot", "pcmrl_recon", "pcmrl_interp")
@@ -86,10 +87,6 @@ TINY: dict[str, dict[str, Any]] = {
     },
     "pcmrl_interp": {"dim": 16, "heads": 2, "layers": 1, "ff_mult": 2, "max_relative": 16},
 }
-#: Lightning DDP strategy per method: stage 2's network has parameters its loss never
-#: reaches (the blocks' ``norm_m`` weights at the paper's settings), which plain ``ddp``
-#: refuses; DDP then has to look for them after every backward pass.
-DDP_STRATEGY = dict.fromkeys(METHODS, "ddp") | {"pcmrl_interp": "ddp_find_unused_parameters_true"}
 
 
 @dataclass(frozen=True)
@@ -292,7 +289,8 @@ def forked(
     """Start ``fn(*args)`` in a forked process (with ``env`` added to its environment).
 
     The child writes ``{"result": ..., "peak_rss_mib": ...}``, or ``{"error": traceback}``,
-    as JSON to a temporary file.
+    as JSON to a temporary file. It dies with this process
+    (:func:`~benchmarks.harness.die_with_parent`).
 
     Returns:
         ``(pid, path of that file)``, for :func:`collect`.
@@ -301,9 +299,11 @@ def forked(
     os.close(fd)
     sys.stdout.flush()
     sys.stderr.flush()
+    parent = os.getpid()
     pid = os.fork()
     if pid:
         return pid, Path(name)
+    die_with_parent(parent)
     code = 1
     try:
         os.environ.update(env or {})
@@ -449,8 +449,12 @@ def throughput(
 
 
 def ddp_rank(job: Job) -> dict[str, float]:
-    """One of two DDP ranks (gloo, 1 thread): windows/s of both ranks together."""
-    return _timed(job, 1, ranks=2, accelerator="cpu", devices=2, strategy=DDP_STRATEGY[job.method])
+    """One of two DDP ranks (plain ``ddp``, gloo, 1 thread): windows/s of both ranks together.
+
+    Every method runs under Lightning's plain ``ddp`` strategy: each trainable
+    parameter gets a gradient at every step, so DDP need not search for unused ones.
+    """
+    return _timed(job, 1, ranks=2, accelerator="cpu", devices=2, strategy="ddp")
 
 
 def memory(job: Job, threads: int) -> dict[str, float | None]:

@@ -65,6 +65,8 @@ def time_fit(
     import lightning as L
     import torch
 
+    from skelagnostic.aligners import quiet_trainer
+
     compute: list[float] = []
     sync = torch.cuda.synchronize if accelerator == "gpu" else (lambda: None)
     fetch: list[float] = []
@@ -91,16 +93,12 @@ def time_fit(
             self.cpu_end = now
 
     with tempfile.TemporaryDirectory() as run_dir:  # aligners may write renders here
-        trainer = L.Trainer(
+        trainer = quiet_trainer(
             max_steps=warmup + steps,
             accelerator=accelerator,
             devices=devices,
             strategy=strategy,
             precision=precision,
-            logger=False,
-            enable_checkpointing=False,
-            enable_progress_bar=False,
-            enable_model_summary=False,
             limit_val_batches=0,
             num_sanity_val_steps=0,
             callbacks=[Timer(), *callbacks],

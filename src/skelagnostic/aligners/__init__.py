@@ -8,6 +8,16 @@ your own by subclassing :class:`Aligner` and registering it through the
 from skelagnostic.aligners.base import KNOWN_CAPABILITIES, Aligner, CapabilityError, Latent
 from skelagnostic.aligners.checkpoints import CheckpointError, read_checkpoint
 from skelagnostic.aligners.schedule import steps_per_epoch
+from skelagnostic.aligners.trainer import QUIET_TRAINER_OPTIONS, quiet_trainer
 
-__all__ = ["KNOWN_CAPABILITIES", "Aligner", "CapabilityError", "CheckpointError", "Latent",
-           "read_checkpoint", "steps_per_epoch"]
+__all__ = [
+    "KNOWN_CAPABILITIES",
+    "QUIET_TRAINER_OPTIONS",
+    "Aligner",
+    "CapabilityError",
+    "CheckpointError",
+    "Latent",
+    "quiet_trainer",
+    "read_checkpoint",
+    "steps_per_epoch",
+]

@@ -29,6 +29,7 @@ from typing import Any
 import lightning as L
 import torch
 
+from skelagnostic.aligners import quiet_trainer
 from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut
 from skelagnostic.metrics.functional import bone_length_consistency
 from skelagnostic_humot.aligner import HumotAligner
@@ -86,15 +87,11 @@ def train_variant(
     """
     L.seed_everything(seed, verbose=False)
     model = HumotAligner(**{**dict(hparams), **dict(changes)})
-    trainer = L.Trainer(
+    trainer = quiet_trainer(
         max_steps=steps,
         max_epochs=-1,
         accelerator="cpu",
         devices=1,
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
         limit_val_batches=0,
         num_sanity_val_steps=0,
         default_root_dir=root_dir,
