@@ -12,7 +12,7 @@ Core layer: numpy and torch only (no lightning, hydra or pluggy).
 """
 
 from skelagnostic.baselines.keyframes import key_brackets, lerp_keys, lerp_slerp, slerp_keys
-from skelagnostic.baselines.names import joint_key, name_copy, name_match
+from skelagnostic.baselines.names import joint_key, name_copy, name_match, scaled_root
 from skelagnostic.baselines.pose import mean_pose, mean_pose_on_trajectory
 from skelagnostic.baselines.primal import primal_copy, primal_match, primal_skeleton
 
@@ -28,5 +28,6 @@ __all__ = [
     "primal_copy",
     "primal_match",
     "primal_skeleton",
+    "scaled_root",
     "slerp_keys",
 ]
