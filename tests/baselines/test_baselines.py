@@ -10,6 +10,7 @@ import torch
 
 from skelagnostic import procedural
 from skelagnostic.baselines import (
+    direction_copy,
     joint_key,
     key_brackets,
     lerp_slerp,
@@ -176,7 +177,7 @@ class TestPrimal:
             np.testing.assert_allclose(pos[3], b, atol=1e-9)
 
 
-@pytest.mark.parametrize("copy", [name_copy, primal_copy])
+@pytest.mark.parametrize("copy", [name_copy, primal_copy, direction_copy])
 def test_root_rule_keeps_the_start_and_scales_height_and_displacement(copy) -> None:
     """A clip that starts 5.8 m from the origin: the copy starts where it starts."""
     m, _ = procedural.dataset(kinds=("biped22",), gaits=("walk",), clips_per_gait=1, seconds=1.0)[0]
