@@ -10,6 +10,7 @@ import torch
 
 from skelagnostic import procedural
 from skelagnostic.baselines import (
+    direction_copy,
     joint_key,
     key_brackets,
     lerp_slerp,
@@ -132,16 +133,6 @@ class TestNames:
         torch.testing.assert_close(out.rotations, m.rotations)
         torch.testing.assert_close(out.root_positions, m.root_positions)
 
-    def test_root_scaled_by_height_in_metres(self) -> None:
-        m, _ = procedural.dataset(
-            kinds=("biped22",), gaits=("walk",), clips_per_gait=1, seconds=1.0
-        )[0]
-        big = m.skeleton.scaled(2.0)
-        out = name_copy(m, big, "cm", "cm")
-        torch.testing.assert_close(out.root_positions, 2.0 * m.root_positions)
-        in_m = name_copy(m, m.skeleton.scaled(0.01), "cm", "m")
-        torch.testing.assert_close(in_m.root_positions, 0.01 * m.root_positions)
-
 
 class TestPrimal:
     def _chain(self, split: bool) -> Skeleton:
@@ -184,6 +175,28 @@ class TestPrimal:
             pos = out.global_positions()[f].numpy()
             np.testing.assert_allclose(pos[1], a, atol=1e-9)
             np.testing.assert_allclose(pos[3], b, atol=1e-9)
+
+
+@pytest.mark.parametrize("copy", [name_copy, primal_copy, direction_copy])
+def test_root_rule_keeps_the_start_and_scales_height_and_displacement(copy) -> None:
+    """A clip that starts 5.8 m from the origin: the copy starts where it starts."""
+    m, _ = procedural.dataset(kinds=("biped22",), gaits=("walk",), clips_per_gait=1, seconds=1.0)[0]
+    m = Motion(
+        m.skeleton,
+        m.rotations,
+        m.root_positions + torch.tensor([500.0, 0.0, -300.0], dtype=m.root_positions.dtype),
+        m.fps,
+    )
+    src = m.root_positions.double().numpy()
+    assert np.linalg.norm(src[0, [0, 2]]) > 500  # y is up: x, z are the ground
+    expected = src.copy()
+    expected[:, [0, 2]] = src[0, [0, 2]] + 2.0 * (src[:, [0, 2]] - src[0, [0, 2]])
+    expected[:, 1] = 2.0 * src[:, 1]
+    out = copy(m, m.skeleton.scaled(2.0), "cm", "cm").root_positions.double().numpy()
+    np.testing.assert_allclose(out, expected, atol=1e-9)
+    # the ratio is taken in metres and the result is in the target's units
+    in_m = copy(m, m.skeleton.scaled(0.02), "cm", "m").root_positions.double().numpy()
+    np.testing.assert_allclose(in_m, expected / 100.0, atol=1e-9)
 
 
 def test_baselines_stay_in_the_core_layer() -> None:

@@ -165,3 +165,32 @@ def test_geometry_maps_reject_bad_hierarchies(call):
 
     with pytest.raises(sa.MotionError):
         call(kinematics)
+
+
+def test_global_rotations_from_directions_swing_kabsch_and_unknown_bones():
+    from skelagnostic.core.kinematics import global_rotations_from_directions
+
+    # root with two children (a, c), a -> b a chain, c -> d a chain
+    parents = [-1, 0, 1, 0, 3]
+    offsets = torch.tensor(
+        [[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 1, 0]], dtype=torch.float64
+    )
+    turn = Rotation.from_euler("xyz", [0.3, -0.7, 1.1])
+    dirs = np.zeros((5, 3))
+    dirs[[1, 3]] = turn.apply(offsets[[1, 3]].numpy())  # the root's bones: a rigid turn
+    dirs[2] = [0.0, 0.0, 2.0]
+    dirs[4] = [1.0, 1.0, 0.0]
+    glob = global_rotations_from_directions(
+        torch.tensor(dirs), offsets, parents, [True] * 4 + [False]
+    )
+    g = glob.numpy()
+    # Kabsch at the root recovers the rigid turn
+    xyzw = turn.as_quat()
+    assert abs(abs((g[0] * np.r_[xyzw[3:], xyzw[:3]]).sum()) - 1.0) < 1e-9
+    # a has one bone (to b): it points along dirs[2]
+    np.testing.assert_allclose(Q.rotate(glob[1], offsets[2]).numpy(), [0.0, 0.0, 1.0], atol=1e-9)
+    # b is a leaf, d's bone is unknown: b keeps a's global rotation, c the root's, d c's
+    for joint, parent in ((2, 1), (3, 0), (4, 3)):
+        np.testing.assert_allclose(g[joint], g[parent], atol=1e-12)
+    with pytest.raises(sa.MotionError, match="known has 2 entries"):
+        global_rotations_from_directions(torch.tensor(dirs), offsets, parents, [True, False])

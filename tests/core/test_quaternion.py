@@ -107,3 +107,38 @@ def test_heading_from_direction():
         d * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64), dim=-1
     )
     torch.testing.assert_close(out, ref)
+
+
+def test_best_rotation_matches_scipy_align_vectors():
+    rng = np.random.default_rng(3)
+    source = rng.normal(size=(5, 6, 3))
+    truth = Rotation.random(5, random_state=4)
+    noisy = np.stack([truth[i].apply(source[i]) for i in range(5)]) + 0.1 * rng.normal(
+        size=source.shape
+    )
+    weights = rng.uniform(0.5, 2.0, size=(5, 6))
+    q = Q.best_rotation(torch.tensor(source), torch.tensor(noisy), torch.tensor(weights))
+    assert q.shape == (5, 4) and bool((q[:, 0] >= 0).all())
+    for i in range(5):
+        ref, _ = Rotation.align_vectors(noisy[i], source[i], weights=weights[i])
+        _same_rotation(q[i].numpy(), _scipy_wxyz(ref), 1e-9)
+    # a mirrored target still gives a rotation (det +1), the best one
+    mirrored = source[0] * np.array([1.0, 1.0, -1.0])
+    q = Q.best_rotation(torch.tensor(source[0]), torch.tensor(mirrored))
+    ref, _ = Rotation.align_vectors(mirrored, source[0])
+    _same_rotation(q.numpy(), _scipy_wxyz(ref), 1e-9)
+
+
+def test_rotation_between_is_the_shortest_arc():
+    rng = np.random.default_rng(5)
+    u, v = rng.normal(size=(2, 16, 3))
+    q = Q.rotation_between(torch.tensor(u), torch.tensor(3.0 * v)).numpy()
+    unit = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    rotated = Q.rotate(torch.tensor(q), torch.tensor(u)).numpy()
+    np.testing.assert_allclose(
+        rotated, unit * np.linalg.norm(u, axis=-1, keepdims=True), atol=1e-12
+    )
+    # the axis is perpendicular to both and the angle is the angle between them
+    angle = np.arccos(np.clip((u * unit).sum(-1) / np.linalg.norm(u, axis=-1), -1, 1))
+    np.testing.assert_allclose(2 * np.arccos(np.clip(q[:, 0], -1, 1)), angle, atol=1e-7)
+    np.testing.assert_allclose((q[:, 1:] * u).sum(-1), 0.0, atol=1e-12)

@@ -56,7 +56,7 @@ def test_retargeting_procedural_uses_paired_ground_truth(humot_small):
     assert set(out) == {"biped22->biped17", "biped17->biped22", "mean"}
     pair = out["biped22->biped17"]
     assert pair["clips"] == 1
-    for method in ("humot", "name_copy", "primal_copy"):
+    for method in ("humot", "name_copy", "primal_copy", "direction_copy"):
         assert 0 < pair[f"{method}_mpjpe_over_height"] < 10
         assert pair[f"{method}_root_aligned_mpjpe"] <= pair[f"{method}_mpjpe"] + 50
     mean = out["mean"]["humot_mpjpe"]
@@ -124,11 +124,11 @@ def test_retarget_protocol_cycles_through_another_topology(tmp_path, humot_small
         out = retarget_protocol(model, _held(clip), tmp_path)
     (row,) = out.rows
     assert row["via"] == "biped31"  # the first human kind of another topology
-    assert set(row["values"]) == {"model", "name_copy", "primal_copy"}
+    assert set(row["values"]) == {"model", "name_copy", "primal_copy", "direction_copy"}
     assert all(v["cycle_over_height"] >= 0 for v in row["values"].values())
     mean = out.extra["procedural_paired_retargeting"]["mean"]
     by_method = out.extra["procedural_paired_mean"]
-    assert set(by_method) == {"model", "name_copy", "primal_copy"}
+    assert set(by_method) == {"model", "name_copy", "primal_copy", "direction_copy"}
     for method, prefix in (("model", "humot"), ("name_copy", "name_copy")):
         for metric in ("mpjpe", "mpjpe_over_height", "root_aligned_mpjpe"):
             assert by_method[method][metric] == mean[f"{prefix}_{metric}"]

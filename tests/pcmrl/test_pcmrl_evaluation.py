@@ -15,7 +15,13 @@ from skelagnostic_pcmrl.evaluation import (
 from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
 import skelagnostic as sa
-from skelagnostic.baselines import name_copy, name_match, primal_copy, primal_match
+from skelagnostic.baselines import (
+    direction_copy,
+    name_copy,
+    name_match,
+    primal_copy,
+    primal_match,
+)
 from skelagnostic.core.motion import UNITS
 from skelagnostic.evaluation import EvaluationError, HeldOut
 from skelagnostic.representations import PointCloud
@@ -66,9 +72,9 @@ def test_baselines_lafan_to_cmu(lafan, shared_data) -> None:
     leg = [n for n in primal if cmu.body_groups[cmu.index(n)] == "left_leg"]
     assert leg and all(src.body_groups[src.index(primal[n])] == "left_leg" for n in leg)
     result = evaluate_clips([lafan], cmu, sigmas=(0.0,), num_points=256)
-    assert set(result["rows"]) == {"original", "name_copy", "primal_copy"}
+    assert set(result["rows"]) == {"original", "name_copy", "primal_copy", "direction_copy"}
     assert result["rows"]["original"]["knn@0"] < result["rows"]["name_copy"]["knn@0"]
-    assert format_table(result).count("\n") == 4
+    assert format_table(result).count("\n") == 5
 
 
 def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
@@ -79,7 +85,7 @@ def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
         out = reconstruction_protocol(model, HeldOut("test", [lafan[:12]]), tmp_path)
     (row,) = out.rows
     assert row["clip"] == "clip" and row["frames"] == 12
-    assert out.methods == ["model", "original", "name_copy", "primal_copy"]
+    assert out.methods == ["model", "original", "name_copy", "primal_copy", "direction_copy"]
     assert set(row["values"]["model"]) == set(TABLE2_METRICS)
     assert row["values"]["original"]["end"] == 0.0
 
@@ -166,6 +172,7 @@ def test_reconstruction_protocol_rows_are_per_clip_figures(lafan, shared_data, t
             for name, result in (
                 ("name_copy", name_copy(clip, target)),
                 ("primal_copy", primal_copy(clip, target)),
+                ("direction_copy", direction_copy(clip, target)),
                 ("model", model.retarget(clip, target)),
             ):
                 assert row["values"][name] == evaluate_pair(result, clip, stride=2), name

@@ -31,7 +31,7 @@ from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton, _side, _words
 from skelagnostic.core.units import infer_units
 
-__all__ = ["joint_key", "name_copy", "name_match"]
+__all__ = ["copied_motion", "joint_key", "name_copy", "name_match", "scaled_root"]
 
 
 def joint_key(name: str) -> tuple[int, str]:
@@ -100,9 +100,10 @@ def name_copy(
 
     Each target joint takes the local rotation of the source joint
     :func:`name_match` pairs it with (identity without a match). The root
-    trajectory is scaled by the ratio of the skeletons' heights measured in
-    metres and expressed in the target's units. Both rigs are assumed to share
-    their rest-pose convention (identity rotations give the rest pose).
+    trajectory follows :func:`scaled_root` (height and displacement from the first
+    frame scaled by the ratio of the skeletons' heights in metres, in the target's
+    units). Both rigs are assumed to share their rest-pose convention (identity
+    rotations give the rest pose).
 
     Args:
         motion: Source motion.
@@ -115,15 +116,38 @@ def name_copy(
     Returns:
         A motion on ``target`` at the source's fps, in the target's units.
     """
-    src_unit = infer_units(motion.skeleton, source_units or motion.units)
-    dst_unit = infer_units(target, target_units)
     rot = Q.identity(motion.num_frames, target.num_joints, dtype=motion.rotations.dtype)
     for j, i in enumerate(name_match(motion.skeleton, target, cutoff)):
         if i is not None:
             rot[:, j] = motion.rotations[:, i]
+    return copied_motion(motion, target, rot, source_units, target_units)
+
+
+def copied_motion(
+    motion: Motion,
+    target: Skeleton,
+    local: torch.Tensor,
+    source_units: str | None = None,
+    target_units: str | None = None,
+) -> Motion:
+    """The motion a copy baseline returns: ``local`` rotations on ``target``, :func:`scaled_root`.
+
+    Args:
+        motion: Source motion (its root path, fps and name are kept).
+        target: Target skeleton.
+        local: ``[T, J, 4]`` local rotations of ``target``.
+        source_units: Units of ``motion`` (default: ``motion.units``, else guessed from its
+            height by :func:`skelagnostic.core.units.infer_units`).
+        target_units: Units of ``target`` (default: guessed).
+
+    Returns:
+        A motion on ``target`` at the source's fps, in the target's units.
+    """
+    src_unit = infer_units(motion.skeleton, source_units or motion.units)
+    dst_unit = infer_units(target, target_units)
     return Motion(
         target,
-        rot,
+        local,
         scaled_root(motion, target, src_unit, dst_unit),
         motion.fps,
         name=motion.name,
@@ -134,10 +158,45 @@ def name_copy(
 def scaled_root(
     motion: Motion, target: Skeleton, source_units: str, target_units: str
 ) -> torch.Tensor:
-    """``motion``'s root positions scaled by the height ratio, in ``target_units``."""
+    """The root rule of the copy baselines: ``motion``'s root path scaled, in ``target_units``.
+
+    With ``ratio`` the target's height over the source's
+    (:meth:`~skelagnostic.core.skeleton.Skeleton.height`, both in metres):
+
+    * the root's height (its coordinate along the source's up axis, the ground
+      being at 0) is multiplied by ``ratio``;
+    * its horizontal displacement from the first frame is multiplied by ``ratio``,
+      so the copy starts where the source starts (on the ground) and covers
+      ``ratio`` times its distance.
+
+    Earlier versions scaled the whole position about the world origin, which
+    moved a clip that starts far from the origin by ``1 - ratio`` times that
+    distance (about 0.7 m on LaFAN1 clips copied onto CMU), an offset that
+    dominated the copies' position errors.
+
+    Args:
+        motion: Source motion.
+        target: Target skeleton.
+        source_units: Units of ``motion``.
+        target_units: Units of ``target``.
+
+    Returns:
+        ``[T, 3]`` root positions in ``target_units``, in ``motion``'s dtype.
+
+    Example:
+        >>> import torch, skelagnostic as sa
+        >>> sk = sa.Skeleton(["hips", "head"], [-1, 0], [[0, 1, 0], [0, 1, 0]])
+        >>> root = torch.tensor([[5.0, 1, 3], [6, 1, 3]])
+        >>> m = sa.Motion(sk, torch.tensor([1.0, 0, 0, 0]).expand(2, 2, 4), root, fps=30)
+        >>> scaled_root(m, sk.scaled(2.0), "m", "m").tolist()
+        [[5.0, 2.0, 3.0], [7.0, 2.0, 3.0]]
+    """
     src_m = motion.skeleton.height() * UNITS[source_units]
     dst_m = target.height() * UNITS[target_units]
     ratio = dst_m / max(src_m, 1e-9)
-    return (motion.root_positions * (UNITS[source_units] * ratio / UNITS[target_units])).to(
+    root = motion.root_positions
+    start = root[:1].clone()
+    start[:, motion.skeleton.up_index] = 0.0
+    return ((start + ratio * (root - start)) * (UNITS[source_units] / UNITS[target_units])).to(
         motion.rotations.dtype
     )

@@ -18,8 +18,8 @@ baseline that needs no joint names:
    *global* rotation of the source chain joint at the same relative position
    along its chain (chains of different lengths are resampled by rank), so a
    chain bends like its source; joints without a match keep their parent's
-   global rotation (identity local rotation). The root trajectory is scaled as
-   in :func:`~skelagnostic.baselines.name_copy` (height ratio, in metres).
+   global rotation (identity local rotation). The root trajectory follows
+   :func:`~skelagnostic.baselines.names.scaled_root`, as for every copy.
 
 Like the name copy it assumes both rigs share their rest-pose convention and
 world axes.
@@ -27,11 +27,10 @@ world axes.
 
 from __future__ import annotations
 
-from skelagnostic.baselines.names import scaled_root
+from skelagnostic.baselines.names import copied_motion
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.core.units import infer_units
 
 __all__ = ["primal_copy", "primal_match", "primal_skeleton"]
 
@@ -124,8 +123,6 @@ def primal_copy(
     Returns:
         A motion on ``target`` at the source's fps, in the target's units.
     """
-    src_unit = infer_units(motion.skeleton, source_units or motion.units)
-    dst_unit = infer_units(target, target_units)
     src_chains, dst_chains = primal_skeleton(motion.skeleton), primal_skeleton(target)
     donor: dict[int, int] = {}
     for t, s in primal_match(motion.skeleton, target).items():
@@ -143,11 +140,4 @@ def primal_copy(
             local[:, j] = glob[:, j] if p < 0 else Q.mul(Q.inv(glob[:, p]), glob[:, j])
         elif p >= 0:
             glob[:, j] = glob[:, p]
-    return Motion(
-        target,
-        local,
-        scaled_root(motion, target, src_unit, dst_unit),
-        motion.fps,
-        name=motion.name,
-        units=dst_unit,
-    )
+    return copied_motion(motion, target, local, source_units, target_units)

@@ -33,6 +33,7 @@ __all__ = [
     "fk_from_global",
     "forward_kinematics",
     "global_from_local",
+    "global_rotations_from_directions",
     "local_from_global",
 ]
 
@@ -191,6 +192,86 @@ def local_from_global(global_rotations: torch.Tensor, parents: Sequence[int]) ->
     idx = torch.tensor(parents[1:], dtype=torch.long, device=global_rotations.device)
     child = Q.mul(Q.inv(global_rotations[..., idx, :]), global_rotations[..., 1:, :])
     return torch.cat([global_rotations[..., :1, :], child], dim=-2)
+
+
+def global_rotations_from_directions(
+    directions: torch.Tensor,
+    offsets: torch.Tensor,
+    parents: Sequence[int],
+    known: Sequence[bool] | None = None,
+    eps: float = 1e-9,
+) -> torch.Tensor:
+    """Global rotations that point every bone along given world directions, without twist.
+
+    ``directions[..., c, :]`` is the wanted direction of the bone from
+    ``parents[c]`` to ``c`` (any length; the root's entry is not read). A bone
+    *counts* when its rest offset is longer than ``eps`` and ``known[c]``. Joint by
+    joint from the root down:
+
+    * a joint with one counting child bone gets the shortest-arc (swing) rotation
+      from that bone's rest offset, carried by the parent's global rotation, to its
+      direction (:func:`~skelagnostic.core.quaternion.rotation_between`);
+    * a joint with several gets the rotation that best maps their rest offsets onto
+      their directions (Kabsch, :func:`~skelagnostic.core.quaternion.best_rotation`,
+      unit vectors, equal weights);
+    * a joint with none keeps its parent's global rotation (the root: identity).
+
+    Twist about a bone is not determined by its direction; single-child joints get none
+    relative to their parent.
+
+    Args:
+        directions: ``[..., J, 3]`` bone directions in world axes.
+        offsets: ``[J, 3]`` rest offsets (rest pose = identity rotations).
+        parents: Parent index per joint, ``-1`` for the root (joint 0), parents before children.
+        known: Per joint, whether its bone's direction is given (default: all).
+        eps: Rest offsets not longer than this are not bones.
+
+    Returns:
+        ``[..., J, 4]`` global unit quaternions (w, x, y, z).
+
+    Raises:
+        MotionError: ``parents`` or ``known`` does not fit the tensor, or ``parents``
+            is not a valid hierarchy.
+
+    Example:
+        >>> import torch
+        >>> offsets = torch.tensor([[0.0, 0, 0], [0, 1, 0], [0, 1, 0]])
+        >>> dirs = torch.tensor([[0.0, 0, 0], [1, 0, 0], [1, 0, 0]])
+        >>> g = global_rotations_from_directions(dirs, offsets, [-1, 0, 1])
+        >>> Q.rotate(g[0], offsets[1]).round(decimals=6).tolist()
+        [1.0, 0.0, 0.0]
+    """
+    num = directions.shape[-2]
+    parents = _check_parents(parents, num, "global_rotations_from_directions")
+    if known is not None and len(known) != num:
+        raise MotionError(
+            f"global_rotations_from_directions: known has {len(known)} entries for {num} joints"
+        )
+    offsets = offsets.to(directions)
+    lengths = offsets.norm(dim=-1)
+    kids: list[list[int]] = [[] for _ in parents]
+    for c, p in enumerate(parents):
+        if p >= 0 and float(lengths[c]) > eps and (known is None or bool(known[c])):
+            kids[p].append(c)
+    lead = directions.shape[:-2]
+    identity = Q.identity(*lead, dtype=directions.dtype, device=directions.device)
+    glob: list[torch.Tensor] = []
+    for j, p in enumerate(parents):
+        g_parent = identity if p < 0 else glob[p]
+        if not kids[j]:
+            g = g_parent
+        elif len(kids[j]) == 1:
+            c = kids[j][0]
+            rest_dir = Q.rotate(g_parent, offsets[c].expand(*lead, 3))
+            g = Q.mul(Q.rotation_between(rest_dir, directions[..., c, :]), g_parent)
+        else:
+            rest = offsets[kids[j]]
+            rest = rest / rest.norm(dim=-1, keepdim=True)
+            target = directions[..., kids[j], :]
+            target = target / target.norm(dim=-1, keepdim=True).clamp_min(eps)
+            g = Q.best_rotation(rest, target)
+        glob.append(g)
+    return torch.stack(glob, dim=-2)
 
 
 @lru_cache(maxsize=256)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import torch
 
 __all__ = [
+    "best_rotation",
     "continuity",
     "euler_to_quat",
     "from_matrix",
@@ -27,6 +28,7 @@ __all__ = [
     "normalize",
     "quat_to_euler",
     "rotate",
+    "rotation_between",
     "slerp",
     "to_matrix",
     "yaw",
@@ -100,6 +102,75 @@ def from_matrix(m: torch.Tensor) -> torch.Tensor:
 
     q = roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(m))
     return torch.where(q[..., :1] < 0, -q, q)
+
+
+def _unit(v: torch.Tensor, eps: float = 1e-9) -> torch.Tensor:
+    return v / v.norm(dim=-1, keepdim=True).clamp_min(eps)
+
+
+def rotation_between(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """Shortest-arc rotations taking directions ``u`` to directions ``v``.
+
+    Args:
+        u: ``[..., 3]`` source directions (any length; zero gives identity).
+        v: ``[..., 3]`` target directions (broadcastable with ``u``).
+
+    Returns:
+        ``[..., 4]`` unit quaternions (w, x, y, z); opposite directions turn by
+        pi about an axis perpendicular to ``u``.
+
+    Example:
+        >>> q = rotation_between(torch.tensor([1.0, 0, 0]), torch.tensor([0.0, 2, 0]))
+        >>> rotate(q, torch.tensor([1.0, 0, 0])).round(decimals=6).tolist()
+        [0.0, 1.0, 0.0]
+    """
+    u, v = torch.broadcast_tensors(_unit(u), _unit(v))
+    w = 1.0 + (u * v).sum(-1, keepdim=True)
+    xyz = torch.linalg.cross(u, v, dim=-1)
+    nonzero = (u.norm(dim=-1, keepdim=True) > 0.5) & (v.norm(dim=-1, keepdim=True) > 0.5)
+    opposite = (w < 1e-7) & nonzero
+    if bool(opposite.any()):
+        ex = torch.zeros_like(u)
+        ex[..., 0] = 1.0
+        ey = torch.zeros_like(u)
+        ey[..., 1] = 1.0
+        helper = torch.where(u[..., :1].abs() < 0.9, ex, ey)
+        axis = _unit(torch.linalg.cross(u, helper, dim=-1))
+        w = torch.where(opposite, torch.zeros_like(w), w)
+        xyz = torch.where(opposite, axis, xyz)
+    w = torch.where(nonzero, w, torch.ones_like(w))
+    xyz = torch.where(nonzero, xyz, torch.zeros_like(xyz))
+    return normalize(torch.cat([w, xyz], dim=-1))
+
+
+def best_rotation(
+    source: torch.Tensor, target: torch.Tensor, weights: torch.Tensor | None = None
+) -> torch.Tensor:
+    """The rotation that best maps vectors ``source`` onto ``target`` (Kabsch), as a quaternion.
+
+    Minimises ``sum_k w_k ||R source_k - target_k||^2`` over rotations ``R``
+    (``roma.rigid_vectors_registration``: the SVD solution with the sign fix
+    that keeps ``det R = +1``). Unique when the vectors span a plane; with
+    collinear vectors the turn about their line is arbitrary.
+
+    Args:
+        source: ``[..., K, 3]`` vectors.
+        target: ``[..., K, 3]`` vectors (broadcastable with ``source``).
+        weights: Optional ``[..., K]`` positive weights (default: equal).
+
+    Returns:
+        ``[..., 4]`` unit quaternions (w, x, y, z) with ``w >= 0``.
+
+    Example:
+        >>> x = torch.tensor([[1.0, 0, 0], [0, 1, 0]])
+        >>> q = best_rotation(x, torch.tensor([[0.0, 1, 0], [-1, 0, 0]]))
+        >>> rotate(q, x).round(decimals=6).tolist()
+        [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]
+    """
+    import roma
+
+    source, target = torch.broadcast_tensors(source, target)
+    return from_matrix(roma.rigid_vectors_registration(source, target, weights))
 
 
 def _check_order(order: str) -> str:

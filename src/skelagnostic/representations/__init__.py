@@ -22,13 +22,10 @@ Examples:
     True
 """
 
+from skelagnostic.core.quaternion import rotation_between
 from skelagnostic.representations.base import MotionRepresentation
 from skelagnostic.representations.pointcloud import POINT_GROUPS, PointCloud, PointSamples
-from skelagnostic.representations.positions import (
-    GlobalPositions,
-    inverse_kinematics,
-    rotation_between,
-)
+from skelagnostic.representations.positions import GlobalPositions, inverse_kinematics
 from skelagnostic.representations.rotations import (
     FirstFrameOffsetQuaternions,
     LocalQuaternions,

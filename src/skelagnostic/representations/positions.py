@@ -7,59 +7,13 @@ from typing import Any, ClassVar
 import torch
 
 from skelagnostic.core import quaternion as Q
-from skelagnostic.core.kinematics import local_from_global
+from skelagnostic.core.kinematics import global_rotations_from_directions, local_from_global
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations.base import MotionRepresentation
 
 _EPS = 1e-9
-
-
-def _unit(v: torch.Tensor) -> torch.Tensor:
-    return v / v.norm(dim=-1, keepdim=True).clamp_min(_EPS)
-
-
-def rotation_between(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """Shortest-arc rotations taking directions ``u`` to directions ``v``.
-
-    Args:
-        u: ``[..., 3]`` source directions (any length; zero gives identity).
-        v: ``[..., 3]`` target directions.
-
-    Returns:
-        ``[..., 4]`` unit quaternions (w, x, y, z); opposite directions turn by
-        pi about an axis perpendicular to ``u``.
-    """
-    u, v = _unit(u), _unit(v)
-    w = 1.0 + (u * v).sum(-1, keepdim=True)
-    xyz = torch.linalg.cross(u, v, dim=-1)
-    nonzero = (u.norm(dim=-1, keepdim=True) > 0.5) & (v.norm(dim=-1, keepdim=True) > 0.5)
-    opposite = (w < 1e-7) & nonzero
-    if bool(opposite.any()):
-        ex = torch.zeros_like(u)
-        ex[..., 0] = 1.0
-        ey = torch.zeros_like(u)
-        ey[..., 1] = 1.0
-        helper = torch.where(u[..., :1].abs() < 0.9, ex, ey)
-        axis = _unit(torch.linalg.cross(u, helper, dim=-1))
-        w = torch.where(opposite, torch.zeros_like(w), w)
-        xyz = torch.where(opposite, axis, xyz)
-    w = torch.where(nonzero, w, torch.ones_like(w))
-    xyz = torch.where(nonzero, xyz, torch.zeros_like(xyz))
-    return Q.normalize(torch.cat([w, xyz], dim=-1))
-
-
-def _best_rotation(rest: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Rotation R minimising sum ||R rest_k - target_k||^2 (Kabsch), ``[K,3]`` x ``[...,K,3]``."""
-    h = torch.einsum("ki,...kj->...ij", rest, target)
-    u, _, vh = torch.linalg.svd(h)
-    v = vh.mT
-    d = torch.sign(torch.linalg.det(v @ u.mT))
-    d = torch.where(d == 0, torch.ones_like(d), d)
-    diag = torch.ones(*d.shape, 3, dtype=rest.dtype, device=rest.device)
-    diag[..., 2] = d
-    return Q.from_matrix(v @ torch.diag_embed(diag) @ u.mT)
 
 
 def inverse_kinematics(
@@ -92,28 +46,9 @@ def inverse_kinematics(
     """
     parents = skeleton.parents
     offsets = skeleton.offsets.to(positions.dtype).to(positions.device)
-    lengths = offsets.norm(dim=-1)
-    lead = positions.shape[:-2]
-    num = skeleton.num_joints
-    identity = torch.zeros(*lead, 4, dtype=positions.dtype, device=positions.device)
-    identity[..., 0] = 1.0
-    glob: list[torch.Tensor] = []
-    for j in range(num):
-        p = parents[j]
-        g_parent = identity if p < 0 else glob[p]
-        kids = [c for c in skeleton.children(j) if lengths[c] > _EPS]
-        if not kids:
-            g = g_parent
-        elif len(kids) == 1:
-            c = kids[0]
-            rest_dir = Q.rotate(g_parent, offsets[c].expand(*lead, 3))
-            target = positions[..., c, :] - positions[..., j, :]
-            g = Q.mul(rotation_between(rest_dir, target), g_parent)
-        else:
-            target = positions[..., kids, :] - positions[..., j : j + 1, :]
-            g = _best_rotation(_unit(offsets[kids]), _unit(target))
-        glob.append(g)
-    local = local_from_global(torch.stack(glob, dim=-2), parents)
+    directions = positions - positions[..., [max(p, 0) for p in parents], :]
+    glob = global_rotations_from_directions(directions, offsets, parents, eps=_EPS)
+    local = local_from_global(glob, parents)
     return local, positions[..., 0, :].clone()
 
 

@@ -9,8 +9,9 @@ Protocols (``skelagnostic evaluate model=humot ckpt_path=... [protocol=...]``):
   (Fig. 9) curves over all chunks go into ``extra`` and two plots.
 * ``humot.retarget`` (:func:`retarget_protocol`): per held-out human clip, the
   cycle error (source -> a procedural rig of another topology -> source) of
-  HuMoT beside the :func:`~skelagnostic.baselines.name_copy` and
-  :func:`~skelagnostic.baselines.primal_copy` baselines; ``extra`` adds
+  HuMoT beside the :func:`~skelagnostic.baselines.name_copy`,
+  :func:`~skelagnostic.baselines.primal_copy` and
+  :func:`~skelagnostic.baselines.direction_copy` baselines; ``extra`` adds
   :func:`retargeting_procedural` (paired procedural ground truth).
 
 Functions:
@@ -50,7 +51,13 @@ from typing import Any
 import torch
 
 from skelagnostic import procedural
-from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory, name_copy, primal_copy
+from skelagnostic.baselines import (
+    direction_copy,
+    mean_pose,
+    mean_pose_on_trajectory,
+    name_copy,
+    primal_copy,
+)
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
@@ -202,7 +209,11 @@ def upsampling_curve(
 # ------------------------------------------------------------------ retargeting
 #: Retargeting baselines of :mod:`skelagnostic.baselines`: ``name -> f(motion, target,
 #: source_units, target_units)``; the source is resampled to HuMoT's 30 fps first.
-BASELINES: dict[str, Callable[..., Motion]] = {"name_copy": name_copy, "primal_copy": primal_copy}
+BASELINES: dict[str, Callable[..., Motion]] = {
+    "name_copy": name_copy,
+    "primal_copy": primal_copy,
+    "direction_copy": direction_copy,
+}
 
 
 def _at_30fps(motion: Motion) -> Motion:
@@ -245,8 +256,8 @@ def retargeting_procedural(
     amplitudes, phase and turn rate) on ``B``, which is the ground truth.
 
     Returns:
-        ``"A->B" -> {humot_*, name_copy_*, primal_copy_*}`` with the keys of the error (``mpjpe``
-        in cm, ``mpjpe_over_height``, ``root_aligned_mpjpe``,
+        ``"A->B" -> {humot_*, <baseline>_*}`` (one per :data:`BASELINES`) with the keys
+        of the error (``mpjpe`` in cm, ``mpjpe_over_height``, ``root_aligned_mpjpe``,
         ``root_aligned_over_height``), averaged over clips, plus ``clips``;
         and ``"mean"``, the average over pairs.
     """
@@ -294,7 +305,7 @@ def cycle_error(
     the source rig has. The reference is the source clip at 30 fps.
 
     Returns:
-        ``humot_*``, ``name_copy_*`` and ``primal_copy_*`` errors (see
+        ``humot_*`` and ``<baseline>_*`` errors (one per :data:`BASELINES`; see
         :func:`retargeting_procedural`;
         ``mpjpe`` in the source's units).
     """
@@ -661,7 +672,7 @@ def retarget_protocol(
     """
     notes = [
         "cycle: source -> a procedural human rig of another topology -> source, compared "
-        "with the source at 30 fps; baselines: name_copy and primal_copy "
+        "with the source at 30 fps; baselines: name_copy, primal_copy and direction_copy "
         "(skelagnostic.baselines)",
         _SEEN_NOTE,
     ]
@@ -675,11 +686,7 @@ def retarget_protocol(
         )
         cyc = cycle_error(aligner, clip, procedural.skeleton(via_kind), via_units="cm")
         values = {}
-        for method, prefix in (
-            (MODEL, "humot"),
-            ("name_copy", "name_copy"),
-            ("primal_copy", "primal_copy"),
-        ):
+        for method, prefix in ((MODEL, "humot"), *((n, n) for n in BASELINES)):
             values[method] = {
                 "cycle_over_height": cyc[f"{prefix}_mpjpe_over_height"],
                 "cycle_root_aligned_over_height": cyc[f"{prefix}_root_aligned_over_height"],

@@ -28,7 +28,9 @@ best reachable KNN value, as in the paper), the non-learned retargeting
 baselines of :mod:`skelagnostic.baselines` (``name_copy``: local rotations
 copied between joints of matching names; ``primal_copy``: global rotations
 copied along matched primal-skeleton chains, the structure of the paper's
-primal-skeleton comparison) and ``pcmrl`` (the trained model).
+primal-skeleton comparison; ``direction_copy``: every bone pointed along its
+paired primal chain of the source, free of rest-pose conventions) and ``pcmrl``
+(the trained model).
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from typing import Any
 
 import torch
 
-from skelagnostic.baselines import lerp_slerp, name_copy, primal_copy
+from skelagnostic.baselines import direction_copy, lerp_slerp, name_copy, primal_copy
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
@@ -64,7 +66,11 @@ SIGMAS = (0.0, 0.01, 0.05, 0.1, 0.2)
 
 
 #: Retargeting baselines of :mod:`skelagnostic.baselines`: ``name -> f(motion, target)``.
-BASELINES = {"name_copy": name_copy, "primal_copy": primal_copy}
+BASELINES = {
+    "name_copy": name_copy,
+    "primal_copy": primal_copy,
+    "direction_copy": direction_copy,
+}
 
 
 def evaluate_pair(
