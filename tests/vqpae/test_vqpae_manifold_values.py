@@ -21,16 +21,12 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-import lightning as L
 import numpy as np
 import pytest
 import torch
 from skelagnostic_vqpae import evaluation
-from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
 from skelagnostic_vqpae.embed import embed_clip
 from skelagnostic_vqpae.evaluation import manifold_protocol
-
-from skelagnostic.evaluation import held_out
 
 
 def _unwrap(phase: np.ndarray) -> np.ndarray:
@@ -69,15 +65,7 @@ def _spread_codes(embed: Any) -> Any:
 def test_code_and_phase_figures_equal_an_independent_computation(
     helpers: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    L.seed_everything(0, verbose=False)
-    dm = helpers["datamodule"](tmp_path / "cache")
-    dm.test_fraction = 0.25
-    model = VqpaeAligner(
-        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
-    )
-    helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
-    model.eval()
-    held = held_out(dm)
+    model, held = helpers["tiny"](tmp_path, 0.25)
     monkeypatch.setattr(evaluation, "embed_clip", _spread_codes(embed_clip))
     with torch.no_grad():
         out = manifold_protocol(model, held, tmp_path, procedural_seeds=0)
