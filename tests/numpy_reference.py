@@ -91,6 +91,22 @@ def global_pose(motion: Any, scale: float | None = None) -> tuple[np.ndarray, np
     )
 
 
+#: Y up (x, y, z) -> HuMoT's model frame, Z up: (x, -z, y).
+Y_UP_TO_Z_UP = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+
+
+def humot_chunks(positions: np.ndarray, major: np.ndarray, chunk: int = 30) -> np.ndarray:
+    """``[C, chunk, J, 3]`` whole chunks of Y-up positions, in the Z-up frame, centred.
+
+    Each chunk is centred on the mean over its frames and ``major`` joints (all
+    joints when none is major), as HuMoT's input.
+    """
+    count = len(positions) // chunk
+    out = positions[: count * chunk].reshape(count, chunk, *positions.shape[1:]) @ Y_UP_TO_Z_UP.T
+    ref = out[:, :, major] if major.any() else out
+    return out - ref.mean(axis=(1, 2), keepdims=True)
+
+
 def mpjpe(a: np.ndarray, b: np.ndarray) -> float:
     """Mean over frames and joints of the Euclidean distance of ``[..., J, 3]`` positions."""
     return float(np.linalg.norm(a - b, axis=-1).mean())

@@ -23,21 +23,16 @@ from skelagnostic_humot.data import prepare_chunks
 from skelagnostic_humot.evaluation import reconstruction_protocol
 
 import skelagnostic as sa
-from numpy_reference import global_pose, mpjpe
+from numpy_reference import global_pose, humot_chunks, mpjpe
 from skelagnostic.evaluation import HeldOut, mean_rows
-
-#: Y up (x, y, z) -> model frame Z up: (x, -z, y).
-TO_MODEL = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
 
 
 def _expected(model: HumotAligner, clip: sa.Motion) -> dict[str, float]:
     """The row of one 30 fps clip: model and baselines, cm (and model MPJPE / height)."""
-    _, pos = global_pose(clip)  # metres
-    count = len(pos) // 30
-    chunks = pos[: count * 30].reshape(count, 30, *pos.shape[1:]) @ TO_MODEL.T
     topo = model.topology(clip.skeleton)
     major = topo.major.numpy()
-    chunks = chunks - chunks[:, :, major].mean(axis=(1, 2), keepdims=True)
+    chunks = humot_chunks(global_pose(clip)[1], major)  # metres
+    count = len(chunks)
     # the templates the protocol gives the network (the library's, from median bone lengths)
     _, tmpl = prepare_chunks(torch.from_numpy(chunks).float(), topo)
     with torch.no_grad():
