@@ -32,23 +32,56 @@ def make_datamodule(cache_dir: Path) -> Any:
     from skelagnostic.data import ProceduralSource
 
     src = ProceduralSource(kinds=["biped22", "quadruped"], clips_per_gait=2, seconds=3.0)
-    return VqpaeDataModule(src, fps=FPS, stride=2, batch_size=16, cache_dir=cache_dir,
-                           pair_seconds=0.1)
+    return VqpaeDataModule(
+        src, fps=FPS, stride=2, batch_size=16, cache_dir=cache_dir, pair_seconds=0.1
+    )
 
 
 def make_trainer(root: Path, steps: int, validate: bool = True) -> L.Trainer:
     """A quiet CPU trainer for ``steps`` steps."""
-    return L.Trainer(max_steps=steps, accelerator="cpu", devices=1, logger=False,
-                     limit_val_batches=None if validate else 0,
-                     enable_checkpointing=True, enable_progress_bar=False,
-                     enable_model_summary=False, default_root_dir=str(root),
-                     num_sanity_val_steps=0, deterministic=True)
+    return L.Trainer(
+        max_steps=steps,
+        accelerator="cpu",
+        devices=1,
+        logger=False,
+        limit_val_batches=None if validate else 0,
+        enable_checkpointing=True,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        default_root_dir=str(root),
+        num_sanity_val_steps=0,
+        deterministic=True,
+    )
+
+
+def make_tiny(root: Path, test_fraction: float) -> tuple[Any, Any]:
+    """A VQ-PAE trained 3 steps on :func:`make_datamodule` (no quality expected), in eval mode.
+
+    Args:
+        root: Directory of the run and its window cache.
+        test_fraction: Share of the clips held out.
+
+    Returns:
+        ``(model, held_out(datamodule))``.
+    """
+    from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+
+    from skelagnostic.evaluation import held_out
+
+    L.seed_everything(0, verbose=False)
+    dm = make_datamodule(root / "cache")
+    dm.test_fraction = test_fraction
+    model = VqpaeAligner(
+        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+    )
+    make_trainer(root, 3, validate=False).fit(model, datamodule=dm)
+    return model.eval(), held_out(dm)
 
 
 @pytest.fixture
 def helpers() -> dict[str, Callable[..., Any]]:
-    """``make_datamodule`` and ``make_trainer`` for tests that train their own model."""
-    return {"datamodule": make_datamodule, "trainer": make_trainer}
+    """``make_datamodule``, ``make_trainer`` and ``make_tiny`` for tests that train a model."""
+    return {"datamodule": make_datamodule, "trainer": make_trainer, "tiny": make_tiny}
 
 
 @pytest.fixture(scope="session")
@@ -59,8 +92,9 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     root = tmp_path_factory.mktemp("vqpae-train")
     L.seed_everything(0, verbose=False)
     dm = make_datamodule(root / "cache")
-    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000,
-                         **PREVIOUS_DEFAULTS)
+    model = VqpaeAligner(
+        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+    )
     before = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
     from skelagnostic.callbacks import FitSummary
 
@@ -70,8 +104,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     after = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
     ckpt = root / "final.ckpt"
     trainer.save_checkpoint(ckpt)
-    return {"model": model, "dm": dm, "before": before, "after": after, "ckpt": ckpt,
-            "root": root}
+    return {"model": model, "dm": dm, "before": before, "after": after, "ckpt": ckpt, "root": root}
 
 
 @pytest.fixture

@@ -9,11 +9,9 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-import lightning as L
 import numpy as np
 import pytest
 import torch
-from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
 from skelagnostic_vqpae.embed import embed_clip
 from skelagnostic_vqpae.evaluation import (
     LOCOMOTION_SPEED,
@@ -34,7 +32,7 @@ from skelagnostic_vqpae.evaluation import (
 from skelagnostic import procedural
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.evaluation import MODEL, held_out
+from skelagnostic.evaluation import MODEL
 
 # --- Table 2 -------------------------------------------------------------------------------
 
@@ -209,14 +207,7 @@ def test_rhythm_of_a_dog_following_a_human_walk(walks) -> None:
 @pytest.fixture
 def tiny(helpers, tmp_path):
     """A VQ-PAE trained a few steps on procedural biped + quadruped (no quality expected)."""
-    L.seed_everything(0, verbose=False)
-    dm = helpers["datamodule"](tmp_path / "cache")
-    dm.test_fraction = 0.3
-    model = VqpaeAligner(
-        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
-    )
-    helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
-    return model.eval(), held_out(dm)
+    return helpers["tiny"](tmp_path, 0.3)
 
 
 def test_manifold_protocol_tables_per_character(tiny, tmp_path) -> None:

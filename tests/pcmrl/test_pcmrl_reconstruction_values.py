@@ -1,0 +1,137 @@
+"""pcmrl.reconstruction: every reported figure recomputed independently in numpy.
+
+The protocol runs on two short LaFAN1 clips with an untrained (seeded) stage-1
+model. Each per-clip figure of ``model``, ``original``, ``name_copy`` and
+``primal_copy`` (temporal KNN distance at the five offsets, end-effector error,
+x100 in metres) and their means in ``evaluation.json`` are recomputed here with
+numpy forward kinematics, a brute-force KNN over every pair of point
+trajectories (PC-MRL Eq. 5) and hand-picked end-effector pairs (Eq. 6). Only the
+seeded draw of the points on the bones (``PointCloud.sample``) and the methods'
+own outputs (the retargeted motions) come from the library.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.distance import cdist
+from skelagnostic_pcmrl.evaluation import reconstruction_protocol
+from skelagnostic_pcmrl.recon import PcmrlReconAligner
+
+import skelagnostic as sa
+from numpy_reference import global_pose, metres, qrot
+from skelagnostic.baselines import name_copy, primal_copy
+from skelagnostic.core.motion import UNITS
+from skelagnostic.evaluation import HeldOut, write_evaluation
+from skelagnostic.representations import PointCloud
+
+SIGMAS = (0.0, 0.01, 0.05, 0.1, 0.2)
+MAX_FRAMES, STRIDE = 6, 3
+#: End effectors matched by hand, LaFAN1 -> the procedural biped31 (CMU hierarchy): the end
+#: of each limb chain and the head (biped31's hands end at their index-finger joints).
+END_EFFECTORS = {
+    "LeftHand": "LeftHandIndex1",
+    "RightHand": "RightHandIndex1",
+    "Head": "Head",
+    "LeftToe": "LeftToeBase",
+    "RightToe": "RightToeBase",
+}
+
+
+def _cloud(motion: sa.Motion, sigma: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``[F, 1024, 3]`` points (every ``STRIDE``-th frame) and their body groups, in metres."""
+    scale = metres(motion)
+    draw = PointCloud(1024, sigma).sample(
+        motion.skeleton.scaled(scale), torch.Generator().manual_seed(seed)
+    )
+    grot, gpos = global_pose(motion, scale)
+    joints = draw.joints.numpy()
+    rot, pos = grot[::STRIDE][:, joints], gpos[::STRIDE][:, joints]
+    local = np.broadcast_to(draw.local.numpy(), pos.shape)
+    return pos + qrot(rot, local), draw.groups.numpy()
+
+
+def _knn(result: sa.Motion, source: sa.Motion, sigma: float, seed: int, k: int = 8) -> float:
+    """Eq. 5 x100: per source point, its k nearest result trajectories of the same group."""
+    pa, ga = _cloud(source, sigma, seed)
+    pb, gb = _cloud(result, sigma, seed + 1)
+    dist = np.zeros((pa.shape[1], pb.shape[1]))
+    for frame in range(pa.shape[0]):
+        dist += cdist(pa[frame], pb[frame])
+    dist[ga[:, None] != gb[None]] = np.inf
+    nearest = np.sort(dist, axis=1)[:, :k]
+    return 100.0 * float(nearest.sum() / (pa.shape[1] * k * pa.shape[0]))
+
+
+def _end(result: sa.Motion, source: sa.Motion) -> float:
+    """Eq. 6 x100: summed over the matched effectors, mean over the scored frames."""
+    pa = global_pose(source)[1][::STRIDE]
+    pb = global_pose(result)[1][::STRIDE]
+    src, res = source.skeleton, result.skeleton
+    return 100.0 * sum(
+        float(np.linalg.norm(pb[:, res.index(b)] - pa[:, src.index(a)], axis=-1).mean())
+        for a, b in END_EFFECTORS.items()
+    )
+
+
+def _figures(result: sa.Motion, source: sa.Motion, seed: int) -> dict[str, float]:
+    out = {f"knn@{s:g}": _knn(result, source, s, seed) for s in SIGMAS}
+    # the source against itself: every effector on itself, no error by definition
+    return out | {"end": 0.0 if result is source else _end(result, source)}
+
+
+def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_path: Path) -> None:
+    motion = sa.read_bvh(lafan_clip)
+    motion.units = "cm"
+    a, b = motion[:14], motion[100:120]
+    a.name, b.name = "a", "b"
+    torch.manual_seed(0)
+    model = PcmrlReconAligner(dim=16, stages=1, target="biped31").eval()
+    held = HeldOut("test", [a, b])
+    with torch.no_grad():
+        out = reconstruction_protocol(model, held, tmp_path, max_frames=MAX_FRAMES, stride=STRIDE)
+        target = model.target_skeleton.scaled(1.0 / UNITS[model.target_units])
+        assert set(END_EFFECTORS.values()) <= set(target.joint_names)
+        expected = {}
+        for clip in (a, b):
+            cut = clip[:MAX_FRAMES]
+            expected[clip.name] = {
+                "model": _figures(model.retarget(cut, target), cut, 0),
+                # an independent cloud (seeds 2 and 3) on the source motion itself
+                "original": _figures(cut, cut, 2),
+                "name_copy": _figures(name_copy(cut, target), cut, 0),
+                "primal_copy": _figures(primal_copy(cut, target), cut, 0),
+            }
+    assert [r["clip"] for r in out.rows] == ["a", "b"]
+    assert [r["frames"] for r in out.rows] == [MAX_FRAMES, MAX_FRAMES]
+    for row in out.rows:
+        want = expected[row["clip"]]
+        assert set(row["values"]) == set(want)
+        for method, figures in want.items():
+            assert set(row["values"][method]) == set(figures), method
+            for metric, value in figures.items():
+                got = row["values"][method][metric]
+                assert got == pytest.approx(value, rel=1e-6, abs=1e-9), (row["clip"], method)
+    # the means written to evaluation.json: plain averages over the two clips
+    write_evaluation(
+        out,
+        tmp_path,
+        protocol="pcmrl.reconstruction",
+        model="pcmrl",
+        description="",
+        checkpoint="none",
+        data={"source": "lafan1"},
+        held=held,
+    )
+    report = json.loads((tmp_path / "evaluation.json").read_text())
+    for method in expected["a"]:
+        for metric in expected["a"][method]:
+            mean = (expected["a"][method][metric] + expected["b"][method][metric]) / 2
+            assert report["mean"][method][metric] == pytest.approx(mean, rel=1e-6, abs=1e-9)
+    # sanity of the reference itself: the independent cloud on the source is the closest
+    for want in expected.values():
+        assert want["original"]["knn@0"] < min(want[m]["knn@0"] for m in want if m != "original")

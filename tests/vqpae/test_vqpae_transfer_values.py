@@ -1,0 +1,79 @@
+"""vqpae.transfer: the acceleration figures in numpy, the derived rhythm figures by hand.
+
+A VQ-PAE trained 3 steps on procedural biped22 and quadruped clips re-enacts
+the held-out biped clips with the quadruped's training clips. The test captures
+the three outputs of every clip (the model's, ``unscaled_matching``'s and
+``own_rate_clip``'s: the methods under test) and recomputes from them, with
+numpy forward kinematics, ``accel_height_per_s2`` and
+``accel_max_height_per_s2`` (second difference of the joint positions times
+fps^2, its norm averaged over the joints, over the skeleton height; mean and
+maximum over the frames). From the row's measured frequencies it recomputes
+``frequency_error_pct``, ``gait_ratio``, ``contact_rhythm_error_pct`` and
+``contact_rhythm_within_10pct``. Not recomputed: the measured frequencies
+themselves (``output_hz``, ``source_hz``, ``contact_hz``) and ``contact_lock``,
+whose foot-detection and touch-down rules are checked against the procedural
+generator in ``test_vqpae_transfer_eval.py`` instead
+(``docs/reports/protocol_tests.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+from skelagnostic_vqpae import evaluation
+
+from numpy_reference import global_pose
+from skelagnostic.evaluation import mean_rows
+
+
+def _acceleration(motion: Any) -> tuple[float, float]:
+    pos = global_pose(motion, 1.0)[1]
+    per_frame = np.linalg.norm(pos[2:] - 2 * pos[1:-1] + pos[:-2], axis=-1).mean(-1)
+    per_frame = per_frame * motion.fps**2 / motion.skeleton.height()
+    return float(per_frame.mean()), float(per_frame.max())
+
+
+def test_acceleration_and_derived_figures_equal_an_independent_computation(
+    helpers: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    model, held = helpers["tiny"](tmp_path, 0.3)
+    captured: dict[str, list[Any]] = {}
+    transfer_rows = evaluation.transfer_rows
+
+    def capture(*args: Any, **kwargs: Any) -> Any:
+        rows, outputs = transfer_rows(*args, **kwargs)
+        captured.update(outputs)
+        return rows, outputs
+
+    monkeypatch.setattr(evaluation, "transfer_rows", capture)
+    with torch.no_grad():
+        out = evaluation.transfer_protocol(model, held, tmp_path)
+    methods = [evaluation.MODEL, evaluation.UNSCALED, evaluation.OWN_RATE]
+    assert out.methods == methods and out.rows
+    for row in out.rows:
+        source, *made = captured[row["clip"]]
+        assert row["frames"] == source.num_frames
+        for method, output in zip(methods, made, strict=True):
+            values = row["values"][method]
+            mean_acc, max_acc = _acceleration(output)
+            assert values["accel_height_per_s2"] == pytest.approx(mean_acc, rel=1e-6)
+            assert values["accel_max_height_per_s2"] == pytest.approx(max_acc, rel=1e-6)
+            hz, src = values["output_hz"], row["source_hz"]
+            assert values["gait_ratio"] == pytest.approx(hz / src, nan_ok=True)
+            assert values["frequency_error_pct"] == pytest.approx(
+                100 * abs(hz / src - 1), nan_ok=True
+            )
+            error = 100 * abs(values["contact_hz"] / row["source_contact_hz"] - 1)
+            assert values["contact_rhythm_error_pct"] == pytest.approx(error, nan_ok=True)
+            within = math.nan if math.isnan(error) else float(error <= 10)
+            assert values["contact_rhythm_within_10pct"] == pytest.approx(within, nan_ok=True)
+    # means over the clips (NaN values skipped): the acceleration of each method
+    mean = mean_rows(out.rows)
+    for method in methods:
+        accs = [_acceleration(captured[r["clip"]][1 + methods.index(method)])[0] for r in out.rows]
+        assert mean[method]["accel_height_per_s2"] == pytest.approx(np.mean(accs), rel=1e-6)
