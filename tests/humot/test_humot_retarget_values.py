@@ -24,7 +24,7 @@ from skelagnostic_humot.evaluation import retarget_protocol
 
 import skelagnostic as sa
 from numpy_reference import global_pose
-from skelagnostic.baselines import name_copy, primal_copy
+from skelagnostic.baselines import direction_copy, name_copy, primal_copy
 from skelagnostic.evaluation import HeldOut, mean_rows
 
 pytestmark = pytest.mark.slow  # about 30 s on a loaded 2-core machine
@@ -52,7 +52,12 @@ def _methods(model: HumotAligner) -> dict[str, object]:
     def humot(m: sa.Motion, sk: sa.Skeleton, su: str, tu: str) -> sa.Motion:
         return model.retarget(m, sk, su, tu)
 
-    return {"humot": humot, "name_copy": name_copy, "primal_copy": primal_copy}
+    return {
+        "humot": humot,
+        "name_copy": name_copy,
+        "primal_copy": primal_copy,
+        "direction_copy": direction_copy,
+    }
 
 
 def test_rows_means_and_paired_table_equal_an_independent_computation(
@@ -104,6 +109,7 @@ def test_rows_means_and_paired_table_equal_an_independent_computation(
             ("model", "humot"),
             ("name_copy", "name_copy"),
             ("primal_copy", "primal_copy"),
+            ("direction_copy", "direction_copy"),
         ):
             got = row["values"][method]
             assert got["cycle_over_height"] == pytest.approx(
@@ -127,5 +133,8 @@ def test_rows_means_and_paired_table_equal_an_independent_computation(
     for key in paired["biped22->biped31"]:
         average = sum(p[key] for p in paired.values()) / len(paired)
         assert table["mean"][key] == pytest.approx(average, rel=1e-6), key
+        method, metric = next((m, key[len(m) + 1 :]) for m in methods if key.startswith(f"{m}_"))
+        by_method = out.extra["procedural_paired_mean"]["model" if method == "humot" else method]
+        assert by_method[metric] == pytest.approx(average, rel=1e-6), key
     # sanity of the reference: every error is a finite positive length
     assert all(0 < v < np.inf for p in paired.values() for v in p.values())

@@ -1,13 +1,14 @@
 """pcmrl.reconstruction: every reported figure recomputed independently in numpy.
 
 The protocol runs on two short LaFAN1 clips with an untrained (seeded) stage-1
-model. Each per-clip figure of ``model``, ``original``, ``name_copy`` and
-``primal_copy`` (temporal KNN distance at the five offsets, end-effector error,
-x100 in metres) and their means in ``evaluation.json`` are recomputed here with
-numpy forward kinematics, a brute-force KNN over every pair of point
-trajectories (PC-MRL Eq. 5) and hand-picked end-effector pairs (Eq. 6). Only the
-seeded draw of the points on the bones (``PointCloud.sample``) and the methods'
-own outputs (the retargeted motions) come from the library.
+model. Each per-clip figure of ``model``, ``original``, ``name_copy``,
+``primal_copy`` and ``direction_copy`` (temporal KNN distance at the five
+offsets, end-effector error, x100 in metres) and their means in
+``evaluation.json`` are recomputed here with numpy forward kinematics, a brute-
+force KNN over every pair of point trajectories (PC-MRL Eq. 5) and hand-picked
+end-effector pairs (Eq. 6). Only the seeded draw of the points on the bones
+(``PointCloud.sample``) and the methods' own outputs (the retargeted motions)
+come from the library.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
 import skelagnostic as sa
 from numpy_reference import global_pose, metres, qrot
-from skelagnostic.baselines import name_copy, primal_copy
+from skelagnostic.baselines import direction_copy, name_copy, primal_copy
 from skelagnostic.core.motion import UNITS
 from skelagnostic.evaluation import HeldOut, write_evaluation
 from skelagnostic.representations import PointCloud
@@ -105,6 +106,7 @@ def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_p
                 "original": _figures(cut, cut, 2),
                 "name_copy": _figures(name_copy(cut, target), cut, 0),
                 "primal_copy": _figures(primal_copy(cut, target), cut, 0),
+                "direction_copy": _figures(direction_copy(cut, target), cut, 0),
             }
     assert [r["clip"] for r in out.rows] == ["a", "b"]
     assert [r["frames"] for r in out.rows] == [MAX_FRAMES, MAX_FRAMES]
