@@ -4,8 +4,8 @@ The protocol runs on two short LaFAN1 clips with an untrained (seeded) stage-1
 model. Each per-clip figure of ``model``, ``original``, ``name_copy``,
 ``primal_copy`` and ``direction_copy`` (temporal KNN distance at the five
 offsets, end-effector error, x100 in metres) and their means in
-``evaluation.json`` are recomputed here with numpy forward kinematics, a brute-
-force KNN over every pair of point trajectories (PC-MRL Eq. 5) and hand-picked
+``evaluation.json`` are recomputed here with numpy forward kinematics, a
+brute-force KNN over every pair of point trajectories (PC-MRL Eq. 5) and hand-picked
 end-effector pairs (Eq. 6). Only the seeded draw of the points on the bones
 (``PointCloud.sample``) and the methods' own outputs (the retargeted motions)
 come from the library.

@@ -35,9 +35,11 @@ Functions:
   (positions -> rotations by IK, what a user gets) divided by the target's
   height, next to the name-copy and primal-copy baselines. Caveat: the
   procedural ground truth is itself made by driving corresponding joints with
-  the same local rotations, so the name copy is exact between procedural rigs
-  whose names match (biped22 <-> biped31) and only the topology with other
-  names (biped17) tests it.
+  the same local rotations, so with the roots aligned the name copy is exact
+  between procedural rigs whose names match (biped22 <-> biped31; its root path
+  follows the copies' root rule, :func:`skelagnostic.baselines.scaled_root`,
+  not the generated one) and only the topology with other names (biped17)
+  tests it.
 * :func:`cycle_error`: for real clips without paired ground truth,
   source -> other rig -> source, MPJPE / height, for HuMoT and the baselines.
 """
