@@ -21,10 +21,11 @@ Usage::
 
     OMP_NUM_THREADS=1 python benchmarks/pcmrl_profile.py --stage recon --steps 2
     OMP_NUM_THREADS=1 python benchmarks/pcmrl_profile.py --stage interp --preset cpu2h
+    OMP_NUM_THREADS=1 python benchmarks/pcmrl_profile.py --stage interp --reference
 
 The results are written as JSON (``--out``, default
-``benchmarks/results/pcmrl_profile.json``; one entry per stage and preset, merged
-into the file's previous entries).
+``benchmarks/results/pcmrl_profile.json``; one entry per stage and preset, and
+``/reference`` for stage 2 with ``--reference``, merged into the file's previous entries).
 """
 
 from __future__ import annotations
@@ -204,6 +205,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rows", type=int, default=12, help="operators in the table")
     parser.add_argument("--peak-size", type=int, default=2048, help="side of the sgemm timing")
     parser.add_argument("--out", type=Path, default=OUT, help="JSON file (merged)")
+    parser.add_argument(
+        "--reference",
+        action="store_true",
+        help="stage 2: model.fast_path=false (the network that encodes every frame)",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     stages = ("recon", "interp") if args.stage == "both" else (args.stage,)
@@ -212,13 +218,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"sgemm peak ({args.peak_size}^2 torch.mm, {args.threads} thread(s)): {peak:.1f} GFLOP/s")
     previous = json.loads(args.out.read_text()) if args.out.exists() else {}
     for stage in stages:
+        options = {"fast_path": False} if args.reference and stage == "interp" else {}
         for preset in presets:
-            result = profile_step(stage, preset, args.batch, args.warmup, args.steps, args.rows)
+            result = profile_step(
+                stage, preset, args.batch, args.warmup, args.steps, args.rows, **options
+            )
             result["sgemm_peak_gflops"] = peak
             result["fraction_of_peak"] = result["achieved_gflops_per_cpu_s"] / peak
             result["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
             print("\n" + table(result))
-            previous[f"{stage}/{preset}"] = result
+            previous[f"{stage}/{preset}" + ("/reference" if options else "")] = result
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(previous, indent=2) + "\n")
     print(f"\nwrote {args.out}")
