@@ -29,7 +29,13 @@ loader knows the MotionBuilder joint names of that file, not the 3ds Max names o
 Stage 2 has none: their stage-2 step also runs the stage-1 network on fresh
 point clouds to make its training data, and its batch is fixed by the keyframe
 range (32 windows), so it is not the same step as ours. Without the option the
-baselines are absent (``null``).
+``recon`` baselines are absent (``null``).
+
+The baseline of the ``interp`` rows (sizes ``default`` and ``large``) is the same
+steps of the reference network (``model.fast_path=false``: the keyframe encoder
+runs on every frame), same weights, data and seed, timed in the same run after
+the keyframe-only encoder (``fast_path=true``, the default); at ``smoke`` size
+they have none (the CI smoke test stays short).
 """
 
 from __future__ import annotations
@@ -52,6 +58,8 @@ STEPS = {"smoke": (1, 1), "default": (3, 3), "large": (10, 20)}
 #: the part runs (CI), so it takes 2 windows instead of the measured sizes' 16.
 BATCH = {"smoke": 2, "default": 16, "large": 16}
 AUTHORS = "authors' train_pointcloud.py (same run)"
+#: Baseline of the stage-2 rows (sizes ``default`` and ``large``).
+REFERENCE = "reference network (fast_path=false), same run"
 
 
 #: The presets :func:`setup` builds: the paper's settings (``model=pcmrl`` / ``model=pcmrl_interp``
@@ -167,12 +175,22 @@ def setup(
 
 
 def measure(
-    stage: str, steps: int, accelerator: str = "cpu", batch: int = BATCH["default"]
+    stage: str,
+    steps: int,
+    accelerator: str = "cpu",
+    batch: int = BATCH["default"],
+    fast_path: bool = True,
 ) -> dict[str, Any]:
-    """Median step time and data share of ``steps`` steps of ``stage`` (recon or interp)."""
+    """Median step time and data share of ``steps`` steps of ``stage`` (recon or interp).
+
+    ``fast_path=False`` (stage 2 only) times the reference network that encodes every frame.
+    """
+    import lightning as L
     import torch
 
-    model, dm, data = setup(stage, batch)
+    options = {} if stage == "recon" else {"fast_path": fast_path}
+    model, dm, data = setup(stage, batch, **options)
+    L.seed_everything(0, verbose=False)  # the same windows and keyframes for both networks
     timing = time_fit(model, dm, steps, accelerator=accelerator)
     return {
         **timing,
@@ -210,7 +228,8 @@ def run(size: str) -> list[Result]:
     """Steps/s, windows/s, data-loading share and peak RSS of both stages.
 
     With ``--authors-repo pcmrl=DIR`` the authors' stage 1 is the baseline of the
-    CPU ``recon`` rows; otherwise every baseline is absent.
+    CPU ``recon`` rows (otherwise they have none); the ``interp`` rows of sizes
+    ``default`` and ``large`` have the reference network (:data:`REFERENCE`).
     """
     repo = authors_repo("pcmrl")
     batch = BATCH[size]
@@ -218,18 +237,18 @@ def run(size: str) -> list[Result]:
     results = []
     for device in accelerators():
         for stage, steps in zip(("recon", "interp"), STEPS[size], strict=True):
-            out, rss = run_child(
-                "benchmarks.suites.training_pcmrl:measure",
-                stage=stage,
-                steps=steps,
-                accelerator=device,
-                batch=batch,
-            )
+            child = "benchmarks.suites.training_pcmrl:measure"
+            out, rss = run_child(child, stage=stage, steps=steps, accelerator=device, batch=batch)
             step, tag = out["median_step_s"], f"{stage}{suffix(device)}"
-            base, base_rss = (None, None)
+            base, base_rss, name = None, None, None
             if theirs is not None and stage == "recon" and device == "cpu":
-                base, base_rss = theirs[0]["median_step_s"], theirs[1]
-            name = AUTHORS if base is not None else None
+                base, base_rss, name = theirs[0]["median_step_s"], theirs[1], AUTHORS
+            elif stage == "interp" and size != "smoke":
+                ref, base_rss = run_child(
+                    child, stage=stage, steps=steps, accelerator=device, batch=batch,
+                    fast_path=False,
+                )  # fmt: skip
+                base, name = ref["median_step_s"], REFERENCE
             results += [
                 Result(f"pcmrl_{tag}_steps_per_s", "steps/s", 1.0 / step, name,
                        base and 1.0 / base, higher_is_better=True),
