@@ -261,6 +261,36 @@ def test_pcmrl_baseline_only_on_stage_1_and_absent_without_the_option(
     assert by_name["pcmrl_interp_steps_per_s"].baseline_value is None
 
 
+def test_pcmrl_interp_rows_take_the_reference_network_as_baseline(
+    monkeypatch: pytest.MonkeyPatch, clean_env: None
+) -> None:
+    from benchmarks.suites import training_pcmrl
+
+    calls: list[dict[str, Any]] = []
+
+    def fake(target: str, **kwargs: Any) -> tuple[dict[str, Any], float]:
+        calls.append(kwargs)
+        slow = kwargs.get("fast_path") is False  # the reference network: 1.5x the step
+        return {"median_step_s": 0.75 if slow else 0.5, "data_share": 0.1}, 600.0 if slow else 500.0
+
+    monkeypatch.setattr(training_pcmrl, "accelerators", lambda: ["cpu"])
+    monkeypatch.setattr(training_pcmrl, "run_child", fake)
+    by_name = {r.name: r for r in training_pcmrl.run("default")}
+    assert [c.get("fast_path") for c in calls] == [None, None, False]
+    assert calls[2]["stage"] == "interp"
+    steps = by_name["pcmrl_interp_steps_per_s"]
+    assert steps.baseline == training_pcmrl.REFERENCE
+    assert steps.speedup == pytest.approx(1.5)
+    assert by_name["pcmrl_interp_windows_per_s"].baseline_value == pytest.approx(
+        training_pcmrl.BATCH["default"] / 0.75
+    )
+    assert by_name["pcmrl_interp_peak_rss_mib"].baseline_value == 600.0
+    assert by_name["pcmrl_recon_steps_per_s"].baseline_value is None
+    calls.clear()
+    assert all(r.baseline_value is None for r in training_pcmrl.run("smoke"))
+    assert all("fast_path" not in c for c in calls)
+
+
 def test_pytorch3d_stand_ins_compute_the_definitions() -> None:
     import torch
     from benchmarks.suites.authors_pcmrl import (

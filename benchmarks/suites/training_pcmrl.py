@@ -29,11 +29,19 @@ loader knows the MotionBuilder joint names of that file, not the 3ds Max names o
 Stage 2 has none: their stage-2 step also runs the stage-1 network on fresh
 point clouds to make its training data, and its batch is fixed by the keyframe
 range (32 windows), so it is not the same step as ours. Without the option the
-baselines are absent (``null``).
+``recon`` baselines are absent (``null``).
+
+The baseline of the ``interp`` rows (sizes ``default`` and ``large``) is the same
+steps of the reference network (``model.fast_path=false``: the keyframe encoder
+runs on every frame), same weights, data and seed, timed in the same run after
+the keyframe-only encoder (``fast_path=true``, the default); at ``smoke`` size
+they have none (the CI smoke test stays short).
 """
 
 from __future__ import annotations
 
+import importlib
+import inspect
 import sys
 import tempfile
 from pathlib import Path
@@ -50,12 +58,68 @@ STEPS = {"smoke": (1, 1), "default": (3, 3), "large": (10, 20)}
 #: the part runs (CI), so it takes 2 windows instead of the measured sizes' 16.
 BATCH = {"smoke": 2, "default": 16, "large": 16}
 AUTHORS = "authors' train_pointcloud.py (same run)"
+#: Baseline of the stage-2 rows (sizes ``default`` and ``large``).
+REFERENCE = "reference network (fast_path=false), same run"
 
 
-def measure(
-    stage: str, steps: int, accelerator: str = "cpu", batch: int = BATCH["default"]
-) -> dict[str, Any]:
-    """Median step time and data share of ``steps`` steps of ``stage`` (recon or interp)."""
+#: The presets :func:`setup` builds: the paper's settings (``model=pcmrl`` / ``model=pcmrl_interp``
+#: defaults) or the 2-CPU-hour presets' model and batch (``experiment=pcmrl_cpu2h`` /
+#: ``experiment=pcmrl_interp_cpu2h``) on the same one clip.
+PRESETS = ("paper", "cpu2h")
+
+
+def _preset_options(stage: str, preset: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``(model options, data options)`` of ``preset`` for ``stage`` (empty for ``paper``).
+
+    Raises:
+        ValueError: ``stage`` or ``preset`` is unknown.
+    """
+    if stage not in ("recon", "interp"):
+        raise ValueError(f"stage must be 'recon' or 'interp', got {stage!r}")
+    if preset not in PRESETS:
+        raise ValueError(f"preset must be one of {', '.join(PRESETS)}, got {preset!r}")
+    if preset == "paper":
+        return {}, {}
+    from omegaconf import OmegaConf
+
+    from skelagnostic.cli import app
+
+    model, experiment = (
+        ("pcmrl", "pcmrl_cpu2h") if stage == "recon" else ("pcmrl_interp", "pcmrl_interp_cpu2h")
+    )
+    with tempfile.TemporaryDirectory() as run_dir:
+        cfg = app.compose([f"model={model}", f"experiment={experiment}", f"run_dir={run_dir}"])
+        options = OmegaConf.to_container(cfg.model, resolve=True)
+        data = OmegaConf.to_container(cfg.data, resolve=False)
+    assert isinstance(options, dict) and isinstance(data, dict)
+    target = str(options.pop("_target_"))
+    module, _, name = target.rpartition(".")
+    accepted = inspect.signature(getattr(importlib.import_module(module), name)).parameters
+    options = {k: v for k, v in options.items() if k in accepted}  # not e.g. the config's name
+    keep = (
+        ("window", "stride", "batch_size")
+        if stage == "recon"
+        else ("window", "stride", "batch_size", "key_mode", "rpa_prob", "mirror", "fps")
+    )
+    return options, {k: data[k] for k in keep if k in data}
+
+
+def setup(
+    stage: str, batch: int | None = None, preset: str = "paper", **model_options: Any
+) -> tuple[Any, Any, str]:
+    """The aligner (seed 0) and data module of one ``stage`` (recon or interp) at ``preset``.
+
+    Args:
+        stage: ``"recon"`` (stage 1) or ``"interp"`` (stage 2).
+        batch: Windows per step (``None``: the preset's, 16 for ``paper``).
+        preset: One of :data:`PRESETS`. ``cpu2h`` takes the model and the window, batch and
+            keyframe options of the preset and trains on the clip of the ``paper`` rows
+            (stage 2: LaFAN1 walk4_subject1, the preset's skeleton).
+        **model_options: More constructor options of the aligner (e.g. ``fast_path``).
+
+    Returns:
+        ``(aligner, data module, description of the data)``.
+    """
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "pcmrl" / "src"))
     import torch
     from skelagnostic_pcmrl.interp import PcmrlInterpAligner
@@ -65,42 +129,68 @@ def measure(
 
     from skelagnostic.data import BVHSource, ProceduralSource
 
+    options, data_options = _preset_options(stage, preset)
+    options.update(model_options)
+    data_options["batch_size"] = batch or data_options.get("batch_size", BATCH["default"])
     root = shared_data("human/cmu", "human/lafan1")
     cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"
+    lafan1 = None if root is None else root / "human" / "lafan1" / "walk4_subject1.bvh"
     torch.manual_seed(0)
     dm: Any
     if stage == "recon":
-        if root is not None:
-            source: Any = BVHSource(
-                [root / "human" / "lafan1" / "walk4_subject1.bvh"], units="cm", name="lafan1"
-            )
+        if lafan1 is not None:
+            source: Any = BVHSource([lafan1], units="cm", name="lafan1")
             target, target_units = str(root / "human" / "cmu" / "131_01.bvh"), "cmu"
             data = "LaFAN1 walk4_subject1 -> CMU-31 (131_01)"
         else:
             source = ProceduralSource(kinds=["biped22"], gaits=["walk", "run"], seconds=8.0)
             target, target_units = "biped31", None
             data = "procedural biped22 -> biped31"
+        data_options = {"window": 64, "stride": 16, **data_options}
         dm = PcmrlReconDataModule(
             source,
             target=target,
             target_units=target_units,
             fps=30.0,
-            window=64,
-            stride=16,
-            batch_size=batch,
             val_fraction=0.0,
             cache_dir=cache,
+            **data_options,
         )
-        model: Any = PcmrlReconAligner(lr=1e-4)
+        options = {"lr": 1e-4, **options}
+        options.pop("target", None)
+        options.pop("target_units", None)
+        return PcmrlReconAligner(**options), dm, data
+    if preset == "paper" and root is not None:
+        source = BVHSource([root / "human" / "cmu"], units="cmu", name="cmu")
+        data = "CMU-31 (131_01, 131_03) at 30 fps"
+    elif lafan1 is not None:
+        source = BVHSource([lafan1], units="cm", name="lafan1")
+        data = "LaFAN1-22 (walk4_subject1) at 30 fps"
     else:
-        if root is not None:
-            source = BVHSource([root / "human" / "cmu"], units="cmu", name="cmu")
-            data = "CMU-31 (131_01, 131_03) at 30 fps"
-        else:
-            source = ProceduralSource(kinds=["biped31"], gaits=["walk", "run"], seconds=10.0)
-            data = "procedural biped31"
-        dm = PcmrlInterpDataModule(source, fps=30.0, batch_size=batch, val_fraction=0.0)
-        model = PcmrlInterpAligner()
+        source = ProceduralSource(kinds=["biped31"], gaits=["walk", "run"], seconds=10.0)
+        data = "procedural biped31"
+    data_options = {"fps": 30.0, **data_options}
+    dm = PcmrlInterpDataModule(source, val_fraction=0.0, **data_options)
+    return PcmrlInterpAligner(**options), dm, data
+
+
+def measure(
+    stage: str,
+    steps: int,
+    accelerator: str = "cpu",
+    batch: int = BATCH["default"],
+    fast_path: bool = True,
+) -> dict[str, Any]:
+    """Median step time and data share of ``steps`` steps of ``stage`` (recon or interp).
+
+    ``fast_path=False`` (stage 2 only) times the reference network that encodes every frame.
+    """
+    import lightning as L
+    import torch
+
+    options = {} if stage == "recon" else {"fast_path": fast_path}
+    model, dm, data = setup(stage, batch, **options)
+    L.seed_everything(0, verbose=False)  # the same windows and keyframes for both networks
     timing = time_fit(model, dm, steps, accelerator=accelerator)
     return {
         **timing,
@@ -138,7 +228,8 @@ def run(size: str) -> list[Result]:
     """Steps/s, windows/s, data-loading share and peak RSS of both stages.
 
     With ``--authors-repo pcmrl=DIR`` the authors' stage 1 is the baseline of the
-    CPU ``recon`` rows; otherwise every baseline is absent.
+    CPU ``recon`` rows (otherwise they have none); the ``interp`` rows of sizes
+    ``default`` and ``large`` have the reference network (:data:`REFERENCE`).
     """
     repo = authors_repo("pcmrl")
     batch = BATCH[size]
@@ -146,18 +237,18 @@ def run(size: str) -> list[Result]:
     results = []
     for device in accelerators():
         for stage, steps in zip(("recon", "interp"), STEPS[size], strict=True):
-            out, rss = run_child(
-                "benchmarks.suites.training_pcmrl:measure",
-                stage=stage,
-                steps=steps,
-                accelerator=device,
-                batch=batch,
-            )
+            child = "benchmarks.suites.training_pcmrl:measure"
+            out, rss = run_child(child, stage=stage, steps=steps, accelerator=device, batch=batch)
             step, tag = out["median_step_s"], f"{stage}{suffix(device)}"
-            base, base_rss = (None, None)
+            base, base_rss, name = None, None, None
             if theirs is not None and stage == "recon" and device == "cpu":
-                base, base_rss = theirs[0]["median_step_s"], theirs[1]
-            name = AUTHORS if base is not None else None
+                base, base_rss, name = theirs[0]["median_step_s"], theirs[1], AUTHORS
+            elif stage == "interp" and size != "smoke":
+                ref, base_rss = run_child(
+                    child, stage=stage, steps=steps, accelerator=device, batch=batch,
+                    fast_path=False,
+                )  # fmt: skip
+                base, name = ref["median_step_s"], REFERENCE
             results += [
                 Result(f"pcmrl_{tag}_steps_per_s", "steps/s", 1.0 / step, name,
                        base and 1.0 / base, higher_is_better=True),

@@ -83,6 +83,11 @@ class PcmrlInterpAligner(Aligner):
         layout: ``"skelagnostic"`` (pre-norm blocks) or ``"authors"`` (the blocks of the
             authors' CITL: post-norm with masked norms, every frame attending to itself,
             :class:`~skelagnostic_pcmrl.interp_network.CITLInterpolator`).
+        fast_path: Run the keyframe encoder on the keyframe tokens only (default): the
+            same values and gradients as ``False`` (the reference network, which
+            encodes every frame) up to rounding, in less time; no parameter changes, so
+            checkpoints load either way. The ``"authors"`` layout always takes the
+            reference path.
 
     Raises:
         SkelagnosticError: An option is out of range.
@@ -112,6 +117,7 @@ class PcmrlInterpAligner(Aligner):
         fps: float | None = None,
         window: int = 128,
         layout: str = "skelagnostic",
+        fast_path: bool = True,
     ) -> None:
         super().__init__()
         for arg, value in (
@@ -165,6 +171,7 @@ class PcmrlInterpAligner(Aligner):
             zero_output=hp.residual,
             interm_features=interm,
             layout=hp.get("layout", "skelagnostic"),
+            fast_path=bool(hp.get("fast_path", True)),
         )
 
     def features(

@@ -41,29 +41,44 @@ class RelativeAttention(nn.Module):
         self.rel_k = nn.Parameter(torch.zeros(2 * max_relative + 1, self.head_dim))
         self.rel_v = nn.Parameter(torch.zeros(2 * max_relative + 1, self.head_dim))
 
-    def forward(self, x: Tensor, memory: Tensor, key_mask: Tensor | None = None) -> Tensor:
-        """Attend from ``x [B, T, D]`` to ``memory [B, T, D]`` (same frames).
+    def forward(
+        self,
+        x: Tensor,
+        memory: Tensor,
+        key_mask: Tensor | None = None,
+        frames: tuple[Tensor, Tensor] | None = None,
+    ) -> Tensor:
+        """Attend from ``x [B, T, D]`` to ``memory [B, S, D]``.
 
         Args:
             x: Queries.
             memory: Keys/values.
-            key_mask: ``[B, T]`` True where a frame may be attended to, or ``[B, T, T]``
-                per query frame.
+            key_mask: ``[B, S]`` True where a token may be attended to, or ``[B, T, S]``
+                per query.
+            frames: ``([B, T], [B, S])`` frame indices of the queries and of the keys, for
+                the relative positions; ``None``: both are the frames ``0 .. T - 1``
+                (``S == T``).
         """
         num_b, num_t, dim = x.shape
+        num_s = memory.shape[1]
         h, d = self.heads, self.head_dim
         q = self.q(x).view(num_b, num_t, h, d).transpose(1, 2)
-        k, v = self.kv(memory).view(num_b, num_t, 2, h, d).permute(2, 0, 3, 1, 4)
-        frames = torch.arange(num_t, device=x.device)
-        rel = (frames[None, :] - frames[:, None]).clamp(-self.max_relative, self.max_relative)
-        rel = rel + self.max_relative
-        rk, rv = self.rel_k[rel], self.rel_v[rel]  # [T, T, d]
-        logits = (q @ k.transpose(-1, -2) + torch.einsum("bhid,ijd->bhij", q, rk)) / math.sqrt(d)
+        k, v = self.kv(memory).view(num_b, num_s, 2, h, d).permute(2, 0, 3, 1, 4)
+        if frames is None:
+            pos = torch.arange(num_t, device=x.device)
+            rel = pos[None, :] - pos[:, None]  # [T, T], shared by the batch
+            pattern_k, pattern_v = "bhid,ijd->bhij", "bhij,ijd->bhid"
+        else:
+            rel = frames[1][:, None, :] - frames[0][:, :, None]  # [B, T, S]
+            pattern_k, pattern_v = "bhid,bijd->bhij", "bhij,bijd->bhid"
+        rel = rel.clamp(-self.max_relative, self.max_relative) + self.max_relative
+        rk, rv = self.rel_k[rel], self.rel_v[rel]  # [(B,) T, S, d]
+        logits = (q @ k.transpose(-1, -2) + torch.einsum(pattern_k, q, rk)) / math.sqrt(d)
         if key_mask is not None:
             allowed = key_mask[:, None] if key_mask.dim() == 3 else key_mask[:, None, None, :]
             logits = logits.masked_fill(~allowed, float("-inf"))
         attn = logits.softmax(dim=-1)
-        out = attn @ v + torch.einsum("bhij,ijd->bhid", attn, rv)
+        out = attn @ v + torch.einsum(pattern_v, attn, rv)
         return self.out(out.transpose(1, 2).reshape(num_b, num_t, dim))
 
 
@@ -111,22 +126,24 @@ class Block(nn.Module):
         memory: Tensor | None = None,
         key_mask: Tensor | None = None,
         norm_mask: Tensor | None = None,
+        frames: tuple[Tensor, Tensor] | None = None,
     ) -> Tensor:
         """Self-attention (``memory=None``) or cross-attention, then feed-forward.
 
         Args:
             x: ``[B, T, D]`` queries.
-            memory: ``[B, T, D]`` keys and values (``None``: ``x``).
+            memory: ``[B, S, D]`` keys and values (``None``: ``x``).
             key_mask: See :meth:`RelativeAttention.forward`.
             norm_mask: ``[B, T]`` frames the post-norms apply to (``None``: all).
+            frames: See :meth:`RelativeAttention.forward`.
         """
         if self.post_norm:
-            x = x + self.attn(x, x if memory is None else memory, key_mask)
+            x = x + self.attn(x, x if memory is None else memory, key_mask, frames)
             x = _masked_norm(self.norm_q, x, norm_mask)
             return _masked_norm(self.norm_ff, x + self.ff(x), norm_mask)
         q = self.norm_q(x)
         m = q if memory is None else self.norm_m(memory)
-        x = x + self.attn(q, m, key_mask)
+        x = x + self.attn(q, m, key_mask, frames)
         return x + self.ff(self.norm_ff(x))
 
 
@@ -145,6 +162,8 @@ class CITLInterpolator(nn.Module):
         interm_features: Size of the per-frame input of the intermediate tokens
             (``interm_tokens="lerp"``); 0: the tokens start at zero, as in CITL.
         layout: ``"skelagnostic"`` or ``"authors"`` (see the module docstring).
+        fast_path: Run the encoder and the intermediate blocks' keys and values on the
+            keyframe tokens only (same values; see the module docstring).
     """
 
     def __init__(
@@ -159,6 +178,7 @@ class CITLInterpolator(nn.Module):
         zero_output: bool = False,
         interm_features: int = 0,
         layout: str = "skelagnostic",
+        fast_path: bool = True,
     ) -> None:
         super().__init__()
         if layout not in LAYOUTS:
@@ -166,6 +186,7 @@ class CITLInterpolator(nn.Module):
                 f"CITLInterpolator: layout={layout!r} is not one of {', '.join(LAYOUTS)}"
             )
         self.layout = layout
+        self.fast_path = fast_path
         post = layout == "authors"
         self.embed = nn.Linear(in_features, dim)
         self.interm_embed = nn.Linear(interm_features, dim) if interm_features > 0 else None
@@ -205,6 +226,8 @@ class CITLInterpolator(nn.Module):
             interm_inputs: ``[B, T, interm_features]`` start of the intermediate tokens
                 (required when the network was built with ``interm_features``).
         """
+        if self.fast_path and self.layout == "skelagnostic" and not _tracing():
+            return self._forward_packed(inputs, keys, interm_inputs)
         key_mask: Tensor = keys
         enc_norm = interm_norm = None
         if self.layout == "authors":  # every frame also sees itself; masked post-norms
@@ -214,15 +237,60 @@ class CITLInterpolator(nn.Module):
         enc = self.embed(inputs)
         for block in self.encoder:
             enc = block(enc, key_mask=key_mask, norm_mask=enc_norm)
-        if self.interm_embed is None:
-            interm = torch.zeros_like(enc)
-        else:
-            if interm_inputs is None:
-                raise SkelagnosticError("CITLInterpolator: interm_inputs are required")
-            interm = self.interm_embed(interm_inputs)
+        interm = self._interm_start(enc, interm_inputs)
         for block in self.interm:
             interm = block(interm, memory=enc, key_mask=key_mask, norm_mask=interm_norm)
         manifold = torch.where(keys[..., None], self.key_ff(enc), self.interm_ff(interm))
+        return self._decode(manifold)
+
+    def _interm_start(self, like: Tensor, interm_inputs: Tensor | None) -> Tensor:
+        """The intermediate tokens before the first block.
+
+        Args:
+            like: ``[B, T, D]``: the shape, type and device of zero tokens.
+            interm_inputs: What ``interm_embed`` embeds (when the network has it).
+        """
+        if self.interm_embed is None:
+            return like.new_zeros(like.shape)
+        if interm_inputs is None:
+            raise SkelagnosticError("CITLInterpolator: interm_inputs are required")
+        return self.interm_embed(interm_inputs)
+
+    def _decode(self, manifold: Tensor) -> Tensor:
+        """The decoder blocks and the output layer."""
         for block in self.decoder:
             manifold = block(manifold)
         return self.head(manifold)
+
+    def _forward_packed(self, inputs: Tensor, keys: Tensor, interm_inputs: Tensor | None) -> Tensor:
+        """:meth:`forward` of the ``"skelagnostic"`` layout with the encoder on the keyframes only.
+
+        The keyframes of each window are packed in frame order into ``K`` tokens
+        (``K``: the batch's largest keyframe count; padding tokens are masked out as
+        keys and dropped from the output), attended with their own frame indices.
+        """
+        num_b, num_t = keys.shape
+        count = keys.sum(dim=-1)
+        width = int(count.max())
+        # stable sort of ~keys: each window's key frames first, in frame order
+        order = torch.argsort((~keys).to(torch.uint8), dim=-1, stable=True)[:, :width]
+        valid = torch.arange(width, device=keys.device)[None, :] < count[:, None]  # [B, K]
+        all_frames = torch.arange(num_t, device=keys.device).expand(num_b, -1)
+        gather = order[..., None].expand(-1, -1, inputs.shape[-1])
+        enc = self.embed(torch.gather(inputs, 1, gather))  # [B, K, D]
+        for block in self.encoder:
+            enc = block(enc, key_mask=valid, frames=(order, order))
+        interm = self._interm_start(enc[:, :1].expand(-1, num_t, -1), interm_inputs)
+        for block in self.interm:
+            interm = block(interm, memory=enc, key_mask=valid, frames=(all_frames, order))
+        # key tokens back to their frames; the padding tokens land on non-key frames,
+        # which take the intermediate tokens
+        index = order[..., None].expand(-1, -1, enc.shape[-1])
+        key_tokens = torch.zeros_like(interm).scatter(1, index, self.key_ff(enc))
+        manifold = torch.where(keys[..., None], key_tokens, self.interm_ff(interm))
+        return self._decode(manifold)
+
+
+def _tracing() -> bool:
+    """Whether the module is being traced or exported (shapes must not depend on values)."""
+    return bool(torch.jit.is_tracing() or torch.compiler.is_compiling())
