@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +42,7 @@ __all__ = [
     "held_out",
     "markdown",
     "mean_rows",
+    "portable_names",
     "reconstruction_rows",
     "write_evaluation",
 ]
@@ -278,6 +281,46 @@ def markdown(report: Mapping[str, Any]) -> str:
 _SPLIT_NAMES = {"test": "test split", "val": "validation split (the data has no test split)"}
 
 
+#: A clip id that is a file path, optionally behind a ``label:`` of a combined source.
+_PATH_ID = re.compile(r"^(?P<label>[^/\\:]+:)?(?P<path>/.+)$")
+
+
+def portable_names(names: Sequence[str]) -> dict[str, str]:
+    """Clip ids without this machine's folders, as ``evaluation.json`` writes them.
+
+    Ids that are absolute file paths are written relative to the deepest folder
+    all of them share, or to its parent when a file lies in that folder itself:
+    LaFAN1 and MANN dog clips of ``/data/sets/lafan1`` and
+    ``/data/sets/mann_dog`` become ``lafan1/<file>`` and ``mann_dog/<file>``; the
+    clips of one folder ``/data/sets/lafan1`` ``lafan1/<file>``. A ``label:``
+    before a path (the parts of a combined source) is kept. Other ids
+    (procedural clips, windows) are kept as they are.
+
+    Args:
+        names: Clip ids (each may appear more than once).
+
+    Returns:
+        ``id -> portable name`` for every distinct id.
+
+    Examples:
+        >>> names = portable_names(["/d/lafan1/a.bvh", "/d/mann_dog/b.bvh", "walk_3"])
+        >>> names["/d/lafan1/a.bvh"], names["/d/mann_dog/b.bvh"], names["walk_3"]
+        ('lafan1/a.bvh', 'mann_dog/b.bvh', 'walk_3')
+        >>> portable_names(["human:/d/lafan1/a.bvh"])["human:/d/lafan1/a.bvh"]
+        'human:lafan1/a.bvh'
+    """
+    matches = {n: _PATH_ID.match(n) for n in dict.fromkeys(map(str, names))}
+    folders = [os.path.dirname(m["path"]) for m in matches.values() if m]
+    if not folders:
+        return {n: n for n in matches}
+    common = os.path.commonpath(folders)
+    base = os.path.dirname(common) if common in folders else common
+    return {
+        n: f"{m['label'] or ''}{os.path.relpath(m['path'], base)}" if m else n
+        for n, m in matches.items()
+    }
+
+
 def write_evaluation(
     result: Evaluation,
     out_dir: str | Path,
@@ -315,6 +358,8 @@ def write_evaluation(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     mean = mean_rows(result.rows)
+    portable = portable_names([*held.names, *(str(row["clip"]) for row in result.rows)])
+    rows = [{**row, "clip": portable[str(row["clip"])]} for row in result.rows]
     plot_method_comparison(mean, title=protocol, out=out / "evaluation.png")
     report = {
         "schema": SCHEMA_VERSION,
@@ -327,13 +372,13 @@ def write_evaluation(
             "source": data.get("source"),
             "split": held.split,
             "split_name": _SPLIT_NAMES[held.split],
-            "clips": held.names,
+            "clips": [portable[n] for n in held.names],
             "config": dict(data),
         },
         "methods": result.methods,
         "metrics": dict(result.metrics),
         "mean": mean,
-        "per_clip": result.rows,
+        "per_clip": rows,
         "extra": result.extra,
         "plots": ["evaluation.png", *result.plots],
         "notes": list(result.notes),

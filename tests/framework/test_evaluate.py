@@ -204,3 +204,41 @@ def test_help_lists_the_protocols(example_plugin: Path, capsys: pytest.CaptureFi
     assert "Evaluation protocols (protocol=NAME; * = the model's default):" in out
     assert "* example.reconstruction" in out and "model=example" in out
     assert "ckpt_path" in out  # Hydra's help follows
+
+
+def test_evaluation_json_names_file_clips_without_the_machines_folders(tmp_path: Path) -> None:
+    """Clip ids that are absolute paths lose the folders above the data (portable JSON)."""
+    import skelagnostic as sa
+    from skelagnostic.evaluation import HeldOut, portable_names, write_evaluation
+
+    root = tmp_path / "somewhere" / "sets"
+    ids = [str(root / "lafan1" / "walk1_subject5.bvh"), str(root / "mann_dog" / "D1_004.bvh")]
+    clips = []
+    for clip_id in ids:
+        clip = sa.procedural.generate("biped22", "walk", seconds=0.5, fps=30, seed=1)[0]
+        clip.name = clip_id
+        clips.append(clip)
+    rows = [
+        {"clip": clip_id, "values": {"model": {"mpjpe_cm": float(i)}}}
+        for i, clip_id in enumerate([*ids, "window_3"])
+    ]
+    result = Evaluation({"mpjpe_cm": "an error"}, rows)
+    report = write_evaluation(
+        result,
+        tmp_path / "out",
+        protocol="p",
+        model="m",
+        description="",
+        checkpoint="last.ckpt",
+        data={"source": "bvh"},
+        held=HeldOut("test", clips),
+    )
+    names = ["lafan1/walk1_subject5.bvh", "mann_dog/D1_004.bvh"]
+    assert report["data"]["clips"] == names
+    assert [r["clip"] for r in report["per_clip"]] == [*names, "window_3"]
+    written = (tmp_path / "out" / "evaluation.json").read_text()
+    assert str(tmp_path) not in written
+    assert str(tmp_path) not in (tmp_path / "out" / "evaluation.md").read_text()
+    # one folder keeps its name; a combined source's label stays in front
+    one = portable_names([ids[0], f"human:{ids[0]}"])
+    assert one == {ids[0]: names[0], f"human:{ids[0]}": f"human:{names[0]}"}
