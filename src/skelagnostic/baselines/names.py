@@ -169,11 +169,6 @@ def scaled_root(
       so the copy starts where the source starts (on the ground) and covers
       ``ratio`` times its distance.
 
-    Earlier versions scaled the whole position about the world origin, which
-    moved a clip that starts far from the origin by ``1 - ratio`` times that
-    distance (about 0.7 m on LaFAN1 clips copied onto CMU), an offset that
-    dominated the copies' position errors.
-
     Args:
         motion: Source motion.
         target: Target skeleton.
