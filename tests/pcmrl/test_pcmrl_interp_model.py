@@ -21,6 +21,7 @@ from skelagnostic_pcmrl.interp_data import (
     random_keys,
     regular_keys,
 )
+from skelagnostic_pcmrl.rpa import bone_tails
 
 from skelagnostic import Motion, procedural
 from skelagnostic.baselines import lerp_slerp
@@ -400,3 +401,36 @@ def test_interm_tokens_option_is_checked_and_saved(tmp_path: Path) -> None:
     keys = [0, 12, motion.num_frames - 1]
     assert torch.allclose(loaded.interpolate(motion, keys).global_positions(),
                           model.interpolate(motion, keys).global_positions(), atol=1e-6)
+
+
+def test_interpolate_batches_chunks_like_one_at_a_time() -> None:
+    """Equal-length chunks run as one batch; each chunk is what it is alone (float64)."""
+    model = _tiny(window=32).double()
+    motion = _motion(seconds=6.0).to(dtype=torch.float64)  # 181 frames
+    keys = [*range(0, 150, 10), 157, 165, 180]  # chunks of 30 frames, then shorter ones
+    chunks = model._chunks(keys, 32)
+    assert [(s, e) for s, e, _, _ in chunks][:2] == [(0, 30), (30, 60)]
+    assert len({e - s for s, e, _, _ in chunks}) > 1  # several batches of different lengths
+    batched = model.interpolate(motion, keys)
+    # reference: every chunk through the network on its own, assembled by hand
+    grot = motion.global_rotations()
+    root = motion.root_positions
+    offsets = motion.skeleton.offsets[None]
+    tails = bone_tails(motion.skeleton).tails.to(torch.float64)[None]
+    want_g, want_r = grot.clone(), root.clone()
+    start = 0
+    while start < motion.num_frames - 1:
+        end = max(k for k in keys if k - start + 1 <= 32 and k > start)
+        mask = torch.tensor([[t in keys for t in range(start, end + 1)]])
+        with torch.no_grad():
+            g, r = model.interpolate_window(grot[None, start : end + 1],
+                                            root[None, start : end + 1], mask, offsets, tails)
+        want_g[start : end + 1], want_r[start : end + 1] = g[0], r[0]
+        start = end
+    got = batched.global_rotations()
+    assert torch.allclose(Q.mul(got, Q.inv(want_g))[..., 0].abs(),
+                          torch.ones_like(got[..., 0]), atol=1e-10)
+    assert torch.allclose(batched.root_positions, want_r, atol=1e-10)
+    model.interpolate_batch = 1  # one chunk per call: the same motion
+    single = model.interpolate(motion, keys)
+    assert torch.allclose(single.rotations, batched.rotations, atol=1e-10)

@@ -474,6 +474,26 @@ class PcmrlInterpAligner(Aligner):
             )
         ]
 
+    #: Chunks of equal length run through the network together, at most this many at a time.
+    interpolate_batch: int = 16
+
+    @staticmethod
+    def _chunks(keys: Sequence[int], window: int) -> list[tuple[int, int, int, int]]:
+        """Chained chunks ``(start, end, first key index, last key index)`` of a key list.
+
+        Each chunk runs from a key to the furthest key within ``window`` frames (at
+        least the next key); consecutive chunks share their boundary key.
+        """
+        chunks = []
+        ki = 0
+        while ki < len(keys) - 1:
+            end_i = ki + 1
+            while end_i + 1 < len(keys) and keys[end_i + 1] - keys[ki] + 1 <= window:
+                end_i += 1
+            chunks.append((keys[ki], keys[end_i], ki, end_i))
+            ki = end_i
+        return chunks
+
     @torch.no_grad()
     def interpolate(self, motion: Motion, keyframes: Sequence[int]) -> Motion:
         """Keep the keyframes of ``motion`` and generate the frames between them.
@@ -481,9 +501,11 @@ class PcmrlInterpAligner(Aligner):
         Clips longer than the training window are cut at keyframes into chained
         chunks of at most ``window`` frames (consecutive chunks share their
         boundary key; a gap longer than the window becomes one longer chunk, which
-        the relative positions allow). Each chunk is encoded relative to its first
-        frame (a key) and, with ``canonical_heading``, turned so that this frame
-        faces a fixed direction (the result is turned back). Lengths are brought
+        the relative positions allow); chunks of equal length run through the
+        network as one batch (at most :attr:`interpolate_batch`). Each chunk is
+        encoded relative to its first frame (a key) and, with
+        ``canonical_heading``, turned so that this frame faces a fixed direction
+        (the result is turned back). Lengths are brought
         to the training data's units (metres) and back: by ``motion.units`` when
         known, else by the known unit closest to the ratio of the skeleton
         heights (1 within a factor of 2). Animated non-root translations
@@ -523,37 +545,37 @@ class PcmrlInterpAligner(Aligner):
             )
         scale = self._scale_to_training(motion)
         work = motion.scaled(scale) if scale != 1.0 else motion
-        work = work.to(dtype=torch.float32, device=self.device)
+        work = work.to(dtype=self.dtype, device=self.device)  # the weights' dtype
         grot = work.global_rotations()
         root = work.root_positions
-        offsets = work.skeleton.offsets.float().to(self.device)
+        offsets = work.skeleton.offsets.to(self.device, self.dtype)
         tails_info = bone_tails(work.skeleton)
-        tails = tails_info.tails.float().to(self.device)
+        tails = tails_info.tails.to(self.device, self.dtype)
         out_global = grot.clone()
         out_root = root.clone()
-        window = int(self.hparams.window)
-        start = 0
-        key_set = keys
-        ki = 0
-        while start < num_t - 1:
-            # the furthest key within the window, at least the next key
-            end_i = ki + 1
-            while end_i + 1 < len(key_set) and key_set[end_i + 1] - start + 1 <= window:
-                end_i += 1
-            end = key_set[end_i]
-            mask = torch.zeros(1, end - start + 1, dtype=torch.bool, device=self.device)
-            mask[0, [k - start for k in key_set[ki : end_i + 1]]] = True
-            # chunks share only their boundary keys, which the window keeps unchanged
-            chunk_global, chunk_root = self.interpolate_window(
-                grot[None, start : end + 1],
-                root[None, start : end + 1],
-                mask,
-                offsets[None],
-                tails[None],
-            )
-            out_global[start : end + 1] = chunk_global[0]
-            out_root[start : end + 1] = chunk_root[0]
-            start, ki = end, end_i
+        chunks = self._chunks(keys, int(self.hparams.window))
+        # chunks are independent: those of equal length run as one batch
+        by_length: dict[int, list[tuple[int, int, int, int]]] = {}
+        for chunk in chunks:
+            by_length.setdefault(chunk[1] - chunk[0], []).append(chunk)
+        for group in by_length.values():
+            for first in range(0, len(group), self.interpolate_batch):
+                batch = group[first : first + self.interpolate_batch]
+                frames = torch.stack([torch.arange(s, e + 1) for s, e, _, _ in batch]).to(
+                    self.device)
+                mask = torch.zeros(frames.shape, dtype=torch.bool, device=self.device)
+                for row, (s, _, ki, end_i) in enumerate(batch):
+                    mask[row, [k - s for k in keys[ki : end_i + 1]]] = True
+                # chunks share only their boundary keys, which the window keeps unchanged
+                chunk_global, chunk_root = self.interpolate_window(
+                    grot[frames],
+                    root[frames],
+                    mask,
+                    offsets[None].expand(len(batch), -1, -1),
+                    tails[None].expand(len(batch), -1, -1),
+                )
+                out_global[frames.reshape(-1)] = chunk_global.reshape(-1, *grot.shape[1:])
+                out_root[frames.reshape(-1)] = chunk_root.reshape(-1, 3)
         local = local_from_global(out_global, skeleton.parents)
         local[keys] = work.rotations[keys]
         out_root[keys] = root[keys]
