@@ -51,6 +51,17 @@ def test_table2_of_hand_made_codes() -> None:
     assert out["frames"] == {"human": 6, "dog": 7}
 
 
+def test_table2_shared_codes_of_the_training_windows() -> None:
+    held = {"human": torch.tensor([0, 0, 1, 2, 5]), "dog": torch.tensor([1, 1, 3])}
+    trained = {"human": torch.tensor([0, 1, 2, 2]), "dog": torch.tensor([0, 1, 3, 4])}
+    out = table2(held, trained)  # shared on the training windows: {0, 1}
+    assert out["codes_shared_training"] == 2
+    assert out["frame_share_training_shared"] == {"human": pytest.approx(3 / 5),
+                                                  "dog": pytest.approx(2 / 3)}
+    assert out["frame_share"] == {"human": pytest.approx(1 / 5), "dog": pytest.approx(2 / 3)}
+    assert "codes_shared_training" not in table2(held)
+
+
 def test_table2_against_counting_three_characters() -> None:
     gen = torch.Generator().manual_seed(0)
     codes = {

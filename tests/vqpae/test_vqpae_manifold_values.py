@@ -96,6 +96,20 @@ def test_code_and_phase_figures_equal_an_independent_computation(
         on_shared = sum(c in shared for c in frame_codes) / len(frame_codes)
         assert table["frame_share"][name] == pytest.approx(on_shared)
         assert table["frames"][name] == len(frame_codes)
+    # shared components of the training data: codes of the training windows, one at a time
+    dm = held.datamodule
+    trained: dict[str, set[int]] = {}
+    for name, dataset in dm.datasets["train"].items():
+        k = model.dataset_names.index(name)
+        for i in range(len(dataset)):
+            with torch.no_grad():
+                code = model.forward_dataset(k, dataset[i]["features"][None])[1].code
+            trained.setdefault(name, set()).add(int(code[0]))
+    both = set.intersection(*trained.values())
+    assert table["codes_shared_training"] == len(both)
+    for name, frame_codes in codes.items():
+        on_trained = sum(c in both for c in frame_codes) / len(frame_codes)
+        assert table["frame_share_training_shared"][name] == pytest.approx(on_trained)
     overlap = out.extra["overlap"]
     assert overlap["usage"] == pytest.approx(len(union) / 8)
     assert overlap["overlap"] == pytest.approx(len(shared) / 8)

@@ -17,7 +17,9 @@ character and reports, per clip:
   ``pose_mpjpe_locomotion_cm``: the same on its locomotion frames
   (:func:`locomotion_frames`).
 
-``extra`` holds the paper's Table 2 (:func:`table2`) and Table 1 (:func:`table1`)
+``extra`` holds the paper's Table 2 (:func:`table2`; its shared codes once taken
+from the held-out clips, once from the training windows, as the paper's
+"embeddings in the dataset" are) and Table 1 (:func:`table1`)
 per character, codebook usage and overlap (:func:`code_overlap`), per-character
 means, and phase linearity and frequency error on held-out procedural gaits
 (:func:`procedural_gaits`); the plot ``manifold.png`` is the phase manifold
@@ -81,6 +83,7 @@ __all__ = [
     "rhythm_figures",
     "table1",
     "table2",
+    "training_codes",
     "transfer_protocol",
     "transfer_rows",
     "transition_note",
@@ -196,11 +199,39 @@ def _pose_errors(aligner: Any, clip: Any, emb: ClipEmbedding) -> tuple[torch.Ten
     )
 
 
-def table2(codes: Mapping[str, torch.Tensor]) -> dict[str, Any]:
+def training_codes(aligner: Any, datamodule: Any) -> dict[str, torch.Tensor]:
+    """Code of every training window of every character (no shuffling, no gradient).
+
+    Args:
+        aligner: A trained :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`.
+        datamodule: Its set-up :class:`~skelagnostic_vqpae.data.VqpaeDataModule`.
+
+    Returns:
+        ``character -> [N]`` codes, one per training window.
+    """
+    out: dict[str, torch.Tensor] = {}
+    with torch.no_grad():
+        for name, loader in datamodule.loaders("train", shuffle=False).items():
+            k = aligner.dataset_names.index(name)
+            codes = [aligner.forward_dataset(k, b["features"].to(aligner.device))[1].code.cpu()
+                     for b in loader]
+            if codes:
+                out[name] = torch.cat(codes)
+    return out
+
+
+def table2(
+    codes: Mapping[str, torch.Tensor], training: Mapping[str, torch.Tensor] | None = None
+) -> dict[str, Any]:
     """WalkTheDog Table 2 per character, from the code of every frame of its clips.
 
     Args:
         codes: ``character -> [F]`` code of every frame of its (held-out) clips.
+        training: Optional ``character -> [N]`` codes of its training windows. The
+            paper's Table 2 calls a component (code) shared when both datasets' embeddings
+            lie on it; with this argument the codes every character uses on its
+            training clips are that set, and ``frame_share_training_shared`` is the
+            share of each character's held-out frames on one of them.
 
     Returns:
         ``characters``; ``codes_used`` (character -> number of distinct codes its
@@ -209,7 +240,10 @@ def table2(codes: Mapping[str, torch.Tensor]) -> dict[str, Any]:
         ``codes_shared / codes_used_any`` (the issue's "codes used that are shared",
         target >= 0.75); ``shared_of_own`` (character -> ``codes_shared`` / its
         ``codes_used``); ``frame_share`` (character -> share of its frames on a
-        shared code, the paper's Table 2 figure); ``frames`` per character.
+        shared code, the paper's Table 2 figure); ``frames`` per character. With
+        ``training``: ``codes_shared_training`` (codes every character uses on its
+        training windows) and ``frame_share_training_shared`` (character -> share of
+        its held-out frames on one of those).
 
     Example:
         >>> out = table2({"human": torch.tensor([0, 0, 1, 2]), "dog": torch.tensor([1, 1, 3])})
@@ -219,7 +253,7 @@ def table2(codes: Mapping[str, torch.Tensor]) -> dict[str, Any]:
     used = {name: set(c.tolist()) for name, c in codes.items()}
     shared = set.intersection(*used.values()) if used else set()
     union = set.union(*used.values()) if used else set()
-    return {
+    out: dict[str, Any] = {
         "characters": list(codes),
         "codes_used": {name: len(u) for name, u in used.items()},
         "codes_shared": len(shared),
@@ -234,6 +268,14 @@ def table2(codes: Mapping[str, torch.Tensor]) -> dict[str, Any]:
         },
         "frames": {name: len(c) for name, c in codes.items()},
     }
+    if training is not None:
+        trained = set.intersection(*(set(c.tolist()) for c in training.values()))
+        out["codes_shared_training"] = len(trained)
+        out["frame_share_training_shared"] = {
+            name: float(np.isin(c.numpy(), sorted(trained)).mean()) if len(c) else math.nan
+            for name, c in codes.items()
+        }
+    return out
 
 
 def table1(errors: Mapping[str, Sequence[tuple[torch.Tensor, ...]]]) -> dict[str, Any]:
@@ -437,7 +479,8 @@ def manifold_protocol(
         by_character.setdefault(emb.dataset, []).append(emb)
     codes = {n: torch.cat([e.code for e in embs]) for n, embs in by_character.items()}
     overlap = code_overlap(codes, num_codes)
-    table = table2(codes)
+    trained = training_codes(aligner, held.datamodule) if held.datamodule is not None else None
+    table = table2(codes, trained if trained and set(trained) >= set(codes) else None)
     shared = set.intersection(*(set(c.tolist()) for c in codes.values()))
     specs = aligner.hparams["datasets"] or {}
     authors = [n for n in aligner.dataset_names if (specs.get(n) or {}).get("pose_features")]
