@@ -207,11 +207,14 @@ def training_codes(aligner: Any, datamodule: Any) -> dict[str, torch.Tensor]:
         datamodule: Its set-up :class:`~skelagnostic_vqpae.data.VqpaeDataModule`.
 
     Returns:
-        ``character -> [N]`` codes, one per training window.
+        ``character -> [N]`` codes, one per training window; datasets the aligner
+        has no VQ-PAE for (another run's data) are left out.
     """
     out: dict[str, torch.Tensor] = {}
     with torch.no_grad():
         for name, loader in datamodule.loaders("train", shuffle=False).items():
+            if name not in aligner.dataset_names:
+                continue
             k = aligner.dataset_names.index(name)
             codes = [aligner.forward_dataset(k, b["features"].to(aligner.device))[1].code.cpu()
                      for b in loader]
@@ -480,12 +483,18 @@ def manifold_protocol(
     codes = {n: torch.cat([e.code for e in embs]) for n, embs in by_character.items()}
     overlap = code_overlap(codes, num_codes)
     trained = training_codes(aligner, held.datamodule) if held.datamodule is not None else None
-    table = table2(codes, trained if trained and set(trained) >= set(codes) else None)
+    if not trained or not set(trained) >= set(codes):
+        trained = None  # the data module's training split is not the characters' data
+    table = table2(codes, trained)
     shared = set.intersection(*(set(c.tolist()) for c in codes.values()))
     specs = aligner.hparams["datasets"] or {}
     authors = [n for n in aligner.dataset_names if (specs.get(n) or {}).get("pose_features")]
     pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
     notes = [
+        "codes_shared_training / frame_share_training_shared: "
+        + ("codes every character uses on the training split of the evaluated data"
+           if trained is not None else "omitted, the evaluated data has no training split "
+           "with a dataset of every character's name"),
         f"shared codes: {len(shared)} of {num_codes}, over the held-out clips of "
         f"{', '.join(by_character)}; chance = shared / K; codes shared / codes used by any "
         f"character: {table['codes_shared']} / {table['codes_used_any']}",
