@@ -23,7 +23,7 @@ import json
 import math
 import os
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,6 +44,7 @@ __all__ = [
     "mean_rows",
     "portable_names",
     "reconstruction_rows",
+    "track",
     "write_evaluation",
 ]
 
@@ -51,6 +52,32 @@ __all__ = [
 MODEL = "model"
 #: Version of the layout of ``evaluation.json``.
 SCHEMA_VERSION = 1
+
+
+def track(
+    items: Iterable[Any], description: str, total: int | None = None, console: Any = None
+) -> Iterator[Any]:
+    """Iterate ``items`` with a Rich progress bar on stderr (protocols' long loops).
+
+    The bar is transient and drawn only when the console is a terminal, so logs
+    and captured output stay clean.
+
+    Args:
+        items: What to iterate.
+        description: The bar's label, e.g. ``"vqpae.manifold: held-out clips"``.
+        total: Number of items (default: ``len(items)`` when it has one, else the
+            bar shows no end).
+        console: A ``rich.console.Console`` (default: one on stderr).
+
+    Yields:
+        The items, unchanged.
+    """
+    from rich.console import Console
+    from rich.progress import track as rich_track
+
+    console = console or Console(stderr=True)
+    yield from rich_track(items, description=description, total=total, console=console,
+                          transient=True, disable=not console.is_terminal)
 
 
 class EvaluationError(SkelagnosticError):
@@ -186,7 +213,7 @@ def reconstruction_rows(
         Rows for :class:`Evaluation` with :data:`RECONSTRUCTION_METRICS`.
     """
     rows = []
-    for clip in clips:
+    for clip in track(clips, "held-out clips"):
         pred = reconstruct(clip)
         if pred.fps != clip.fps:
             pred = pred.resample(clip.fps)

@@ -45,7 +45,14 @@ from skelagnostic.baselines import direction_copy, lerp_slerp, name_copy, primal
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut, clips_of_split
+from skelagnostic.evaluation import (
+    MODEL,
+    Evaluation,
+    EvaluationError,
+    HeldOut,
+    clips_of_split,
+    track,
+)
 from skelagnostic.metrics.functional import end_effector_error, temporal_knn_distance
 from skelagnostic.representations import PointCloud
 from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, position_stats, windows
@@ -144,7 +151,7 @@ def evaluate_clips(
         ``{"rows": {row: {metric: mean}}, "per_clip": [...], "options": ...}``.
     """
     per_clip = []
-    for motion in clips:
+    for motion in track(clips, "held-out clips"):
         rows = {}
         if baselines or aligner is None:
             rows["original"] = evaluate_pair(
@@ -335,7 +342,7 @@ def interpolation_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evalua
         )
     methods = {MODEL: aligner.interpolate, "lerp_slerp": lerp_slerp}
     rows = []
-    for clip in clips:
+    for clip in track(clips, "held-out clips"):
         report = evaluate(methods, [clip], window, stride, GAPS, stats)
         values = {
             m: {f"{k}@{g}": v for g, per in gaps.items() for k, v in per.items()}

@@ -51,6 +51,7 @@ from skelagnostic.evaluation import (
     HeldOut,
     clips_of_split,
     mean_rows,
+    track,
 )
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import GlobalPositions
@@ -217,7 +218,8 @@ def training_codes(aligner: Any, datamodule: Any) -> dict[str, torch.Tensor]:
                 continue
             k = aligner.dataset_names.index(name)
             codes = [aligner.forward_dataset(k, b["features"].to(aligner.device))[1].code.cpu()
-                     for b in loader]
+                     for b in track(loader, f"{name}: codes of the training windows",
+                                    total=len(loader))]
             if codes:
                 out[name] = torch.cat(codes)
     return out
@@ -476,7 +478,7 @@ def manifold_protocol(
         (:func:`procedural_gaits`).
     """
     num_codes = int(aligner.hparams.num_codes)
-    embeddings = [embed_clip(aligner, clip) for clip in held.clips]
+    embeddings = [embed_clip(aligner, clip) for clip in track(held.clips, "held-out clips")]
     by_character: dict[str, list[ClipEmbedding]] = {}
     for emb in embeddings:
         by_character.setdefault(emb.dataset, []).append(emb)
@@ -935,7 +937,7 @@ def transfer_rows(
     )
     shortest = min(m.duration for m in target.motions)
     rows, outputs = [], {}
-    for clip in sources:
+    for clip in track(sources, "transfer: held-out clips"):
         source_hz = gait_frequency(clip)
         options = {"halflife": halflife, "frequency_tolerance": frequency_tolerance}
         made = {
