@@ -107,6 +107,24 @@ def test_encode_gives_one_embedding_per_frame(trained: dict) -> None:
     assert bool((latent.extras["frequency"] > 0).all())
 
 
+def test_encode_dataset_is_forward_dataset_without_the_decoder(trained: dict) -> None:
+    model: VqpaeAligner = trained["model"].eval()
+    seen = set()
+    for kind in ("biped22", "quadruped"):  # each dataset's own network and codebook view
+        motion, _ = procedural.generate(kind, "walk", seconds=2.0, fps=FPS, seed=4)
+        k = model.dataset_of(motion.skeleton)
+        seen.add(k)
+        windows, _ = model._windows(k, motion)
+        with torch.no_grad():
+            _, full = model.forward_dataset(k, windows)
+            alone = model.encode_dataset(k, windows)
+        for field in ("phase", "frequency", "code", "amplitude", "manifold"):
+            assert torch.equal(getattr(alone, field), getattr(full, field)), (kind, field)
+    assert seen == {0, 1}
+    with pytest.raises(SkelagnosticError, match="no datasets yet"):
+        VqpaeAligner().encode_dataset(0, torch.zeros(1, 3, 5))
+
+
 def test_decode_gives_the_average_pose_on_the_skeleton(trained: dict) -> None:
     model: VqpaeAligner = trained["model"]
     motion, _ = procedural.generate("quadruped", "trot", seconds=1.0, fps=FPS, seed=2)

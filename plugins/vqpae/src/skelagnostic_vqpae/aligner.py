@@ -364,6 +364,11 @@ class VqpaeAligner(Aligner):
         book = self._require_built()
         return self.characters[index].pae(windows, book.quantizer(index))
 
+    def encode_dataset(self, index: int, windows: Tensor) -> PhaseParameters:
+        """:meth:`forward_dataset` without the decoder: the parameters of the windows only."""
+        book = self._require_built()
+        return self.characters[index].pae.encode(windows, book.quantizer(index))
+
     def _losses(self, batch: Mapping[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
         hp = self.hparams
         parts: list[Tensor] = []
@@ -711,7 +716,7 @@ class VqpaeAligner(Aligner):
 
     def _pivot_embedding(self, k: int, batch: Mapping[str, Tensor]) -> dict[str, Tensor]:
         """Dataset ``k``'s embedding of each window's pivot, with its ``clip`` and ``pivot``."""
-        _, p = self.forward_dataset(k, batch["features"])
+        p = self.encode_dataset(k, batch["features"])
         return {"phase": p.phase, "frequency": p.frequency, "code": p.code,
                 "amplitude": p.amplitude, "manifold": p.manifold[..., p.manifold.shape[-1] // 2],
                 "clip": batch["clip"], "pivot": batch["pivot"]}
@@ -863,7 +868,7 @@ class VqpaeAligner(Aligner):
         outs: dict[str, list[Tensor]] = {n: [] for n in ("z", "phase", "frequency", "code",
                                                          "amplitude", "raw_amplitude")}
         for chunk in windows.split(batch_size):
-            _, p = self.forward_dataset(k, chunk)
+            p = self.encode_dataset(k, chunk)
             outs["z"].append(p.manifold[..., p.manifold.shape[-1] // 2])
             outs["phase"].append(p.phase)
             outs["frequency"].append(p.frequency)

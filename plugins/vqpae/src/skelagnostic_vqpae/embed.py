@@ -135,7 +135,7 @@ def fit_average_pose(aligner: VqpaeAligner, datamodule: Any, epochs: int = 1,
             losses = []
             for batch in loader:
                 with torch.no_grad():
-                    _, p = aligner.forward_dataset(k, batch["features"].to(aligner.device))
+                    p = aligner.encode_dataset(k, batch["features"].to(aligner.device))
                 loss = torch.nn.functional.mse_loss(mlp(p.manifold.transpose(1, 2)),
                                                     batch["poses"].to(aligner.device))
                 opt.zero_grad()

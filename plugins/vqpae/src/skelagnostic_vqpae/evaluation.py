@@ -217,9 +217,8 @@ def training_codes(aligner: Any, datamodule: Any) -> dict[str, torch.Tensor]:
             if name not in aligner.dataset_names:
                 continue
             k = aligner.dataset_names.index(name)
-            codes = [aligner.forward_dataset(k, b["features"].to(aligner.device))[1].code.cpu()
-                     for b in track(loader, f"{name}: codes of the training windows",
-                                    total=len(loader))]
+            codes = [aligner.encode_dataset(k, b["features"].to(aligner.device)).code.cpu()
+                     for b in track(loader, f"{name}: codes of the training windows")]
             if codes:
                 out[name] = torch.cat(codes)
     return out
