@@ -44,6 +44,7 @@ def test_table2_of_hand_made_codes() -> None:
     assert out["characters"] == ["human", "dog"]
     assert out["codes_used"] == {"human": 4, "dog": 3}
     assert out["codes_shared"] == 2 and out["codes_used_any"] == 5  # {1, 2} of {0, 1, 2, 3, 5}
+    assert out["shared_codes"] == [1, 2]
     assert out["shared_of_used"] == pytest.approx(2 / 5)
     assert out["shared_of_own"] == {"human": pytest.approx(2 / 4), "dog": pytest.approx(2 / 3)}
     # human: frames 2 and 3 of 6 on {1, 2}; dog: frames 0, 1, 2 of 7

@@ -239,7 +239,8 @@ def table2(
 
     Returns:
         ``characters``; ``codes_used`` (character -> number of distinct codes its
-        frames use); ``codes_shared``: codes used by every character;
+        frames use); ``codes_shared``: codes used by every character, and
+        ``shared_codes``: their ids, ascending;
         ``codes_used_any``: codes used by any character; ``shared_of_used``:
         ``codes_shared / codes_used_any`` (the issue's "codes used that are shared",
         target >= 0.75); ``shared_of_own`` (character -> ``codes_shared`` / its
@@ -261,6 +262,7 @@ def table2(
         "characters": list(codes),
         "codes_used": {name: len(u) for name, u in used.items()},
         "codes_shared": len(shared),
+        "shared_codes": sorted(shared),
         "codes_used_any": len(union),
         "shared_of_used": len(shared) / len(union) if union else math.nan,
         "shared_of_own": {
@@ -487,7 +489,7 @@ def manifold_protocol(
     if not trained or not set(trained) >= set(codes):
         trained = None  # the data module's training split is not the characters' data
     table = table2(codes, trained)
-    shared = set.intersection(*(set(c.tolist()) for c in codes.values()))
+    shared = table["shared_codes"]
     specs = aligner.hparams["datasets"] or {}
     authors = [n for n in aligner.dataset_names if (specs.get(n) or {}).get("pose_features")]
     pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
@@ -512,7 +514,7 @@ def manifold_protocol(
     rows = []
     errors: dict[str, list[tuple[torch.Tensor, ...]]] = {}
     for clip, emb in zip(held.clips, embeddings, strict=True):
-        share = float(np.isin(emb.code.numpy(), sorted(shared)).mean()) if len(emb) else 0.0
+        share = float(np.isin(emb.code.numpy(), shared).mean()) if len(emb) else 0.0
         values: dict[str, dict[str, float]] = {
             MODEL: {"shared_code_share": share, "phase_r2": phase_line(emb.phase)[0]},
             "chance": {"shared_code_share": len(shared) / num_codes},
