@@ -2,21 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "pcmrl_fastpath.py"
+from script_loader import load_script
 
 
-def _script():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("pcmrl_fastpath", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def _script() -> ModuleType:
+    return load_script("benchmarks/pcmrl_fastpath.py", "pcmrl_fastpath")
 
 
 @pytest.mark.data
@@ -32,5 +28,6 @@ def test_fast_path_does_fewer_flops_on_the_same_batches(tmp_path: Path) -> None:
         assert step["cpu_s_fast"] > 0 and step["cpu_s_reference"] > 0
         assert 2 <= step["keys"] <= 128
     total = sum(s["flops_reference"] for s in result["steps"]) / sum(
-        s["flops_fast"] for s in result["steps"])
+        s["flops_fast"] for s in result["steps"]
+    )
     assert result["total_flop_ratio"] == pytest.approx(total)

@@ -2,22 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "pcmrl_interp_probe.py"
+from script_loader import load_script
 
 
-def _probe():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("interp_probe", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def _probe() -> ModuleType:
+    return load_script("benchmarks/pcmrl_interp_probe.py", "interp_probe")
 
 
 @pytest.mark.data

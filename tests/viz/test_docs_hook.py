@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import re
 from pathlib import Path
 
@@ -10,17 +9,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from script_loader import load_script
+
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 
 @pytest.fixture(scope="module")
 def hook():
-    spec = importlib.util.spec_from_file_location(
-        "render_examples", DOCS / "hooks" / "render_examples.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("docs/hooks/render_examples.py", "render_examples")
 
 
 @pytest.mark.slow
