@@ -66,6 +66,23 @@ def test_later_verbs_need_only_the_checkpoint(verb: str, fitted: Path, tmp_path:
     assert "evaluated checkpoint" in out
 
 
+def test_a_checkpoint_deeper_in_the_checkpoints_folder_finds_its_run(
+        fitted: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # a second ModelCheckpoint (e.g. every N steps) writing to checkpoints/periodic/
+    periodic = fitted / "checkpoints" / "periodic"
+    periodic.mkdir()
+    (periodic / "step2.ckpt").write_bytes((fitted / "checkpoints" / "last.ckpt").read_bytes())
+    assert cli.main(["validate", f"ckpt_path={periodic / 'step2.ckpt'}"]) == 0, (
+        capsys.readouterr().err)
+    config = yaml.safe_load((later_run(tmp_path, "validate") / "config.yaml").read_text())
+    assert config["model"]["hidden"] == 8 and config["data"]["window"] == 16  # the run's
+    # outside a run's checkpoints folder nothing is guessed
+    loose = tmp_path / "elsewhere" / "deeper" / "model.ckpt"
+    loose.parent.mkdir(parents=True)
+    loose.write_bytes(b"")
+    assert cli.runs.find_run_dir(loose) is None
+
+
 def test_explicit_overrides_still_win(fitted: Path, tmp_path: Path,
                                       capsys: pytest.CaptureFixture[str]) -> None:
     assert cli.main(["validate", f"ckpt_path={fitted}", "data.batch_size=3"]) == 0

@@ -41,11 +41,21 @@ REUSED = ("model", "data")
 def find_run_dir(ckpt: str | Path) -> Path | None:
     """The run directory of a checkpoint (or the directory itself), if it has a ``config.yaml``.
 
-    Looks at the checkpoint's folder and the one above it
-    (``<run>/checkpoints/last.ckpt``).
+    Looks at the checkpoint's folder, the one above it (``<run>/checkpoints/last.ckpt``)
+    and, for a checkpoint deeper in a run's ``checkpoints`` folder (a second
+    ``ModelCheckpoint`` writing to ``<run>/checkpoints/periodic/``), the folder that
+    holds ``checkpoints``.
+
+    Example:
+        >>> find_run_dir("/nonexistent/run/checkpoints/last.ckpt") is None
+        True
     """
     path = expand_path(ckpt)
     candidates = [path] if path.is_dir() else [path.parent, path.parent.parent]
+    if not path.is_dir():
+        inside = next((p for p in path.parents if p.name == "checkpoints"), None)
+        if inside is not None:
+            candidates.append(inside.parent)
     return next((c for c in candidates if (c / CONFIG_FILE).is_file()), None)
 
 
