@@ -51,8 +51,9 @@ def run(preset: str, batch: int | None, steps: int, fast_path: bool, count: bool
         count: Count FLOPs instead of timing.
 
     Returns:
-        One dict per step after the warm-up: ``keys`` (mean keyframes per window) and
-        ``cpu_s`` or ``flops``.
+        One dict per step after the warm-up: ``keys`` (mean keyframes per window),
+        ``batch`` (the keyframe positions and a checksum of the windows' rotations,
+        to check that two runs drew the same batches) and ``cpu_s`` or ``flops``.
     """
     import lightning as L
     from torch.utils.flop_counter import FlopCounterMode
@@ -68,7 +69,16 @@ def run(preset: str, batch: int | None, steps: int, fast_path: bool, count: bool
         start = 0.0
 
         def on_train_batch_start(self, trainer: Any, module: Any, batch: Any, *args: Any) -> None:
-            rows.append({"keys": float(batch["keys"].sum(-1).float().mean())})
+            rows.append(
+                {
+                    "keys": float(batch["keys"].sum(-1).float().mean()),
+                    # which windows and keyframes: both runs of a comparison must draw the same
+                    "batch": (
+                        batch["keys"].nonzero().tolist(),
+                        float(batch["global_rotations"].double().sum()),
+                    ),
+                }
+            )
             if count:
                 self.mode = FlopCounterMode(display=False)
                 self.mode.__enter__()
@@ -98,13 +108,13 @@ def main(argv: list[str] | None = None) -> int:
     for name, fast in (("fast", True), ("reference", False)):
         timed = run(args.preset, args.batch, args.steps, fast, count=False)
         counted = run(args.preset, args.batch, args.steps, fast, count=True)
-        if [r["keys"] for r in timed] != [r["keys"] for r in counted]:
+        if [r["batch"] for r in timed] != [r["batch"] for r in counted]:
             raise RuntimeError("the timed and the counted runs drew different batches")
         side[name] = [
-            {"keys": t["keys"], "cpu_s": t["cpu_s"], "flops": c["flops"]}
+            {"keys": t["keys"], "batch": t["batch"], "cpu_s": t["cpu_s"], "flops": c["flops"]}
             for t, c in zip(timed, counted, strict=True)
         ]
-    if [r["keys"] for r in side["fast"]] != [r["keys"] for r in side["reference"]]:
+    if [r["batch"] for r in side["fast"]] != [r["batch"] for r in side["reference"]]:
         raise RuntimeError("the two networks drew different batches")
     steps = []
     print(
