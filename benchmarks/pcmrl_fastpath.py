@@ -1,8 +1,9 @@
 r"""PC-MRL stage 2: the keyframe fast path against the reference network, step by step.
 
-Both networks (``model.fast_path=true``, the default, and ``false``) train on the
-same windows and keyframes (:func:`lightning.seed_everything` before each run,
-as the training suite does), at the paper's settings
+Both networks (``model.fast_path=true``, the default, and ``false``) are built by
+the training suite's setup, seeded as it seeds them, and train on the same
+windows and keyframes (checked per step: keyframe positions and a checksum of the
+windows; the script stops if they differ), at the paper's settings
 (:func:`benchmarks.suites.training_pcmrl.setup`, ``--preset paper``) or the
 2-CPU-hour preset's. For every training step the script reports the keyframes
 per window, the floating-point operations of both networks
