@@ -20,8 +20,10 @@ from skelagnostic_vqpae.evaluation import (
     contact_lock,
     contact_onsets,
     gait_frequency,
+    gait_phase,
     locomotion_frames,
     manifold_protocol,
+    phase_oracle_errors,
     procedural_kind,
     rhythm_figures,
     table1,
@@ -57,8 +59,10 @@ def test_table2_shared_codes_of_the_training_windows() -> None:
     trained = {"human": torch.tensor([0, 1, 2, 2]), "dog": torch.tensor([0, 1, 3, 4])}
     out = table2(held, trained)  # shared on the training windows: {0, 1}
     assert out["codes_shared_training"] == 2
-    assert out["frame_share_training_shared"] == {"human": pytest.approx(3 / 5),
-                                                  "dog": pytest.approx(2 / 3)}
+    assert out["frame_share_training_shared"] == {
+        "human": pytest.approx(3 / 5),
+        "dog": pytest.approx(2 / 3),
+    }
     assert out["frame_share"] == {"human": pytest.approx(1 / 5), "dog": pytest.approx(2 / 3)}
     assert "codes_shared_training" not in table2(held)
 
@@ -180,6 +184,78 @@ def test_contact_frequency_of_real_walks_is_their_gait_frequency(walks) -> None:
         assert contact_frequency(faster) == pytest.approx(1.3 * contact_frequency(clip), rel=0.05)
 
 
+def test_gait_phase_of_real_walks_advances_at_their_gait_frequency(walks) -> None:
+    human, dog = walks
+    for clip in (human, dog):  # defined on most locomotion frames, in [0, 1)
+        phase, loco = gait_phase(clip), locomotion_frames(clip).numpy()
+        finite = np.isfinite(phase)
+        assert finite[loco].mean() > 0.85
+        assert phase[finite].min() >= 0 and phase[finite].max() < 1
+    for clip in (human[620:830], dog):  # steady stretches (the human stops around 560)
+        phase = gait_phase(clip)
+        finite = np.isfinite(phase)
+        # cycles per second over the frames with a phase, against the feet's fore-aft swing
+        steps = np.diff(phase)[finite[1:] & finite[:-1]] % 1.0
+        rate = steps.sum() / (len(steps) / clip.fps)
+        assert rate == pytest.approx(gait_frequency(clip), rel=0.05)
+
+
+def test_gait_phase_is_undefined_while_the_character_stands(walks) -> None:
+    clip = walks[0][620:830]  # 7 s of steady walk, then the same with a stop in the middle
+    pause = int(4 * clip.fps)  # 4 s standing on frame 105
+    frames = torch.cat([torch.arange(105), torch.full((pause,), 105), torch.arange(105, 210)])
+    paused = Motion(clip.skeleton, clip.rotations[frames], clip.root_positions[frames], clip.fps)
+    phase, steady = gait_phase(paused), gait_phase(clip)
+    assert np.isnan(phase[105 + int(clip.fps) : 105 + pause - int(clip.fps)]).all()
+    assert np.isfinite(steady[105 - 30 : 105 + 30]).all()  # walking through, it is defined
+    walking = np.isfinite(phase[:60]).mean(), np.isfinite(phase[-60:]).mean()
+    assert min(walking) > 0.5
+
+
+def test_phase_oracle_against_grouping_by_hand() -> None:
+    gen = np.random.default_rng(0)
+    pose = torch.from_numpy(gen.normal(size=(60, 4, 3)))
+    phase = torch.from_numpy(gen.uniform(0, 1, 60))
+    phase[:5] = math.nan
+    mask = torch.from_numpy(gen.uniform(size=60) < 0.7)
+    out = phase_oracle_errors(pose, phase, mask, bins=4)
+    rows = [(f, int(4 * float(phase[f]))) for f in range(60) if mask[f] and f >= 5]
+    for f, b in rows:
+        mean = np.mean([pose[g].numpy() for g, b2 in rows if b2 == b], axis=0)
+        expected = np.linalg.norm(pose[f].numpy() - mean, axis=-1).mean()
+        assert float(out[f]) == pytest.approx(expected, rel=1e-12)
+    evaluated = {f for f, _ in rows}
+    assert all(math.isnan(float(out[f])) for f in range(60) if f not in evaluated)
+    # one bin: the mean pose of the evaluated frames, the mean-pose baseline's figure
+    whole = phase_oracle_errors(pose, phase.nan_to_num(0.5), torch.ones(60, dtype=torch.bool), 1)
+    centred = pose - pose.mean(0)
+    assert torch.allclose(whole, centred.norm(dim=-1).mean(-1))
+
+
+def test_table1_reports_the_phase_oracle_on_phased_locomotion_frames() -> None:
+    nan, yes, no = math.nan, True, False
+    errors = {
+        "human": [
+            # model, mean pose, locomotion, oracle (NaN: no gait phase)
+            (
+                torch.tensor([0.02, 0.04, 0.06, 0.08]),
+                torch.tensor([0.1, 0.1, 0.2, 0.2]),
+                torch.tensor([yes, yes, yes, no]),
+                torch.tensor([0.05, nan, 0.1, 0.01]),
+            ),
+        ],
+    }
+    loco = table1(errors)["human"]["locomotion"]
+    assert loco["phase_oracle_frames"] == 2  # frames 0 and 2 (frame 3 is not locomotion)
+    assert loco["phase_oracle"] == pytest.approx(100 * 0.15 / 2)
+    assert loco["phased_ratio"] == {
+        MODEL: pytest.approx(0.08 / 0.3),
+        "phase_oracle": pytest.approx(0.15 / 0.3),
+    }
+    assert loco["ratio"] == pytest.approx(0.12 / 0.4)  # all locomotion frames, as before
+    assert "phase_oracle" not in table1({"h": [e[:3] for e in errors["human"]]})["h"]["locomotion"]
+
+
 def test_contact_lock_of_hand_made_onsets() -> None:
     source = [np.arange(0.0, 100.0, 10.0), np.arange(5.0, 100.0, 10.0)]
     lagged = [np.arange(2.0, 100.0, 10.0) + 0.5 * k for k in range(4)]  # 4 feet, fixed lags
@@ -247,6 +323,7 @@ def test_manifold_protocol_tables_per_character(tiny, tmp_path) -> None:
             weighted = sum(r["frames"] * r["values"][method]["pose_mpjpe_cm"] for r in rows)
             assert figures["all"][method] == pytest.approx(weighted / frames, rel=1e-6)
         assert figures["locomotion"]["frames"] == sum(r["locomotion_frames"] for r in rows)
+        assert 0 <= figures["locomotion"]["phase_oracle_frames"] <= figures["locomotion"]["frames"]
         clip_mean = np.mean([r["values"][MODEL]["phase_r2"] for r in rows])
         assert out.extra["per_character"][name][MODEL]["phase_r2"] == pytest.approx(clip_mean)
     # held-out procedural gaits: unseen seeds, the generator's frequencies
