@@ -22,7 +22,9 @@ from skelagnostic_vqpae.evaluation import (
     gait_frequency,
     gait_phase,
     locomotion_frames,
+    locomotion_runs,
     manifold_protocol,
+    motion_onsets,
     phase_oracle_errors,
     procedural_kind,
     rhythm_figures,
@@ -287,6 +289,41 @@ def test_rhythm_of_a_dog_following_a_human_walk(walks) -> None:
     assert rushed["contact_rhythm_within_10pct"] == 0.0
     drifting = rhythm_figures(human, _retimed(human, 1.0, 1.3))["contact_lock"]
     assert drifting < 0.5 * itself["contact_lock"]
+    assert itself["locomotion_rhythm_error_pct"] == 0.0  # over the human's walks only
+
+
+def test_locomotion_rhythm_counts_only_the_source_walks(walks) -> None:
+    walk = walks[0][620:830]  # 7 s of steady walk
+    fps, pause = walk.fps, int(4 * walk.fps)
+    # the source stands still 4 s in the middle; the output walks on through the pause
+    stand = torch.cat([torch.arange(105), torch.full((pause,), 105), torch.arange(105, 210)])
+    keep_walking = torch.cat(
+        [torch.arange(105), torch.arange(105, 105 + pause) % 210, torch.arange(105, 210)]
+    )
+    source, output = (
+        Motion(walk.skeleton, walk.rotations[f], walk.root_positions[f], fps)
+        for f in (stand, keep_walking)
+    )
+    runs = locomotion_runs(source)
+    assert len(runs) == 2
+    assert runs[0][1] <= 105 + 0.5 * fps and runs[1][0] >= 105 + pause - 0.5 * fps
+    figures = rhythm_figures(source, output)
+    assert figures["contact_rhythm_error_pct"] > 30  # the whole clip: the pause counts
+    # inside the runs, by hand: touch-downs per second and foot on both sides
+    seconds = sum(b - a for a, b in runs) / fps
+
+    def rate(motion: Motion) -> float:
+        onsets = motion_onsets(motion)
+        inside = sum(((o >= a) & (o < b)).sum() for o in onsets for a, b in runs)
+        return inside / len(onsets) / seconds
+
+    expected = 100 * abs(rate(output) / rate(source) - 1)
+    assert figures["locomotion_rhythm_error_pct"] == pytest.approx(expected)
+    assert figures["locomotion_rhythm_error_pct"] < 10
+    assert len(locomotion_runs(source, min_seconds=10.0)) == 0
+    nothing = rhythm_figures(source[: int(fps)], output[: int(fps)])  # 1 s: no run
+    assert math.isnan(nothing["locomotion_rhythm_error_pct"])
+    assert math.isnan(nothing["locomotion_rhythm_within_10pct"])
 
 
 # --- the protocols on a tiny model -------------------------------------------------------------
@@ -378,6 +415,9 @@ def test_transfer_protocol_reports_the_contact_rhythm(tiny, tmp_path) -> None:
                     100 * abs(values["contact_hz"] / row["source_contact_hz"] - 1)
                 )
                 assert values["contact_rhythm_within_10pct"] == float(error <= 10)
+            run_error = values["locomotion_rhythm_error_pct"]
+            if math.isfinite(run_error):
+                assert values["locomotion_rhythm_within_10pct"] == float(run_error <= 10)
 
 
 def _turned(clip: Motion, angle: float, shift: tuple[float, float, float]) -> Motion:

@@ -68,6 +68,7 @@ __all__ = [
     "OWN_RATE",
     "PROCEDURAL_SECONDS",
     "PROCEDURAL_SEED",
+    "RHYTHM_RUN_SECONDS",
     "RHYTHM_TOLERANCE",
     "TRANSFER_METRICS",
     "UNSCALED",
@@ -81,6 +82,7 @@ __all__ = [
     "gait_frequency",
     "gait_phase",
     "locomotion_frames",
+    "locomotion_runs",
     "manifold_protocol",
     "phase_line",
     "phase_oracle_errors",
@@ -703,6 +705,11 @@ TRANSFER_METRICS = {
     "target: at most 10)",
     "contact_rhythm_within_10pct": "1 when contact_rhythm_error_pct <= 10, else 0; the mean "
     "is the share of clips meeting the target, higher is better",
+    "locomotion_rhythm_error_pct": "the same as contact_rhythm_error_pct over the source's "
+    "locomotion runs only (at least 3 s of root travel), where the source has a gait; %, "
+    "lower is better (the issue's target: at most 10)",
+    "locomotion_rhythm_within_10pct": "1 when locomotion_rhythm_error_pct <= 10, else 0; the "
+    "mean is the share of clips meeting the target, higher is better",
     "contact_lock": "phase locking of the output's touch-downs to the source's stride cycle, "
     "0-1, higher is better",
     "accel_height_per_s2": "mean joint acceleration of the output over the skeleton height, "
@@ -824,6 +831,46 @@ CONTACT_MIN_LIFT = 0.02
 
 #: The issue's target for :data:`TRANSFER_METRICS` ``contact_rhythm_within_10pct``.
 RHYTHM_TOLERANCE = 0.10
+
+#: Shortest run of locomotion frames (s) over which :func:`rhythm_figures` compares the
+#: rhythms (:func:`locomotion_runs`): a few strides.
+RHYTHM_RUN_SECONDS = 3.0
+
+
+def locomotion_runs(
+    motion: Motion, min_seconds: float = RHYTHM_RUN_SECONDS
+) -> list[tuple[int, int]]:
+    """``(start, end)`` frames (end excluded) of each run of locomotion frames.
+
+    Runs of :func:`locomotion_frames` shorter than ``min_seconds`` are left out.
+
+    Example:
+        >>> from skelagnostic import procedural
+        >>> walk, _ = procedural.generate("biped22", "walk", seconds=4.0, fps=30, seed=1)
+        >>> locomotion_runs(walk), locomotion_runs(walk, min_seconds=5.0)
+        ([(0, 121)], [])
+    """
+    moving = [*locomotion_frames(motion).tolist(), False]
+    runs, start = [], None
+    for t, m in enumerate(moving):
+        if m and start is None:
+            start = t
+        elif not m and start is not None:
+            if (t - start) / motion.fps >= min_seconds:
+                runs.append((start, t))
+            start = None
+    return runs
+
+
+def _rate_in_runs(
+    onsets: Sequence[np.ndarray], runs: Sequence[tuple[float, float]], fps: float
+) -> float:
+    """Touch-downs per second and foot inside ``runs`` (frames of the onsets' clip)."""
+    seconds = sum(b - a for a, b in runs) / fps
+    if not onsets or seconds <= 0:
+        return math.nan
+    count = sum(int(((o >= a) & (o < b)).sum()) for o in onsets for a, b in runs)
+    return count / len(onsets) / seconds
 
 
 def contact_onsets(
@@ -983,20 +1030,34 @@ def rhythm_figures(source: Motion, output: Motion) -> dict[str, float]:
         ``contact_rhythm_within_10pct`` (1.0 when that error is at most
         :data:`RHYTHM_TOLERANCE`, else 0.0; NaN when either side has no rhythm) and
         ``contact_lock`` (:func:`contact_lock` of the output's touch-downs in the
-        source's cycle).
+        source's cycle), and ``locomotion_rhythm_error_pct`` /
+        ``locomotion_rhythm_within_10pct``: the same comparison over the source's
+        :func:`locomotion_runs` only (touch-downs inside them per second and foot, on
+        both sides, over the time both clips cover; NaN when the source has none),
+        where the source has a gait to follow (a fall or a get-up lifts feet without
+        one).
     """
     src_onsets, out_onsets = motion_onsets(source), motion_onsets(output)
     source_hz = _onset_rate(src_onsets, source.fps)
     contact_hz = _onset_rate(out_onsets, output.fps)
     error = abs(contact_hz / source_hz - 1) if source_hz > 0 else math.nan
     scale = output.fps / source.fps  # the output's frames on the source's time axis
+    span = min(source.num_frames, output.num_frames / scale)  # the time both cover
+    runs = [(a, min(b, span)) for a, b in locomotion_runs(source) if a < span]
+    src_run = _rate_in_runs(src_onsets, runs, source.fps)
+    out_run = _rate_in_runs(out_onsets, [(a * scale, b * scale) for a, b in runs], output.fps)
+    run_error = abs(out_run / src_run - 1) if src_run > 0 else math.nan
+
+    def within(e: float) -> float:
+        return math.nan if math.isnan(e) else float(e <= RHYTHM_TOLERANCE)
+
     return {
         "contact_hz": contact_hz,
         "contact_rhythm_error_pct": 100 * error,
-        "contact_rhythm_within_10pct": (
-            math.nan if math.isnan(error) else float(error <= RHYTHM_TOLERANCE)
-        ),
+        "contact_rhythm_within_10pct": within(error),
         "contact_lock": contact_lock(src_onsets, [o / scale for o in out_onsets]),
+        "locomotion_rhythm_error_pct": 100 * run_error,
+        "locomotion_rhythm_within_10pct": within(run_error),
     }
 
 
