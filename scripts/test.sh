@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up a virtual environment and run every check CI runs: ruff, the test
-# suite (pytest, slow tests and benchmark smoke sizes included), the library's
-# docstring examples and the strict docs build.
+# suite (pytest, slow tests and benchmark smoke sizes included), the docstring
+# examples of the library and of the built-in plugins, and the strict docs build.
 # Usage: bash scripts/test.sh [extra pytest args]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,7 +17,8 @@ echo "== ruff"
 "$VENV/bin/ruff" check src tests benchmarks plugins
 echo "== pytest"
 "$VENV/bin/python" -m pytest -n 2 --durations=15 "$@"
-echo "== doctests (the docstring examples of the library)"
-"$VENV/bin/python" -m pytest -q -n 2 -p no:cacheprovider --doctest-modules src/skelagnostic
+echo "== doctests (the docstring examples of the library and of the built-in plugins)"
+"$VENV/bin/python" -m pytest -q -n 2 -p no:cacheprovider --doctest-modules src/skelagnostic \
+  plugins/*/src
 echo "== docs"
 NO_MKDOCS_2_WARNING=1 "$VENV/bin/mkdocs" build --strict --quiet --site-dir "$(mktemp -d)"
