@@ -36,8 +36,13 @@ def main() -> None:
         sa.procedural.generate("quadruped", "trot", seconds=3.0, fps=30, seed=2)[0],
     ]
     page = args.html or args.out.with_suffix(".html")
-    to_html(clips, names=["walk (22 joints)", "run (31 joints)", "dog trot"], out=page,
-            keyframes={0: [0, 30, 60, 90]}, transitions={2: [25, 70]})
+    to_html(
+        clips,
+        names=["walk (22 joints)", "run (31 joints)", "dog trot"],
+        out=page,
+        keyframes={0: [0, 30, 60, 90]},
+        transitions={2: [25, 70]},
+    )
     try:
         with ViewerBrowser(size=(960, 540)) as browser:
             browser.open(page)

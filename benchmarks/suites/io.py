@@ -120,8 +120,13 @@ def run(size: str) -> list[Result]:
             "pybvh Bvh.joint_positions",
             fk_base * 1e3,
         ),
-        Result("read_bvh+global_positions" + tag, "ms", e2e_ours * 1e3,
-               "pybvh.read_bvh_file + joint_positions", e2e_base * 1e3),
+        Result(
+            "read_bvh+global_positions" + tag,
+            "ms",
+            e2e_ours * 1e3,
+            "pybvh.read_bvh_file + joint_positions",
+            e2e_base * 1e3,
+        ),
         Result("write_bvh" + tag, "ms", write_ours * 1e3, "pybvh.write_bvh_file", write_base * 1e3),
         Result("positions_max_rel_diff_vs_pybvh" + tag, "ratio", error),
     ]

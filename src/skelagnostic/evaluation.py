@@ -76,8 +76,14 @@ def track(
     from rich.progress import track as rich_track
 
     console = console or Console(stderr=True)
-    yield from rich_track(items, description=description, total=total, console=console,
-                          transient=True, disable=not console.is_terminal)
+    yield from rich_track(
+        items,
+        description=description,
+        total=total,
+        console=console,
+        transient=True,
+        disable=not console.is_terminal,
+    )
 
 
 class EvaluationError(SkelagnosticError):

@@ -38,8 +38,15 @@ from skelagnostic.errors import SkelagnosticError
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
 
-__all__ = ["FORMATS", "ExportError", "ExportGraph", "Method", "export_aligner", "export_graph",
-           "sidecar"]
+__all__ = [
+    "FORMATS",
+    "ExportError",
+    "ExportGraph",
+    "Method",
+    "export_aligner",
+    "export_graph",
+    "sidecar",
+]
 
 #: Formats :func:`export_aligner` writes, and the suffix of their files.
 FORMATS: dict[str, str] = {"onnx": ".onnx", "torchscript": ".pt"}
@@ -93,13 +100,17 @@ class ExportGraph:
         if not self.name or any(not (c.isalnum() or c in "_.-") for c in self.name):
             raise ExportError(f"export graph name {self.name!r}: use letters, digits, _ . -")
         if len(self.example_inputs) != len(self.input_names):
-            raise ExportError(f"export graph {self.name!r}: {len(self.example_inputs)} example "
-                              f"inputs for {len(self.input_names)} input names")
+            raise ExportError(
+                f"export graph {self.name!r}: {len(self.example_inputs)} example "
+                f"inputs for {len(self.input_names)} input names"
+            )
         known = {*self.input_names, *self.output_names}
         unknown = sorted(set(self.dynamic_axes) - known)
         if unknown:
-            raise ExportError(f"export graph {self.name!r}: dynamic_axes names {unknown[0]!r}, "
-                              "which is neither an input nor an output")
+            raise ExportError(
+                f"export graph {self.name!r}: dynamic_axes names {unknown[0]!r}, "
+                "which is neither an input nor an output"
+            )
 
 
 class Method(nn.Module):
@@ -167,8 +178,10 @@ def sidecar(graph: ExportGraph, fmt: str, file: str, aligner: str = "") -> dict[
     with torch.no_grad():
         outputs = _as_tuple(graph.module(*graph.example_inputs))
     if len(outputs) != len(graph.output_names):
-        raise ExportError(f"export graph {graph.name!r}: forward returned {len(outputs)} "
-                          f"tensors for {len(graph.output_names)} output names")
+        raise ExportError(
+            f"export graph {graph.name!r}: forward returned {len(outputs)} "
+            f"tensors for {len(graph.output_names)} output names"
+        )
     axes = {k: dict(v) for k, v in graph.dynamic_axes.items()}
     out: dict[str, Any] = {
         "sidecar_version": SIDECAR_VERSION,
@@ -177,10 +190,14 @@ def sidecar(graph: ExportGraph, fmt: str, file: str, aligner: str = "") -> dict[
         "graph": graph.name,
         "aligner": aligner,
         "description": graph.description,
-        "inputs": [_tensor_entry(n, t, axes.get(n, {}))
-                   for n, t in zip(graph.input_names, graph.example_inputs, strict=True)],
-        "outputs": [_tensor_entry(n, t, axes.get(n, {}))
-                    for n, t in zip(graph.output_names, outputs, strict=True)],
+        "inputs": [
+            _tensor_entry(n, t, axes.get(n, {}))
+            for n, t in zip(graph.input_names, graph.example_inputs, strict=True)
+        ],
+        "outputs": [
+            _tensor_entry(n, t, axes.get(n, {}))
+            for n, t in zip(graph.output_names, outputs, strict=True)
+        ],
         "dynamic_axes": {k: {str(a): label for a, label in v.items()} for k, v in axes.items()},
         "fixed_axes": dict(graph.fixed_axes),
         "metadata": _jsonable(dict(graph.metadata)),
@@ -241,8 +258,10 @@ def _require_onnx() -> None:
         except ImportError:
             missing.append(package)
     if missing:
-        raise ExportError(f"format=onnx needs the {' and '.join(missing)} package(s): "
-                          "pip install 'skelagnostic[export]'")
+        raise ExportError(
+            f"format=onnx needs the {' and '.join(missing)} package(s): "
+            "pip install 'skelagnostic[export]'"
+        )
 
 
 @contextlib.contextmanager
@@ -278,8 +297,9 @@ def _write_atomic(path: Path, write: Any) -> None:
             os.unlink(tmp)
 
 
-def export_graph(graph: ExportGraph, fmt: str, out_dir: str | Path, aligner: str = ""
-                 ) -> tuple[Path, Path]:
+def export_graph(
+    graph: ExportGraph, fmt: str, out_dir: str | Path, aligner: str = ""
+) -> tuple[Path, Path]:
     """Write one graph as ``<out_dir>/<name><suffix>`` and its sidecar ``<name>.json``.
 
     Args:
@@ -308,11 +328,18 @@ def export_graph(graph: ExportGraph, fmt: str, out_dir: str | Path, aligner: str
     meta = sidecar(graph, fmt, model_path.name, aligner)
 
     def write_onnx(path: Path) -> None:
-        torch.onnx.export(module, args, str(path), dynamo=True, opset_version=OPSET,
-                          input_names=list(graph.input_names),
-                          output_names=list(graph.output_names),
-                          dynamic_shapes=_dynamic_shapes(graph), external_data=False,
-                          verbose=False)
+        torch.onnx.export(
+            module,
+            args,
+            str(path),
+            dynamo=True,
+            opset_version=OPSET,
+            input_names=list(graph.input_names),
+            output_names=list(graph.output_names),
+            dynamic_shapes=_dynamic_shapes(graph),
+            external_data=False,
+            verbose=False,
+        )
         _label_dynamic_outputs(path, graph)
 
     def write_torchscript(path: Path) -> None:
@@ -330,15 +357,15 @@ def export_graph(graph: ExportGraph, fmt: str, out_dir: str | Path, aligner: str
             root = root.__cause__
         text = re.sub(r"\x1b\[[0-9;]*m", "", str(root))
         first = next((ln.strip() for ln in text.splitlines() if ln.strip()), "")
-        raise ExportError(f"export graph {graph.name!r} as {fmt} failed: "
-                          f"{type(root).__name__}: {first}") from error
+        raise ExportError(
+            f"export graph {graph.name!r} as {fmt} failed: {type(root).__name__}: {first}"
+        ) from error
     side = out / f"{graph.name}.json"
     _write_atomic(side, lambda p: p.write_text(json.dumps(meta, indent=2) + "\n"))
     return model_path, side
 
 
-def export_aligner(aligner: Aligner, fmt: str, out_dir: str | Path, name: str = ""
-                   ) -> list[Path]:
+def export_aligner(aligner: Aligner, fmt: str, out_dir: str | Path, name: str = "") -> list[Path]:
     """Export every graph of ``aligner.export_graphs()``.
 
     Args:
@@ -359,8 +386,9 @@ def export_aligner(aligner: Aligner, fmt: str, out_dir: str | Path, name: str = 
     with torch.no_grad():
         graphs = list(aligner.export_graphs())
     if not graphs:
-        raise ExportError(f"{type(aligner).__name__} exports no networks "
-                          "(Aligner.export_graphs returns none)")
+        raise ExportError(
+            f"{type(aligner).__name__} exports no networks (Aligner.export_graphs returns none)"
+        )
     names = [g.name for g in graphs]
     if len(set(names)) != len(names):
         raise ExportError(f"{type(aligner).__name__}.export_graphs: duplicate names {names}")

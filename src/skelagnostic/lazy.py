@@ -95,8 +95,11 @@ def deprecated_aliases(module: str, aliases: Mapping[str, str]) -> Callable[[str
     def __getattr__(name: str) -> Any:
         if name not in table:
             raise AttributeError(f"module {module!r} has no attribute {name!r}")
-        warnings.warn(f"{module}.{name} is deprecated; use {module}.{table[name]}",
-                      DeprecationWarning, stacklevel=2)
+        warnings.warn(
+            f"{module}.{name} is deprecated; use {module}.{table[name]}",
+            DeprecationWarning,
+            stacklevel=2,
+        )
         return getattr(sys.modules[module], table[name])
 
     return __getattr__

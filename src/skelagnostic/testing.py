@@ -135,9 +135,20 @@ def _spy_on_log(cls: type, calls: list[LogCall], seen: dict[str, Any]) -> Iterat
             seen["model"] = self
         if hook == "training_step" and "initial" not in seen:
             seen["initial"] = {k: v.detach().clone() for k, v in self.state_dict().items()}
-        names = ("prog_bar", "logger", "on_step", "on_epoch", "reduce_fx", "enable_graph",
-                 "sync_dist", "sync_dist_group", "add_dataloader_idx", "batch_size",
-                 "metric_attribute", "rank_zero_only")
+        names = (
+            "prog_bar",
+            "logger",
+            "on_step",
+            "on_epoch",
+            "reduce_fx",
+            "enable_graph",
+            "sync_dist",
+            "sync_dist_group",
+            "add_dataloader_idx",
+            "batch_size",
+            "metric_attribute",
+            "rank_zero_only",
+        )
         given = {**dict(zip(names, args, strict=False)), **kwargs}
         calls.append(LogCall(hook, name, given, isinstance(value, Metric)))
         return original(self, name, value, *args, **kwargs)
@@ -173,12 +184,24 @@ def fit_for_contract(
 
     pm = plugin_manager or get_plugin_manager()
     run_dir = Path(run_dir)
-    cfg = compose([f"model={aligner}", "experiment=smoke", f"run_dir={run_dir}",
-                   f"data.cache_dir={run_dir / 'cache'}", "threads=1", "trainer.max_epochs=1",
-                   "trainer.max_time=null", f"trainer.limit_train_batches={steps}",
-                   "trainer.limit_val_batches=1", "~callbacks.rich_progress_bar",
-                   "+trainer.enable_progress_bar=false", "+trainer.num_sanity_val_steps=0",
-                   *overrides], plugin_manager=pm)
+    cfg = compose(
+        [
+            f"model={aligner}",
+            "experiment=smoke",
+            f"run_dir={run_dir}",
+            f"data.cache_dir={run_dir / 'cache'}",
+            "threads=1",
+            "trainer.max_epochs=1",
+            "trainer.max_time=null",
+            f"trainer.limit_train_batches={steps}",
+            "trainer.limit_val_batches=1",
+            "~callbacks.rich_progress_bar",
+            "+trainer.enable_progress_bar=false",
+            "+trainer.num_sanity_val_steps=0",
+            *overrides,
+        ],
+        plugin_manager=pm,
+    )
     calls: list[LogCall] = []
     seen: dict[str, Any] = {}
     with _spy_on_log(pm.aligner(aligner).module, calls, seen):
@@ -186,19 +209,33 @@ def fit_for_contract(
     model = seen.get("model")
     assert model is not None, f"aligner {aligner!r} never called self.log during fit"
     assert "initial" in seen, f"aligner {aligner!r}: training_step logged nothing"
-    return ContractRun(aligner, run_dir, metrics, model, model.trainer.datamodule,
-                       seen["initial"], pm, calls, plugin_manager is None)
+    return ContractRun(
+        aligner,
+        run_dir,
+        metrics,
+        model,
+        model.trainer.datamodule,
+        seen["initial"],
+        pm,
+        calls,
+        plugin_manager is None,
+    )
 
 
 def check_fit(run: ContractRun) -> None:
     """Finite ``train/loss`` and ``val/loss``, weights that changed, a ``last.ckpt``."""
     for key in ("train/loss", "val/loss"):
-        assert key in run.metrics, (f"aligner {run.aligner!r} did not log {key!r} "
-                                    f"(logged: {', '.join(sorted(run.metrics)) or 'nothing'})")
+        assert key in run.metrics, (
+            f"aligner {run.aligner!r} did not log {key!r} "
+            f"(logged: {', '.join(sorted(run.metrics)) or 'nothing'})"
+        )
         assert math.isfinite(run.metrics[key]), f"aligner {run.aligner!r}: {key} is not finite"
     now = run.model.state_dict()
-    changed = [k for k, v in run.initial.items()
-               if v.is_floating_point() and not torch.equal(v.cpu(), now[k].detach().cpu())]
+    changed = [
+        k
+        for k, v in run.initial.items()
+        if v.is_floating_point() and not torch.equal(v.cpu(), now[k].detach().cpu())
+    ]
     assert changed, f"aligner {run.aligner!r}: training did not change any weight"
     assert run.checkpoint.is_file(), f"aligner {run.aligner!r}: no {run.checkpoint}"
 
@@ -229,16 +266,22 @@ def check_checkpoint_round_trip(run: ContractRun, motion: Motion | None = None) 
     assert not missing and not extra, (
         f"aligner {run.aligner!r}: the network rebuilt from the checkpoint's hyper-parameters "
         f"differs (missing: {missing[:5]}, unexpected: {extra[:5]}); save data-dependent sizes "
-        "with self.save_hyperparameters()")
+        "with self.save_hyperparameters()"
+    )
     for key, value in saved.items():
         assert torch.equal(value, state[key].cpu()), (
-            f"aligner {run.aligner!r}: weight {key!r} differs after load_aligner")
+            f"aligner {run.aligner!r}: weight {key!r} differs after load_aligner"
+        )
     motion = motion if motion is not None else contract_motion(run)
     run.model.eval()
     a, b = run.model.encode(motion), loaded.encode(motion)
-    torch.testing.assert_close(b.z.float().cpu(), a.z.float().cpu(), rtol=1e-4, atol=1e-5,
-                               msg=lambda m: f"aligner {run.aligner!r}: reloaded encode "
-                                             f"differs: {m}")
+    torch.testing.assert_close(
+        b.z.float().cpu(),
+        a.z.float().cpu(),
+        rtol=1e-4,
+        atol=1e-5,
+        msg=lambda m: f"aligner {run.aligner!r}: reloaded encode differs: {m}",
+    )
     return loaded
 
 
@@ -267,7 +310,8 @@ def check_encode_decode(run: ContractRun, motion: Motion, target: Skeleton) -> N
     latent = model.encode(motion)
     assert isinstance(latent, Latent), f"{type(model).__name__}.encode must return a Latent"
     assert isinstance(latent.z, torch.Tensor) and bool(torch.isfinite(latent.z).all()), (
-        f"{type(model).__name__}.encode: z is not a finite tensor")
+        f"{type(model).__name__}.encode: z is not a finite tensor"
+    )
     results = {"decode": model.decode(latent, target)}
     if model.supports("retarget"):
         results["retarget"] = model.retarget(motion, target)
@@ -276,7 +320,8 @@ def check_encode_decode(run: ContractRun, motion: Motion, target: Skeleton) -> N
         assert isinstance(out, Motion), f"{name} must return a Motion, got {type(out).__name__}"
         assert out.skeleton.num_joints == target.num_joints, f"{name}: wrong skeleton"
         assert out.num_frames == motion.num_frames, (
-            f"{name}: {out.num_frames} frames for a {motion.num_frames}-frame clip")
+            f"{name}: {out.num_frames} frames for a {motion.num_frames}-frame clip"
+        )
         assert abs(out.fps - motion.fps) < 1e-6, f"{name}: fps {out.fps} != {motion.fps}"
         assert tuple(out.rotations.shape) == (motion.num_frames, target.num_joints, 4)
         assert bool(torch.isfinite(out.global_positions()).all()), f"{name}: non-finite output"
@@ -302,7 +347,8 @@ def check_logging(run: ContractRun) -> None:
             problems.append(f"{where} per epoch without sync_dist=True")
     assert not problems, "; ".join(dict.fromkeys(problems))
     assert any(c.hook == "validation_step" and c.name == "val/loss" for c in run.logs), (
-        f"{type(run.model).__name__}.validation_step must log 'val/loss' (checkpoint monitor)")
+        f"{type(run.model).__name__}.validation_step must log 'val/loss' (checkpoint monitor)"
+    )
 
 
 class AlignerContract:
@@ -335,8 +381,9 @@ class AlignerContract:
         """One short training run shared by the tests of the class."""
         assert self.aligner, f"{type(self).__name__}: set the class attribute 'aligner'"
         root = tmp_path_factory.mktemp(f"contract-{self.aligner}")
-        return fit_for_contract(self.aligner, root / "run", self.overrides, self.steps,
-                                self.plugin_manager())
+        return fit_for_contract(
+            self.aligner, root / "run", self.overrides, self.steps, self.plugin_manager()
+        )
 
     def test_fit_a_few_steps(self, contract_run: ContractRun) -> None:
         """Losses logged and finite, weights updated, a checkpoint written."""

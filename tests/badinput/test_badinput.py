@@ -36,28 +36,45 @@ HERE = Path(__file__).resolve().parent
 CORPUS = HERE / "corpus"
 REPO = HERE.parents[1]
 TROUBLESHOOTING = REPO / "docs" / "troubleshooting.md"
-SMOKE = ["model=example", "experiment=smoke", "data.window=2", "data.stride=1",
-         "model.hidden=8", "model.latent=4"]
+SMOKE = [
+    "model=example",
+    "experiment=smoke",
+    "data.window=2",
+    "data.stride=1",
+    "model.hidden=8",
+    "model.latent=4",
+]
 
 #: Malformed BVH file -> (1-based line, reason) of the BVHError.
 MALFORMED = {
     "empty.bvh": (1, "the file is empty"),
-    "binary_garbage.bvh": (1, "a BVH file starts with 'HIERARCHY', found "
-                              "'PK\\x03\\x04\\x00\ufffd\ufffd'"),
-    "non_utf8_name.bvh": (19, "invalid UTF-8 at byte offset 364 (0xe9); BVH files are read as "
-                              "UTF-8, re-save this one in that encoding"),
+    "binary_garbage.bvh": (
+        1,
+        "a BVH file starts with 'HIERARCHY', found 'PK\\x03\\x04\\x00\ufffd\ufffd'",
+    ),
+    "non_utf8_name.bvh": (
+        19,
+        "invalid UTF-8 at byte offset 364 (0xe9); BVH files are read as "
+        "UTF-8, re-save this one in that encoding",
+    ),
     "not_bvh_text.bvh": (1, "a BVH file starts with 'HIERARCHY', found '{\"not\":'"),
-    "cut_in_hierarchy.bvh": (17, "unexpected end of the hierarchy, expected 'JOINT', "
-                                 "'End Site' or '}' in joint 'LeftUpLeg'"),
-    "unbalanced_braces.bvh": (28, "unexpected end of the hierarchy, expected 'JOINT', "
-                                  "'End Site' or '}' in joint 'Hips'"),
+    "cut_in_hierarchy.bvh": (
+        17,
+        "unexpected end of the hierarchy, expected 'JOINT', 'End Site' or '}' in joint 'LeftUpLeg'",
+    ),
+    "unbalanced_braces.bvh": (
+        28,
+        "unexpected end of the hierarchy, expected 'JOINT', 'End Site' or '}' in joint 'Hips'",
+    ),
     "duplicate_joint.bvh": (19, "duplicate joint name 'Spine'"),
     "unknown_channel.bvh": (9, "unknown channel 'Wrotation' on joint 'Spine'"),
     "no_motion_section.bvh": (29, "no MOTION section (truncated file?)"),
     "zero_frames.bvh": (31, "the file declares 0 frames; a motion needs at least one"),
     "zero_frame_time.bvh": (32, "Frame Time must be positive, got 0.0"),
-    "tiny_frame_time.bvh": (32, "Frame Time 1e-320 is too small: the frame rate 1 / Frame Time "
-                                "is not a finite number"),
+    "tiny_frame_time.bvh": (
+        32,
+        "Frame Time 1e-320 is too small: the frame rate 1 / Frame Time is not a finite number",
+    ),
     "inf_frame_time.bvh": (32, "Frame Time must be a finite number of seconds, got inf"),
     "nan_frame_time.bvh": (32, "Frame Time must be a finite number of seconds, got nan"),
     "truncated_frames.bvh": (35, "the file declares 5 frames but has 3 motion lines (truncated?)"),
@@ -68,8 +85,11 @@ MALFORMED = {
 }
 HEIGHT_ZERO = {"single_joint.bvh": 1, "all_bones_zero.bvh": 4}
 #: Variants of valid_small.bvh that read as the same motion.
-READABLE = {"utf8_bom.bvh": "a UTF-8 byte order mark", "cr_only.bvh": "CR-only line ends",
-            "cut_last_number.bvh": "no line end after the last (cut) value"}
+READABLE = {
+    "utf8_bom.bvh": "a UTF-8 byte order mark",
+    "cr_only.bvh": "CR-only line ends",
+    "cut_last_number.bvh": "no line end after the last (cut) value",
+}
 
 
 #: Set to a file path to collect the error lines there (to update the page) instead of checking.
@@ -107,13 +127,15 @@ def assert_no_partial_output(tmp_path: Path) -> None:
     cached = files(tmp_path / "cache")
     assert not [f for f in cached if f.endswith(".tmp")]
     assert {f.removesuffix(".npy") for f in cached if f.endswith(".npy")} == {
-        f.removesuffix(".json") for f in cached if f.endswith(".json")}
+        f.removesuffix(".json") for f in cached if f.endswith(".json")
+    }
 
 
 def fit(tmp_path: Path, *args: str, cache: Path | None = None) -> int:
     cache = cache or tmp_path / "cache"
-    return cli.main(["fit", *SMOKE, *args, f"runs_dir={tmp_path / 'runs'}",
-                     f"data.cache_dir={cache}"])
+    return cli.main(
+        ["fit", *SMOKE, *args, f"runs_dir={tmp_path / 'runs'}", f"data.cache_dir={cache}"]
+    )
 
 
 # ------------------------------------------------------------------ BVH, Python API
@@ -143,8 +165,10 @@ def test_readable_variants(name: str) -> None:
     messages = [str(w.message) for w in caught]
     if name == "cut_last_number.bvh":  # read, but the cut is reported with its line
         assert [w.category for w in caught] == [BVHWarning]
-        assert messages == [f"{CORPUS / name}:35: the last motion line has no line end, so "
-                            "the file may be truncated (its last value read as '1.')"]
+        assert messages == [
+            f"{CORPUS / name}:35: the last motion line has no line end, so "
+            "the file may be truncated (its last value read as '1.')"
+        ]
     else:
         assert messages == []
         assert torch.equal(motion.rotations, valid.rotations)
@@ -152,8 +176,9 @@ def test_readable_variants(name: str) -> None:
 
 # ------------------------------------------------------------------------ BVH, CLI
 @pytest.mark.parametrize("name", sorted(MALFORMED))
-def test_cli_malformed_bvh(site: Path, tmp_path: Path, name: str,
-                           capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_malformed_bvh(
+    site: Path, tmp_path: Path, name: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert fit(tmp_path, "data=bvh", f"data.paths=[{CORPUS / name}]") == 1
     line, reason = MALFORMED[name]
     err = error_line(capsys)
@@ -164,21 +189,25 @@ def test_cli_malformed_bvh(site: Path, tmp_path: Path, name: str,
 
 
 @pytest.mark.parametrize("name", sorted(HEIGHT_ZERO))
-def test_cli_rejects_skeletons_of_height_zero(site: Path, tmp_path: Path, name: str,
-                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_rejects_skeletons_of_height_zero(
+    site: Path, tmp_path: Path, name: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     motion = sa.read_bvh(CORPUS / name)  # the core accepts them ...
     assert motion.skeleton.height() == 0
     assert fit(tmp_path, "data=bvh", f"data.paths=[{CORPUS / name}]") == 1  # ... training not
     err = error_line(capsys)
-    assert err == (f"skelagnostic fit: error: data: clip '{CORPUS / name}' has a skeleton of "
-                   f"height 0 ({HEIGHT_ZERO[name]} joint(s), no bone of non-zero length); "
-                   "features are normalised by the skeleton height")
+    assert err == (
+        f"skelagnostic fit: error: data: clip '{CORPUS / name}' has a skeleton of "
+        f"height 0 ({HEIGHT_ZERO[name]} joint(s), no bone of non-zero length); "
+        "features are normalised by the skeleton height"
+    )
     assert_no_partial_output(tmp_path)
     documented(err, tmp_path)
 
 
 def test_zero_length_bone_is_accepted_for_training_but_not_by_bone_metrics(
-        site: Path, tmp_path: Path) -> None:
+    site: Path, tmp_path: Path
+) -> None:
     motion = sa.read_bvh(CORPUS / "zero_length_bone.bvh")
     assert motion.skeleton.offsets.norm(dim=-1).tolist() == [0.0, 10.0, 5.0, 0.0]
     assert fit(tmp_path, "data=bvh", f"data.paths=[{CORPUS / 'zero_length_bone.bvh'}]") == 0
@@ -206,16 +235,32 @@ def test_mismatched_skeleton_and_motion() -> None:
 # --------------------------------------------------------------------- data dirs
 @pytest.mark.parametrize(
     ("case", "args", "message"),
-    [("empty dir", ["data=bvh", "data.paths=[{tmp}/empty]"],
-      "data.paths: no file matches '**/*.bvh' in ['{tmp}/empty']"),
-     ("missing dir", ["data=bvh", "data.paths=[{tmp}/missing]"],
-      "data.paths: '{tmp}/missing' does not exist"),
-     ("clips too short", ["data=bvh", f"data.paths=[{CORPUS / 'valid_small.bvh'}]",
-                          "data.window=100"],
-      "data: no clip is at least data.window=100 frames long at 30 fps")],
+    [
+        (
+            "empty dir",
+            ["data=bvh", "data.paths=[{tmp}/empty]"],
+            "data.paths: no file matches '**/*.bvh' in ['{tmp}/empty']",
+        ),
+        (
+            "missing dir",
+            ["data=bvh", "data.paths=[{tmp}/missing]"],
+            "data.paths: '{tmp}/missing' does not exist",
+        ),
+        (
+            "clips too short",
+            ["data=bvh", f"data.paths=[{CORPUS / 'valid_small.bvh'}]", "data.window=100"],
+            "data: no clip is at least data.window=100 frames long at 30 fps",
+        ),
+    ],
 )
-def test_cli_data_dirs(site: Path, tmp_path: Path, case: str, args: list[str], message: str,
-                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_data_dirs(
+    site: Path,
+    tmp_path: Path,
+    case: str,
+    args: list[str],
+    message: str,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     (tmp_path / "empty").mkdir()
     assert fit(tmp_path, *(a.format(tmp=tmp_path) for a in args)) == 1
     err = error_line(capsys)
@@ -227,26 +272,48 @@ def test_cli_data_dirs(site: Path, tmp_path: Path, case: str, args: list[str], m
 # ------------------------------------------------------------------- config keys
 @pytest.mark.parametrize(
     ("args", "message"),
-    [(["model.hiden=8"], "Could not override 'model.hiden'. To append to your config use "
-      "+model.hiden=8 (Key 'hiden' is not in struct)"),
-     (["+model.hiden=8"], "model.hiden is not an option of model=example; accepted: hidden, "
-      "latent, lr"),
-     (["model.hidden=big"], "model.hidden='big' has the wrong type for model=example "
-      "(expected int)"),
-     (["trainer.max_epochs=ten"], "trainer.max_epochs='ten' has the wrong type for "
-      "lightning.Trainer (expected Optional[int])"),
-     (["+trainer.epochs=3"], "trainer.epochs is not an option of lightning.Trainer; accepted: "),
-     (["+data.windw=8"], "data.windw is not an option of data.source='procedural' nor of "
-      "ExampleDataModule; accepted: "),
-     (["callbacks=nope"], "In 'config': Could not find 'callbacks/nope' Available options in "
-      "'callbacks': default ema none render resumable"),
-     (["+callbacks.model_checkpoint.every=1"], "callbacks.model_checkpoint.every=1: TypeError: "
-      "ModelCheckpoint.__init__() got an unexpected keyword argument 'every'"),
-     (["ckpt_path={tmp}/none.ckpt"], "ckpt_path: no checkpoint file '{tmp}/none.ckpt'"),
-     (["data.window=0"], "data.window must be > 0, got 0")],
+    [
+        (
+            ["model.hiden=8"],
+            "Could not override 'model.hiden'. To append to your config use "
+            "+model.hiden=8 (Key 'hiden' is not in struct)",
+        ),
+        (
+            ["+model.hiden=8"],
+            "model.hiden is not an option of model=example; accepted: hidden, latent, lr",
+        ),
+        (
+            ["model.hidden=big"],
+            "model.hidden='big' has the wrong type for model=example (expected int)",
+        ),
+        (
+            ["trainer.max_epochs=ten"],
+            "trainer.max_epochs='ten' has the wrong type for "
+            "lightning.Trainer (expected Optional[int])",
+        ),
+        (["+trainer.epochs=3"], "trainer.epochs is not an option of lightning.Trainer; accepted: "),
+        (
+            ["+data.windw=8"],
+            "data.windw is not an option of data.source='procedural' nor of "
+            "ExampleDataModule; accepted: ",
+        ),
+        (
+            ["callbacks=nope"],
+            "In 'config': Could not find 'callbacks/nope' Available options in "
+            "'callbacks': default ema none render resumable",
+        ),
+        (
+            ["+callbacks.model_checkpoint.every=1"],
+            "callbacks.model_checkpoint.every=1: TypeError: "
+            "ModelCheckpoint.__init__() got an unexpected keyword argument 'every'",
+        ),
+        (["ckpt_path={tmp}/none.ckpt"], "ckpt_path: no checkpoint file '{tmp}/none.ckpt'"),
+        (["data.window=0"], "data.window must be > 0, got 0"),
+    ],
 )
-def test_cli_wrong_config(site: Path, tmp_path: Path, args: list[str], message: str,
-                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_wrong_config(
+    site: Path, tmp_path: Path, args: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert fit(tmp_path, *(a.format(tmp=tmp_path) for a in args)) == 1
     err = error_line(capsys)
     assert err.startswith(f"skelagnostic fit: error: {message.format(tmp=tmp_path)}")
@@ -255,14 +322,26 @@ def test_cli_wrong_config(site: Path, tmp_path: Path, args: list[str], message: 
 
 
 def test_failed_run_keeps_a_directory_holding_other_files(
-        site: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    site: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     run_dir = tmp_path / "existing"
     run_dir.mkdir()
     (run_dir / "notes.txt").write_text("mine")
-    assert cli.main(["fit", *SMOKE, "data.window=0", f"hydra.run.dir={run_dir}",
-                     f"data.cache_dir={tmp_path / 'cache'}"]) == 1
-    assert error_line(capsys) == ("skelagnostic fit: error: data.window must be > 0, got 0 "
-                                  f"[run directory kept: {run_dir}]")
+    assert (
+        cli.main(
+            [
+                "fit",
+                *SMOKE,
+                "data.window=0",
+                f"hydra.run.dir={run_dir}",
+                f"data.cache_dir={tmp_path / 'cache'}",
+            ]
+        )
+        == 1
+    )
+    assert error_line(capsys) == (
+        f"skelagnostic fit: error: data.window must be > 0, got 0 [run directory kept: {run_dir}]"
+    )
     assert (run_dir / "notes.txt").read_text() == "mine"
 
 
@@ -292,50 +371,71 @@ def test_damaged_cache_entries_are_rebuilt(tmp_path: Path) -> None:
         assert entry is not None and np.array_equal(entry.open(), good), what
 
 
-def test_cli_unwritable_cache_dir(site: Path, tmp_path: Path,
-                                  capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_unwritable_cache_dir(
+    site: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     blocker = tmp_path / "cache_is_a_file"
     blocker.write_text("")
     assert fit(tmp_path, cache=blocker) == 1
     err = error_line(capsys)
-    assert err.startswith(f"skelagnostic fit: error: data.cache_dir: cannot write the window "
-                          f"cache in '{blocker}/windows/")
-    assert err.endswith("(Not a directory); set data.cache_dir or $SKELAGNOSTIC_CACHE to a "
-                        "writable directory")
+    assert err.startswith(
+        f"skelagnostic fit: error: data.cache_dir: cannot write the window "
+        f"cache in '{blocker}/windows/"
+    )
+    assert err.endswith(
+        "(Not a directory); set data.cache_dir or $SKELAGNOSTIC_CACHE to a writable directory"
+    )
     assert files(tmp_path / "runs") == []
     documented(err.split(f"'{blocker}")[0], tmp_path)
 
 
 # ------------------------------------------------------------------------ plugins
-def test_cli_names_the_broken_plugin(broken_plugin: Path, tmp_path: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_names_the_broken_plugin(
+    broken_plugin: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert cli.main(["fit", "model=broken", f"runs_dir={tmp_path / 'runs'}"]) == 1
     err = error_line(capsys)
-    assert err == ("skelagnostic fit: error: In 'config': Could not find 'model/broken' "
-                   "Available options in 'model': example [plugins that failed to load: broken "
-                   "(RuntimeError: boom)]")
+    assert err == (
+        "skelagnostic fit: error: In 'config': Could not find 'model/broken' "
+        "Available options in 'model': example [plugins that failed to load: broken "
+        "(RuntimeError: boom)]"
+    )
     documented(err, tmp_path)
 
 
 # --------------------------------------------------------------------- subprocess
 @pytest.mark.slow
 def test_exit_code_and_traceback_only_when_asked(site: Path, tmp_path: Path) -> None:
-    env = {**os.environ, "SKELAGNOSTIC_LOAD_PLUGINS": "example",
-           "PYTHONPATH": os.pathsep.join([str(site), str(REPO / "plugins" / "example-aligner"
-                                                         / "src"), str(REPO / "src")])}
+    env = {
+        **os.environ,
+        "SKELAGNOSTIC_LOAD_PLUGINS": "example",
+        "PYTHONPATH": os.pathsep.join(
+            [str(site), str(REPO / "plugins" / "example-aligner" / "src"), str(REPO / "src")]
+        ),
+    }
     env.pop("SKELAGNOSTIC_DEBUG", None)
     nan = CORPUS / "nan_frame.bvh"
-    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", "model=example", "data=bvh",
-           f"data.paths=[{nan}]", f"runs_dir={tmp_path / 'runs'}",
-           f"data.cache_dir={tmp_path / 'cache'}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "skelagnostic.cli",
+        "fit",
+        "model=example",
+        "data=bvh",
+        f"data.paths=[{nan}]",
+        f"runs_dir={tmp_path / 'runs'}",
+        f"data.cache_dir={tmp_path / 'cache'}",
+    ]
     quiet = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
     assert quiet.returncode == 1
     errors = [line for line in quiet.stderr.splitlines() if "error" in line.lower()]
-    assert errors == [f"skelagnostic fit: error: {nan}:34: motion value 'nan' is not finite "
-                      "(NaN/inf)"]
+    assert errors == [
+        f"skelagnostic fit: error: {nan}:34: motion value 'nan' is not finite (NaN/inf)"
+    ]
     assert "Traceback" not in quiet.stderr
-    loud = subprocess.run(cmd, env={**env, "SKELAGNOSTIC_DEBUG": "1"}, capture_output=True,
-                          text=True, timeout=120)
+    loud = subprocess.run(
+        cmd, env={**env, "SKELAGNOSTIC_DEBUG": "1"}, capture_output=True, text=True, timeout=120
+    )
     assert loud.returncode != 0 and "Traceback (most recent call last)" in loud.stderr
     assert files(tmp_path / "runs") == []
 
@@ -370,12 +470,14 @@ def test_full_disk_while_writing_the_cache(tmp_path: Path, monkeypatch: pytest.M
         WindowCache(tmp_path).put("ab" + "0" * 62, np.zeros((2, 4, 3, 2)), {"starts": [0, 4]})
     assert str(info.value) == (
         f"data.cache_dir: cannot write the window cache in '{tmp_path}/windows/ab' (No space "
-        "left on device); set data.cache_dir or $SKELAGNOSTIC_CACHE to a writable directory")
+        "left on device); set data.cache_dir or $SKELAGNOSTIC_CACHE to a writable directory"
+    )
     assert files(tmp_path) == []  # no temporary file, no half entry
 
 
 def test_cli_fit_outputs_get_the_permissions_the_umask_allows(
-        site: Path, tmp_path: Path, umask_022: None) -> None:
+    site: Path, tmp_path: Path, umask_022: None
+) -> None:
     assert fit(tmp_path) == 0
     written = {**modes(tmp_path / "runs"), **modes(tmp_path / "cache")}
     assert any(name.endswith(".npy") for name in written)
@@ -384,8 +486,9 @@ def test_cli_fit_outputs_get_the_permissions_the_umask_allows(
     assert wrong == {}
 
 
-def test_cli_demo_on_a_full_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                 capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_demo_on_a_full_disk(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "out"
     target = out / "bvh" / "biped22_walk_0.bvh"
     target.parent.mkdir(parents=True)

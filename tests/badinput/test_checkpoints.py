@@ -33,8 +33,9 @@ from skelagnostic.aligners.checkpoints import (
 from skelagnostic.cli import app
 from skelagnostic.plugins import LOAD_PLUGINS_ENV, PluginManager, get_plugin_manager, load_aligner
 
-PLUGIN_SRC = [REPO / "plugins" / name / "src" for name in ("example-aligner", "humot", "pcmrl",
-                                                           "vqpae")]
+PLUGIN_SRC = [
+    REPO / "plugins" / name / "src" for name in ("example-aligner", "humot", "pcmrl", "vqpae")
+]
 TRAIN_VERBS = ("fit", "validate", "test", "predict")
 INFER_VERBS = ("retarget", "interpolate", "transfer")
 #: The verb whose line troubleshooting.md quotes for each option (the others say the same).
@@ -83,8 +84,12 @@ def all_aligners(plugin_paths: None) -> Iterator[PluginManager]:
     import skelagnostic_vqpae.plugin as vqpae
 
     pm = PluginManager(load_entrypoints=False)
-    for name, plugin in (("example", example), ("humot", humot), ("pcmrl", pcmrl),
-                         ("vqpae", vqpae)):
+    for name, plugin in (
+        ("example", example),
+        ("humot", humot),
+        ("pcmrl", pcmrl),
+        ("vqpae", vqpae),
+    ):
         pm.register(plugin, name)
     with config_store_restored():
         yield pm
@@ -94,9 +99,18 @@ def all_aligners(plugin_paths: None) -> Iterator[PluginManager]:
 def trained(tmp_path_factory: pytest.TempPathFactory, all_aligners: PluginManager) -> Path:
     """``last.ckpt`` of the example aligner (hidden=8) after a smoke run."""
     root = tmp_path_factory.mktemp("trained")
-    app.run(app.compose([*SMOKE, f"run_dir={root / 'run'}", f"data.cache_dir={root / 'cache'}",
-                         "trainer.max_epochs=1"], plugin_manager=all_aligners),
-            plugin_manager=all_aligners)
+    app.run(
+        app.compose(
+            [
+                *SMOKE,
+                f"run_dir={root / 'run'}",
+                f"data.cache_dir={root / 'cache'}",
+                "trainer.max_epochs=1",
+            ],
+            plugin_manager=all_aligners,
+        ),
+        plugin_manager=all_aligners,
+    )
     return root / "run" / "checkpoints" / "last.ckpt"
 
 
@@ -138,11 +152,17 @@ def command(verb: str, kind: str, ckpt: Path, tmp_path: Path) -> list[str]:
     if kind == "architecture":
         model = [*SMOKE[:-2], "model.hidden=16", "model.latent=4"]
     if verb in TRAIN_VERBS:
-        return [verb, *model, f"ckpt_path={ckpt}", f"runs_dir={tmp_path / 'runs'}",
-                f"data.cache_dir={tmp_path / 'cache'}"]
+        return [
+            verb,
+            *model,
+            f"ckpt_path={ckpt}",
+            f"runs_dir={tmp_path / 'runs'}",
+            f"data.cache_dir={tmp_path / 'cache'}",
+        ]
     clip = str(CORPUS / "valid_small.bvh")
-    inputs = {"retarget": [clip, clip], "interpolate": [clip, "every=2"],
-              "transfer": [clip, clip]}[verb]
+    inputs = {"retarget": [clip, clip], "interpolate": [clip, "every=2"], "transfer": [clip, clip]}[
+        verb
+    ]
     named = ["model=humot"] if kind == "other_model" else ["model=example"]
     return [verb, *inputs, f"ckpt={ckpt}", *named, f"out={tmp_path / 'out.bvh'}"]
 
@@ -154,8 +174,8 @@ CASES = {
     "truncated": "'{ckpt}' is not a readable checkpoint (truncated or corrupt)",
     "random": "'{ckpt}' is not a readable checkpoint (truncated or corrupt)",
     "payload": "'{ckpt}' holds a Python object (posix.system) that a safe load refuses; "
-               "skelagnostic loads checkpoints with torch.load(weights_only=True), which allows "
-               "tensors and plain data only",
+    "skelagnostic loads checkpoints with torch.load(weights_only=True), which allows "
+    "tensors and plain data only",
     "other_model": "'{ckpt}' is a checkpoint of model=example, this is model=humot",
 }
 
@@ -163,12 +183,21 @@ CASES = {
 @pytest.mark.parametrize(
     ("kind", "verb"),
     # a missing ckpt_path= file was already one line (test_badinput.py::test_cli_wrong_config)
-    [(kind, verb) for kind in sorted(CASES) for verb in (*TRAIN_VERBS, *INFER_VERBS)
-     if not (kind == "missing" and verb in TRAIN_VERBS)],
+    [
+        (kind, verb)
+        for kind in sorted(CASES)
+        for verb in (*TRAIN_VERBS, *INFER_VERBS)
+        if not (kind == "missing" and verb in TRAIN_VERBS)
+    ],
 )
-def test_bad_checkpoint_is_one_line(with_humot: None, trained: Path, tmp_path: Path,
-                                    capsys: pytest.CaptureFixture[str], kind: str,
-                                    verb: str) -> None:
+def test_bad_checkpoint_is_one_line(
+    with_humot: None,
+    trained: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    kind: str,
+    verb: str,
+) -> None:
     ckpt = bad_checkpoint(kind, trained, tmp_path)
     code = cli.main(command(verb, kind, ckpt, tmp_path))
     err = capsys.readouterr().err
@@ -178,41 +207,48 @@ def test_bad_checkpoint_is_one_line(with_humot: None, trained: Path, tmp_path: P
     assert code != 0 and line in err.splitlines(), err
     assert not (tmp_path / "pwned").exists() and not (tmp_path / "out.bvh").exists()
     assert not list((tmp_path / "runs").rglob("*.*"))
-    documented(line.replace(f"skelagnostic {verb}:", f"skelagnostic {DOC_VERB[option]}:"),
-               tmp_path)
+    documented(line.replace(f"skelagnostic {verb}:", f"skelagnostic {DOC_VERB[option]}:"), tmp_path)
 
 
 @pytest.mark.parametrize("verb", TRAIN_VERBS)
 def test_different_architecture_names_the_hyperparameters(
-        site: Path, trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-        verb: str) -> None:
+    site: Path, trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], verb: str
+) -> None:
     ckpt = bad_checkpoint("copy", trained, tmp_path)
     assert cli.main(command(verb, "architecture", ckpt, tmp_path)) == 1
     err = capsys.readouterr().err
     assert "Traceback" not in err, err
-    line = (f"skelagnostic {verb}: error: ckpt_path: '{ckpt}' is of a different architecture: "
-            "model.hidden=8 in the checkpoint, 16 here")
+    line = (
+        f"skelagnostic {verb}: error: ckpt_path: '{ckpt}' is of a different architecture: "
+        "model.hidden=8 in the checkpoint, 16 here"
+    )
     assert line in err.splitlines(), err
     documented(line.replace(f"skelagnostic {verb}:", "skelagnostic validate:"), tmp_path)
 
 
 @pytest.mark.parametrize("verb", INFER_VERBS)
 def test_weights_that_do_not_fit_their_hyperparameters(
-        site: Path, trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-        verb: str) -> None:
+    site: Path, trained: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], verb: str
+) -> None:
     ckpt = bad_checkpoint("weights", trained, tmp_path)
     assert cli.main(command(verb, "weights", ckpt, tmp_path)) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err, err
-    line = (f"skelagnostic {verb}: error: ckpt: '{ckpt}' is of a different architecture: its "
-            "weights do not fit (14 of another shape)")
+    line = (
+        f"skelagnostic {verb}: error: ckpt: '{ckpt}' is of a different architecture: its "
+        "weights do not fit (14 of another shape)"
+    )
     assert err.splitlines() == [line]
     documented(line.replace(f"skelagnostic {verb}:", "skelagnostic retarget:"), tmp_path)
 
 
 def test_payload_never_runs_even_when_torch_is_told_to_unpickle(
-        site: Path, trained: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-        capsys: pytest.CaptureFixture[str]) -> None:
+    site: Path,
+    trained: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     """``weights_only=True`` is explicit, so torch's opt-out variable cannot re-enable pickle."""
     monkeypatch.setenv("TORCH_FORCE_NO_WEIGHTS_ONLY_LOAD", "1")
     ckpt = bad_checkpoint("payload", trained, tmp_path)
@@ -246,33 +282,76 @@ def test_read_checkpoint_api(trained: Path, tmp_path: Path, all_aligners: Plugin
 #: Tiny training runs of every built-in aligner, with checkpoints every step.
 FITS = {
     "example": [*SMOKE, "callbacks=[ema,resumable]", "callbacks.resume.every_n_train_steps=1"],
-    "humot": ["model=humot", "experiment=humot_quick", "model.dim=32", "model.latent=16",
-              "model.blocks=1", "model.heads=4", "data.seconds=2.0", "callbacks=resumable",
-              "callbacks.resume.every_n_train_steps=1"],
-    "pcmrl": ["model=pcmrl", "data.kinds=[biped22]", "data.gaits=[walk]",
-              "data.clips_per_gait=2", "data.seconds=1.5", "data.window=12", "data.stride=12",
-              "data.batch_size=2", "data.val_fraction=0.5", "model.dim=8", "model.stages=2",
-              "model.point_heads=2", "model.temporal_dim=16", "model.temporal_layers=1",
-              "model.temporal_heads=2", "model.num_source_points=64",
-              "model.num_target_points=128", "callbacks=resumable",
-              "callbacks.resume.every_n_train_steps=1"],
-    "pcmrl_interp": ["model=pcmrl_interp", "model.dim=16", "model.heads=2", "model.layers=1",
-                     "data.samples_per_epoch=8", "data.batch_size=4", "callbacks=[ema,resumable]",
-                     "callbacks.resume.every_n_train_steps=1"],
-    "vqpae": ["model=vqpae", "experiment=smoke", "model.num_codes=8", "model.kernel_size=7",
-              "data.seconds=2.0", "callbacks=[ema,resumable]",
-              "callbacks.resume.every_n_train_steps=1"],
+    "humot": [
+        "model=humot",
+        "experiment=humot_quick",
+        "model.dim=32",
+        "model.latent=16",
+        "model.blocks=1",
+        "model.heads=4",
+        "data.seconds=2.0",
+        "callbacks=resumable",
+        "callbacks.resume.every_n_train_steps=1",
+    ],
+    "pcmrl": [
+        "model=pcmrl",
+        "data.kinds=[biped22]",
+        "data.gaits=[walk]",
+        "data.clips_per_gait=2",
+        "data.seconds=1.5",
+        "data.window=12",
+        "data.stride=12",
+        "data.batch_size=2",
+        "data.val_fraction=0.5",
+        "model.dim=8",
+        "model.stages=2",
+        "model.point_heads=2",
+        "model.temporal_dim=16",
+        "model.temporal_layers=1",
+        "model.temporal_heads=2",
+        "model.num_source_points=64",
+        "model.num_target_points=128",
+        "callbacks=resumable",
+        "callbacks.resume.every_n_train_steps=1",
+    ],
+    "pcmrl_interp": [
+        "model=pcmrl_interp",
+        "model.dim=16",
+        "model.heads=2",
+        "model.layers=1",
+        "data.samples_per_epoch=8",
+        "data.batch_size=4",
+        "callbacks=[ema,resumable]",
+        "callbacks.resume.every_n_train_steps=1",
+    ],
+    "vqpae": [
+        "model=vqpae",
+        "experiment=smoke",
+        "model.num_codes=8",
+        "model.kernel_size=7",
+        "data.seconds=2.0",
+        "callbacks=[ema,resumable]",
+        "callbacks.resume.every_n_train_steps=1",
+    ],
 }
 
 
 @pytest.mark.parametrize("name", sorted(FITS))
 def test_every_aligner_checkpoint_loads_with_weights_only(
-        all_aligners: PluginManager, tmp_path: Path, name: str) -> None:
+    all_aligners: PluginManager, tmp_path: Path, name: str
+) -> None:
     def common(steps: int, run_dir: Path) -> list[str]:
-        return ["threads=1", "logger=none", "trainer.max_epochs=3", f"trainer.max_steps={steps}",
-                "trainer.limit_train_batches=2", "trainer.limit_val_batches=1",
-                "trainer.enable_model_summary=false", f"data.cache_dir={tmp_path / 'cache'}",
-                f"run_dir={run_dir}"]
+        return [
+            "threads=1",
+            "logger=none",
+            "trainer.max_epochs=3",
+            f"trainer.max_steps={steps}",
+            "trainer.limit_train_batches=2",
+            "trainer.limit_val_batches=1",
+            "trainer.enable_model_summary=false",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            f"run_dir={run_dir}",
+        ]
 
     cfg = app.compose([*FITS[name], *common(2, tmp_path / "run")], plugin_manager=all_aligners)
     ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
@@ -282,13 +361,19 @@ def test_every_aligner_checkpoint_loads_with_weights_only(
         # the whole file (loops, callbacks, data module, hyperparameters) under the safe loader
         checkpoint = read_checkpoint(ckpt, name, aligners=all_aligners.aligner_classes())
         assert checkpoint["global_step"] == 2
-        model = load_checkpoint(all_aligners.aligner(name).module, ckpt,
-                                aligners=all_aligners.aligner_classes())
+        model = load_checkpoint(
+            all_aligners.aligner(name).module, ckpt, aligners=all_aligners.aligner_classes()
+        )
         assert set(model.state_dict()) == set(checkpoint["state_dict"])
         # resuming (weights_only=True) restores the loops, callbacks and data loader position
-        resumed = app.compose([*FITS[name], *common(3, tmp_path / "resumed"),
-                               f"ckpt_path={ckpt}"], plugin_manager=all_aligners)
+        resumed = app.compose(
+            [*FITS[name], *common(3, tmp_path / "resumed"), f"ckpt_path={ckpt}"],
+            plugin_manager=all_aligners,
+        )
         app.run(resumed, plugin_manager=all_aligners)
-    after = read_checkpoint(tmp_path / "resumed" / "checkpoints" / "last.ckpt", name,
-                            aligners=all_aligners.aligner_classes())
+    after = read_checkpoint(
+        tmp_path / "resumed" / "checkpoints" / "last.ckpt",
+        name,
+        aligners=all_aligners.aligner_classes(),
+    )
     assert after["global_step"] == 3

@@ -37,12 +37,16 @@ TRAIN_VERBS = ("fit", "validate", "test", "predict")
 INFER_VERBS = ("retarget", "interpolate", "transfer")
 BVH_VERBS = ("retarget", "interpolate", "transfer", "render", "demo")
 #: Bad checkpoints, in the order of the verbs they go through (fit, validate, ... transfer).
-CHECKPOINTS = ("missing", "payload", "architecture", "random", "empty", "other_model",
-               "truncated")
+CHECKPOINTS = ("missing", "payload", "architecture", "random", "empty", "other_model", "truncated")
 MAX_STDERR_LINES = 3
 #: Informational lines Lightning writes to stderr when a run starts (not errors).
-LIGHTNING_INFO = ("Seed set to ", "GPU available: ", "TPU available: ", "💡 Tip: ",
-                  "Restoring states from the checkpoint path at ")
+LIGHTNING_INFO = (
+    "Seed set to ",
+    "GPU available: ",
+    "TPU available: ",
+    "💡 Tip: ",
+    "Restoring states from the checkpoint path at ",
+)
 EXAMPLE_SRC = REPO / "plugins" / "example-aligner" / "src"
 
 
@@ -61,19 +65,31 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("corpus")
     dist = root / "site" / "skelagnostic_example_aligner-0.1.0.dist-info"  # as conftest.site
     dist.mkdir(parents=True)
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: skelagnostic-example-aligner\n"
-                                   "Version: 0.1.0\n")
+    (dist / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: skelagnostic-example-aligner\nVersion: 0.1.0\n"
+    )
     (dist / "entry_points.txt").write_text(
-        "[skelagnostic]\nexample = skelagnostic_example.plugin\n")
+        "[skelagnostic]\nexample = skelagnostic_example.plugin\n"
+    )
     sys.path.insert(0, str(EXAMPLE_SRC))
     try:
         import skelagnostic_example.plugin as plugin
 
         pm = PluginManager(load_entrypoints=False)
         pm.register(plugin, "example")
-        app.run(app.compose([*SMOKE, f"run_dir={root / 'run'}", f"data.cache_dir={root / 'c'}",
-                             "trainer.max_epochs=1", "logger=none"], plugin_manager=pm),
-                plugin_manager=pm)
+        app.run(
+            app.compose(
+                [
+                    *SMOKE,
+                    f"run_dir={root / 'run'}",
+                    f"data.cache_dir={root / 'c'}",
+                    "trainer.max_epochs=1",
+                    "logger=none",
+                ],
+                plugin_manager=pm,
+            ),
+            plugin_manager=pm,
+        )
     finally:
         sys.path.remove(str(EXAMPLE_SRC))
     good = root / "run" / "checkpoints" / "last.ckpt"
@@ -105,8 +121,12 @@ def _command() -> list[str]:
 def _env(root: Path) -> dict[str, str]:
     paths = [root / "site", EXAMPLE_SRC, REPO / "src", REPO / "plugins" / "humot" / "src"]
     inherited = os.environ.get("PYTHONPATH", "")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([*map(str, paths), inherited]),
-           "SKELAGNOSTIC_LOAD_PLUGINS": "example,humot", "OMP_NUM_THREADS": "1"}
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([*map(str, paths), inherited]),
+        "SKELAGNOSTIC_LOAD_PLUGINS": "example,humot",
+        "OMP_NUM_THREADS": "1",
+    }
     for name in ("SKELAGNOSTIC_DEBUG", "HYDRA_FULL_ERROR"):
         env.pop(name, None)
     return env
@@ -130,11 +150,22 @@ def bvh_cases(root: Path) -> list[Case]:
         out = root / "out" / path.stem
         verb = ("fit", *BVH_VERBS)[i % (len(BVH_VERBS) + 1)]
         argv = {
-            "fit": ["fit", *SMOKE, "data=bvh", f"data.paths=[{path}]", f"runs_dir={out}/runs",
-                    f"data.cache_dir={out}/cache"],
+            "fit": [
+                "fit",
+                *SMOKE,
+                "data=bvh",
+                f"data.paths=[{path}]",
+                f"runs_dir={out}/runs",
+                f"data.cache_dir={out}/cache",
+            ],
             "retarget": ["retarget", str(path), valid, f"ckpt={ckpt}", f"out={out}/r.bvh"],
-            "interpolate": ["interpolate", str(path), f"ckpt={ckpt}", "every=2",
-                            f"out={out}/i.bvh"],
+            "interpolate": [
+                "interpolate",
+                str(path),
+                f"ckpt={ckpt}",
+                "every=2",
+                f"out={out}/i.bvh",
+            ],
             "transfer": ["transfer", valid, str(path), f"ckpt={ckpt}", f"out={out}/t.bvh"],
             "render": ["render", str(path), f"out={out}/r.png", "size=48", "max_frames=2"],
             "demo": ["demo", str(path), "--out", f"{out}/demo", "--no-gif"],
@@ -158,14 +189,24 @@ def checkpoint_cases(root: Path) -> list[Case]:
                 model = ["model=humot"]
             elif kind == "architecture":
                 model = [*SMOKE[:-2], "model.hidden=16", "model.latent=4"]
-            cases.append(Case(f"{verb} {kind}", [verb, *model, f"ckpt_path={ckpt}",
-                                                 f"runs_dir={out}/runs",
-                                                 f"data.cache_dir={out}/cache"]))
+            cases.append(
+                Case(
+                    f"{verb} {kind}",
+                    [
+                        verb,
+                        *model,
+                        f"ckpt_path={ckpt}",
+                        f"runs_dir={out}/runs",
+                        f"data.cache_dir={out}/cache",
+                    ],
+                )
+            )
             continue
         inputs = [clip, "every=2"] if verb == "interpolate" else [clip, clip]
         name = "model=humot" if kind == "other_model" else "model=example"
-        cases.append(Case(f"{verb} {kind}", [verb, *inputs, f"ckpt={ckpt}", name,
-                                             f"out={out}/o.bvh"]))
+        cases.append(
+            Case(f"{verb} {kind}", [verb, *inputs, f"ckpt={ckpt}", name, f"out={out}/o.bvh"])
+        )
     return cases
 
 
@@ -175,23 +216,32 @@ def value_cases(root: Path) -> list[Case]:
     common = [f"runs_dir={out}/runs", f"data.cache_dir={out}/cache"]
     clip = str(CORPUS / "valid_small.bvh")
     ckpt = root / "run" / "checkpoints" / "last.ckpt"
-    return [Case(" ".join(argv[:2]), argv) for argv in (
-        ["fit", *SMOKE, "trainer.devices=abc", *common],
-        ["fit", "model=nope", *common],
-        ["validate", *SMOKE, "data=nope", *common],
-        ["test", *SMOKE, "model.hidden=big", *common],
-        ["predict", *SMOKE, "trainer.max_epochs=ten", *common],
-        ["fit", *SMOKE, "callbacks=nope", *common],
-        ["fit", *SMOKE, "data.batch_size=abc", *common],
-        ["interpolate", clip, f"ckpt={ckpt}", "every=abc", f"out={out}/o.bvh"],
-        ["retarget", clip, clip, f"ckpt={ckpt}", "speed=2", f"out={out}/o.bvh"],
-        ["nope"],
-    )]
+    return [
+        Case(" ".join(argv[:2]), argv)
+        for argv in (
+            ["fit", *SMOKE, "trainer.devices=abc", *common],
+            ["fit", "model=nope", *common],
+            ["validate", *SMOKE, "data=nope", *common],
+            ["test", *SMOKE, "model.hidden=big", *common],
+            ["predict", *SMOKE, "trainer.max_epochs=ten", *common],
+            ["fit", *SMOKE, "callbacks=nope", *common],
+            ["fit", *SMOKE, "data.batch_size=abc", *common],
+            ["interpolate", clip, f"ckpt={ckpt}", "every=abc", f"out={out}/o.bvh"],
+            ["retarget", clip, clip, f"ckpt={ckpt}", "speed=2", f"out={out}/o.bvh"],
+            ["nope"],
+        )
+    ]
 
 
 def _run(case: Case, root: Path) -> tuple[Case, subprocess.CompletedProcess[str]]:
-    done = subprocess.run([*_command(), *case.argv], env=_env(root), cwd=root,
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [*_command(), *case.argv],
+        env=_env(root),
+        cwd=root,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     return case, done
 
 
@@ -204,8 +254,7 @@ def test_whole_corpus_gives_no_traceback(workdir: Path) -> None:
         results = list(pool.map(lambda case: _run(case, workdir), cases))
     failures = []
     for case, done in results:
-        lines = [line for line in done.stderr.splitlines()
-                 if not line.startswith(LIGHTNING_INFO)]
+        lines = [line for line in done.stderr.splitlines() if not line.startswith(LIGHTNING_INFO)]
         problems = []
         if "Traceback" in done.stderr or "Error executing job" in done.stderr:
             problems.append("traceback")
@@ -217,23 +266,31 @@ def test_whole_corpus_gives_no_traceback(workdir: Path) -> None:
             failures.append(f"{case.name}: {', '.join(problems)}\n{done.stderr[-2000:]}")
     assert not (workdir / "pwned").exists()
     if failures:
-        pytest.fail(f"{len(failures)} of {len(cases)} cases:\n\n" + "\n\n".join(failures),
-                    pytrace=False)
+        pytest.fail(
+            f"{len(failures)} of {len(cases)} cases:\n\n" + "\n\n".join(failures), pytrace=False
+        )
 
 
 @pytest.mark.parametrize("name", ["single_joint.bvh", "all_bones_zero.bvh"])
 @pytest.mark.parametrize("position", [0, 1])
-def test_retarget_with_a_skeleton_of_height_zero(site: Path, workdir: Path, tmp_path: Path,
-                                                 capsys: pytest.CaptureFixture[str], name: str,
-                                                 position: int) -> None:
+def test_retarget_with_a_skeleton_of_height_zero(
+    site: Path,
+    workdir: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    name: str,
+    position: int,
+) -> None:
     paths = [str(CORPUS / "valid_small.bvh")] * 2
     paths[position] = str(CORPUS / name)
     ckpt = workdir / "run" / "checkpoints" / "last.ckpt"
     assert cli.main(["retarget", *paths, f"ckpt={ckpt}", f"out={tmp_path / 'o.bvh'}"]) == 2
     err = capsys.readouterr().err.strip()
     joints = {"single_joint.bvh": 1, "all_bones_zero.bvh": 4}[name]
-    assert err == (f"skelagnostic retarget: error: model=example: skeleton '{name[:-4]}' has "
-                   f"height 0 ({joints} joint(s), no bone of non-zero length); the example "
-                   "aligner normalises positions by the skeleton height")
+    assert err == (
+        f"skelagnostic retarget: error: model=example: skeleton '{name[:-4]}' has "
+        f"height 0 ({joints} joint(s), no bone of non-zero length); the example "
+        "aligner normalises positions by the skeleton height"
+    )
     assert not (tmp_path / "o.bvh").exists()
     documented(err, tmp_path)

@@ -15,29 +15,54 @@ from test_badinput import assert_no_partial_output, documented, error_line, fit
 
 @pytest.mark.parametrize(
     ("args", "message"),
-    [(["trainer.devices=abc"], "trainer.devices='abc': TypeError: `devices` selected with "
-      "`CPUAccelerator` should be an int > 0."),
-     (["trainer.strategy=nope"], "trainer.strategy='nope': ValueError: You selected an invalid "
-      "strategy name: `strategy='nope'`."),
-     (["trainer.accelerator=nope"], "trainer.accelerator='nope': ValueError: You selected an "
-      "invalid accelerator name: `accelerator='nope'`."),
-     (["trainer.accumulate_grad_batches=0"], "trainer.accumulate_grad_batches=0 must be a "
-      "positive integer"),
-     (["trainer.check_val_every_n_epoch=0"], "trainer.check_val_every_n_epoch=0 must be a "
-      "positive integer"),
-     (["callbacks.model_checkpoint.mode=sideways"], "callbacks.model_checkpoint.mode="
-      "'sideways': `mode` can be min, max but got sideways"),
-     (["logger.csv.save_dir={tmp}/file"], "logger.csv.save_dir='{tmp}/file': cannot write "
-      "there ('{tmp}/file' is not a directory)"),
-     (["callbacks.model_checkpoint.dirpath={tmp}/file/checkpoints"],
-      "callbacks.model_checkpoint.dirpath='{tmp}/file/checkpoints': cannot write there "
-      "('{tmp}/file' is not a directory)"),
-     (["data.batch_size=abc"], "data.batch_size='abc' has the wrong type for "
-      "ExampleDataModule (expected int)"),
-     (["seed=abc"], "seed must be an integer, got 'abc'")],
+    [
+        (
+            ["trainer.devices=abc"],
+            "trainer.devices='abc': TypeError: `devices` selected with "
+            "`CPUAccelerator` should be an int > 0.",
+        ),
+        (
+            ["trainer.strategy=nope"],
+            "trainer.strategy='nope': ValueError: You selected an invalid "
+            "strategy name: `strategy='nope'`.",
+        ),
+        (
+            ["trainer.accelerator=nope"],
+            "trainer.accelerator='nope': ValueError: You selected an "
+            "invalid accelerator name: `accelerator='nope'`.",
+        ),
+        (
+            ["trainer.accumulate_grad_batches=0"],
+            "trainer.accumulate_grad_batches=0 must be a positive integer",
+        ),
+        (
+            ["trainer.check_val_every_n_epoch=0"],
+            "trainer.check_val_every_n_epoch=0 must be a positive integer",
+        ),
+        (
+            ["callbacks.model_checkpoint.mode=sideways"],
+            "callbacks.model_checkpoint.mode='sideways': `mode` can be min, max but got sideways",
+        ),
+        (
+            ["logger.csv.save_dir={tmp}/file"],
+            "logger.csv.save_dir='{tmp}/file': cannot write "
+            "there ('{tmp}/file' is not a directory)",
+        ),
+        (
+            ["callbacks.model_checkpoint.dirpath={tmp}/file/checkpoints"],
+            "callbacks.model_checkpoint.dirpath='{tmp}/file/checkpoints': cannot write there "
+            "('{tmp}/file' is not a directory)",
+        ),
+        (
+            ["data.batch_size=abc"],
+            "data.batch_size='abc' has the wrong type for ExampleDataModule (expected int)",
+        ),
+        (["seed=abc"], "seed must be an integer, got 'abc'"),
+    ],
 )
-def test_cli_names_the_key(site: Path, tmp_path: Path, args: list[str], message: str,
-                           capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_names_the_key(
+    site: Path, tmp_path: Path, args: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     (tmp_path / "file").write_text("")
     assert fit(tmp_path, *(a.format(tmp=tmp_path) for a in args)) == 1
     err = error_line(capsys)
@@ -47,12 +72,15 @@ def test_cli_names_the_key(site: Path, tmp_path: Path, args: list[str], message:
     documented(expected, tmp_path)
 
 
-def test_cli_names_the_monitor_that_never_appears(site: Path, tmp_path: Path,
-                                                  capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_names_the_monitor_that_never_appears(
+    site: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert fit(tmp_path, "callbacks.model_checkpoint.monitor=val/nope") == 1
     err = error_line(capsys)
-    expected = ("skelagnostic fit: error: callbacks.model_checkpoint.monitor='val/nope': "
-                "`ModelCheckpoint(monitor='val/nope')` could not find the monitored key in the "
-                "returned metrics: ['train/loss', 'val/loss', 'epoch', 'step'].")
+    expected = (
+        "skelagnostic fit: error: callbacks.model_checkpoint.monitor='val/nope': "
+        "`ModelCheckpoint(monitor='val/nope')` could not find the monitored key in the "
+        "returned metrics: ['train/loss', 'val/loss', 'epoch', 'step']."
+    )
     assert err.startswith(expected)
     documented(expected, tmp_path)

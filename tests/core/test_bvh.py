@@ -344,8 +344,13 @@ def test_byte_order_mark_and_unterminated_last_line(tmp_path):
 
 def deep_chain(levels: int, frames: int = 2) -> str:
     """A BVH text whose joints form one chain ``levels`` deep (no indentation)."""
-    lines = ["HIERARCHY", "ROOT J0", "{", "OFFSET 0 0 0",
-             "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation"]
+    lines = [
+        "HIERARCHY",
+        "ROOT J0",
+        "{",
+        "OFFSET 0 0 0",
+        "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation",
+    ]
     for k in range(1, levels):
         lines += [f"JOINT J{k}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Yrotation Xrotation"]
     lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * levels
@@ -471,10 +476,18 @@ try:
 except sa.BVHError as exc:
     print(exc)
 """
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO / "src"),
-                                                       os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=env, timeout=120, check=False)
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(REPO / "src"), os.environ.get("PYTHONPATH", "")]),
+    }
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        check=False,
+    )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == f"{target}: cannot write: File too large", proc.stderr
     assert target.read_text() == "the old file"

@@ -81,8 +81,10 @@ def test_demo_outputs_get_the_permissions_the_umask_allows(tmp_path):
 def test_demo_takes_key_value_options_like_every_verb(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == ("skelagnostic demo: error: option --out: every verb takes key=value options, "
-                   "e.g. out=...; see 'skelagnostic demo --help'")
+    assert err == (
+        "skelagnostic demo: error: option --out: every verb takes key=value options, "
+        "e.g. out=...; see 'skelagnostic demo --help'"
+    )
     assert main(["demo", "seconds=abc"]) == 2
     assert "option seconds='abc': not a number" in capsys.readouterr().err
     assert main(["demo", "colour=red"]) == 2

@@ -46,8 +46,12 @@ def fake_site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]
 def example_plugin(fake_site: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """The example aligner installed as a (fake) distribution; only it is loaded."""
     monkeypatch.syspath_prepend(str(EXAMPLE_SRC))
-    write_dist(fake_site, "skelagnostic-example-aligner", "0.1.0",
-               {"example": "skelagnostic_example.plugin"})
+    write_dist(
+        fake_site,
+        "skelagnostic-example-aligner",
+        "0.1.0",
+        {"example": "skelagnostic_example.plugin"},
+    )
     monkeypatch.setenv(LOAD_PLUGINS_ENV, "example")
     return fake_site
 
@@ -75,8 +79,9 @@ def add_plugin(fake_site: Path) -> Callable[[str, str], None]:
 def subprocess_env(tmp_path: Path) -> dict[str, str]:
     """Environment for CLI subprocesses: the example plugin importable, a private cache."""
     site = tmp_path / "subsite"
-    write_dist(site, "skelagnostic-example-aligner", "0.1.0",
-               {"example": "skelagnostic_example.plugin"})
+    write_dist(
+        site, "skelagnostic-example-aligner", "0.1.0", {"example": "skelagnostic_example.plugin"}
+    )
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(site), str(EXAMPLE_SRC), str(REPO / "src")])
     env[LOAD_PLUGINS_ENV] = "example"
@@ -107,9 +112,19 @@ def fit_example() -> Callable[..., Path]:
             pm = PluginManager(load_entrypoints=False)
             pm.register(plugin, "example")
             run_dir = root / ("run" if task == "fit" else task)
-            app.run(app.compose(["model=example", f"data.cache_dir={root / 'cache'}",
-                                 *overrides, f"run_dir={run_dir}"], task=task, plugin_manager=pm),
-                    plugin_manager=pm)
+            app.run(
+                app.compose(
+                    [
+                        "model=example",
+                        f"data.cache_dir={root / 'cache'}",
+                        *overrides,
+                        f"run_dir={run_dir}",
+                    ],
+                    task=task,
+                    plugin_manager=pm,
+                ),
+                plugin_manager=pm,
+            )
         finally:
             sys.path.remove(str(EXAMPLE_SRC))
         return run_dir

@@ -25,8 +25,14 @@ TROUBLESHOOTING = REPO / "docs" / "troubleshooting.md"
 
 def _module(cache: Path, representation: GlobalPositions | None = None) -> MotionDataModule:
     source = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=2, seconds=2.0)
-    return MotionDataModule(source, representation or GlobalPositions(frame="root"), window=8,
-                            stride=8, val_fraction=0.0, cache_dir=cache)
+    return MotionDataModule(
+        source,
+        representation or GlobalPositions(frame="root"),
+        window=8,
+        stride=8,
+        val_fraction=0.0,
+        cache_dir=cache,
+    )
 
 
 def _arrays(cache: Path) -> list[Path]:
@@ -40,7 +46,8 @@ def new_process(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_entry_overwritten_with_nan_bytes_is_detected_and_rebuilt(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     first = _module(tmp_path)
     first.setup("fit")
     stats = first.representations["procedural"].normalization_state()
@@ -59,8 +66,9 @@ def test_entry_overwritten_with_nan_bytes_is_detected_and_rebuilt(
         assert torch.equal(value, stats[key])
 
 
-def test_entries_are_verified_once_per_process(tmp_path: Path, new_process: None,
-                                               monkeypatch: pytest.MonkeyPatch) -> None:
+def test_entries_are_verified_once_per_process(
+    tmp_path: Path, new_process: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
     reads: list[Path] = []
     checksum = cache_module.file_checksum
 
@@ -112,7 +120,8 @@ def test_non_finite_statistics_fail_with_one_line(tmp_path: Path) -> None:
     assert line == (
         "dataset 'procedural': the features normalisation statistic 'mean' is not finite (1 "
         "of 66 values); a training clip holds NaN or infinite values (check the source files, "
-        "or run 'skelagnostic cache clear')")
+        "or run 'skelagnostic cache clear')"
+    )
     assert line in TROUBLESHOOTING.read_text(encoding="utf-8")
 
 
@@ -122,8 +131,9 @@ def test_changed_source_file_replaces_its_entry(tmp_path: Path, new_process: Non
     cache = tmp_path / "cache"
 
     def prepare() -> list[str]:
-        dm = MotionDataModule(BVHSource([clip], units="cm"), window=2, stride=1,
-                              val_fraction=0.0, cache_dir=cache)
+        dm = MotionDataModule(
+            BVHSource([clip], units="cm"), window=2, stride=1, val_fraction=0.0, cache_dir=cache
+        )
         dm.prepare_data()
         return [p.stem for p in _arrays(cache)]
 
@@ -156,5 +166,6 @@ def test_cache_verb_info_and_clear(tmp_path: Path, capsys: pytest.CaptureFixture
     assert cli.main(["cache", "info", "--cache-dir", str(tmp_path / "file")]) == 1
     err = capsys.readouterr().err.strip()
     assert err == f"skelagnostic cache: error: {tmp_path / 'file'} is not a directory"
-    assert ("skelagnostic cache: error: <tmp>/file is not a directory"
-            in TROUBLESHOOTING.read_text(encoding="utf-8"))
+    assert "skelagnostic cache: error: <tmp>/file is not a directory" in TROUBLESHOOTING.read_text(
+        encoding="utf-8"
+    )

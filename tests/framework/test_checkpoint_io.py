@@ -20,8 +20,15 @@ from skelagnostic.callbacks import AtomicCheckpointIO
 from skelagnostic.callbacks.checkpoint_io import TEMP_SUFFIX
 from skelagnostic.cli import app
 
-FAST = ["experiment=smoke", "data.seconds=2.0", "data.clips_per_gait=1", "data.window=16",
-        "data.stride=8", "model.hidden=16", "model.latent=4"]
+FAST = [
+    "experiment=smoke",
+    "data.seconds=2.0",
+    "data.clips_per_gait=1",
+    "data.window=16",
+    "data.stride=8",
+    "model.hidden=16",
+    "model.latent=4",
+]
 
 
 @pytest.fixture
@@ -45,8 +52,9 @@ def mode(path: Path) -> int:
     return stat.S_IMODE(path.stat().st_mode)
 
 
-def test_save_replaces_the_file_and_leaves_no_temporary(tmp_path: Path, private_tmpdir: Path,
-                                                        umask_022: None) -> None:
+def test_save_replaces_the_file_and_leaves_no_temporary(
+    tmp_path: Path, private_tmpdir: Path, umask_022: None
+) -> None:
     io = AtomicCheckpointIO()
     path = tmp_path / "ckpts" / "last.ckpt"
     stale = path.with_name("last.ckpt" + TEMP_SUFFIX)
@@ -105,14 +113,28 @@ class Tiny(L.LightningModule):
 
 
 @pytest.mark.parametrize("save_last", [True, "link"])
-def test_model_checkpoint_top_k_and_last(tmp_path: Path, private_tmpdir: Path, umask_022: None,
-                                         save_last: bool | str) -> None:
-    callback = ModelCheckpoint(dirpath=tmp_path / "ckpts", filename="{step}", monitor="step",
-                               mode="max", save_top_k=2, every_n_train_steps=1,
-                               save_last=save_last)
-    trainer = L.Trainer(accelerator="cpu", max_epochs=1, logger=False, callbacks=[callback],
-                        enable_progress_bar=False, enable_model_summary=False,
-                        plugins=[AtomicCheckpointIO()], default_root_dir=tmp_path)
+def test_model_checkpoint_top_k_and_last(
+    tmp_path: Path, private_tmpdir: Path, umask_022: None, save_last: bool | str
+) -> None:
+    callback = ModelCheckpoint(
+        dirpath=tmp_path / "ckpts",
+        filename="{step}",
+        monitor="step",
+        mode="max",
+        save_top_k=2,
+        every_n_train_steps=1,
+        save_last=save_last,
+    )
+    trainer = L.Trainer(
+        accelerator="cpu",
+        max_epochs=1,
+        logger=False,
+        callbacks=[callback],
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        plugins=[AtomicCheckpointIO()],
+        default_root_dir=tmp_path,
+    )
     assert isinstance(trainer.strategy.checkpoint_io, AtomicCheckpointIO)
     trainer.fit(Tiny())
     files = {p.name: p for p in (tmp_path / "ckpts").iterdir()}
@@ -120,13 +142,15 @@ def test_model_checkpoint_top_k_and_last(tmp_path: Path, private_tmpdir: Path, u
     assert files["last.ckpt"].is_symlink() == (save_last == "link")
     for name, path in files.items():
         assert torch.load(path, weights_only=False)["global_step"] == (
-            8 if name == "last.ckpt" else int(name[5]))
+            8 if name == "last.ckpt" else int(name[5])
+        )
         assert mode(path) == 0o644
     assert not any(private_tmpdir.iterdir())
 
 
-def test_ddp_trainer_saves_through_it_on_rank_zero_only(tmp_path: Path,
-                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+def test_ddp_trainer_saves_through_it_on_rank_zero_only(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # set_global_rank(1) below also sets the process-wide rank of Lightning's
     # rank_zero_only helpers: restore them after the test, or later tests in this
     # worker would log, save configs and write metrics as a non-zero rank (nothing).
@@ -134,11 +158,23 @@ def test_ddp_trainer_saves_through_it_on_rank_zero_only(tmp_path: Path,
     from lightning.pytorch.utilities import rank_zero_only
     from lightning_utilities.core import rank_zero as utilities_rank_zero
 
-    for helper in {id(f): f for f in (rank_zero_only, fabric_rank_zero.rank_zero_only,
-                                      utilities_rank_zero.rank_zero_only)}.values():
+    for helper in {
+        id(f): f
+        for f in (
+            rank_zero_only,
+            fabric_rank_zero.rank_zero_only,
+            utilities_rank_zero.rank_zero_only,
+        )
+    }.values():
         monkeypatch.setattr(helper, "rank", getattr(helper, "rank", 0), raising=False)
-    trainer = L.Trainer(accelerator="cpu", strategy="ddp", devices=2, logger=False,
-                        plugins=[AtomicCheckpointIO()], default_root_dir=tmp_path)
+    trainer = L.Trainer(
+        accelerator="cpu",
+        strategy="ddp",
+        devices=2,
+        logger=False,
+        plugins=[AtomicCheckpointIO()],
+        default_root_dir=tmp_path,
+    )
     strategy = trainer.strategy
     assert isinstance(strategy.checkpoint_io, AtomicCheckpointIO)
     assert strategy.global_rank == 0  # not launched: this process would be rank 0
@@ -149,9 +185,13 @@ def test_ddp_trainer_saves_through_it_on_rank_zero_only(tmp_path: Path,
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rank0.ckpt"]
 
 
-def test_fit_writes_checkpoints_atomically(example_plugin: Path, tmp_path: Path,
-                                           private_tmpdir: Path, umask_022: None,
-                                           monkeypatch: pytest.MonkeyPatch) -> None:
+def test_fit_writes_checkpoints_atomically(
+    example_plugin: Path,
+    tmp_path: Path,
+    private_tmpdir: Path,
+    umask_022: None,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     staged: list[str] = []
     mkstemp = tempfile.mkstemp
 
@@ -163,8 +203,17 @@ def test_fit_writes_checkpoints_atomically(example_plugin: Path, tmp_path: Path,
 
     monkeypatch.setattr(tempfile, "mkstemp", spy)  # fsspec stages Lightning's saves with it
     run_dir = tmp_path / "run"
-    app.run(app.compose(["model=example", f"data.cache_dir={tmp_path / 'cache'}", *FAST,
-                         f"run_dir={run_dir}", "trainer.max_epochs=1"]))
+    app.run(
+        app.compose(
+            [
+                "model=example",
+                f"data.cache_dir={tmp_path / 'cache'}",
+                *FAST,
+                f"run_dir={run_dir}",
+                "trainer.max_epochs=1",
+            ]
+        )
+    )
     ckpts = sorted((run_dir / "checkpoints").iterdir())
     assert [p.name for p in ckpts] == ["best.ckpt", "last.ckpt"]
     assert all(mode(p) == 0o644 for p in ckpts)
@@ -173,15 +222,31 @@ def test_fit_writes_checkpoints_atomically(example_plugin: Path, tmp_path: Path,
 
 
 @pytest.mark.slow
-def test_ddp_fit_writes_checkpoints_atomically(subprocess_env: dict[str, str], tmp_path: Path,
-                                               umask_022: None) -> None:
+def test_ddp_fit_writes_checkpoints_atomically(
+    subprocess_env: dict[str, str], tmp_path: Path, umask_022: None
+) -> None:
     tmpdir = tmp_path / "tmpdir"
     tmpdir.mkdir()
     run_dir = tmp_path / "run"
-    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", "model=example", *FAST,
-           "trainer.strategy=ddp", "trainer.devices=2", f"hydra.run.dir={run_dir}"]
-    proc = subprocess.run(cmd, env={**subprocess_env, "TMPDIR": str(tmpdir)}, cwd=tmp_path,
-                          capture_output=True, text=True, timeout=240)
+    cmd = [
+        sys.executable,
+        "-m",
+        "skelagnostic.cli",
+        "fit",
+        "model=example",
+        *FAST,
+        "trainer.strategy=ddp",
+        "trainer.devices=2",
+        f"hydra.run.dir={run_dir}",
+    ]
+    proc = subprocess.run(
+        cmd,
+        env={**subprocess_env, "TMPDIR": str(tmpdir)},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     ckpts = sorted((run_dir / "checkpoints").iterdir())
     assert [p.name for p in ckpts] == ["best.ckpt", "last.ckpt"]

@@ -13,8 +13,9 @@ from skelagnostic import cli
 
 
 @pytest.mark.parametrize("verb", ["render", "retarget", "interpolate", "transfer"])
-def test_file_verbs_take_threads(verb: str, tmp_path: Path,
-                                 capsys: pytest.CaptureFixture[str]) -> None:
+def test_file_verbs_take_threads(
+    verb: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     before = torch.get_num_threads()
     try:
         # threads= is taken before anything else is checked: a bad value is its own error
@@ -29,8 +30,12 @@ def test_file_verbs_take_threads(verb: str, tmp_path: Path,
 
 
 def test_help_into_a_closed_pipe_is_quiet(tmp_path: Path) -> None:
-    proc = subprocess.Popen([sys.executable, "-m", "skelagnostic.cli", "interpolate", "--help"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skelagnostic.cli", "interpolate", "--help"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=tmp_path,
+    )
     assert proc.stdout is not None and proc.stderr is not None
     proc.stdout.close()  # like `| head` that already exited
     err = proc.stderr.read().decode()
@@ -38,11 +43,11 @@ def test_help_into_a_closed_pipe_is_quiet(tmp_path: Path) -> None:
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
 
 
-def test_help_lists_no_internal_data_config(example_plugin: Path,
-                                            capsys: pytest.CaptureFixture[str]) -> None:
+def test_help_lists_no_internal_data_config(
+    example_plugin: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert cli.main(["fit", "--help"]) == 0
-    data = next(line for line in capsys.readouterr().out.splitlines()
-                if line.startswith("data: "))
+    data = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("data: "))
     options = data.removeprefix("data: ").split(", ")
     assert "procedural" in options and "bvh" in options
     assert not [o for o in options if o.startswith("_")]

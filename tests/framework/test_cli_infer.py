@@ -16,13 +16,21 @@ from skelagnostic.core.quaternion import slerp
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import LOAD_PLUGINS_ENV
 
-FAST = ["experiment=smoke", "data.seconds=2.0", "data.clips_per_gait=1", "data.window=16",
-        "data.stride=8", "model.hidden=16", "model.latent=4", "trainer.max_epochs=1"]
+FAST = [
+    "experiment=smoke",
+    "data.seconds=2.0",
+    "data.clips_per_gait=1",
+    "data.window=16",
+    "data.stride=8",
+    "model.hidden=16",
+    "model.latent=4",
+    "trainer.max_epochs=1",
+]
 
 # A third-party aligner declaring the two optional capabilities. Its methods are simple
 # and exact (slerp between keys, replay of the first target clip), so the tests can
 # check that the verbs pass the right arguments and write what the method returns.
-KEYED = '''
+KEYED = """
 import torch
 from skelagnostic import Motion
 from skelagnostic.core.quaternion import slerp
@@ -50,12 +58,13 @@ class Keyed(ExampleAligner):
 @hookimpl
 def register_aligners(register):
     register("keyed", Keyed, ExampleDataModule, config={"hidden": 16, "latent": 4})
-'''
+"""
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory,
-            fit_example: Callable[[Path, Sequence[str]], Path]) -> Path:
+def trained(
+    tmp_path_factory: pytest.TempPathFactory, fit_example: Callable[[Path, Sequence[str]], Path]
+) -> Path:
     """A run directory of the example aligner trained for one tiny epoch."""
     return fit_example(tmp_path_factory.mktemp("infer"), FAST)
 
@@ -85,8 +94,18 @@ def test_retarget_writes_a_bvh_of_the_target_rig(
     gif = tmp_path / "out" / "side.gif"
     ckpt = trained / "checkpoints" / "last.ckpt"
     # model= is read from the run's config.yaml next to the checkpoint
-    code = cli.main(["retarget", str(source), str(target), f"ckpt={ckpt}", f"out={out}",
-                     f"render={gif}", "max_frames=4", "size=64"])
+    code = cli.main(
+        [
+            "retarget",
+            str(source),
+            str(target),
+            f"ckpt={ckpt}",
+            f"out={out}",
+            f"render={gif}",
+            "max_frames=4",
+            "size=64",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     result = sa.read_bvh(out)
     assert result.skeleton.joint_names == sa.read_bvh(target).skeleton.joint_names
@@ -101,8 +120,9 @@ def test_interpolate_keeps_keys_and_passes_them(
     clip = clips("biped22", "walk")
     out = tmp_path / "inbetween.bvh"
     ckpt = trained / "checkpoints" / "last.ckpt"
-    code = cli.main(["interpolate", str(clip), f"ckpt={ckpt}", "model=keyed", "every=15",
-                     f"out={out}"])
+    code = cli.main(
+        ["interpolate", str(clip), f"ckpt={ckpt}", "model=keyed", "every=15", f"out={out}"]
+    )
     assert code == 0, capsys.readouterr().err
     source, result = sa.read_bvh(clip), sa.read_bvh(out)
     assert source.num_frames == 61
@@ -125,8 +145,16 @@ def test_transfer_reads_target_directories(
     dog_dir.mkdir()
     shutil.move(str(clips("quadruped", "trot", 3.0)), dog_dir / "a.bvh")
     out = tmp_path / "transfer.bvh"
-    code = cli.main(["transfer", str(source), str(dog_dir), "model=keyed",
-                     f"ckpt={trained / 'checkpoints' / 'last.ckpt'}", f"out={out}"])
+    code = cli.main(
+        [
+            "transfer",
+            str(source),
+            str(dog_dir),
+            "model=keyed",
+            f"ckpt={trained / 'checkpoints' / 'last.ckpt'}",
+            f"out={out}",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     result = sa.read_bvh(out)
     assert result.skeleton.num_joints == sa.read_bvh(dog_dir / "a.bvh").skeleton.num_joints
@@ -141,8 +169,17 @@ def test_interpolate_and_transfer_mark_keys_and_transitions_in_the_viewer(
     clip = clips("biped22", "walk")
     ckpt = f"ckpt={trained / 'checkpoints' / 'last.ckpt'}"
     page = tmp_path / "keys.html"
-    code = cli.main(["interpolate", str(clip), ckpt, "model=keyed", "every=20",
-                     f"out={tmp_path / 'a.bvh'}", f"html={page}"])
+    code = cli.main(
+        [
+            "interpolate",
+            str(clip),
+            ckpt,
+            "model=keyed",
+            "every=20",
+            f"out={tmp_path / 'a.bvh'}",
+            f"html={page}",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     text = page.read_text(encoding="utf-8")
     assert text.count('"keyframes":[0,20,40,60]') == 2  # input and result
@@ -151,21 +188,39 @@ def test_interpolate_and_transfer_mark_keys_and_transitions_in_the_viewer(
 
     dog = clips("quadruped", "trot", 3.0)
     page = tmp_path / "transfer.html"
-    code = cli.main(["transfer", str(clip), str(dog), ckpt, "model=keyed",
-                     f"out={tmp_path / 'b.bvh'}", f"render={page}"])
+    code = cli.main(
+        [
+            "transfer",
+            str(clip),
+            str(dog),
+            ckpt,
+            "model=keyed",
+            f"out={tmp_path / 'b.bvh'}",
+            f"render={page}",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     text = page.read_text(encoding="utf-8")
     assert '"transitions":[10,25]' in text and '"name":"transfer"' in text
     assert [p.shape[1] for p in decode_payload(text)] == [22, 21]
 
 
-def test_retarget_html_option(example_plugin: Path, trained: Path, clips, tmp_path: Path,
-                              capsys) -> None:
+def test_retarget_html_option(
+    example_plugin: Path, trained: Path, clips, tmp_path: Path, capsys
+) -> None:
     source, target = clips("biped22", "walk"), clips("biped31", "run")
     page = tmp_path / "retarget.html"
-    code = cli.main(["retarget", str(source), str(target),
-                     f"ckpt={trained / 'checkpoints' / 'last.ckpt'}",
-                     f"out={tmp_path / 'r.bvh'}", f"html={page}", "mode=overlay"])
+    code = cli.main(
+        [
+            "retarget",
+            str(source),
+            str(target),
+            f"ckpt={trained / 'checkpoints' / 'last.ckpt'}",
+            f"out={tmp_path / 'r.bvh'}",
+            f"html={page}",
+            "mode=overlay",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     text = page.read_text(encoding="utf-8")
     assert '"mode":"overlay"' in text and '"name":"retarget"' in text
@@ -174,26 +229,41 @@ def test_retarget_html_option(example_plugin: Path, trained: Path, clips, tmp_pa
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["interpolate", "{clip}", "ckpt={ckpt}", "every=5", "out={out}"],
-         "does not support 'interpolate'"),
+        (
+            ["interpolate", "{clip}", "ckpt={ckpt}", "every=5", "out={out}"],
+            "does not support 'interpolate'",
+        ),
         (["retarget", "{clip}", "ckpt={ckpt}", "out={out}"], "expected 2 input path(s), got 1"),
         (["retarget", "{clip}", "{clip}", "ckpt={ckpt}"], "missing option out="),
         (["retarget", "{clip}", "{clip}", "ckpt={ckpt}", "out=x.gif"], "must be a .bvh path"),
-        (["retarget", "{clip}", "{clip}", "ckpt=nope.ckpt", "out={out}"],
-         "ckpt: no checkpoint file 'nope.ckpt'"),
+        (
+            ["retarget", "{clip}", "{clip}", "ckpt=nope.ckpt", "out={out}"],
+            "ckpt: no checkpoint file 'nope.ckpt'",
+        ),
         (["retarget", "{clip}", "{clip}", "ckpt={ckpt}", "model=nope", "out={out}"], "nope"),
-        (["retarget", "missing.bvh", "{clip}", "ckpt={ckpt}", "out={out}"],
-         "missing.bvh: no such file"),
-        (["interpolate", "{clip}", "ckpt={ckpt}", "keys=3,99", "out={out}"],
-         "frame(s) [99] are outside the clip"),
+        (
+            ["retarget", "missing.bvh", "{clip}", "ckpt={ckpt}", "out={out}"],
+            "missing.bvh: no such file",
+        ),
+        (
+            ["interpolate", "{clip}", "ckpt={ckpt}", "keys=3,99", "out={out}"],
+            "frame(s) [99] are outside the clip",
+        ),
         (["interpolate", "{clip}", "ckpt={ckpt}", "out={out}"], "exactly one of every="),
-        (["transfer", "{clip}", "{clip}", "ckpt={ckpt}", "out={out}", "speed=2"],
-         "unknown option(s) speed="),
+        (
+            ["transfer", "{clip}", "{clip}", "ckpt={ckpt}", "out={out}", "speed=2"],
+            "unknown option(s) speed=",
+        ),
     ],
 )
 def test_verb_errors_are_one_line_and_write_nothing(
-    example_plugin: Path, trained: Path, clips, tmp_path: Path, capsys,
-    args: list[str], message: str,
+    example_plugin: Path,
+    trained: Path,
+    clips,
+    tmp_path: Path,
+    capsys,
+    args: list[str],
+    message: str,
 ) -> None:
     clip, out = clips("biped22", "walk"), tmp_path / "never.bvh"
     ckpt = trained / "checkpoints" / "last.ckpt"
@@ -230,6 +300,14 @@ def test_units_option_sets_the_input_units(clips, tmp_path: Path, capsys) -> Non
     with pytest.raises(SkelagnosticError, match=r"units='furlong'.*cmu"):
         _read(clip, {"units": "furlong"})
     ckpt = tmp_path / "missing.ckpt"
-    code = cli.main(["interpolate", str(clip), f"ckpt={ckpt}", "every=15", "units=cm",
-                     f"out={tmp_path / 'o.bvh'}"])
+    code = cli.main(
+        [
+            "interpolate",
+            str(clip),
+            f"ckpt={ckpt}",
+            "every=15",
+            "units=cm",
+            f"out={tmp_path / 'o.bvh'}",
+        ]
+    )
     assert code == 2 and "missing.ckpt" in capsys.readouterr().err  # units= is a known option

@@ -26,8 +26,9 @@ from skelagnostic.representations import FirstFrameOffsetQuaternions, RootLocalV
 
 
 def small_source() -> ProceduralSource:
-    return ProceduralSource(kinds=["biped22", "quadruped"], gaits=["walk"], clips_per_gait=3,
-                            seconds=2.0)
+    return ProceduralSource(
+        kinds=["biped22", "quadruped"], gaits=["walk"], clips_per_gait=3, seconds=2.0
+    )
 
 
 def test_procedural_source_is_in_metres_and_keyed_by_content() -> None:
@@ -58,19 +59,33 @@ def test_datamodule_batches_one_per_skeleton(tmp_path: Path) -> None:
 
 
 def test_split_is_by_clip_and_deterministic(tmp_path: Path) -> None:
-    dm = MotionDataModule(small_source(), window=16, stride=8, val_fraction=0.34,
-                          test_fraction=0.3, cache_dir=tmp_path)
+    dm = MotionDataModule(
+        small_source(),
+        window=16,
+        stride=8,
+        val_fraction=0.34,
+        test_fraction=0.3,
+        cache_dir=tmp_path,
+    )
     dm.setup()
     for name in dm.dataset_names:
         parts = [set(dm.datasets[s][name].clip_ids) for s in ("train", "val", "test")]
         assert all(parts)
         assert not (parts[0] & parts[1] or parts[0] & parts[2] or parts[1] & parts[2])
         assert sum(len(p) for p in parts) == 3
-    again = MotionDataModule(small_source(), window=16, stride=8, val_fraction=0.34,
-                             test_fraction=0.3, cache_dir=tmp_path)
+    again = MotionDataModule(
+        small_source(),
+        window=16,
+        stride=8,
+        val_fraction=0.34,
+        test_fraction=0.3,
+        cache_dir=tmp_path,
+    )
     again.setup()
-    assert again.datasets["val"]["procedural/biped22"].clip_ids == \
-        dm.datasets["val"]["procedural/biped22"].clip_ids
+    assert (
+        again.datasets["val"]["procedural/biped22"].clip_ids
+        == dm.datasets["val"]["procedural/biped22"].clip_ids
+    )
 
 
 def test_split_rules() -> None:
@@ -78,8 +93,9 @@ def test_split_rules() -> None:
     split = _split_clips(clips, 0.2, 0.1, seed=0)
     assert [len(split[s]) for s in ("train", "val", "test")] == [7, 2, 2]
     assert split["test"][0].id == "subject5"
-    assert {c.id for c in _split_clips(clips, 0.2, 0.1, seed=1)["val"]} != \
-        {c.id for c in split["val"]}
+    assert {c.id for c in _split_clips(clips, 0.2, 0.1, seed=1)["val"]} != {
+        c.id for c in split["val"]
+    }
     single = _split_clips(clips[:1], 0.5, 0.0, seed=0)
     assert len(single["train"]) == 1 and not single["val"]
 
@@ -113,8 +129,9 @@ def test_cache_reads_are_memory_mapped(tmp_path: Path) -> None:
 
 def test_window_dependent_representation(tmp_path: Path) -> None:
     src = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=2, seconds=2.0)
-    dm = MotionDataModule(src, FirstFrameOffsetQuaternions(), window=8, stride=8,
-                          cache_dir=tmp_path, val_fraction=0.0)
+    dm = MotionDataModule(
+        src, FirstFrameOffsetQuaternions(), window=8, stride=8, cache_dir=tmp_path, val_fraction=0.0
+    )
     dm.setup()
     assert dm.dataset_names == ["procedural"]  # one topology: named after the source
     item = dm.datasets["train"]["procedural"][3]
@@ -130,14 +147,18 @@ def test_datamodule_pickles_without_arrays(tmp_path: Path) -> None:
     windows = sum(e.array.stat().st_size for e in ds.entries)
     assert len(pickle.dumps(ds)) < windows / 2  # metadata only: windows stay in the files
     clone = pickle.loads(pickle.dumps(dm))
-    torch.testing.assert_close(clone.datasets["train"]["procedural/biped22"][0]["features"],
-                               ds[0]["features"])
+    torch.testing.assert_close(
+        clone.datasets["train"]["procedural/biped22"][0]["features"], ds[0]["features"]
+    )
 
 
 @pytest.mark.parametrize(
     ("kwargs", "match"),
-    [({"window": 0}, "data.window"), ({"batch_size": 0}, "data.batch_size"),
-     ({"val_fraction": 0.6, "test_fraction": 0.5}, "data.val_fraction")],
+    [
+        ({"window": 0}, "data.window"),
+        ({"batch_size": 0}, "data.batch_size"),
+        ({"val_fraction": 0.6, "test_fraction": 0.5}, "data.val_fraction"),
+    ],
 )
 def test_bad_arguments_name_the_field(kwargs, match: str) -> None:
     with pytest.raises(SkelagnosticError, match=match):
@@ -172,8 +193,11 @@ def test_reroot_keeps_global_motion() -> None:
 
 @pytest.mark.data
 def test_real_bvh_directories_group_by_topology(shared_data: Path, tmp_path: Path) -> None:
-    src = BVHSource([shared_data / "human" / "xia_cmu", shared_data / "dog" / "mann"],
-                    pattern="*_0*.bvh", units="cm")
+    src = BVHSource(
+        [shared_data / "human" / "xia_cmu", shared_data / "dog" / "mann"],
+        pattern="*_0*.bvh",
+        units="cm",
+    )
     dm = MotionDataModule(src, window=32, stride=32, fps=15, cache_dir=tmp_path)
     dm.setup()
     assert sorted(dm.dataset_names) == ["bvh/21j", "bvh/31j"]
@@ -219,9 +243,16 @@ def test_overfit_batches_repeats_the_same_training_batches(tmp_path: Path) -> No
 
     dm = MotionDataModule(small_source(), window=16, stride=8, batch_size=2, cache_dir=tmp_path)
     module = Recorder()
-    trainer = L.Trainer(overfit_batches=2, max_epochs=3, accelerator="cpu", logger=False,
-                        enable_checkpointing=False, enable_progress_bar=False,
-                        enable_model_summary=False, limit_val_batches=0)
+    trainer = L.Trainer(
+        overfit_batches=2,
+        max_epochs=3,
+        accelerator="cpu",
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        limit_val_batches=0,
+    )
     trainer.fit(module, datamodule=dm)
     assert len(module.seen) == 6
     for epoch in (1, 2):

@@ -28,8 +28,13 @@ def test_training_lowers_the_loss(model, tmp_path: Path) -> None:
 
     from skelagnostic.data import ProceduralSource
 
-    dm = ExampleDataModule(ProceduralSource(gaits=["walk"], clips_per_gait=1, seconds=2.0),
-                           window=16, stride=8, batch_size=8, cache_dir=tmp_path)
+    dm = ExampleDataModule(
+        ProceduralSource(gaits=["walk"], clips_per_gait=1, seconds=2.0),
+        window=16,
+        stride=8,
+        batch_size=8,
+        cache_dir=tmp_path,
+    )
     dm.setup()
     batch, _, _ = next(iter(dm.train_dataloader()))
     model.train()
@@ -52,9 +57,12 @@ def test_retarget_biped_to_quadruped(model) -> None:
     assert out.fps == walk.fps and torch.isfinite(out.global_positions()).all()
     # the root follows the source path, scaled by the height ratio (ground plane)
     ratio = dog.skeleton.height() / walk.skeleton.height()
-    torch.testing.assert_close(out.root_positions[:, [0, 2]].float(),
-                               walk.root_positions[:, [0, 2]].float() * ratio,
-                               atol=1e-3, rtol=1e-4)
+    torch.testing.assert_close(
+        out.root_positions[:, [0, 2]].float(),
+        walk.root_positions[:, [0, 2]].float() * ratio,
+        atol=1e-3,
+        rtol=1e-4,
+    )
 
 
 def test_decode_without_extras_stays_at_origin(model) -> None:

@@ -27,15 +27,22 @@ ort = pytest.importorskip("onnxruntime")
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE_SRC = REPO / "plugins" / "example-aligner" / "src"
 TOL = 1e-4
-FAST = ["experiment=smoke", "data.seconds=2.0", "data.clips_per_gait=1", "data.window=16",
-        "data.stride=8", "model.hidden=16", "model.latent=4", "trainer.max_epochs=1"]
+FAST = [
+    "experiment=smoke",
+    "data.seconds=2.0",
+    "data.clips_per_gait=1",
+    "data.window=16",
+    "data.stride=8",
+    "model.hidden=16",
+    "model.latent=4",
+    "trainer.max_epochs=1",
+]
 
 pytestmark = pytest.mark.slow
 
 
 # ----------------------------------------------------------------------------- helpers
-def run_file(path: Path, names: Sequence[str], inputs: Sequence[torch.Tensor]
-             ) -> list[np.ndarray]:
+def run_file(path: Path, names: Sequence[str], inputs: Sequence[torch.Tensor]) -> list[np.ndarray]:
     """Run an exported file: ONNX in onnxruntime, TorchScript with torch.jit.load."""
     if path.suffix == ".onnx":
         session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
@@ -47,8 +54,9 @@ def run_file(path: Path, names: Sequence[str], inputs: Sequence[torch.Tensor]
     return [o.numpy() for o in (out if isinstance(out, tuple) else (out,))]
 
 
-def assert_matches(got: Sequence[np.ndarray], want: Sequence[torch.Tensor],
-                   names: Sequence[str]) -> None:
+def assert_matches(
+    got: Sequence[np.ndarray], want: Sequence[torch.Tensor], names: Sequence[str]
+) -> None:
     assert len(got) == len(want)
     for name, g, w in zip(names, got, want, strict=True):
         w = w.detach().numpy()
@@ -72,13 +80,21 @@ def check_sidecar(path: Path, fmt: str, inputs: Sequence[str], outputs: Sequence
 Case = Callable[[int, int], tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]]]
 
 
-def check_graph(out_dir: Path, name: str, fmt: str, inputs: Sequence[str],
-                outputs: Sequence[str], case: Case, sizes: Sequence[tuple[int, int]]) -> dict:
+def check_graph(
+    out_dir: Path,
+    name: str,
+    fmt: str,
+    inputs: Sequence[str],
+    outputs: Sequence[str],
+    case: Case,
+    sizes: Sequence[tuple[int, int]],
+) -> dict:
     """Exported graph ``name`` against PyTorch on ``case(batch, time)`` for each size."""
     meta = check_sidecar(out_dir / f"{name}.json", fmt, inputs, outputs)
     if fmt == "onnx":  # the file's interface is the sidecar's, dynamic axes by their labels
-        session = ort.InferenceSession(str(out_dir / meta["file"]),
-                                       providers=["CPUExecutionProvider"])
+        session = ort.InferenceSession(
+            str(out_dir / meta["file"]), providers=["CPUExecutionProvider"]
+        )
         assert [o.shape for o in session.get_outputs()] == [o["shape"] for o in meta["outputs"]]
         assert [i.shape for i in session.get_inputs()] == [i["shape"] for i in meta["inputs"]]
     for batch, frames in sizes:
@@ -94,21 +110,27 @@ def lafan(lafan_clip: Path) -> sa.Motion:
 
 def windows(x: torch.Tensor, batch: int, frames: int, step: int = 37) -> torch.Tensor:
     """``batch`` windows of ``frames`` frames of ``x [F, ...]``, starting ``step`` apart."""
-    return torch.stack([x[i * step: i * step + frames] for i in range(batch)])
+    return torch.stack([x[i * step : i * step + frames] for i in range(batch)])
 
 
 # ----------------------------------------------------------------------------- example
 @pytest.fixture(scope="module")
-def example_run(tmp_path_factory: pytest.TempPathFactory,
-                fit_example: Callable[[Path, Sequence[str]], Path]) -> Path:
+def example_run(
+    tmp_path_factory: pytest.TempPathFactory, fit_example: Callable[[Path, Sequence[str]], Path]
+) -> Path:
     """A run of the example aligner trained for one tiny epoch on procedural motion."""
     return fit_example(tmp_path_factory.mktemp("export"), FAST)
 
 
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
 def test_example_exported_by_the_cli_matches_pytorch(
-    example_plugin: Path, example_run: Path, lafan: sa.Motion, fmt: str, tmp_path: Path,
-    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+    example_plugin: Path,
+    example_run: Path,
+    lafan: sa.Motion,
+    fmt: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     from skelagnostic.cli.infer import load_from_checkpoint
     from skelagnostic.representations import GlobalPositions
@@ -118,8 +140,9 @@ def test_example_exported_by_the_cli_matches_pytorch(
     monkeypatch.setenv("EXPORT_OUT", str(tmp_path))  # path options expand $VARS
     before = torch.get_num_threads()
     try:
-        code = cli.main(["export", f"ckpt_path={ckpt}", f"format={fmt}",
-                         f"out=$EXPORT_OUT/{fmt}", "threads=1"])
+        code = cli.main(
+            ["export", f"ckpt_path={ckpt}", f"format={fmt}", f"out=$EXPORT_OUT/{fmt}", "threads=1"]
+        )
         assert code == 0, capsys.readouterr().err
         assert torch.get_num_threads() == 1
     finally:
@@ -127,7 +150,8 @@ def test_example_exported_by_the_cli_matches_pytorch(
     printed = capsys.readouterr().out.split()
     suffix = ".onnx" if fmt == "onnx" else ".pt"
     assert sorted(Path(p).name for p in printed) == sorted(
-        ["encoder" + suffix, "encoder.json", "decoder" + suffix, "decoder.json"])
+        ["encoder" + suffix, "encoder.json", "decoder" + suffix, "decoder.json"]
+    )
     aligner = load_from_checkpoint(ckpt)  # model name from the run's config.yaml
     height = lafan.skeleton.height()
     positions = GlobalPositions(frame="root").encode(lafan).float() / height
@@ -154,7 +178,10 @@ def test_example_exported_by_the_cli_matches_pytorch(
 
 
 def test_export_errors_are_one_line(
-    example_plugin: Path, example_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    example_plugin: Path,
+    example_run: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     ckpt = example_run / "checkpoints" / "last.ckpt"
@@ -175,8 +202,7 @@ def test_export_errors_are_one_line(
     assert not out.exists()
 
 
-def test_an_aligner_without_graphs_exports_nothing(example_plugin: Path,
-                                                   tmp_path: Path) -> None:
+def test_an_aligner_without_graphs_exports_nothing(example_plugin: Path, tmp_path: Path) -> None:
     from skelagnostic_example.aligner import ExampleAligner
 
     from skelagnostic.aligners import Aligner
@@ -193,8 +219,9 @@ def test_an_aligner_without_graphs_exports_nothing(example_plugin: Path,
 
 # ------------------------------------------------------------------------------ HuMoT
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
-def test_humot_encoder_and_decoder_match_pytorch(lafan: sa.Motion, fmt: str,
-                                                 tmp_path: Path) -> None:
+def test_humot_encoder_and_decoder_match_pytorch(
+    lafan: sa.Motion, fmt: str, tmp_path: Path
+) -> None:
     from skelagnostic_humot.aligner import HumotAligner, infer_units
     from skelagnostic_humot.data import prepare_chunks
 
@@ -207,11 +234,11 @@ def test_humot_encoder_and_decoder_match_pytorch(lafan: sa.Motion, fmt: str,
     topology = aligner.topology(lafan.skeleton)
     cmu = sa.read_bvh(REPO.parent / "shared" / "data" / "human" / "cmu" / "131_01.bvh")
     cmu_template = aligner.topology(cmu.skeleton).templates(
-        cmu.skeleton.bone_lengths().float() * UNITS[infer_units(cmu.skeleton)])
+        cmu.skeleton.bone_lengths().float() * UNITS[infer_units(cmu.skeleton)]
+    )
 
     def encoder(batch: int, frames: int) -> Any:
-        pos, tmpl = prepare_chunks(windows(world, batch, frames), topology,
-                                   lafan.skeleton.up_axis)
+        pos, tmpl = prepare_chunks(windows(world, batch, frames), topology, lafan.skeleton.up_axis)
         with torch.no_grad():
             return (pos, tmpl), (aligner.net.encoder(pos, tmpl),)
 
@@ -229,18 +256,30 @@ def test_humot_encoder_and_decoder_match_pytorch(lafan: sa.Motion, fmt: str,
 
 # ----------------------------------------------------------------------------- VQ-PAE
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
-def test_vqpae_encoder_and_pose_decoder_match_pytorch(lafan: sa.Motion, fmt: str,
-                                                      tmp_path: Path) -> None:
+def test_vqpae_encoder_and_pose_decoder_match_pytorch(
+    lafan: sa.Motion, fmt: str, tmp_path: Path
+) -> None:
     from skelagnostic_vqpae.aligner import VqpaeAligner
 
     from skelagnostic.representations import RootLocalVelocities
 
     torch.manual_seed(0)
     skeleton = lafan.skeleton
-    spec = {"channels": 3 * skeleton.num_joints, "window": 31, "fps": 30.0,
-            "skeleton": skeleton.to_dict()}
-    aligner = VqpaeAligner(latent=4, num_codes=8, kernel_size=5, freq_layers=2, amp_layers=2,
-                           pose_layers=2, datasets={"lafan human": spec}).eval()
+    spec = {
+        "channels": 3 * skeleton.num_joints,
+        "window": 31,
+        "fps": 30.0,
+        "skeleton": skeleton.to_dict(),
+    }
+    aligner = VqpaeAligner(
+        latent=4,
+        num_codes=8,
+        kernel_size=5,
+        freq_layers=2,
+        amp_layers=2,
+        pose_layers=2,
+        datasets={"lafan human": spec},
+    ).eval()
     char = aligner.characters[0]
     feats = RootLocalVelocities().encode(lafan).float().flatten(1)
     char.input_mean.copy_(feats.mean(0))
@@ -250,7 +289,7 @@ def test_vqpae_encoder_and_pose_decoder_match_pytorch(lafan: sa.Motion, fmt: str
     all_windows, _ = aligner._windows(0, lafan)
 
     def encoder(batch: int, _frames: int) -> Any:
-        x = all_windows[40: 40 + 7 * batch: 7]
+        x = all_windows[40 : 40 + 7 * batch : 7]
         with torch.no_grad():
             _, p = aligner.forward_dataset(0, x)
         return (x,), (p.phase, p.frequency, p.code, p.amplitude, p.manifold[..., 15])
@@ -262,35 +301,42 @@ def test_vqpae_encoder_and_pose_decoder_match_pytorch(lafan: sa.Motion, fmt: str
 
     outputs = ["phase", "frequency", "code", "amplitude", "manifold"]
     sizes = [(2, 31), (5, 31), (1, 31)]  # the window length is fixed by the architecture
-    meta = check_graph(tmp_path, "encoder_lafan_human", fmt, ["windows"], outputs, encoder,
-                       sizes)
+    meta = check_graph(tmp_path, "encoder_lafan_human", fmt, ["windows"], outputs, encoder, sizes)
     assert "window" in meta["fixed_axes"]
     assert meta["inputs"][0]["shape"] == ["batch", spec["channels"], 31]
     assert np.allclose(meta["metadata"]["normalisation"]["input_mean"], char.input_mean)
     assert meta["metadata"]["skeleton"]["joint_names"] == skeleton.joint_names
-    meta = check_graph(tmp_path, "pose_decoder_lafan_human", fmt, ["manifold"], ["pose"],
-                       decoder, sizes)
+    meta = check_graph(
+        tmp_path, "pose_decoder_lafan_human", fmt, ["manifold"], ["pose"], decoder, sizes
+    )
     assert np.allclose(meta["metadata"]["normalisation"]["pose_std"], char.pose_std)
 
 
 # ------------------------------------------------------------------------------ PC-MRL
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
-def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str,
-                                              tmp_path: Path) -> None:
+def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str, tmp_path: Path) -> None:
     from skelagnostic_pcmrl.points import global_to_local, sample_layout
     from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
     from skelagnostic.core import quaternion as Q
 
     torch.manual_seed(0)
-    aligner = PcmrlReconAligner(num_source_points=64, num_target_points=64, dim=16,
-                                  stages=3, point_heads=2, temporal_layers=1,
-                                  temporal_heads=2, target="biped22").eval()
+    aligner = PcmrlReconAligner(
+        num_source_points=64,
+        num_target_points=64,
+        dim=16,
+        stages=3,
+        point_heads=2,
+        temporal_layers=1,
+        temporal_heads=2,
+        target="biped22",
+    ).eval()
     export_aligner(aligner, fmt, tmp_path, "pcmrl")
     metric = lafan.to_metres().to(torch.float32)
     layout = sample_layout(metric.skeleton, 64, 0.05, (), torch.Generator().manual_seed(1))
-    cloud = layout.points(metric.global_rotations(), metric.global_positions(),
-                          metric.skeleton.offsets.float())
+    cloud = layout.points(
+        metric.global_rotations(), metric.global_positions(), metric.skeleton.offsets.float()
+    )
     parents = aligner.target_skeleton.parents
 
     def case(batch: int, frames: int) -> Any:
@@ -298,27 +344,39 @@ def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str,
         with torch.no_grad():
             out = aligner.reconstruct(pts, groups, 1)
         local = Q.normalize(global_to_local(out["rotations"], parents))
-        return (pts, groups.contiguous()), (out["root"], out["rotations"], local,
-                                            out["positions"])
+        return (pts, groups.contiguous()), (out["root"], out["rotations"], local, out["positions"])
 
-    meta = check_graph(tmp_path, "reconstruction", fmt, ["points", "groups"],
-                       ["root", "global_rotations", "local_rotations", "positions"], case,
-                       [(2, 12), (3, 23), (1, 16)])
+    meta = check_graph(
+        tmp_path,
+        "reconstruction",
+        fmt,
+        ["points", "groups"],
+        ["root", "global_rotations", "local_rotations", "positions"],
+        case,
+        [(2, 12), (3, 23), (1, 16)],
+    )
     assert meta["metadata"]["target_skeleton"]["parents"] == list(parents)
     assert "points" in meta["fixed_axes"]
 
 
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
-def test_pcmrl_interpolation_matches_pytorch(lafan: sa.Motion, fmt: str,
-                                             tmp_path: Path) -> None:
+def test_pcmrl_interpolation_matches_pytorch(lafan: sa.Motion, fmt: str, tmp_path: Path) -> None:
     from skelagnostic_pcmrl.interp import PcmrlInterpAligner
     from skelagnostic_pcmrl.rpa import bone_tails
 
     torch.manual_seed(0)
     metric = lafan.to_metres().to(torch.float32)
     skeleton = metric.skeleton
-    aligner = PcmrlInterpAligner(dim=16, heads=2, layers=1, ff_mult=2, max_relative=8,
-                                   skeleton=skeleton.to_dict(), fps=30.0, window=16).eval()
+    aligner = PcmrlInterpAligner(
+        dim=16,
+        heads=2,
+        layers=1,
+        ff_mult=2,
+        max_relative=8,
+        skeleton=skeleton.to_dict(),
+        fps=30.0,
+        window=16,
+    ).eval()
     export_aligner(aligner, fmt, tmp_path, "pcmrl_interp")
     grot, root = metric.global_rotations().float(), metric.root_positions.float()
     offsets, tails = skeleton.offsets.float(), bone_tails(skeleton).tails.float()
@@ -327,15 +385,25 @@ def test_pcmrl_interpolation_matches_pytorch(lafan: sa.Motion, fmt: str,
         keys = torch.zeros(batch, frames, dtype=torch.bool)
         keys[:, 0] = keys[:, -1] = True
         for b in range(batch):  # a different key pattern per window
-            keys[b, 3 + b: frames - 1: 4 + b] = True
-        args = (windows(grot, batch, frames), windows(root, batch, frames), keys,
-                offsets.expand(batch, -1, -1).contiguous(),
-                tails.expand(batch, -1, -1).contiguous())
+            keys[b, 3 + b : frames - 1 : 4 + b] = True
+        args = (
+            windows(grot, batch, frames),
+            windows(root, batch, frames),
+            keys,
+            offsets.expand(batch, -1, -1).contiguous(),
+            tails.expand(batch, -1, -1).contiguous(),
+        )
         with torch.no_grad():
             return args, aligner.interpolate_window(*args)
 
-    meta = check_graph(tmp_path, "interpolation", fmt,
-                       ["global_rotations", "root", "keys", "offsets", "tails"],
-                       ["out_global_rotations", "out_root"], case, [(2, 16), (3, 27), (1, 16)])
+    meta = check_graph(
+        tmp_path,
+        "interpolation",
+        fmt,
+        ["global_rotations", "root", "keys", "offsets", "tails"],
+        ["out_global_rotations", "out_root"],
+        case,
+        [(2, 16), (3, 27), (1, 16)],
+    )
     assert meta["metadata"]["training_window"] == 16
     assert np.allclose(meta["metadata"]["tails"], tails)

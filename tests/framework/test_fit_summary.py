@@ -163,8 +163,10 @@ def test_long_nested_figures_point_to_the_json_instead_of_a_blob(tmp_path: Path)
     from skelagnostic.callbacks import FitSummary
 
     trainer = SimpleNamespace(current_epoch=1, global_step=5)
-    content = {"metrics": {"usage": 0.5, "codes": {"a": 1}, "transfer": {"rows": list(range(80))}},
-               "notes": ["## Transfer\n\n| a |\n|---|\n| 1 |"]}
+    content = {
+        "metrics": {"usage": 0.5, "codes": {"a": 1}, "transfer": {"rows": list(range(80))}},
+        "notes": ["## Transfer\n\n| a |\n|---|\n| 1 |"],
+    }
     text = FitSummary(name="m")._markdown(trainer, {}, content, tmp_path / "m_metrics.json", [])
     assert "| `usage` | 0.5 |" in text and '| `codes` | {"a": 1} |' in text
     assert "| `transfer` | see `transfer` in `m_metrics.json` |" in text

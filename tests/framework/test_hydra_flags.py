@@ -34,17 +34,26 @@ FLAGS: dict[str, tuple[list[str], str]] = {
 }
 
 
-def console(args: list[str], env: dict[str, str], cwd: Path,
-            **extra_env: str) -> subprocess.CompletedProcess[str]:
+def console(
+    args: list[str], env: dict[str, str], cwd: Path, **extra_env: str
+) -> subprocess.CompletedProcess[str]:
     if not SCRIPT.exists():
         pytest.skip(f"console script not installed next to {sys.executable}")
-    return subprocess.run([str(SCRIPT), *args], env={**env, **extra_env}, cwd=cwd,
-                          capture_output=True, text=True, timeout=180)
+    return subprocess.run(
+        [str(SCRIPT), *args],
+        env={**env, **extra_env},
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
 
 
 def test_split_keeps_flag_values_with_their_flags() -> None:
     assert split_hydra_flags(["a=1", "--cfg", "job", "b=2", "--resolve", "-m", "c=1,2"]) == (
-        ["--cfg", "job", "--resolve", "-m"], ["a=1", "b=2", "c=1,2"])
+        ["--cfg", "job", "--resolve", "-m"],
+        ["a=1", "b=2", "c=1,2"],
+    )
     assert split_hydra_flags(["--info", "a=1"]) == (["--info"], ["a=1"])
     assert split_hydra_flags(["--info", "defaults", "a=1"]) == (["--info", "defaults"], ["a=1"])
     assert split_hydra_flags(["--cfg=job", "x=~/y"]) == (["--cfg=job"], ["x=~/y"])
@@ -52,8 +61,9 @@ def test_split_keeps_flag_values_with_their_flags() -> None:
 
 
 @pytest.mark.parametrize("flag", list(FLAGS))
-def test_flag_through_the_console_script(flag: str, subprocess_env: dict[str, str],
-                                         tmp_path: Path) -> None:
+def test_flag_through_the_console_script(
+    flag: str, subprocess_env: dict[str, str], tmp_path: Path
+) -> None:
     args, expected = FLAGS[flag]
     verb = VERBS[list(FLAGS).index(flag) % len(VERBS)]
     # the flag after the overrides, as users type it (this once gave "unrecognized arguments")
@@ -67,10 +77,15 @@ def test_flag_through_the_console_script(flag: str, subprocess_env: dict[str, st
 @pytest.mark.parametrize("verb", VERBS)
 @pytest.mark.parametrize("flag", list(FLAGS))
 @pytest.mark.parametrize("with_model", [True, False])
-def test_every_flag_on_every_verb(verb: str, flag: str, with_model: bool,
-                                  example_plugin: Path, tmp_path: Path,
-                                  capsys: pytest.CaptureFixture[str],
-                                  monkeypatch: pytest.MonkeyPatch) -> None:
+def test_every_flag_on_every_verb(
+    verb: str,
+    flag: str,
+    with_model: bool,
+    example_plugin: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     monkeypatch.chdir(tmp_path)
     args, expected = FLAGS[flag]
     model = ["model=example"] if with_model else []
@@ -83,29 +98,43 @@ def test_every_flag_on_every_verb(verb: str, flag: str, with_model: bool,
         assert ("model" in cfg) == with_model
 
 
-def test_help_lists_aligners_and_plugin_experiments(example_plugin: Path,
-                                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_help_lists_aligners_and_plugin_experiments(
+    example_plugin: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert cli.main(["fit", "--help"]) == 0
     out = capsys.readouterr().out
-    groups = dict(line.split(": ", 1) for line in out.split("== Config ==")[0].splitlines()
-                  if ": " in line)
+    groups = dict(
+        line.split(": ", 1) for line in out.split("== Config ==")[0].splitlines() if ": " in line
+    )
     assert "example" in groups["model"].split(", ")
     assert "example_quick" in groups["experiment"].split(", ")  # from the plugin's conf/
     assert "debug" in groups and "_aligner" not in groups  # the internal group stays hidden
 
 
-def test_help_with_a_model_shows_its_resolved_defaults(example_plugin: Path,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_help_with_a_model_shows_its_resolved_defaults(
+    example_plugin: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert cli.main(["fit", "model=example", "--cfg", "job", "--resolve"]) == 0
     cfg = yaml.safe_load(capsys.readouterr().out)
     assert cfg["model"]["name"] == "example" and cfg["model"]["hidden"] > 0
 
 
-def test_multirun_sweeps_into_one_directory(subprocess_env: dict[str, str],
-                                            tmp_path: Path) -> None:
-    proc = console(["fit", "-m", "model=example", "experiment=smoke", "model.hidden=8,16",
-                    "trainer.max_epochs=1", "threads=1", "data.seconds=2.0",
-                    "data.clips_per_gait=1"], subprocess_env, tmp_path)
+def test_multirun_sweeps_into_one_directory(subprocess_env: dict[str, str], tmp_path: Path) -> None:
+    proc = console(
+        [
+            "fit",
+            "-m",
+            "model=example",
+            "experiment=smoke",
+            "model.hidden=8,16",
+            "trainer.max_epochs=1",
+            "threads=1",
+            "data.seconds=2.0",
+            "data.clips_per_gait=1",
+        ],
+        subprocess_env,
+        tmp_path,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     sweeps = list((tmp_path / "runs" / "example" / "fit").glob("multirun_*"))
     assert len(sweeps) == 1
@@ -119,11 +148,13 @@ def test_multirun_sweeps_into_one_directory(subprocess_env: dict[str, str],
 
 def test_shell_completion_queries(subprocess_env: dict[str, str], tmp_path: Path) -> None:
     line = "skelagnostic f"
-    proc = console(["-sc", "query=bash"], subprocess_env, tmp_path, COMP_LINE=line,
-                   COMP_POINT=str(len(line)))
+    proc = console(
+        ["-sc", "query=bash"], subprocess_env, tmp_path, COMP_LINE=line, COMP_POINT=str(len(line))
+    )
     assert proc.returncode == 0 and proc.stdout.split() == ["fit"]
     line = "skelagnostic fit model=exa"
-    proc = console(["-sc", "query=bash"], subprocess_env, tmp_path, COMP_LINE=line,
-                   COMP_POINT=str(len(line)))
+    proc = console(
+        ["-sc", "query=bash"], subprocess_env, tmp_path, COMP_LINE=line, COMP_POINT=str(len(line))
+    )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["model=example"]

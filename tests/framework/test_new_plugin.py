@@ -21,8 +21,11 @@ REPO = Path(__file__).resolve().parents[2]
 def test_files_are_named_after_the_plugin() -> None:
     layout = new_plugin.files("tiny_net")
     assert set(layout) == {
-        "pyproject.toml", "README.md", "src/skelagnostic_tiny_net/__init__.py",
-        "src/skelagnostic_tiny_net/plugin.py", "src/skelagnostic_tiny_net/aligner.py",
+        "pyproject.toml",
+        "README.md",
+        "src/skelagnostic_tiny_net/__init__.py",
+        "src/skelagnostic_tiny_net/plugin.py",
+        "src/skelagnostic_tiny_net/aligner.py",
         "src/skelagnostic_tiny_net/conf/__init__.py",
         "src/skelagnostic_tiny_net/conf/model/tiny_net.yaml",
         "src/skelagnostic_tiny_net/conf/experiment/tiny_net_quick.yaml",
@@ -32,8 +35,10 @@ def test_files_are_named_after_the_plugin() -> None:
     assert "class TinyNetAligner(Aligner):" in layout["src/skelagnostic_tiny_net/aligner.py"]
     for text in layout.values():
         assert "__NAME__" not in text and "__PKG__" not in text and "__CLASS__" not in text
-    assert 'distribution_version("skelagnostic-tiny_net")' in layout[
-        "src/skelagnostic_tiny_net/__init__.py"]
+    assert (
+        'distribution_version("skelagnostic-tiny_net")'
+        in layout["src/skelagnostic_tiny_net/__init__.py"]
+    )
 
 
 def test_generated_model_yaml_equals_the_generated_constructor_defaults() -> None:
@@ -41,9 +46,13 @@ def test_generated_model_yaml_equals_the_generated_constructor_defaults() -> Non
     config = yaml.safe_load(layout["src/skelagnostic_tiny_net/conf/model/tiny_net.yaml"])
     assert config.pop("_target_") == "skelagnostic_tiny_net.aligner.TinyNetAligner"
     tree = ast.parse(layout["src/skelagnostic_tiny_net/aligner.py"])
-    (init,) = [node for cls in tree.body if isinstance(cls, ast.ClassDef)
-               and cls.name == "TinyNetAligner" for node in cls.body
-               if isinstance(node, ast.FunctionDef) and node.name == "__init__"]
+    (init,) = [
+        node
+        for cls in tree.body
+        if isinstance(cls, ast.ClassDef) and cls.name == "TinyNetAligner"
+        for node in cls.body
+        if isinstance(node, ast.FunctionDef) and node.name == "__init__"
+    ]
     names = [a.arg for a in init.args.args[1:]]
     defaults = [ast.literal_eval(d) for d in init.args.defaults]
     assert dict(zip(names, defaults, strict=True)) == config
@@ -73,25 +82,43 @@ def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> 
     env_dir = tmp_path / "env"
     venv.create(env_dir, system_site_packages=True, with_pip=False)
     py = str(env_dir / "bin" / "python")
-    purelib = subprocess.run([py, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
-                             capture_output=True, text=True, check=True).stdout.strip()
+    purelib = subprocess.run(
+        [py, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
     deps = [p for p in sys.path if p.endswith("site-packages")]
     # addsitedir (not a bare path) so that the .pth files there, e.g. the editable
     # install's finder that maps skelagnostic.conf onto the top-level conf/, run too
     Path(purelib, "deps.pth").write_text(
-        "".join(f"import site; site.addsitedir({p!r})\n" for p in deps))
+        "".join(f"import site; site.addsitedir({p!r})\n" for p in deps)
+    )
     script = Path(sys.executable).with_name("skelagnostic")  # the installed console script
     command = [py, str(script)] if script.is_file() else [py, "-m", "skelagnostic.cli"]
 
     def run(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run(list(args), cwd=work, capture_output=True, text=True, env=env,
-                              timeout=600)
+        return subprocess.run(
+            list(args), cwd=work, capture_output=True, text=True, env=env, timeout=600
+        )
 
     made = run(*command, "new-plugin", "tiny", "--dir", str(tmp_path / "pkg"))
     assert made.returncode == 0, made.stderr
     assert "pip install -e" in made.stdout
-    installed = run(sys.executable, "-m", "pip", "--python", py, "install", "-q", "--no-deps",
-                    "--no-build-isolation", "--no-index", "-e", str(tmp_path / "pkg"))
+    installed = run(
+        sys.executable,
+        "-m",
+        "pip",
+        "--python",
+        py,
+        "install",
+        "-q",
+        "--no-deps",
+        "--no-build-isolation",
+        "--no-index",
+        "-e",
+        str(tmp_path / "pkg"),
+    )
     assert installed.returncode == 0, installed.stderr[-2000:]
     env[LOAD_PLUGINS_ENV] = "tiny"  # only the new plugin (and the built-ins)
     fit = run(*command, "fit", "model=tiny", "experiment=smoke", "threads=1")

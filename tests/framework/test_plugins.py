@@ -23,8 +23,11 @@ from skelagnostic.plugins import (
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE_SRC = REPO / "plugins" / "example-aligner" / "src"
-HOOKS = [name for name, f in inspect.getmembers(hookspecs, inspect.isfunction)
-         if name.startswith("register_")]
+HOOKS = [
+    name
+    for name, f in inspect.getmembers(hookspecs, inspect.isfunction)
+    if name.startswith("register_")
+]
 
 REGISTERING_PLUGIN = """
 from skelagnostic.plugins import hookimpl
@@ -49,9 +52,14 @@ def register_config_paths(register):
 
 
 def test_hookspecs_are_the_documented_six() -> None:
-    assert sorted(HOOKS) == ["register_aligners", "register_checkpoint_readers",
-                             "register_config_paths", "register_datasets",
-                             "register_evaluations", "register_representations"]
+    assert sorted(HOOKS) == [
+        "register_aligners",
+        "register_checkpoint_readers",
+        "register_config_paths",
+        "register_datasets",
+        "register_evaluations",
+        "register_representations",
+    ]
 
 
 @pytest.mark.parametrize("hook", HOOKS)
@@ -64,8 +72,13 @@ def test_builtin_registers_through_hooks() -> None:
     (info,) = pm.plugins()
     assert (info.name, info.source, info.status) == ("skelagnostic", "built-in", "loaded")
     assert set(info.hooks) == {"register_representations", "register_datasets"}
-    assert {"global_positions", "root_local_velocities", "local_quaternions", "foq",
-            "point_cloud"} == set(pm.representations)
+    assert {
+        "global_positions",
+        "root_local_velocities",
+        "local_quaternions",
+        "foq",
+        "point_cloud",
+    } == set(pm.representations)
     assert {"procedural", "bvh", "lafan1", "cmu", "mann_dog", "bandai"} == set(pm.datasets)
     assert pm.aligners == {}
 
@@ -105,8 +118,10 @@ def test_name_collision_between_plugins_raises(add_plugin) -> None:
     add_plugin("first", REGISTERING_PLUGIN)
     add_plugin("second", REGISTERING_PLUGIN)
     pm = PluginManager()
-    with pytest.raises(PluginError, match="representation 'mine' is registered by both plugin "
-                                          "'first' and plugin 'second'"):
+    with pytest.raises(
+        PluginError,
+        match="representation 'mine' is registered by both plugin 'first' and plugin 'second'",
+    ):
         pm.representations  # noqa: B018
 
 
@@ -118,8 +133,10 @@ def test_collision_with_a_builtin_raises() -> None:
 
     pm = PluginManager(load_entrypoints=False)
     pm.register(Clash(), "clash")
-    with pytest.raises(PluginError, match="dataset 'procedural' is registered by both plugin "
-                                          "'skelagnostic' and plugin 'clash'"):
+    with pytest.raises(
+        PluginError,
+        match="dataset 'procedural' is registered by both plugin 'skelagnostic' and plugin 'clash'",
+    ):
         pm.datasets  # noqa: B018
 
 
@@ -151,13 +168,16 @@ def test_plugin_failing_at_import_is_skipped_with_warning(add_plugin) -> None:
 
 
 def test_plugin_failing_at_registration_is_skipped(add_plugin) -> None:
-    add_plugin("badreg", """
+    add_plugin(
+        "badreg",
+        """
 from skelagnostic.plugins import hookimpl
 
 @hookimpl
 def register_aligners(register):
     register("notanaligner", object)
-""")
+""",
+    )
     pm = PluginManager()
     with pytest.warns(PluginLoadWarning, match="module must be an Aligner subclass"):
         infos = {i.name: i for i in pm.plugins()}
@@ -173,7 +193,9 @@ def test_load_plugins_env_restricts(add_plugin, monkeypatch: pytest.MonkeyPatch)
     status = {i.name: i.status for i in pm.plugins()}
     # plugins installed in the environment besides these (e.g. the example) are disabled too
     assert {k: status[k] for k in ("skelagnostic", "broken", "good")} == {
-        "skelagnostic": "loaded", "broken": "disabled", "good": "loaded"
+        "skelagnostic": "loaded",
+        "broken": "disabled",
+        "good": "loaded",
     }
     assert all(v == "disabled" for k, v in status.items() if k not in {"skelagnostic", "good"})
     monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, "")
@@ -192,7 +214,9 @@ def test_plugins_command_lists_broken_plugin(add_plugin, fake_site: Path) -> Non
     env_path = [str(fake_site), str(REPO / "src")]
     out = subprocess.run(
         [sys.executable, "-m", "skelagnostic.cli", "plugins", "--json"],
-        capture_output=True, text=True, check=True,
+        capture_output=True,
+        text=True,
+        check=True,
         env={"PYTHONPATH": ":".join(env_path), "PATH": "/usr/bin:/bin"},
     )
     rows = {row["name"]: row for row in json.loads(out.stdout)}
@@ -205,8 +229,11 @@ def test_plugins_command_lists_broken_plugin(add_plugin, fake_site: Path) -> Non
 
 def test_plugin_without_hookimpl_is_reported(add_plugin) -> None:
     add_plugin("nohooks", "def register_aligners(register):\n    pass\n")
-    with pytest.warns(PluginLoadWarning, match="register_aligners is not decorated with "
-                                               r"@skelagnostic\.plugins\.hookimpl"):
+    with pytest.warns(
+        PluginLoadWarning,
+        match="register_aligners is not decorated with "
+        r"@skelagnostic\.plugins\.hookimpl",
+    ):
         pm = PluginManager()
     info = {i.name: i for i in pm.plugins()}["nohooks"]
     assert info.status == "failed" and "fake_plugin_nohooks" in info.error
@@ -214,27 +241,40 @@ def test_plugin_without_hookimpl_is_reported(add_plugin) -> None:
 
 def test_plugin_with_misspelt_undecorated_hook_is_reported(add_plugin) -> None:
     add_plugin("typo", "def register_aligner(register):\n    pass\n")
-    with pytest.warns(PluginLoadWarning, match=r"implements no skelagnostic hook \(misspelt "
-                                               r"hook\? register_aligner\)"):
+    with pytest.warns(
+        PluginLoadWarning,
+        match=r"implements no skelagnostic hook \(misspelt "
+        r"hook\? register_aligner\)",
+    ):
         pm = PluginManager()
     assert {i.name: i for i in pm.plugins()}["typo"].status == "failed"
 
 
 def test_plugin_with_another_projects_marker_is_reported(add_plugin) -> None:
-    add_plugin("foreign", "import pluggy\nimpl = pluggy.HookimplMarker('other')\n"
-                          "@impl\ndef register_aligners(register):\n    pass\n")
+    add_plugin(
+        "foreign",
+        "import pluggy\nimpl = pluggy.HookimplMarker('other')\n"
+        "@impl\ndef register_aligners(register):\n    pass\n",
+    )
     with pytest.warns(PluginLoadWarning, match="another project's HookimplMarker"):
         PluginManager()
 
 
-def test_fit_error_names_the_plugin_without_hookimpl(example_plugin: Path, add_plugin,
-                                                      fake_site: Path, tmp_path: Path) -> None:
+def test_fit_error_names_the_plugin_without_hookimpl(
+    example_plugin: Path, add_plugin, fake_site: Path, tmp_path: Path
+) -> None:
     add_plugin("mlp", "def register_aligners(register):\n    pass\n")
     out = subprocess.run(
         [sys.executable, "-m", "skelagnostic.cli", "fit", "model=mlp"],
-        capture_output=True, text=True, cwd=tmp_path,
-        env={"PYTHONPATH": f"{fake_site}:{EXAMPLE_SRC}:{REPO / 'src'}", "PATH": "/usr/bin:/bin",
-             plugins.LOAD_PLUGINS_ENV: "mlp,example", "OMP_NUM_THREADS": "1"},
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={
+            "PYTHONPATH": f"{fake_site}:{EXAMPLE_SRC}:{REPO / 'src'}",
+            "PATH": "/usr/bin:/bin",
+            plugins.LOAD_PLUGINS_ENV: "mlp,example",
+            "OMP_NUM_THREADS": "1",
+        },
     )
     assert out.returncode == 1
     line = out.stderr.strip().splitlines()[-1]
@@ -247,18 +287,20 @@ def _conf_plugin(site: Path, name: str, url: str, init: bool, write_dist) -> Non
     (pkg / "conf" / "experiment").mkdir(parents=True)
     (pkg / "__init__.py").write_text(
         "from skelagnostic.plugins import hookimpl\n\n@hookimpl\n"
-        f"def register_config_paths(register):\n    register({url!r})\n")
+        f"def register_config_paths(register):\n    register({url!r})\n"
+    )
     if init:
         (pkg / "conf" / "__init__.py").write_text("")
     (pkg / "conf" / "experiment" / f"{name}_seed.yaml").write_text(
-        "# @package _global_\nseed: 1234\n")
+        "# @package _global_\nseed: 1234\n"
+    )
     write_dist(site, f"confplug-{name}", "0.1.0", {name: f"confplug_{name}"})
 
 
 @pytest.mark.parametrize("init", [True, False])
-def test_conf_package_with_or_without_init_is_found(example_plugin: Path, tmp_path: Path,
-                                                    monkeypatch: pytest.MonkeyPatch,
-                                                    init: bool, dist_writer) -> None:
+def test_conf_package_with_or_without_init_is_found(
+    example_plugin: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, init: bool, dist_writer
+) -> None:
     from skelagnostic.cli.app import compose
 
     name = "withinit" if init else "noinit"  # distinct modules: sys.modules keeps the first
@@ -275,17 +317,26 @@ def test_conf_package_with_or_without_init_is_found(example_plugin: Path, tmp_pa
 def test_missing_conf_package_is_named(example_plugin: Path, monkeypatch, dist_writer) -> None:
     _conf_plugin(example_plugin, "nope", "pkg://confplug_nope.configs", True, dist_writer)
     monkeypatch.setenv(plugins.LOAD_PLUGINS_ENV, "example,nope")
-    with pytest.warns(PluginLoadWarning, match="config path 'pkg://confplug_nope.configs': "
-                                               "'confplug_nope.configs' is not importable"):
+    with pytest.warns(
+        PluginLoadWarning,
+        match="config path 'pkg://confplug_nope.configs': "
+        "'confplug_nope.configs' is not importable",
+    ):
         infos = {i.name: i for i in plugins.get_plugin_manager().plugins()}
     assert infos["nope"].status == "failed"
 
 
-def test_plugins_command_shows_description_version_and_contents(subprocess_env,
-                                                                 tmp_path: Path) -> None:
+def test_plugins_command_shows_description_version_and_contents(
+    subprocess_env, tmp_path: Path
+) -> None:
     def plugins_cli(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "skelagnostic.cli", "plugins", *args],
-                              capture_output=True, text=True, cwd=tmp_path, env=subprocess_env)
+        return subprocess.run(
+            [sys.executable, "-m", "skelagnostic.cli", "plugins", *args],
+            capture_output=True,
+            text=True,
+            cwd=tmp_path,
+            env=subprocess_env,
+        )
 
     text = plugins_cli().stdout
     assert "example 0.1.0 (skelagnostic-example-aligner) loaded" in text
@@ -305,15 +356,26 @@ def test_plugins_name_shows_capabilities_and_defaults(example_plugin, capsys) ->
     assert main(["example"]) == 0
     out = capsys.readouterr().out
     assert "aligner example (plugin example 0.1.0, skelagnostic-example-aligner)" in out
-    for line in ("retarget: yes", "interpolate: no", "transfer: no", "unseen topology: yes",
-                 "declared: decode, encode, quadruped, retarget, unseen_topology",
-                 "  hidden: 64", "  latent: 16", "  lr: 0.003"):
+    for line in (
+        "retarget: yes",
+        "interpolate: no",
+        "transfer: no",
+        "unseen topology: yes",
+        "declared: decode, encode, quadruped, retarget, unseen_topology",
+        "  hidden: 64",
+        "  latent: 16",
+        "  lr: 0.003",
+    ):
         assert line in out
     assert main(["example", "--json"]) == 0
     details = json.loads(capsys.readouterr().out)
     assert details["config"] == {"hidden": 64, "latent": 16, "lr": 3e-3}
-    assert details["capabilities"] == {"retarget": True, "interpolate": False,
-                                       "transfer": False, "unseen_topology": True}
+    assert details["capabilities"] == {
+        "retarget": True,
+        "interpolate": False,
+        "transfer": False,
+        "unseen_topology": True,
+    }
     assert details["module"] == "skelagnostic_example.aligner.ExampleAligner"
 
 
@@ -322,15 +384,21 @@ def test_plugins_name_unknown_lists_the_known_ones(example_plugin, capsys) -> No
 
     assert main(["nope"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("skelagnostic plugins: 'nope' is neither an aligner nor a plugin; "
-                          "aligners: example; plugins: skelagnostic, example")
+    assert err.startswith(
+        "skelagnostic plugins: 'nope' is neither an aligner nor a plugin; "
+        "aligners: example; plugins: skelagnostic, example"
+    )
 
 
 def test_plugin_with_one_undecorated_hook_among_decorated_ones_is_reported(add_plugin) -> None:
-    add_plugin("half", "from skelagnostic.plugins import hookimpl\n\n"
-                       "@hookimpl\ndef register_datasets(register):\n    pass\n\n"
-                       "def register_config_paths(register):\n    register('pkg://x.conf')\n")
-    with pytest.warns(PluginLoadWarning, match="fake_plugin_half: register_config_paths is not "
-                                               "decorated"):
+    add_plugin(
+        "half",
+        "from skelagnostic.plugins import hookimpl\n\n"
+        "@hookimpl\ndef register_datasets(register):\n    pass\n\n"
+        "def register_config_paths(register):\n    register('pkg://x.conf')\n",
+    )
+    with pytest.warns(
+        PluginLoadWarning, match="fake_plugin_half: register_config_paths is not decorated"
+    ):
         pm = PluginManager()
     assert {i.name: i for i in pm.plugins()}["half"].status == "failed"

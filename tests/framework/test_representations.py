@@ -33,8 +33,13 @@ def dog() -> sa.Motion:
 
 @pytest.mark.parametrize(
     ("rep", "channels"),
-    [(GlobalPositions(), 3), (GlobalPositions("root"), 3), (RootLocalVelocities(), 3),
-     (LocalQuaternions(), 7), (FirstFrameOffsetQuaternions(), 7)],
+    [
+        (GlobalPositions(), 3),
+        (GlobalPositions("root"), 3),
+        (RootLocalVelocities(), 3),
+        (LocalQuaternions(), 7),
+        (FirstFrameOffsetQuaternions(), 7),
+    ],
 )
 def test_joint_layouts(walk: sa.Motion, rep, channels: int) -> None:
     feats = rep.encode(walk)
@@ -59,8 +64,12 @@ def test_root_frame_is_translation_and_heading_invariant(walk: sa.Motion) -> Non
     turn = Q.normalize(torch.tensor([0.8, 0.0, 0.6, 0.0], dtype=walk.dtype))
     rot = walk.rotations.clone()
     rot[:, 0] = Q.mul(turn, rot[:, 0])
-    moved = sa.Motion(walk.skeleton, rot, Q.rotate(turn, walk.root_positions) +
-                      torch.tensor([3.0, 0.0, -2.0], dtype=walk.dtype), walk.fps)
+    moved = sa.Motion(
+        walk.skeleton,
+        rot,
+        Q.rotate(turn, walk.root_positions) + torch.tensor([3.0, 0.0, -2.0], dtype=walk.dtype),
+        walk.fps,
+    )
     rep = GlobalPositions("root")
     torch.testing.assert_close(rep.encode(moved), rep.encode(walk), atol=1e-6, rtol=0)
 
@@ -73,8 +82,9 @@ def test_ik_handles_opposite_and_zero_directions() -> None:
     torch.testing.assert_close(q[2], torch.tensor([1.0, 0, 0, 0]))
     sk = sa.Skeleton(["a", "b"], [-1, 0], [[0, 0, 0], [0, 1, 0]])
     rot, _ = inverse_kinematics(torch.tensor([[0.0, 0, 0], [0, -1, 0]]), sk)
-    torch.testing.assert_close(Q.rotate(rot[0], torch.tensor([0.0, 1, 0])),
-                               torch.tensor([0.0, -1, 0]), atol=1e-6, rtol=0)
+    torch.testing.assert_close(
+        Q.rotate(rot[0], torch.tensor([0.0, 1, 0])), torch.tensor([0.0, -1, 0]), atol=1e-6, rtol=0
+    )
 
 
 @pytest.mark.parametrize("rep", [RootLocalVelocities(), PointCloud(num_points=16)])
@@ -145,8 +155,9 @@ def test_normalisation_streaming_matches_full(walk: sa.Motion) -> None:
     torch.testing.assert_close(full.std, chunked.std)
     torch.testing.assert_close(full.denormalize(full.normalize(feats)), feats)
     z = full.normalize(feats)
-    torch.testing.assert_close(z.mean(0)[1:], torch.zeros(walk.num_joints - 1, 3), atol=1e-4,
-                               rtol=0)
+    torch.testing.assert_close(
+        z.mean(0)[1:], torch.zeros(walk.num_joints - 1, 3), atol=1e-4, rtol=0
+    )
 
 
 def test_normalisation_guards_constants_and_one_hot(dog: sa.Motion) -> None:

@@ -14,14 +14,26 @@ from skelagnostic import cli
 from skelagnostic.data import MotionDataModule
 from skelagnostic.data.sources import ClipRef
 
-FIT = ["model=example", "experiment=smoke", "model.hidden=8", "model.latent=4",
-       "data.seconds=2.0", "data.clips_per_gait=2", "data.window=16", "data.stride=8",
-       "threads=1"]
+FIT = [
+    "model=example",
+    "experiment=smoke",
+    "model.hidden=8",
+    "model.latent=4",
+    "data.seconds=2.0",
+    "data.clips_per_gait=2",
+    "data.window=16",
+    "data.stride=8",
+    "threads=1",
+]
 
 
 @pytest.fixture
-def fitted(example_plugin: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-           capsys: pytest.CaptureFixture[str]) -> Path:
+def fitted(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> Path:
     """A finished smoke fit of the example aligner (non-default sizes); its run directory."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
@@ -36,9 +48,12 @@ def later_run(tmp_path: Path, verb: str) -> Path:
     return run
 
 
-def test_fit_records_its_split_and_prints_a_summary(example_plugin: Path, tmp_path: Path,
-                                                   monkeypatch: pytest.MonkeyPatch,
-                                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_fit_records_its_split_and_prints_a_summary(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
     assert cli.main(["fit", *FIT]) == 0
@@ -55,8 +70,9 @@ def test_fit_records_its_split_and_prints_a_summary(example_plugin: Path, tmp_pa
 
 
 @pytest.mark.parametrize("verb", ["validate", "test", "predict"])
-def test_later_verbs_need_only_the_checkpoint(verb: str, fitted: Path, tmp_path: Path,
-                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_later_verbs_need_only_the_checkpoint(
+    verb: str, fitted: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     extra = ["data.test_fraction=0.3"] if verb == "test" else []
     code = cli.main([verb, f"ckpt_path={fitted / 'checkpoints' / 'last.ckpt'}", *extra])
     out, err = capsys.readouterr()
@@ -67,13 +83,15 @@ def test_later_verbs_need_only_the_checkpoint(verb: str, fitted: Path, tmp_path:
 
 
 def test_a_checkpoint_deeper_in_the_checkpoints_folder_finds_its_run(
-        fitted: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    fitted: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     # a second ModelCheckpoint (e.g. every N steps) writing to checkpoints/periodic/
     periodic = fitted / "checkpoints" / "periodic"
     periodic.mkdir()
     (periodic / "step2.ckpt").write_bytes((fitted / "checkpoints" / "last.ckpt").read_bytes())
     assert cli.main(["validate", f"ckpt_path={periodic / 'step2.ckpt'}"]) == 0, (
-        capsys.readouterr().err)
+        capsys.readouterr().err
+    )
     config = yaml.safe_load((later_run(tmp_path, "validate") / "config.yaml").read_text())
     assert config["model"]["hidden"] == 8 and config["data"]["window"] == 16  # the run's
     # outside a run's checkpoints folder nothing is guessed
@@ -83,8 +101,9 @@ def test_a_checkpoint_deeper_in_the_checkpoints_folder_finds_its_run(
     assert cli.runs.find_run_dir(loose) is None
 
 
-def test_explicit_overrides_still_win(fitted: Path, tmp_path: Path,
-                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_explicit_overrides_still_win(
+    fitted: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert cli.main(["validate", f"ckpt_path={fitted}", "data.batch_size=3"]) == 0
     config = yaml.safe_load((later_run(tmp_path, "validate") / "config.yaml").read_text())
     assert config["data"]["batch_size"] == 3 and config["data"]["window"] == 16
@@ -92,8 +111,9 @@ def test_explicit_overrides_still_win(fitted: Path, tmp_path: Path,
     assert str(fitted / "checkpoints" / "best.ckpt") in capsys.readouterr().out
 
 
-def test_test_with_an_empty_split_is_an_error(fitted: Path,
-                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_test_with_an_empty_split_is_an_error(
+    fitted: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert cli.main(["test", f"ckpt_path={fitted / 'checkpoints' / 'best.ckpt'}"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "the test split is empty" in err[0]
@@ -118,8 +138,9 @@ def test_a_later_test_fraction_never_takes_training_clips() -> None:
             assert fresh_test & {k for k, v in recorded.items() if v == "train"}
 
 
-def test_max_steps_is_not_capped_by_max_epochs(example_plugin: Path, tmp_path: Path,
-                                               monkeypatch: pytest.MonkeyPatch) -> None:
+def test_max_steps_is_not_capped_by_max_epochs(
+    example_plugin: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
     # smoke: 2 epochs of at most 4 batches; 11 steps need a third epoch
@@ -132,8 +153,9 @@ def test_max_steps_is_not_capped_by_max_epochs(example_plugin: Path, tmp_path: P
     assert len(logged) >= 5  # at least every other step on an 11-step run
 
 
-def test_short_epochs_log_the_training_loss(example_plugin: Path, tmp_path: Path,
-                                            monkeypatch: pytest.MonkeyPatch) -> None:
+def test_short_epochs_log_the_training_loss(
+    example_plugin: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
     assert cli.main(["fit", *FIT, "trainer.log_every_n_steps=50"]) == 0
@@ -144,8 +166,9 @@ def test_short_epochs_log_the_training_loss(example_plugin: Path, tmp_path: Path
 
 
 @pytest.mark.parametrize("content", ["model: [unclosed", "seed: 1\n"])
-def test_a_broken_run_config_is_one_line(fitted: Path, content: str,
-                                         capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_broken_run_config_is_one_line(
+    fitted: Path, content: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     (fitted / "config.yaml").write_text(content)
     assert cli.main(["validate", f"ckpt_path={fitted / 'checkpoints' / 'last.ckpt'}"]) == 1
     err = capsys.readouterr().err.strip().splitlines()

@@ -22,16 +22,24 @@ VAL = LogCall("validation_step", "val/loss", {"batch_size": 4, "sync_dist": True
 
 def test_logging_without_batch_size_or_sync_dist_is_flagged() -> None:
     check_logging(_run(LogCall("training_step", "train/loss", {"batch_size": 4}, False), VAL))
-    with pytest.raises(AssertionError, match=r"Stub\.training_step logs 'train/loss' without "
-                                             r"batch_size="):
+    with pytest.raises(
+        AssertionError,
+        match=r"Stub\.training_step logs 'train/loss' without "
+        r"batch_size=",
+    ):
         check_logging(_run(LogCall("training_step", "train/loss", {}, False), VAL))
-    with pytest.raises(AssertionError, match=r"Stub\.validation_step logs 'val/mpjpe' per epoch "
-                                             r"without sync_dist=True"):
-        check_logging(_run(VAL, LogCall("validation_step", "val/mpjpe", {"batch_size": 4},
-                                        False)))
+    with pytest.raises(
+        AssertionError,
+        match=r"Stub\.validation_step logs 'val/mpjpe' per epoch "
+        r"without sync_dist=True",
+    ):
+        check_logging(_run(VAL, LogCall("validation_step", "val/mpjpe", {"batch_size": 4}, False)))
     with pytest.raises(AssertionError, match=r"'train/x' per epoch without sync_dist"):
-        check_logging(_run(VAL, LogCall("training_step", "train/x",
-                                        {"batch_size": 4, "on_epoch": True}, False)))
+        check_logging(
+            _run(
+                VAL, LogCall("training_step", "train/x", {"batch_size": 4, "on_epoch": True}, False)
+            )
+        )
     # torchmetrics Metric objects synchronise themselves
     check_logging(_run(VAL, LogCall("validation_step", "val/m", {}, True)))
 

@@ -12,10 +12,12 @@ from skelagnostic.errors import SkelagnosticError
 
 
 def _datamodule(tmp_path, kinds=("biped22", "biped17"), batch_size=8):
-    source = ProceduralSource(kinds=list(kinds), gaits=["walk", "run"], clips_per_gait=1,
-                              seconds=2.0)
-    return HumotDataModule([source], cache_dir=tmp_path / "cache", batch_size=batch_size,
-                           val_fraction=0.5)
+    source = ProceduralSource(
+        kinds=list(kinds), gaits=["walk", "run"], clips_per_gait=1, seconds=2.0
+    )
+    return HumotDataModule(
+        [source], cache_dir=tmp_path / "cache", batch_size=batch_size, val_fraction=0.5
+    )
 
 
 def test_bad_hyper_parameters_are_named():
@@ -48,8 +50,10 @@ def test_subsampled_loss_is_finite_and_differentiable(humot_small):
     torch.manual_seed(0)
     model = HumotAligner(**humot_small).train()
     motion = sa.procedural.generate("biped31", "run", seconds=1.0, fps=30)[0]
-    out = model.chunk_loss(motion.global_positions().float()[None, :30].expand(4, -1, -1, -1)
-                           / 100, model.topology(motion.skeleton))
+    out = model.chunk_loss(
+        motion.global_positions().float()[None, :30].expand(4, -1, -1, -1) / 100,
+        model.topology(motion.skeleton),
+    )
     assert torch.isfinite(out["loss"]) and out["blc"] >= 0
     out["loss"].backward()
 
@@ -57,8 +61,15 @@ def test_subsampled_loss_is_finite_and_differentiable(humot_small):
 def test_cyclic_learning_rate(tmp_path, humot_small):
     model = HumotAligner(**humot_small, lr_period_epochs=2)
     dm = _datamodule(tmp_path)
-    trainer = L.Trainer(max_epochs=4, accelerator="cpu", logger=False, enable_checkpointing=False,
-                        enable_progress_bar=False, limit_val_batches=0, default_root_dir=tmp_path)
+    trainer = L.Trainer(
+        max_epochs=4,
+        accelerator="cpu",
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        limit_val_batches=0,
+        default_root_dir=tmp_path,
+    )
     lrs = []
 
     class Record(L.Callback):
@@ -77,8 +88,15 @@ def test_cyclic_learning_rate_with_max_steps(tmp_path, humot_small):
     """``max_steps`` without ``max_epochs``: the period still counts the loader's batches."""
     model = HumotAligner(**humot_small, lr_period_epochs=2)
     dm = _datamodule(tmp_path, batch_size=4)
-    trainer = L.Trainer(max_steps=3, accelerator="cpu", logger=False, enable_checkpointing=False,
-                        enable_progress_bar=False, limit_val_batches=0, default_root_dir=tmp_path)
+    trainer = L.Trainer(
+        max_steps=3,
+        accelerator="cpu",
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        limit_val_batches=0,
+        default_root_dir=tmp_path,
+    )
     trainer.fit(model, datamodule=dm)
     per_epoch = max(len(x) for x in dm.train_dataloader().iterables.values())
     assert per_epoch > 1
@@ -92,9 +110,16 @@ def test_save_and_load(tmp_path, humot_small):
     dm = _datamodule(tmp_path)
     from skelagnostic.callbacks import FitSummary  # what `skelagnostic fit` adds
 
-    trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, enable_progress_bar=False,
-                        limit_train_batches=1, limit_val_batches=1, default_root_dir=tmp_path,
-                        callbacks=[FitSummary(name="humot")])
+    trainer = L.Trainer(
+        max_epochs=1,
+        accelerator="cpu",
+        logger=False,
+        enable_progress_bar=False,
+        limit_train_batches=1,
+        limit_val_batches=1,
+        default_root_dir=tmp_path,
+        callbacks=[FitSummary(name="humot")],
+    )
     trainer.fit(model, datamodule=dm)
     ckpt = tmp_path / "model.ckpt"
     trainer.save_checkpoint(ckpt)
@@ -120,18 +145,24 @@ def test_leg_length():
     from skelagnostic_humot.template import skeleton_template
 
     t = skeleton_template(sk)
-    expected = float((t[sk.index("LKnee")] - t[sk.index("LHip")]).norm()
-                     + (t[sk.index("LFoot")] - t[sk.index("LKnee")]).norm())
+    expected = float(
+        (t[sk.index("LKnee")] - t[sk.index("LHip")]).norm()
+        + (t[sk.index("LFoot")] - t[sk.index("LKnee")]).norm()
+    )
     assert leg_length(t, sk) == pytest.approx(expected)
 
 
 @pytest.mark.data
-@pytest.mark.parametrize(("source", "target", "frames"), [
-    ("cmu/131_01.bvh", "lafan1/Lafan1_example.bvh", 120),  # 1 s at 120 fps, CMU units -> cm
-    ("lafan1/Lafan1_example.bvh", "xia_cmu/angry_13_000.bvh", 30),  # 1 s at 30 fps, cm -> CMU
-])
-def test_retarget_between_real_skeletons(shared_data, tmp_path, source, target, frames,
-                                         humot_small):
+@pytest.mark.parametrize(
+    ("source", "target", "frames"),
+    [
+        ("cmu/131_01.bvh", "lafan1/Lafan1_example.bvh", 120),  # 1 s at 120 fps, CMU units -> cm
+        ("lafan1/Lafan1_example.bvh", "xia_cmu/angry_13_000.bvh", 30),  # 1 s at 30 fps, cm -> CMU
+    ],
+)
+def test_retarget_between_real_skeletons(
+    shared_data, tmp_path, source, target, frames, humot_small
+):
     """``retarget(motion, skeleton)`` alone (what ``skelagnostic retarget`` calls) on real rigs."""
     torch.manual_seed(0)
     model = HumotAligner(**humot_small).eval()
@@ -144,13 +175,17 @@ def test_retarget_between_real_skeletons(shared_data, tmp_path, source, target, 
     # bone lengths come from the target rig (rotations fitted, lengths exact)
     pos = out.global_positions()
     for p, c in dst.bones():
-        assert torch.allclose((pos[:, c] - pos[:, p]).norm(dim=-1),
-                              dst.offsets[c].norm().expand(len(pos)).to(pos), atol=1e-4)
+        assert torch.allclose(
+            (pos[:, c] - pos[:, p]).norm(dim=-1),
+            dst.offsets[c].norm().expand(len(pos)).to(pos),
+            atol=1e-4,
+        )
     sa.write_bvh(out, tmp_path / "retargeted.bvh")
     back = sa.read_bvh(tmp_path / "retargeted.bvh")
     assert back.skeleton.joint_names == dst.joint_names
-    assert torch.allclose(back.global_positions().float(), out.global_positions().float(),
-                          atol=1e-2)
+    assert torch.allclose(
+        back.global_positions().float(), out.global_positions().float(), atol=1e-2
+    )
 
 
 def test_retarget_scales_the_trajectory_by_leg_length(monkeypatch, humot_small):
@@ -159,8 +194,11 @@ def test_retarget_scales_the_trajectory_by_leg_length(monkeypatch, humot_small):
     motion = sa.procedural.generate("biped22", "walk", seconds=2.0)[0]
     latent = model.encode(motion, units="cm")
     # a decoder that outputs centred zeros leaves only the (scaled) chunk centres
-    monkeypatch.setattr(model.net.decoder, "forward", lambda z, t, m=None: z.new_zeros(
-        z.shape[0], z.shape[1], t.shape[1], 3))
+    monkeypatch.setattr(
+        model.net.decoder,
+        "forward",
+        lambda z, t, m=None: z.new_zeros(z.shape[0], z.shape[1], t.shape[1], 3),
+    )
     same = model.decode_positions(latent, motion.skeleton, motion.skeleton.bone_lengths() / 100)
     big = motion.skeleton.scaled(2.0)
     double = model.decode_positions(latent, big, big.bone_lengths() / 100)
@@ -171,8 +209,7 @@ def test_retarget_scales_the_trajectory_by_leg_length(monkeypatch, humot_small):
 
     pos = motion_positions(motion.resample(30.0)).float() / 100
     # frames before the second chunk (which starts at frame 15) see the first chunk only
-    assert torch.allclose(same[:15, 0], pos[:30, major].mean(dim=(0, 1)).expand(15, 3),
-                          atol=1e-4)
+    assert torch.allclose(same[:15, 0], pos[:30, major].mean(dim=(0, 1)).expand(15, 3), atol=1e-4)
 
 
 def test_upsample_joints_rejects_foreign_joints(humot_small):
@@ -182,9 +219,12 @@ def test_upsample_joints_rejects_foreign_joints(humot_small):
     with pytest.raises(SkelagnosticError, match="not in the full skeleton"):
         model.upsample_joints(motion, other)
     sub = motion.skeleton.subset([n for n in motion.skeleton.joint_names if "Elbow" not in n])
-    sub_motion = sa.Motion(sub, motion.rotations[:, [motion.skeleton.index(n)
-                                                     for n in sub.joint_names]],
-                           motion.root_positions, motion.fps)
+    sub_motion = sa.Motion(
+        sub,
+        motion.rotations[:, [motion.skeleton.index(n) for n in sub.joint_names]],
+        motion.root_positions,
+        motion.fps,
+    )
     up = model.upsample_joints(sub_motion, motion.skeleton, units="cm")
     assert up.skeleton is motion.skeleton
 
@@ -192,11 +232,23 @@ def test_upsample_joints_rejects_foreign_joints(humot_small):
 def test_fit_cli_writes_checkpoint_metrics_and_render(humot_pm, tmp_path):
     from skelagnostic.cli.app import compose, run
 
-    cfg = compose(["model=humot", "experiment=humot_quick", f"run_dir={tmp_path}",
-                   f"data.cache_dir={tmp_path / 'cache'}", "model.dim=32", "model.latent=16",
-                   "model.blocks=1", "model.heads=4", "trainer.max_epochs=1",
-                   "trainer.limit_train_batches=1", "trainer.limit_val_batches=1",
-                   "data.seconds=2.0"], plugin_manager=humot_pm)
+    cfg = compose(
+        [
+            "model=humot",
+            "experiment=humot_quick",
+            f"run_dir={tmp_path}",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            "model.dim=32",
+            "model.latent=16",
+            "model.blocks=1",
+            "model.heads=4",
+            "trainer.max_epochs=1",
+            "trainer.limit_train_batches=1",
+            "trainer.limit_val_batches=1",
+            "data.seconds=2.0",
+        ],
+        plugin_manager=humot_pm,
+    )
     assert cfg.data.window == 30 and cfg.data.stride == 6
     metrics = run(cfg, humot_pm)
     assert "val/loss" in metrics
@@ -204,5 +256,6 @@ def test_fit_cli_writes_checkpoint_metrics_and_render(humot_pm, tmp_path):
     assert (tmp_path / "csv" / "metrics.csv").exists()
     assert (tmp_path / "humot_retarget.gif").exists()
     model = humot_pm.aligner("humot").module.load_from_checkpoint(
-        tmp_path / "checkpoints" / "last.ckpt", map_location="cpu")
+        tmp_path / "checkpoints" / "last.ckpt", map_location="cpu"
+    )
     assert model.hparams.dim == 32

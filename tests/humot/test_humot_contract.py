@@ -8,9 +8,17 @@ from skelagnostic.testing import AlignerContract
 
 class TestHumotContract(AlignerContract):
     aligner = "humot"
-    overrides = ("model.dim=16", "model.latent=8", "model.blocks=1", "model.heads=2",
-                 "model.kernel_size=3", "data.seconds=1.5", "data.clips_per_gait=2",
-                 "data.kinds=[biped22,biped17]", "data.gaits=[walk]")
+    overrides = (
+        "model.dim=16",
+        "model.latent=8",
+        "model.blocks=1",
+        "model.heads=2",
+        "model.kernel_size=3",
+        "data.seconds=1.5",
+        "data.clips_per_gait=2",
+        "data.kinds=[biped22,biped17]",
+        "data.gaits=[walk]",
+    )
     steps = 2
 
     def plugin_manager(self) -> PluginManager:

@@ -90,8 +90,9 @@ class TestLosses:
         torch.manual_seed(0)
         p, t = torch.randn(2, 4, 3, 3), torch.randn(2, 4, 3, 3)
         mask = torch.tensor([[True, True, False], [True, True, True]])
-        expected = (reconstruction_loss(p[:1, :, :2], t[:1, :, :2])
-                    + reconstruction_loss(p[1:], t[1:])) / 2
+        expected = (
+            reconstruction_loss(p[:1, :, :2], t[:1, :, :2]) + reconstruction_loss(p[1:], t[1:])
+        ) / 2
         assert reconstruction_loss(p, t, mask).item() == pytest.approx(expected.item())
 
     def test_blc_by_hand(self):
@@ -108,8 +109,9 @@ class TestLosses:
         target, preds = torch.randn(3, 10, 4, 3), torch.randn(3, 10, 4, 3)
         bones = [(0, 1), (1, 2), (1, 3)]
         ours = bone_length_consistency_loss(preds, target, torch.tensor(bones).expand(3, -1, -1))
-        assert ours.item() == pytest.approx(bone_length_consistency(preds, target, bones).item(),
-                                            rel=1e-5)
+        assert ours.item() == pytest.approx(
+            bone_length_consistency(preds, target, bones).item(), rel=1e-5
+        )
 
     def test_blc_skips_zero_length_and_padded_bones(self):
         target = torch.zeros(1, 3, 3, 3)
@@ -117,6 +119,7 @@ class TestLosses:
         preds = target.clone()
         preds[0, :, 1, 0] = torch.tensor([0.0, 1.0, 2.0])
         bones = torch.tensor([[[0, 1], [0, 2], [0, 0]]])
-        loss = bone_length_consistency_loss(preds, target, bones,
-                                            torch.tensor([[True, True, False]]))
+        loss = bone_length_consistency_loss(
+            preds, target, bones, torch.tensor([[True, True, False]])
+        )
         assert loss.item() == 0.0

@@ -25,17 +25,33 @@ def test_small_humot_overfits_two_windows(tmp_path: Path) -> None:
     torch.set_num_threads(1)
     source = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=1, seconds=2.0)
     dm = HumotDataModule([source], cache_dir=tmp_path / "cache", batch_size=2, val_fraction=0.0)
-    model = HumotAligner(dim=32, latent=16, blocks=1, heads=4, kernel_size=3, subsampling=False,
-                         lr_min=2e-3, lr_max=2e-3)
+    model = HumotAligner(
+        dim=32,
+        latent=16,
+        blocks=1,
+        heads=4,
+        kernel_size=3,
+        subsampling=False,
+        lr_min=2e-3,
+        lr_max=2e-3,
+    )
     history: list[float] = []
 
     class Record(L.Callback):
         def on_train_batch_end(self, trainer: L.Trainer, *args: object) -> None:
             history.append(float(trainer.callback_metrics["train/mpjpe_cm"]))
 
-    trainer = L.Trainer(overfit_batches=1, max_epochs=500, accelerator="cpu", logger=False,
-                        enable_checkpointing=False, enable_progress_bar=False,
-                        enable_model_summary=False, limit_val_batches=0, callbacks=[Record()])
+    trainer = L.Trainer(
+        overfit_batches=1,
+        max_epochs=500,
+        accelerator="cpu",
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        limit_val_batches=0,
+        callbacks=[Record()],
+    )
     trainer.fit(model, datamodule=dm)
     assert history[0] > 40.0  # an untrained network: tens of centimetres
     print("mpjpe every 50 steps:", [round(v, 1) for v in history[::50]], "last", history[-1])

@@ -35,7 +35,13 @@ def test_major_joints_of_real_skeletons(shared_data):
     major = major_joints(cmu)
     # 3dsMax-style names: "LeftShoulder" is the upper arm, found by geometry
     assert [cmu.joint_names[major[k]] for k in KEYS] == [
-        "LeftHip", "LeftKnee", "LeftAnkle", "LeftShoulder", "LeftElbow", "LeftWrist"]
+        "LeftHip",
+        "LeftKnee",
+        "LeftAnkle",
+        "LeftShoulder",
+        "LeftElbow",
+        "LeftWrist",
+    ]
     lafan = sa.read_bvh(shared_data / "human" / "lafan1" / "Lafan1_example.bvh").skeleton
     assert lafan.joint_names[major_joints(lafan)["right_knee"]] == "RightLeg"
 
@@ -63,8 +69,9 @@ def test_model_frame_round_trip_and_handedness():
 def test_template_uses_median_bone_lengths():
     motion = sa.procedural.generate("biped17", "walk", seconds=0.5)[0]
     pos = motion.global_positions()
-    assert torch.allclose(median_bone_lengths(pos, motion.skeleton),
-                          motion.skeleton.bone_lengths(), atol=1e-6)
+    assert torch.allclose(
+        median_bone_lengths(pos, motion.skeleton), motion.skeleton.bone_lengths(), atol=1e-6
+    )
     stretched = pos * 2.0
     t2 = skeleton_template(motion.skeleton, stretched)
     assert torch.allclose(t2, 2 * skeleton_template(motion.skeleton), atol=1e-5)
@@ -78,5 +85,6 @@ def test_topology_templates_match_skeleton_template(kind):
     topo = Topology.of(motion.skeleton)
     pos = motion_positions(motion)
     lengths = median_bone_lengths(pos, motion.skeleton)
-    assert torch.allclose(topo.templates(lengths.float()),
-                          skeleton_template(motion.skeleton, pos).float(), atol=1e-4)
+    assert torch.allclose(
+        topo.templates(lengths.float()), skeleton_template(motion.skeleton, pos).float(), atol=1e-4
+    )

@@ -12,10 +12,22 @@ from skelagnostic import procedural
 from skelagnostic.cli import app
 
 REPO = Path(__file__).resolve().parents[2]
-FAST = ["threads=1", "data.kinds=[biped22]", "data.gaits=[walk]", "data.clips_per_gait=2",
-        "data.seconds=1.5", "data.window=12", "data.stride=12", "data.batch_size=2",
-        "data.val_fraction=0.5", "trainer.max_epochs=1", "trainer.limit_train_batches=2",
-        "trainer.limit_val_batches=1", "trainer.enable_model_summary=false", "logger=csv"]
+FAST = [
+    "threads=1",
+    "data.kinds=[biped22]",
+    "data.gaits=[walk]",
+    "data.clips_per_gait=2",
+    "data.seconds=1.5",
+    "data.window=12",
+    "data.stride=12",
+    "data.batch_size=2",
+    "data.val_fraction=0.5",
+    "trainer.max_epochs=1",
+    "trainer.limit_train_batches=2",
+    "trainer.limit_val_batches=1",
+    "trainer.enable_model_summary=false",
+    "logger=csv",
+]
 
 
 def test_default_config_is_registered(pcmrl_pm, tmp_path) -> None:
@@ -29,22 +41,32 @@ def test_default_config_is_registered(pcmrl_pm, tmp_path) -> None:
     assert cfg.data.target == "biped31"
     # the defaults are the paper's sizes; experiment=pcmrl_cpu is the CPU-sized network
     assert cfg.model.dim == 64 and cfg.model.temporal_dim is None and cfg.model.lr == 1e-4
-    paper = app.compose(["model=pcmrl", "experiment=pcmrl_paper", f"run_dir={tmp_path}"],
-                        plugin_manager=pcmrl_pm)
+    paper = app.compose(
+        ["model=pcmrl", "experiment=pcmrl_paper", f"run_dir={tmp_path}"], plugin_manager=pcmrl_pm
+    )
     assert paper.model.dim == 64 and paper.model.temporal_dim is None
     cpu = app.compose(["experiment=pcmrl_cpu", f"run_dir={tmp_path}"], plugin_manager=pcmrl_pm)
     assert cpu.model.name == "pcmrl" and cpu.model.dim == 16 and cpu.model.temporal_dim == 128
     # data=... keeps the target skeleton option of the aligner
-    bvh = app.compose(["model=pcmrl", "data=bvh", "data.paths=[x]", f"run_dir={tmp_path}"],
-                      plugin_manager=pcmrl_pm)
+    bvh = app.compose(
+        ["model=pcmrl", "data=bvh", "data.paths=[x]", f"run_dir={tmp_path}"],
+        plugin_manager=pcmrl_pm,
+    )
     assert bvh.data.target == "biped31" and bvh.data.source == "bvh"
 
 
 def test_tiny_fit_writes_a_checkpoint_that_reloads(pcmrl_pm, pcmrl_tiny, tmp_path) -> None:
     tiny = [f"model.{k}={v}" for k, v in pcmrl_tiny.items()]
-    cfg = app.compose(["model=pcmrl", f"run_dir={tmp_path}",
-                       f"data.cache_dir={tmp_path / 'cache'}", *FAST, *tiny],
-                      plugin_manager=pcmrl_pm)
+    cfg = app.compose(
+        [
+            "model=pcmrl",
+            f"run_dir={tmp_path}",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            *FAST,
+            *tiny,
+        ],
+        plugin_manager=pcmrl_pm,
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         metrics = app.run(cfg, plugin_manager=pcmrl_pm)
@@ -108,10 +130,20 @@ def test_stage1_output_preset_trains_with_averaged_weights(pcmrl_pm, tmp_path) -
     cfg = app.compose(preset, plugin_manager=pcmrl_pm)
     with pytest.raises(MissingMandatoryValue):
         _ = cfg.data.paths  # the user names the stage-1 output
-    cfg = app.compose([*preset, f"data.paths=[{clips}]", "data.units=cm", "threads=1",
-                       "model.dim=16", "model.heads=2", "model.layers=1",
-                       "data.samples_per_epoch=16", "trainer.max_steps=4"],
-                      plugin_manager=pcmrl_pm)
+    cfg = app.compose(
+        [
+            *preset,
+            f"data.paths=[{clips}]",
+            "data.units=cm",
+            "threads=1",
+            "model.dim=16",
+            "model.heads=2",
+            "model.layers=1",
+            "data.samples_per_epoch=16",
+            "trainer.max_steps=4",
+        ],
+        plugin_manager=pcmrl_pm,
+    )
     assert cfg.model.interm_tokens == "lerp" and cfg.model.canonical_heading
     assert cfg.data.key_mode == "regular" and cfg.data.rpa_prob == 0 and not cfg.data.mirror
     with warnings.catch_warnings():

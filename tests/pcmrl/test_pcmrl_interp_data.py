@@ -9,9 +9,17 @@ from skelagnostic_pcmrl.interp_data import CachedClip, Clip, PcmrlInterpDataModu
 
 
 def test_cached_clips_give_the_windows_of_in_memory_clips(tmp_path: Path) -> None:
-    dm = PcmrlInterpDataModule(fps=20, window=32, stride=16, batch_size=4, samples_per_epoch=12,
-                                 mirror=True, procedural_kind="biped31", procedural_clips=1,
-                                 cache_dir=tmp_path)
+    dm = PcmrlInterpDataModule(
+        fps=20,
+        window=32,
+        stride=16,
+        batch_size=4,
+        samples_per_epoch=12,
+        mirror=True,
+        procedural_kind="biped31",
+        procedural_clips=1,
+        cache_dir=tmp_path,
+    )
     dm.prepare_data()
     dm.setup("fit")
     source = dm.sources[0]
@@ -40,9 +48,16 @@ def test_cached_clips_give_the_windows_of_in_memory_clips(tmp_path: Path) -> Non
             assert torch.equal(clip.tails, want.tails)
             assert torch.equal(clip.skeleton.offsets, want.skeleton.offsets)
     # training windows (random keys, rest-pose augmentation) are those of the held clips
-    held_set = type(dm.train_set)([held(c.name) for c in dm.clips["train"]], dm.window,
-                                  dm.min_keys, dm.max_keys, dm.rpa_range, dm.rpa_prob,
-                                  dm.samples_per_epoch, dm.seed)
+    held_set = type(dm.train_set)(
+        [held(c.name) for c in dm.clips["train"]],
+        dm.window,
+        dm.min_keys,
+        dm.max_keys,
+        dm.rpa_range,
+        dm.rpa_prob,
+        dm.samples_per_epoch,
+        dm.seed,
+    )
     for i in range(len(dm.train_set)):
         got, want = dm.train_set[i], held_set[i]
         assert set(got) == set(want)

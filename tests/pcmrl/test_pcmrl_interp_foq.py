@@ -48,8 +48,14 @@ def test_model_features_are_the_library_foq() -> None:
     keys = torch.zeros(1, motion.num_frames, dtype=torch.bool)
     keys[0, ::5] = True
     tails = bone_tails(motion.skeleton).tails[None]
-    f = window_features(grot[None], motion.root_positions[None],
-                        motion.skeleton.offsets[None], tails, keys, motion.skeleton.parents)
+    f = window_features(
+        grot[None],
+        motion.root_positions[None],
+        motion.skeleton.offsets[None],
+        tails,
+        keys,
+        motion.skeleton.parents,
+    )
     lib = FirstFrameOffsetQuaternions().encode(motion)
     assert torch.allclose(f["foq"][0], lib[..., :4], atol=1e-9)
     assert torch.allclose(f["positions"][0], motion.global_positions(), atol=1e-9)
@@ -72,8 +78,9 @@ def _rolled(motion: Motion, joint: int, angle: float) -> Motion:
     sk = motion.skeleton
     tail = bone_tails(sk).tails[joint]
     axis = tail / tail.norm()
-    r = torch.cat([torch.tensor([math.cos(angle / 2)], dtype=axis.dtype),
-                   math.sin(angle / 2) * axis])
+    r = torch.cat(
+        [torch.tensor([math.cos(angle / 2)], dtype=axis.dtype), math.sin(angle / 2) * axis]
+    )
     offsets = sk.offsets.clone()
     rot = motion.rotations.clone()
     rot[:, joint] = Q.mul(rot[:, joint], r)
@@ -91,20 +98,31 @@ def test_foq_is_roll_invariant(joint_name: str) -> None:
     rolled = _rolled(motion, j, angle=1.1)
     # the rest-pose roll changes nothing visible but the bone's absolute rotation ...
     assert torch.allclose(rolled.global_positions(), motion.global_positions(), atol=1e-9)
-    assert not _same_rotation(rolled.global_rotations()[:, j], motion.global_rotations()[:, j],
-                              atol=1e-3)
+    assert not _same_rotation(
+        rolled.global_rotations()[:, j], motion.global_rotations()[:, j], atol=1e-3
+    )
     # ... and FOQ does not see it (paper: (q_t r)(q_0 r)^-1 = q_t q_0^-1)
     rep = FirstFrameOffsetQuaternions()
     assert torch.allclose(rep.encode(rolled), rep.encode(motion), atol=1e-9)
     # so do the model's inputs: the rest direction rotated by q_0 is the same world vector
     grot0, grot1 = motion.global_rotations(), rolled.global_rotations()
     keys = torch.ones(1, motion.num_frames, dtype=torch.bool)
-    f0 = window_features(grot0[None], motion.root_positions[None],
-                         motion.skeleton.offsets[None],
-                         bone_tails(motion.skeleton).tails[None], keys, motion.skeleton.parents)
-    f1 = window_features(grot1[None], rolled.root_positions[None],
-                         rolled.skeleton.offsets[None],
-                         bone_tails(rolled.skeleton).tails[None], keys, rolled.skeleton.parents)
+    f0 = window_features(
+        grot0[None],
+        motion.root_positions[None],
+        motion.skeleton.offsets[None],
+        bone_tails(motion.skeleton).tails[None],
+        keys,
+        motion.skeleton.parents,
+    )
+    f1 = window_features(
+        grot1[None],
+        rolled.root_positions[None],
+        rolled.skeleton.offsets[None],
+        bone_tails(rolled.skeleton).tails[None],
+        keys,
+        rolled.skeleton.parents,
+    )
     assert torch.allclose(f0["inputs"], f1["inputs"], atol=1e-9)
 
 

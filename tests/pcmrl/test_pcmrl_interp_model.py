@@ -40,8 +40,9 @@ def _motion(seconds: float = 2.0, fps: float = 30.0, seed: int = 0) -> Motion:
 def _tiny(residual: bool = False, window: int = 32, **options: object) -> PcmrlInterpAligner:
     torch.manual_seed(0)
     skel = procedural.skeleton("biped31").scaled(0.01)
-    return PcmrlInterpAligner(**TINY, residual=residual, skeleton=skel.to_dict(), fps=30.0,
-                                window=window, **options).eval()
+    return PcmrlInterpAligner(
+        **TINY, residual=residual, skeleton=skel.to_dict(), fps=30.0, window=window, **options
+    ).eval()
 
 
 def test_paper_defaults() -> None:
@@ -69,8 +70,9 @@ def test_slerp_keys_by_hand() -> None:
     q[0, 1, 0] = torch.tensor([0.0, 1, 0, 0])  # ignored (not a key)
     q[0, 2, 0] = torch.tensor([math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)])  # 90 deg z
     mid = slerp_keys(q, keys)[0, 1, 0]
-    assert mid.tolist() == pytest.approx([math.cos(math.pi / 8), 0, 0, math.sin(math.pi / 8)],
-                                         abs=1e-6)
+    assert mid.tolist() == pytest.approx(
+        [math.cos(math.pi / 8), 0, 0, math.sin(math.pi / 8)], abs=1e-6
+    )
 
 
 def test_lerp_slerp_baseline_by_hand() -> None:
@@ -125,8 +127,16 @@ def test_key_mode_is_checked_and_used_by_the_training_windows() -> None:
         PcmrlInterpDataModule(key_mode="every")
     with pytest.raises(SkelagnosticError, match="min_gap"):
         PcmrlInterpDataModule(key_mode="regular", min_gap=10, max_gap=5)
-    dm = PcmrlInterpDataModule(fps=30, window=64, batch_size=4, samples_per_epoch=16,
-                                 key_mode="regular", min_gap=7, max_gap=7, rpa_prob=0.0)
+    dm = PcmrlInterpDataModule(
+        fps=30,
+        window=64,
+        batch_size=4,
+        samples_per_epoch=16,
+        key_mode="regular",
+        min_gap=7,
+        max_gap=7,
+        rpa_prob=0.0,
+    )
     dm.setup("fit")
     for item in (dm.train_set[i] for i in range(16)):
         frames = item["keys"].nonzero().squeeze(1).tolist()
@@ -134,9 +144,16 @@ def test_key_mode_is_checked_and_used_by_the_training_windows() -> None:
         assert all(b - a == 7 for a, b in itertools.pairwise(inner))
 
 
-@pytest.mark.parametrize(("residual", "interm", "space"),
-                         [(False, "zero", "foq"), (True, "zero", "foq"), (False, "lerp", "foq"),
-                          (True, "lerp", "foq"), (True, "zero", "local")])
+@pytest.mark.parametrize(
+    ("residual", "interm", "space"),
+    [
+        (False, "zero", "foq"),
+        (True, "zero", "foq"),
+        (False, "lerp", "foq"),
+        (True, "lerp", "foq"),
+        (True, "zero", "local"),
+    ],
+)
 def test_interpolate_reproduces_keyframes(residual: bool, interm: str, space: str) -> None:
     model = _tiny(residual, interm_tokens=interm, residual_space=space)
     motion = _motion(seconds=3.0)  # 91 frames > window 32: chained chunks
@@ -146,8 +163,7 @@ def test_interpolate_reproduces_keyframes(residual: bool, interm: str, space: st
     assert out.fps == motion.fps
     assert torch.allclose(out.rotations[keys], motion.rotations[keys], atol=1e-6)
     assert torch.allclose(out.root_positions[keys], motion.root_positions[keys], atol=1e-6)
-    assert torch.allclose(out.global_positions()[keys], motion.global_positions()[keys],
-                          atol=1e-5)
+    assert torch.allclose(out.global_positions()[keys], motion.global_positions()[keys], atol=1e-5)
     # in-between frames are generated from the keys only: corrupting them changes nothing
     rot = motion.rotations.clone()
     inner = [t for t in range(motion.num_frames) if t not in keys]
@@ -197,24 +213,37 @@ def test_datamodule_checks_units_and_hierarchy(tmp_path: Path) -> None:
         def load(self, clip):  # type: ignore[no-untyped-def]
             return self._generate()[clip.id]  # centimetres, not converted
 
-    dm = PcmrlInterpDataModule(sources=[_Raw(kinds=("biped31",), gaits=("walk",))],
-                                 window=32)
+    dm = PcmrlInterpDataModule(sources=[_Raw(kinds=("biped31",), gaits=("walk",))], window=32)
     with pytest.raises(SkelagnosticError, match="metres"):
         dm.setup("fit")
-    dm = PcmrlInterpDataModule(sources=[ProceduralSource(kinds=("biped31", "biped22"),
-                                                           gaits=("walk",))], window=32)
+    dm = PcmrlInterpDataModule(
+        sources=[ProceduralSource(kinds=("biped31", "biped22"), gaits=("walk",))], window=32
+    )
     with pytest.raises(SkelagnosticError, match="hierarchy"):
         dm.setup("fit")
 
 
 def test_fit_a_few_steps_and_reload(tmp_path: Path) -> None:
     L.seed_everything(0)
-    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
-                                 min_keys=3, max_keys=8, rpa_prob=1.0, test_fraction=0.25)
+    dm = PcmrlInterpDataModule(
+        fps=30,
+        window=32,
+        batch_size=4,
+        samples_per_epoch=16,
+        min_keys=3,
+        max_keys=8,
+        rpa_prob=1.0,
+        test_fraction=0.25,
+    )
     model = PcmrlInterpAligner(**TINY, lr=1e-3, warmup_steps=2)
-    trainer = L.Trainer(max_epochs=2, accelerator="cpu", logger=False,
-                        default_root_dir=tmp_path, enable_progress_bar=False,
-                        enable_model_summary=False)
+    trainer = L.Trainer(
+        max_epochs=2,
+        accelerator="cpu",
+        logger=False,
+        default_root_dir=tmp_path,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+    )
     trainer.fit(model, datamodule=dm)
     assert trainer.global_step == 8
     assert math.isfinite(float(trainer.callback_metrics["val/loss"]))
@@ -240,14 +269,26 @@ def test_ema_averages_the_network_built_from_the_data(tmp_path: Path) -> None:
     from skelagnostic.callbacks import EMAWeights
 
     L.seed_everything(0)
-    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=16,
-                                 min_keys=3, max_keys=8, val_fraction=0.0)
+    dm = PcmrlInterpDataModule(
+        fps=30,
+        window=32,
+        batch_size=4,
+        samples_per_epoch=16,
+        min_keys=3,
+        max_keys=8,
+        val_fraction=0.0,
+    )
     model = PcmrlInterpAligner(**TINY, residual=True, lr=1e-2, warmup_steps=1)
-    trainer = L.Trainer(max_epochs=1, accelerator="cpu", logger=False, limit_val_batches=0,
-                        default_root_dir=tmp_path, enable_progress_bar=False,
-                        enable_model_summary=False,
-                        callbacks=[EMAWeights(decay=0.5),
-                                   ModelCheckpoint(dirpath=tmp_path, save_last=True)])
+    trainer = L.Trainer(
+        max_epochs=1,
+        accelerator="cpu",
+        logger=False,
+        limit_val_batches=0,
+        default_root_dir=tmp_path,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        callbacks=[EMAWeights(decay=0.5), ModelCheckpoint(dirpath=tmp_path, save_last=True)],
+    )
     trainer.fit(model, datamodule=dm)
     ckpt_path = tmp_path / "last.ckpt"  # written during training (at the end both agree)
     ckpt = torch.load(ckpt_path, weights_only=False)
@@ -269,12 +310,12 @@ def _local(clip) -> torch.Tensor:  # type: ignore[no-untyped-def]
 def test_training_reduces_the_loss(layout: str) -> None:
     """A few dozen steps on one batch must fit it better than the start (not a no-op)."""
     torch.manual_seed(0)
-    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=8, samples_per_epoch=8,
-                                 rpa_prob=0.0)
+    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=8, samples_per_epoch=8, rpa_prob=0.0)
     dm.setup("fit")
     batch = next(iter(dm.train_dataloader()))
-    model = PcmrlInterpAligner(**TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32,
-                               layout=layout)
+    model = PcmrlInterpAligner(
+        **TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32, layout=layout
+    )
     assert model.net is not None and model.net.layout == layout
     opt = torch.optim.AdamW(model.parameters(), lr=3e-3)
     first = model._losses(batch)[0].item()
@@ -318,23 +359,41 @@ def test_window_heading_is_equivariant_and_needs_left_and_right() -> None:
     motion = _motion(seconds=1.0)
     skel = motion.skeleton
     grot = motion.global_rotations()[None]
-    heading = window_heading(grot, motion.root_positions[None], skel.offsets, group_of_joints(skel),
-                             skel.parents, skel.up_index)
+    heading = window_heading(
+        grot,
+        motion.root_positions[None],
+        skel.offsets,
+        group_of_joints(skel),
+        skel.parents,
+        skel.up_index,
+    )
     turned = _turned(motion, -0.7)
-    again = window_heading(turned.global_rotations()[None], turned.root_positions[None],
-                           skel.offsets, group_of_joints(skel), skel.parents, skel.up_index)
+    again = window_heading(
+        turned.global_rotations()[None],
+        turned.root_positions[None],
+        skel.offsets,
+        group_of_joints(skel),
+        skel.parents,
+        skel.up_index,
+    )
     turn = torch.tensor([math.cos(-0.35), 0.0, math.sin(-0.35), 0.0], dtype=heading.dtype)
     assert torch.allclose(Q.mul(turn, heading[0]).abs(), again[0].abs(), atol=1e-5)
     no_sides = torch.zeros(skel.num_joints, dtype=torch.long)  # every joint on the spine
-    same = window_heading(grot, motion.root_positions[None], skel.offsets, no_sides,
-                          skel.parents, skel.up_index)
+    same = window_heading(
+        grot, motion.root_positions[None], skel.offsets, no_sides, skel.parents, skel.up_index
+    )
     assert torch.allclose(same, Q.identity(1, dtype=same.dtype))
 
 
 def _reloaded(model: PcmrlInterpAligner, tmp_path: Path) -> PcmrlInterpAligner:
     """``model`` saved as a Lightning checkpoint and loaded back."""
-    trainer = L.Trainer(accelerator="cpu", logger=False, default_root_dir=tmp_path,
-                        enable_progress_bar=False, enable_model_summary=False)
+    trainer = L.Trainer(
+        accelerator="cpu",
+        logger=False,
+        default_root_dir=tmp_path,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+    )
     trainer.strategy.connect(model)
     ckpt = tmp_path / "model.ckpt"
     trainer.save_checkpoint(ckpt)
@@ -345,14 +404,18 @@ def test_canonical_heading_is_saved_with_the_checkpoint(tmp_path: Path) -> None:
     assert _tiny().hparams.canonical_heading is False  # the default (paper)
     torch.manual_seed(0)
     skel = procedural.skeleton("biped31").scaled(0.01)
-    model = PcmrlInterpAligner(**TINY, canonical_heading=True, skeleton=skel.to_dict(),
-                                 fps=30.0, window=32).eval()
+    model = PcmrlInterpAligner(
+        **TINY, canonical_heading=True, skeleton=skel.to_dict(), fps=30.0, window=32
+    ).eval()
     loaded = _reloaded(model, tmp_path)
     assert loaded.hparams.canonical_heading is True
     motion = _turned(_motion(seconds=1.0), 0.4)
     keys = [0, 12, motion.num_frames - 1]
-    assert torch.allclose(loaded.interpolate(motion, keys).global_positions(),
-                          model.interpolate(motion, keys).global_positions(), atol=1e-6)
+    assert torch.allclose(
+        loaded.interpolate(motion, keys).global_positions(),
+        model.interpolate(motion, keys).global_positions(),
+        atol=1e-6,
+    )
 
 
 def test_lerp_tokens_see_the_baseline_pose_and_the_place_in_the_gap() -> None:
@@ -366,14 +429,21 @@ def test_lerp_tokens_see_the_baseline_pose_and_the_place_in_the_gap() -> None:
     keys = [0, 4, 19, motion.num_frames - 1]
     mask = torch.zeros(1, motion.num_frames, dtype=torch.bool)
     mask[0, keys] = True
-    feats = window_features(motion.global_rotations()[None], motion.root_positions[None],
-                            skel.offsets[None], bone_tails(skel).tails[None], mask, skel.parents,
-                            interm=True, max_relative=16)
+    feats = window_features(
+        motion.global_rotations()[None],
+        motion.root_positions[None],
+        skel.offsets[None],
+        bone_tails(skel).tails[None],
+        mask,
+        skel.parents,
+        interm=True,
+        max_relative=16,
+    )
     num_j = skel.num_joints
     inputs = feats["interm_inputs"][0]
     assert inputs.shape == (motion.num_frames, 10 * num_j + 3)
     base = lerp_slerp(motion, keys).global_positions() - feats["center"][0]
-    got = inputs[:, :10 * num_j].reshape(motion.num_frames, num_j, 10)[..., :3]
+    got = inputs[:, : 10 * num_j].reshape(motion.num_frames, num_j, 10)[..., :3]
     assert torch.allclose(got, base, atol=1e-5)
     # frame 10 lies 6/15 into the gap 4..19; frame 2 half-way into 0..4
     assert inputs[10, -3:].tolist() == pytest.approx([0.4, math.sin(0.4 * math.pi), 15 / 16])
@@ -382,7 +452,7 @@ def test_lerp_tokens_see_the_baseline_pose_and_the_place_in_the_gap() -> None:
     # the baseline FOQ is the FOQ of the baseline pose
     lerp_global = lerp_slerp(motion, keys).global_rotations()
     foq = Q.mul(lerp_global, Q.inv(lerp_global[:1]))
-    got_foq = inputs[:, :10 * num_j].reshape(motion.num_frames, num_j, 10)[..., 6:]
+    got_foq = inputs[:, : 10 * num_j].reshape(motion.num_frames, num_j, 10)[..., 6:]
     dots = (got_foq * foq).sum(-1).abs()
     assert torch.allclose(dots, torch.ones_like(dots), atol=1e-5)
 
@@ -399,8 +469,11 @@ def test_interm_tokens_option_is_checked_and_saved(tmp_path: Path) -> None:
     assert loaded.hparams.interm_tokens == "lerp"
     motion = _motion(seconds=1.0)
     keys = [0, 12, motion.num_frames - 1]
-    assert torch.allclose(loaded.interpolate(motion, keys).global_positions(),
-                          model.interpolate(motion, keys).global_positions(), atol=1e-6)
+    assert torch.allclose(
+        loaded.interpolate(motion, keys).global_positions(),
+        model.interpolate(motion, keys).global_positions(),
+        atol=1e-6,
+    )
 
 
 def test_interpolate_batches_chunks_like_one_at_a_time() -> None:
@@ -423,13 +496,15 @@ def test_interpolate_batches_chunks_like_one_at_a_time() -> None:
         end = max(k for k in keys if k - start + 1 <= 32 and k > start)
         mask = torch.tensor([[t in keys for t in range(start, end + 1)]])
         with torch.no_grad():
-            g, r = model.interpolate_window(grot[None, start : end + 1],
-                                            root[None, start : end + 1], mask, offsets, tails)
+            g, r = model.interpolate_window(
+                grot[None, start : end + 1], root[None, start : end + 1], mask, offsets, tails
+            )
         want_g[start : end + 1], want_r[start : end + 1] = g[0], r[0]
         start = end
     got = batched.global_rotations()
-    assert torch.allclose(Q.mul(got, Q.inv(want_g))[..., 0].abs(),
-                          torch.ones_like(got[..., 0]), atol=1e-10)
+    assert torch.allclose(
+        Q.mul(got, Q.inv(want_g))[..., 0].abs(), torch.ones_like(got[..., 0]), atol=1e-10
+    )
     assert torch.allclose(batched.root_positions, want_r, atol=1e-10)
     model.interpolate_batch = 1  # one chunk per call: the same motion
     single = model.interpolate(motion, keys)

@@ -19,8 +19,16 @@ def _probe() -> ModuleType:
 @pytest.mark.data
 def test_probe_compares_with_lerp_and_learns(lafan_clip: Path, tmp_path: Path) -> None:
     probe = _probe()
-    common = ["--train", str(lafan_clip), "--test", str(lafan_clip), "--units", "cm",
-              "--data", "key_mode=regular"]
+    common = [
+        "--train",
+        str(lafan_clip),
+        "--test",
+        str(lafan_clip),
+        "--units",
+        "cm",
+        "--data",
+        "key_mode=regular",
+    ]
     tiny = ["--model", "dim=16", "heads=2", "layers=1"]
     # no training step: the zero-initialised residual model IS the LERP baseline
     assert probe.main([*common, *tiny, "--minutes", "0", "--json", str(tmp_path / "a.json")]) == 0
@@ -29,8 +37,24 @@ def test_probe_compares_with_lerp_and_learns(lafan_clip: Path, tmp_path: Path) -
         assert figures["ratio"] == pytest.approx(1.0, abs=1e-9)
         assert 0.01 < figures["lerp_m"] < 1.0  # metres: centimetres of LERP error
     # a few steps later the model is not the baseline any more
-    assert probe.main([*common, *tiny, "interm_tokens=lerp", "--minutes", "0.05", "--every", "3",
-                       "--ema", "0.5", "--json", str(tmp_path / "b.json")]) == 0
+    assert (
+        probe.main(
+            [
+                *common,
+                *tiny,
+                "interm_tokens=lerp",
+                "--minutes",
+                "0.05",
+                "--every",
+                "3",
+                "--ema",
+                "0.5",
+                "--json",
+                str(tmp_path / "b.json"),
+            ]
+        )
+        == 0
+    )
     trained = json.loads((tmp_path / "b.json").read_text())
     assert trained["model"]["interm_tokens"] == "lerp" and trained["model"]["dim"] == 16
     assert trained["data"]["key_mode"] == "regular"
@@ -47,8 +71,8 @@ def test_probe_compares_with_lerp_and_learns(lafan_clip: Path, tmp_path: Path) -
 
 def test_probe_reads_options_as_yaml_values() -> None:
     probe = _probe()
-    assert probe._options(["lr=3e-3", "dim=16", "residual=false", "interm_tokens=lerp"],
-                          "--model") == {"lr": 0.003, "dim": 16, "residual": False,
-                                         "interm_tokens": "lerp"}
+    assert probe._options(
+        ["lr=3e-3", "dim=16", "residual=false", "interm_tokens=lerp"], "--model"
+    ) == {"lr": 0.003, "dim": 16, "residual": False, "interm_tokens": "lerp"}
     with pytest.raises(SystemExit, match="key=value"):
         probe._options(["lr"], "--model")

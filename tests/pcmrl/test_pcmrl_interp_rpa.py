@@ -23,10 +23,12 @@ def _hamilton(a: list[float], b: list[float]) -> list[float]:
     """Hamilton product written out by hand (w, x, y, z)."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
-    return [aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw]
+    return [
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    ]
 
 
 def _algorithm1(tail: list[float], target: list[float]) -> list[float]:
@@ -73,8 +75,10 @@ def test_alg1_random_directions_have_maximum_real_part() -> None:
     # every other rotation taking eta to omega (q followed by a twist about eta) has a
     # smaller real part
     for phi in (0.3, 1.0, 2.5, -0.7):
-        twist = torch.cat([torch.full((64, 1), math.cos(phi / 2), dtype=torch.float64),
-                           math.sin(phi / 2) * unit], -1)
+        twist = torch.cat(
+            [torch.full((64, 1), math.cos(phi / 2), dtype=torch.float64), math.sin(phi / 2) * unit],
+            -1,
+        )
         other = Q.mul(q, twist)
         assert torch.allclose(Q.rotate(other, unit), target, atol=1e-9)
         assert torch.all(other[:, 0].abs() < q[:, 0] - 1e-6)
@@ -83,8 +87,9 @@ def test_alg1_random_directions_have_maximum_real_part() -> None:
 def test_alg1_degenerate_cases() -> None:
     q = max_real_quaternion(torch.tensor([1.0, 0, 0]), torch.tensor([-2.0, 0, 0]))
     assert abs(float(q[0])) < 1e-6  # a half turn
-    assert torch.allclose(Q.rotate(q, torch.tensor([1.0, 0, 0])), torch.tensor([-1.0, 0, 0]),
-                          atol=1e-6)
+    assert torch.allclose(
+        Q.rotate(q, torch.tensor([1.0, 0, 0])), torch.tensor([-1.0, 0, 0]), atol=1e-6
+    )
     ident = max_real_quaternion(torch.zeros(3), torch.tensor([0.0, 1, 0]))
     assert ident.tolist() == [1.0, 0.0, 0.0, 0.0]
     same = max_real_quaternion(torch.tensor([0.0, 3, 0]), torch.tensor([0.0, 1, 0]))
@@ -106,16 +111,18 @@ def test_bone_tails_follow_the_main_child() -> None:
     # a leaf takes its End Site
     head = sk.index("Head")
     assert int(info.child[head]) == -1
-    assert torch.allclose(info.tails[head], torch.tensor(sk.end_sites[head][0],
-                                                         dtype=sk.offsets.dtype))
+    assert torch.allclose(
+        info.tails[head], torch.tensor(sk.end_sites[head][0], dtype=sk.offsets.dtype)
+    )
 
 
 def test_rpa_keeps_bone_directions_and_foq() -> None:
     motion, _ = procedural.generate("biped31", "run", seconds=0.5, fps=30, seed=1)
     motion = motion.convert_units("m").double()
     sk = motion.skeleton
-    delta = random_tail_offsets(sk.num_joints, 0.1, torch.Generator().manual_seed(4),
-                                dtype=torch.float64)
+    delta = random_tail_offsets(
+        sk.num_joints, 0.1, torch.Generator().manual_seed(4), dtype=torch.float64
+    )
     grot = motion.global_rotations()
     offsets, grot_aug, tails = augment_rest_pose(sk, grot, delta)
     # offsets moved by delta, except the root and zero-length bones
@@ -125,8 +132,7 @@ def test_rpa_keeps_bone_directions_and_foq() -> None:
     assert torch.equal(offsets[~nonzero], sk.offsets[~nonzero])
     # the augmented motion, through plain FK on the augmented skeleton
     aug_sk = Skeleton(sk.joint_names, sk.parents, offsets, end_sites=sk.end_sites)
-    aug = Motion(aug_sk, global_to_local(grot_aug, sk.parents), motion.root_positions,
-                 motion.fps)
+    aug = Motion(aug_sk, global_to_local(grot_aug, sk.parents), motion.root_positions, motion.fps)
     assert torch.allclose(aug.global_rotations(), grot_aug, atol=1e-9)
     pos, pos_aug = motion.global_positions(), aug.global_positions()
     child = bone_tails(sk).child

@@ -102,8 +102,14 @@ def test_batched_layout_with_per_clip_offsets(walk: sa.Motion) -> None:
     gpos = walk.global_positions().float().expand(2, -1, -1, -1)
     pts = layout.points(grot, gpos, offsets)
     for b in range(2):
-        single = type(layout)(layout.heads[b], layout.tails[b], layout.alpha[b], layout.noise[b],
-                              layout.groups[b], layout.sigma)
+        single = type(layout)(
+            layout.heads[b],
+            layout.tails[b],
+            layout.alpha[b],
+            layout.noise[b],
+            layout.groups[b],
+            layout.sigma,
+        )
         assert torch.allclose(pts[b], single.points(grot[b], gpos[b], offsets[b]), atol=1e-6)
 
 
@@ -128,8 +134,11 @@ def test_zero_length_bones_warn_and_are_never_sampled() -> None:
     # the joints those bones start from still carry other, non-zero bones
     eff = effective_joints(sk)
     assert sk.index("Hips") in eff
-    assert all(c in eff for c in range(sk.num_joints) if sk.children(c) and any(
-        sk.offsets[k].norm() > 0 for k in sk.children(c)))
+    assert all(
+        c in eff
+        for c in range(sk.num_joints)
+        if sk.children(c) and any(sk.offsets[k].norm() > 0 for k in sk.children(c))
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert warn_zero_length_bones(procedural.skeleton("biped22")) == []
@@ -153,8 +162,11 @@ def test_infer_units_of_real_skeletons(shared_data) -> None:
 
 def _walk_cloud(walk: sa.Motion, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
     layout = sample_layout(walk.skeleton, 256, 0.05, (1,), torch.Generator().manual_seed(seed))
-    pts = layout.points(walk.global_rotations().float()[None],
-                        walk.global_positions().float()[None], walk.skeleton.offsets)
+    pts = layout.points(
+        walk.global_rotations().float()[None],
+        walk.global_positions().float()[None],
+        walk.skeleton.offsets,
+    )
     return pts - pts.mean(dim=2, keepdim=True), layout.groups
 
 
@@ -183,8 +195,10 @@ def test_heading_is_the_left_minus_right_direction(walk) -> None:
     # the moving average removes most of the gait's side-to-side swing
     per_frame = Q.yaw(heading_frames(pts, groups, width=1), forward=2)
     smooth = Q.yaw(heading_frames(pts, groups, width=15), forward=2)
+
     def spread(q: torch.Tensor) -> float:
         return float(2 * torch.atan2(q[..., 2], q[..., 0]).std())
+
     assert spread(smooth) < spread(per_frame)
 
 

@@ -19,8 +19,9 @@ def model(pcmrl_tiny) -> PcmrlReconAligner:
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning, match="LHipJoint, RHipJoint, LowerBack"):
         # the floor- and heading-free frames of the CPU presets (off by default: not the paper's)
-        return PcmrlReconAligner(target="biped31", chunk=16, centre_up=True, canonical_yaw=True,
-                                 **pcmrl_tiny).eval()
+        return PcmrlReconAligner(
+            target="biped31", chunk=16, centre_up=True, canonical_yaw=True, **pcmrl_tiny
+        ).eval()
 
 
 def test_paper_sized_encoder_pools_256_points_to_one_1024_vector() -> None:
@@ -71,8 +72,9 @@ def test_vector_attention_matches_a_loop_over_each_points_neighbours() -> None:
 @pytest.mark.parametrize("attention", ["vector", "none"])
 def test_encoder_attention_options_keep_shapes_and_permutation_invariance(attention) -> None:
     torch.manual_seed(0)
-    enc = PointTransformerEncoder(5, dim=8, stages=2, heads=2, attention=attention,
-                                  attention_k=4).eval()
+    enc = PointTransformerEncoder(
+        5, dim=8, stages=2, heads=2, attention=attention, attention_k=4
+    ).eval()
     x = torch.randn(3, 64, 8)
     assert enc(x).shape == (3, 32)
     perm = torch.randperm(63) + 1
@@ -90,8 +92,9 @@ def test_encoder_rejects_unknown_attention() -> None:
 @pytest.mark.parametrize("attention", ["full", "vector"])
 def test_zero_layer_scale_starts_attention_blocks_as_the_identity(attention) -> None:
     torch.manual_seed(0)
-    scaled = PointTransformerEncoder(5, dim=8, stages=2, heads=2, attention=attention,
-                                     layer_scale=0.0).eval()
+    scaled = PointTransformerEncoder(
+        5, dim=8, stages=2, heads=2, attention=attention, layer_scale=0.0
+    ).eval()
     plain = PointTransformerEncoder(5, dim=8, stages=2, heads=2, attention="none").eval()
     plain.load_state_dict(scaled.state_dict(), strict=False)
     x = torch.randn(2, 64, 8)
@@ -103,9 +106,11 @@ def test_zero_layer_scale_starts_attention_blocks_as_the_identity(attention) -> 
 def test_reconstruction_outputs_unit_quaternions_and_consistent_positions(model) -> None:
     motion = procedural.generate("biped22", "walk", seconds=1.0)[0].convert_units("m")
     layout = sample_layout(motion.skeleton, 64, 0.05, batch=(2,))
-    pts = layout.points(motion.global_rotations().float().expand(2, -1, -1, -1),
-                        motion.global_positions().float().expand(2, -1, -1, -1),
-                        motion.skeleton.offsets)
+    pts = layout.points(
+        motion.global_rotations().float().expand(2, -1, -1, -1),
+        motion.global_positions().float().expand(2, -1, -1, -1),
+        motion.skeleton.offsets,
+    )
     out = model.reconstruct(pts, layout.groups)
     target = model.target_skeleton
     assert out["rotations"].shape == (2, motion.num_frames, target.num_joints, 4)
@@ -123,16 +128,17 @@ def test_reconstruction_outputs_unit_quaternions_and_consistent_positions(model)
     rest = rest - rest[0]
     centred = out["positions"][0, 0].detach() - out["root"][0, 0].detach()
     assert torch.allclose(centred[:, 1], rest[:, 1], atol=0.1)
-    assert torch.allclose(centred[:, [0, 2]].norm(dim=-1), rest[:, [0, 2]].norm(dim=-1),
-                          atol=0.1)
+    assert torch.allclose(centred[:, [0, 2]].norm(dim=-1), rest[:, [0, 2]].norm(dim=-1), atol=0.1)
     # ... facing the way the source faces: the same left-minus-right direction
     left = [target.index(n) for n in ("LeftShoulder", "LeftUpLeg")]
     right = [target.index(n) for n in ("RightShoulder", "RightUpLeg")]
     lateral = (centred[left] - centred[right]).sum(0)[[0, 2]]
     src = motion.skeleton
     src_pos = motion.global_positions()[0].float()
-    src_lat = (src_pos[[src.index("LeftArm"), src.index("LeftUpLeg")]]
-               - src_pos[[src.index("RightArm"), src.index("RightUpLeg")]]).sum(0)[[0, 2]]
+    src_lat = (
+        src_pos[[src.index("LeftArm"), src.index("LeftUpLeg")]]
+        - src_pos[[src.index("RightArm"), src.index("RightUpLeg")]]
+    ).sum(0)[[0, 2]]
     cos = torch.nn.functional.cosine_similarity(lateral, src_lat, dim=0)
     assert cos > 0.9  # 64 points, limbs mid-swing: within ~25 degrees
 
@@ -143,8 +149,11 @@ def test_without_canonical_yaw_the_untrained_network_stands_in_the_rest_pose(pcm
         model = PcmrlReconAligner(target="biped31", canonical_yaw=False, **pcmrl_tiny).eval()
     motion = procedural.generate("biped22", "walk", seconds=0.5)[0].convert_units("m")
     layout = sample_layout(motion.skeleton, 64, 0.05, batch=(1,))
-    pts = layout.points(motion.global_rotations().float()[None],
-                        motion.global_positions().float()[None], motion.skeleton.offsets)
+    pts = layout.points(
+        motion.global_rotations().float()[None],
+        motion.global_positions().float()[None],
+        motion.skeleton.offsets,
+    )
     out = model.reconstruct(pts, layout.groups)
     rest = model.target_skeleton.rest_positions().float()
     centred = out["positions"][0, 0].detach() - out["root"][0, 0].detach()
@@ -158,16 +167,18 @@ def test_canonical_yaw_makes_the_reconstruction_heading_equivariant(model, pcmrl
     turn = torch.tensor([torch.cos(angle / 2), 0.0, torch.sin(angle / 2), 0.0])
     rot = motion.rotations.clone()
     rot[:, 0] = Q.mul(turn.to(rot), rot[:, 0])
-    turned = sa.Motion(motion.skeleton, rot, Q.rotate(turn.to(rot),
-                       motion.root_positions), motion.fps, units="m")
+    turned = sa.Motion(
+        motion.skeleton, rot, Q.rotate(turn.to(rot), motion.root_positions), motion.fps, units="m"
+    )
     a = model.retarget(motion, model.target_skeleton).global_positions().float()
     b = model.retarget(turned, model.target_skeleton).global_positions().float()
     expected = Q.rotate(turn, a)
     assert torch.allclose(b, expected, atol=1e-3)
     # without it the untrained network is not equivariant
     with pytest.warns(ZeroLengthBoneWarning):
-        plain = PcmrlReconAligner(target="biped31", canonical_yaw=False, chunk=16,
-                                    **pcmrl_tiny).eval()
+        plain = PcmrlReconAligner(
+            target="biped31", canonical_yaw=False, chunk=16, **pcmrl_tiny
+        ).eval()
     plain.load_state_dict(model.state_dict())
     a = plain.retarget(motion, model.target_skeleton).global_positions().float()
     b = plain.retarget(turned, model.target_skeleton).global_positions().float()
@@ -180,21 +191,25 @@ def test_centre_up_makes_the_reconstruction_independent_of_the_floor_height(
     """Raising the source by 0.7 m raises the reconstruction by 0.7 m and changes nothing else."""
     motion = procedural.generate("biped22", "walk", seconds=1.0)[0].convert_units("m")
     lift = torch.tensor([0.0, 0.7, 0.0])
-    raised = sa.Motion(motion.skeleton, motion.rotations,
-                       motion.root_positions + lift.to(motion.root_positions), motion.fps,
-                       units="m")
+    raised = sa.Motion(
+        motion.skeleton,
+        motion.rotations,
+        motion.root_positions + lift.to(motion.root_positions),
+        motion.fps,
+        units="m",
+    )
     a = model.retarget(motion, model.target_skeleton)
     b = model.retarget(raised, model.target_skeleton)
-    assert torch.allclose(b.global_positions().float(), a.global_positions().float() + lift,
-                          atol=1e-4)
+    assert torch.allclose(
+        b.global_positions().float(), a.global_positions().float() + lift, atol=1e-4
+    )
     assert torch.allclose(b.rotations, a.rotations, atol=1e-4)
     za, zb = model.encode(motion), model.encode(raised)
     assert torch.allclose(za.z, zb.z, atol=1e-4)
     assert torch.allclose(zb.extras["centre"], za.extras["centre"] + lift, atol=1e-4)
     # without it the encoder sees another cloud
     with pytest.warns(ZeroLengthBoneWarning):
-        plain = PcmrlReconAligner(target="biped31", centre_up=False, chunk=16,
-                                    **pcmrl_tiny).eval()
+        plain = PcmrlReconAligner(target="biped31", centre_up=False, chunk=16, **pcmrl_tiny).eval()
     plain.load_state_dict(model.state_dict())
     za, zb = plain.encode(motion), plain.encode(raised)
     assert not torch.allclose(za.z, zb.z, atol=1e-2)
@@ -202,7 +217,8 @@ def test_centre_up_makes_the_reconstruction_independent_of_the_floor_height(
 
 
 def test_checkpoints_from_before_canonical_yaw_and_centre_up_load_without_them(
-        model, tmp_path) -> None:
+    model, tmp_path
+) -> None:
     import lightning as L
 
     trainer = L.Trainer(logger=False, enable_checkpointing=False, enable_progress_bar=False)
@@ -233,16 +249,18 @@ def test_retarget_returns_a_valid_motion_on_the_target(model, tmp_path) -> None:
     sa.write_bvh(result, tmp_path / "out.bvh")
     back = sa.read_bvh(tmp_path / "out.bvh")
     assert back.num_frames == result.num_frames
-    assert torch.allclose(back.global_positions().float(), result.global_positions().float(),
-                          atol=1e-3)
+    assert torch.allclose(
+        back.global_positions().float(), result.global_positions().float(), atol=1e-3
+    )
 
 
 def test_retarget_between_real_skeletons(lafan_clip, shared_data, pcmrl_tiny) -> None:
     cmu = shared_data / "human" / "cmu" / "131_01.bvh"
     torch.manual_seed(0)
     with pytest.warns(ZeroLengthBoneWarning, match="lowerback"):
-        model = PcmrlReconAligner(target=str(cmu), target_units="cmu", chunk=16,
-                                    **pcmrl_tiny).eval()
+        model = PcmrlReconAligner(
+            target=str(cmu), target_units="cmu", chunk=16, **pcmrl_tiny
+        ).eval()
     source = sa.read_bvh(lafan_clip)[:40]
     target = sa.read_bvh(cmu).skeleton
     result = model.retarget(source, target)
@@ -254,7 +272,12 @@ def test_retarget_between_real_skeletons(lafan_clip, shared_data, pcmrl_tiny) ->
     assert float((src_root_m - out_root_m).norm(dim=-1).max()) < 0.5
     pairs = end_effector_pairs(source.skeleton, target)
     assert {target.body_groups[b] for _, b in pairs} == {
-        "spine", "left_arm", "right_arm", "left_leg", "right_leg"}
+        "spine",
+        "left_arm",
+        "right_arm",
+        "left_leg",
+        "right_leg",
+    }
 
 
 def test_wrong_target_and_stage_are_clear_errors(model, pcmrl_tiny) -> None:
@@ -281,9 +304,11 @@ def test_a_few_steps_reduce_the_knn_loss(pcmrl_tiny, layout) -> None:
     torch.manual_seed(1)
     motion = procedural.generate("biped22", "walk", seconds=0.4)[0].convert_units("m")
     src = sample_layout(motion.skeleton, 64, 0.05, batch=(2,))
-    pts = src.points(motion.global_rotations().float().expand(2, -1, -1, -1),
-                     motion.global_positions().float().expand(2, -1, -1, -1),
-                     motion.skeleton.offsets)
+    pts = src.points(
+        motion.global_rotations().float().expand(2, -1, -1, -1),
+        motion.global_positions().float().expand(2, -1, -1, -1),
+        motion.skeleton.offsets,
+    )
     tgt = sample_layout(model.target_skeleton, 128, 0.05, batch=(2,))
     model.train()
     opt = torch.optim.Adam(model.parameters(), lr=3e-3)

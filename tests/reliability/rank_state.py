@@ -26,7 +26,11 @@ class DumpRankState(L.Callback):
         """Write this rank's state."""
         self.path.mkdir(parents=True, exist_ok=True)
         state = {k: v.detach().cpu().clone() for k, v in pl_module.state_dict().items()}
-        metrics = {k: torch.as_tensor(v).detach().cpu().clone()
-                   for k, v in trainer.callback_metrics.items()}
-        torch.save({"state_dict": state, "metrics": metrics, "world_size": trainer.world_size},
-                   self.path / f"rank{trainer.global_rank}.pt")
+        metrics = {
+            k: torch.as_tensor(v).detach().cpu().clone()
+            for k, v in trainer.callback_metrics.items()
+        }
+        torch.save(
+            {"state_dict": state, "metrics": metrics, "world_size": trainer.world_size},
+            self.path / f"rank{trainer.global_rank}.pt",
+        )

@@ -31,17 +31,21 @@ def plugin_env(tmp_path: Path, name: str, module: str, src: Path) -> dict[str, s
         src: Directory to put on ``PYTHONPATH`` (the plugin's ``src``).
     """
     site = tmp_path / "site"
-    declared = {ep.name for dist in metadata.distributions(path=[str(src), *sys.path])
-                for ep in dist.entry_points if ep.group == ENTRY_POINT_GROUP}
+    declared = {
+        ep.name
+        for dist in metadata.distributions(path=[str(src), *sys.path])
+        for ep in dist.entry_points
+        if ep.group == ENTRY_POINT_GROUP
+    }
     if name not in declared:  # e.g. no build metadata next to the sources
         dist = site / f"skelagnostic_{name.replace('-', '_')}-0.1.0.dist-info"
         dist.mkdir(parents=True)
         (dist / "METADATA").write_text(
-            f"Metadata-Version: 2.1\nName: skelagnostic-{name}\nVersion: 0.1.0\n")
+            f"Metadata-Version: 2.1\nName: skelagnostic-{name}\nVersion: 0.1.0\n"
+        )
         (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\n{name} = {module}\n")
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(
-        [str(site), str(src), str(REPO / "src"), str(HERE)])
+    env["PYTHONPATH"] = os.pathsep.join([str(site), str(src), str(REPO / "src"), str(HERE)])
     env[LOAD_PLUGINS_ENV] = name
     env["SKELAGNOSTIC_CACHE"] = str(tmp_path / "cache")
     env["OMP_NUM_THREADS"] = "1"

@@ -23,10 +23,12 @@ from skelagnostic.representations import GlobalPositions
 
 
 def _module(cache: Path, seconds: float, clips: int = 2) -> MotionDataModule:
-    source = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=clips,
-                              seconds=seconds)
-    return MotionDataModule(source, GlobalPositions(frame="root"), window=8, stride=8,
-                            val_fraction=0.0, cache_dir=cache)
+    source = ProceduralSource(
+        kinds=["biped22"], gaits=["walk"], clips_per_gait=clips, seconds=seconds
+    )
+    return MotionDataModule(
+        source, GlobalPositions(frame="root"), window=8, stride=8, val_fraction=0.0, cache_dir=cache
+    )
 
 
 def _normalisation_peak(dm: MotionDataModule, monkeypatch: pytest.MonkeyPatch) -> int:

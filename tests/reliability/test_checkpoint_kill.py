@@ -48,7 +48,8 @@ def received(conn: Connection) -> list[int]:
 
 @pytest.mark.slow
 def test_killed_writers_leave_a_loadable_checkpoint_and_no_temporary(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     tmpdir = tmp_path / "tmpdir"
     tmpdir.mkdir()
     monkeypatch.setenv("TMPDIR", str(tmpdir))

@@ -32,13 +32,16 @@ SMALL, LARGE = 2, 25
 
 #: data module -> (import path, keyword arguments besides sources and cache_dir)
 MODULES: dict[str, tuple[str, dict[str, Any]]] = {
-    "vqpae": ("skelagnostic_vqpae.data:VqpaeDataModule",
-              {"fps": 30, "stride": 1, "batch_size": 32}),
+    "vqpae": (
+        "skelagnostic_vqpae.data:VqpaeDataModule",
+        {"fps": 30, "stride": 1, "batch_size": 32},
+    ),
     "humot": ("skelagnostic_humot.data:HumotDataModule", {"batch_size": 32}),
-    "pcmrl_recon": ("skelagnostic_pcmrl.recon_data:PcmrlReconDataModule",
-                    {"batch_size": 8, "target": "biped31"}),
-    "pcmrl_interp": ("skelagnostic_pcmrl.interp_data:PcmrlInterpDataModule",
-                     {"batch_size": 16}),
+    "pcmrl_recon": (
+        "skelagnostic_pcmrl.recon_data:PcmrlReconDataModule",
+        {"batch_size": 8, "target": "biped31"},
+    ),
+    "pcmrl_interp": ("skelagnostic_pcmrl.interp_data:PcmrlInterpDataModule", {"batch_size": 16}),
 }
 
 #: Run in the subprocess: set the data module up and read batches, print the peak RSS.
@@ -88,13 +91,16 @@ def corpus_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[lis
     """The 25 clips and a window cache holding every data module's entries of them."""
     corpus = _corpus()
     if corpus is None:
-        pytest.skip(f"the LaFAN1 corpus ({LARGE} clips in ../shared/datasets/lafan1 next to "
-                    "SKELAGNOSTIC_TEST_DATA or ../shared/data) is not available")
+        pytest.skip(
+            f"the LaFAN1 corpus ({LARGE} clips in ../shared/datasets/lafan1 next to "
+            "SKELAGNOSTIC_TEST_DATA or ../shared/data) is not available"
+        )
     files = sorted(str(p) for p in corpus.glob("*.bvh"))[:LARGE]
     cache = tmp_path_factory.mktemp("corpus-cache")
     source = BVHSource(files, units="cm", name="lafan1")
-    modules = [_cls(target)(source, cache_dir=cache, **kwargs)
-               for target, kwargs in MODULES.values()]
+    modules = [
+        _cls(target)(source, cache_dir=cache, **kwargs) for target, kwargs in MODULES.values()
+    ]
     load, last = BVHSource.load, {}
 
     def load_once(self: BVHSource, clip: ClipRef) -> Motion:  # the clip of the previous call
@@ -114,19 +120,27 @@ def _peak_rss(target: str, kwargs: dict[str, Any], files: list[str], cache: Path
     spec = {"target": target, "kwargs": kwargs, "files": files, "cache": str(cache)}
     path = os.pathsep.join([*PLUGIN_SRCS, os.environ.get("PYTHONPATH", "")])
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": path}
-    done = subprocess.run([sys.executable, "-c", _MEASURE, json.dumps(spec)], check=True,
-                          capture_output=True, text=True, env=env)
+    done = subprocess.run(
+        [sys.executable, "-c", _MEASURE, json.dumps(spec)],
+        check=True,
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     return int(json.loads(done.stdout.strip().splitlines()[-1])["rss_kib"])
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("module", list(MODULES))
 def test_peak_memory_is_flat_in_the_corpus_size(
-        module: str, corpus_cache: tuple[list[str], Path]) -> None:
+    module: str, corpus_cache: tuple[list[str], Path]
+) -> None:
     files, cache = corpus_cache
     target, kwargs = MODULES[module]
     small = _peak_rss(target, kwargs, files[:SMALL], cache)
     large = _peak_rss(target, kwargs, files, cache)
-    print(f"{module}: peak RSS {small / 1024:.0f} MiB ({SMALL} clips), "
-          f"{large / 1024:.0f} MiB ({LARGE} clips)")
+    print(
+        f"{module}: peak RSS {small / 1024:.0f} MiB ({SMALL} clips), "
+        f"{large / 1024:.0f} MiB ({LARGE} clips)"
+    )
     assert large <= 1.10 * small, (module, small, large)

@@ -60,25 +60,67 @@ class Method:
 
 #: Tiny runs: ``experiment=smoke`` (2 epochs of at most 4 steps, 2 validation batches).
 METHODS = [
-    Method("humot", "skelagnostic_humot.plugin",
-           ("model.dim=32", "model.latent=16", "model.blocks=1", "model.heads=4",
-            "model.kernel_size=3", "data.seconds=1.5", "data.batch_size=4")),
-    Method("vqpae", "skelagnostic_vqpae.plugin",
-           ("model.num_codes=8", "model.kernel_size=7", "model.pose_layers=2",
-            "data.seconds=2.0", "data.clips_per_gait=1"),
-           shared=("codebook.",)),
-    Method("pcmrl", "skelagnostic_pcmrl.plugin",
-           ("model.dim=8", "model.stages=2", "model.point_heads=2", "model.temporal_dim=16",
-            "model.temporal_layers=1", "model.temporal_heads=2", "model.num_source_points=64",
-            "model.num_target_points=128", "data.gaits=[walk]", "data.clips_per_gait=2",
-            "data.seconds=1.5", "data.window=12", "data.stride=12", "data.batch_size=2",
-            "data.val_fraction=0.5")),
+    Method(
+        "humot",
+        "skelagnostic_humot.plugin",
+        (
+            "model.dim=32",
+            "model.latent=16",
+            "model.blocks=1",
+            "model.heads=4",
+            "model.kernel_size=3",
+            "data.seconds=1.5",
+            "data.batch_size=4",
+        ),
+    ),
+    Method(
+        "vqpae",
+        "skelagnostic_vqpae.plugin",
+        (
+            "model.num_codes=8",
+            "model.kernel_size=7",
+            "model.pose_layers=2",
+            "data.seconds=2.0",
+            "data.clips_per_gait=1",
+        ),
+        shared=("codebook.",),
+    ),
+    Method(
+        "pcmrl",
+        "skelagnostic_pcmrl.plugin",
+        (
+            "model.dim=8",
+            "model.stages=2",
+            "model.point_heads=2",
+            "model.temporal_dim=16",
+            "model.temporal_layers=1",
+            "model.temporal_heads=2",
+            "model.num_source_points=64",
+            "model.num_target_points=128",
+            "data.gaits=[walk]",
+            "data.clips_per_gait=2",
+            "data.seconds=1.5",
+            "data.window=12",
+            "data.stride=12",
+            "data.batch_size=2",
+            "data.val_fraction=0.5",
+        ),
+    ),
     # stage 2: its self-attention blocks hold a memory norm they never use (frozen, else
     # plain ddp stops at the first step on a parameter without a gradient)
-    Method("pcmrl", "skelagnostic_pcmrl.plugin",
-           ("model.dim=16", "model.heads=2", "model.layers=1", "data.clips_per_gait=1",
-            "data.samples_per_epoch=8", "data.batch_size=2"),
-           model="pcmrl_interp"),
+    Method(
+        "pcmrl",
+        "skelagnostic_pcmrl.plugin",
+        (
+            "model.dim=16",
+            "model.heads=2",
+            "model.layers=1",
+            "data.clips_per_gait=1",
+            "data.samples_per_epoch=8",
+            "data.batch_size=2",
+        ),
+        model="pcmrl_interp",
+    ),
 ]
 
 
@@ -91,12 +133,24 @@ def files_under(root: Path) -> list[str]:
 def test_fit_ddp_two_cpu_processes(method: Method, tmp_path: Path) -> None:
     env = plugin_env(tmp_path, method.name, method.module, method.src)
     runs, dumps = tmp_path / "runs", tmp_path / "ranks"
-    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", f"model={method.model_name}",
-           "experiment=smoke", *method.args, "trainer.strategy=ddp", "trainer.devices=2",
-           "trainer.accelerator=cpu", "threads=1", "seed=3", f"runs_dir={runs}",
-           "+callbacks.dump._target_=rank_state.DumpRankState", f"+callbacks.dump.path={dumps}"]
-    proc = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=240)
+    cmd = [
+        sys.executable,
+        "-m",
+        "skelagnostic.cli",
+        "fit",
+        f"model={method.model_name}",
+        "experiment=smoke",
+        *method.args,
+        "trainer.strategy=ddp",
+        "trainer.devices=2",
+        "trainer.accelerator=cpu",
+        "threads=1",
+        "seed=3",
+        f"runs_dir={runs}",
+        "+callbacks.dump._target_=rank_state.DumpRankState",
+        f"+callbacks.dump.path={dumps}",
+    ]
+    proc = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=240)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-4000:]
     assert "Starting with 2 processes" in out and "distributed_backend=gloo" in out
@@ -123,10 +177,12 @@ def test_fit_ddp_two_cpu_processes(method: Method, tmp_path: Path) -> None:
     val = sorted(k for k in ranks[0]["metrics"] if k.startswith("val/"))
     assert val and val == sorted(k for k in ranks[1]["metrics"] if k.startswith("val/"))
     for key in val:
-        torch.testing.assert_close(ranks[0]["metrics"][key], ranks[1]["metrics"][key],
-                                   rtol=1e-5, atol=1e-6, msg=key)
+        torch.testing.assert_close(
+            ranks[0]["metrics"][key], ranks[1]["metrics"][key], rtol=1e-5, atol=1e-6, msg=key
+        )
     # the checkpoint rank 0 wrote is that replica
-    saved = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu",
-                       weights_only=False)["state_dict"]
+    saved = torch.load(
+        run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False
+    )["state_dict"]
     for key in a:
         assert torch.equal(saved[key], a[key]), key

@@ -33,27 +33,48 @@ def _example() -> Any:
         sys.path.append(str(EXAMPLE_SRC))
     return importlib.import_module("skelagnostic_example")
 
+
 #: Small procedural data: two datasets of different lengths (the shorter one cycles).
-ARGS = ["model=example", "model.hidden=16", "model.latent=4", "data.seconds=2.0",
-        "data.clips_per_gait=1", "data.window=16", "data.stride=4", "data.batch_size=4",
-        "trainer.max_epochs=2", "trainer.limit_val_batches=1", "trainer.log_every_n_steps=1",
-        "trainer.enable_model_summary=false", "callbacks=default", "seed=7",
-        # last.ckpt after every step (the default checkpoint waits for val/loss)
-        "callbacks.model_checkpoint.save_last=false",
-        "+callbacks.resume._target_=lightning.pytorch.callbacks.ModelCheckpoint",
-        "+callbacks.resume.dirpath=${run_dir}/checkpoints", "+callbacks.resume.save_top_k=0",
-        "+callbacks.resume.save_last=true", "+callbacks.resume.every_n_train_steps=1"]
+ARGS = [
+    "model=example",
+    "model.hidden=16",
+    "model.latent=4",
+    "data.seconds=2.0",
+    "data.clips_per_gait=1",
+    "data.window=16",
+    "data.stride=4",
+    "data.batch_size=4",
+    "trainer.max_epochs=2",
+    "trainer.limit_val_batches=1",
+    "trainer.log_every_n_steps=1",
+    "trainer.enable_model_summary=false",
+    "callbacks=default",
+    "seed=7",
+    # last.ckpt after every step (the default checkpoint waits for val/loss)
+    "callbacks.model_checkpoint.save_last=false",
+    "+callbacks.resume._target_=lightning.pytorch.callbacks.ModelCheckpoint",
+    "+callbacks.resume.dirpath=${run_dir}/checkpoints",
+    "+callbacks.resume.save_top_k=0",
+    "+callbacks.resume.save_last=true",
+    "+callbacks.resume.every_n_train_steps=1",
+]
 
 
 def fit(env: dict[str, str], cwd: Path, run_dir: Path, *extra: str) -> subprocess.CompletedProcess:
-    cmd = [sys.executable, "-m", "skelagnostic.cli", "fit", *ARGS, f"hydra.run.dir={run_dir}",
-           *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "skelagnostic.cli",
+        "fit",
+        *ARGS,
+        f"hydra.run.dir={run_dir}",
+        *extra,
+    ]
     return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=240)
 
 
 def final_state(run_dir: Path) -> dict:
-    return torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu",
-                      weights_only=False)
+    return torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
 
 
 def assert_same_training_state(a: dict, b: dict) -> None:
@@ -61,8 +82,11 @@ def assert_same_training_state(a: dict, b: dict) -> None:
     assert a["state_dict"].keys() == b["state_dict"].keys()
     for name, tensor in a["state_dict"].items():
         assert torch.equal(tensor, b["state_dict"][name]), name  # bitwise
-    for x, y in zip(a["optimizer_states"][0]["state"].values(),
-                    b["optimizer_states"][0]["state"].values(), strict=True):
+    for x, y in zip(
+        a["optimizer_states"][0]["state"].values(),
+        b["optimizer_states"][0]["state"].values(),
+        strict=True,
+    ):
         for key in x:
             assert torch.equal(x[key], y[key]), key
 
@@ -111,13 +135,17 @@ def test_ranks_get_disjoint_shards() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("signum", "where"), [
-    pytest.param(signal.SIGKILL, "mid-epoch", id="SIGKILL-mid-epoch"),
-    pytest.param(signal.SIGTERM, "mid-epoch", id="SIGTERM-mid-epoch"),
-    pytest.param(signal.SIGKILL, "epoch-boundary", id="SIGKILL-epoch-boundary"),
-])
-def test_killed_fit_resumes_bitwise(cli_env: dict[str, str], tmp_path: Path,
-                                    signum: signal.Signals, where: str) -> None:
+@pytest.mark.parametrize(
+    ("signum", "where"),
+    [
+        pytest.param(signal.SIGKILL, "mid-epoch", id="SIGKILL-mid-epoch"),
+        pytest.param(signal.SIGTERM, "mid-epoch", id="SIGTERM-mid-epoch"),
+        pytest.param(signal.SIGKILL, "epoch-boundary", id="SIGKILL-epoch-boundary"),
+    ],
+)
+def test_killed_fit_resumes_bitwise(
+    cli_env: dict[str, str], tmp_path: Path, signum: signal.Signals, where: str
+) -> None:
     ref = fit(cli_env, tmp_path, tmp_path / "ref")
     assert ref.returncode == 0, ref.stderr[-3000:]
     reference = final_state(tmp_path / "ref")
@@ -129,13 +157,20 @@ def test_killed_fit_resumes_bitwise(cli_env: dict[str, str], tmp_path: Path,
         kill_step = steps_per_epoch + 1
     else:
         kill_step = 2 if signum == signal.SIGKILL else steps_per_epoch + 2
-    killed = fit(cli_env, tmp_path, tmp_path / "killed", "+callbacks.kill._target_=killer.KillAt",
-                 f"+callbacks.kill.step={kill_step}", f"+callbacks.kill.signum={int(signum)}")
+    killed = fit(
+        cli_env,
+        tmp_path,
+        tmp_path / "killed",
+        "+callbacks.kill._target_=killer.KillAt",
+        f"+callbacks.kill.step={kill_step}",
+        f"+callbacks.kill.signum={int(signum)}",
+    )
     assert killed.returncode == (143 if signum == signal.SIGTERM else -signal.SIGKILL)
     if signum == signal.SIGTERM:
         assert killed.stderr.strip().splitlines()[-1] == (
             f"skelagnostic fit: terminated by SIGTERM [run directory kept: {tmp_path / 'killed'}; "
-            f"resume with ckpt_path={tmp_path / 'killed' / 'checkpoints' / 'last.ckpt'}]")
+            f"resume with ckpt_path={tmp_path / 'killed' / 'checkpoints' / 'last.ckpt'}]"
+        )
     last = tmp_path / "killed" / "checkpoints" / "last.ckpt"
     interrupted = torch.load(last, map_location="cpu", weights_only=False)
     # SIGKILL: the checkpoint of the step before; SIGTERM: Lightning finishes the step
@@ -150,8 +185,7 @@ def test_killed_fit_resumes_bitwise(cli_env: dict[str, str], tmp_path: Path,
 
 
 # ------------------------------------------------ resume from every checkpoint of a run
-def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner,
-                                                     ExampleDataModule]:
+def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner, ExampleDataModule]:
     """A 3-epoch example-aligner fit that checkpoints at every point Lightning can.
 
     After every training batch (``steps/``), after every validation run
@@ -160,39 +194,61 @@ def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner,
     """
     L.seed_everything(7, workers=True)
     example = _example()
-    dm = example.ExampleDataModule(sources=[ProceduralSource(clips_per_gait=1, seconds=2.0)],
-                                   window=16, stride=4, batch_size=4,
-                                   cache_dir=root.parent / "cache")
+    dm = example.ExampleDataModule(
+        sources=[ProceduralSource(clips_per_gait=1, seconds=2.0)],
+        window=16,
+        stride=4,
+        batch_size=4,
+        cache_dir=root.parent / "cache",
+    )
     model = example.ExampleAligner(hidden=16, latent=4)
     checkpoints = [
-        ModelCheckpoint(dirpath=root / "steps", filename="{step}", save_top_k=-1,
-                        every_n_train_steps=1),
-        ModelCheckpoint(dirpath=root / "val", filename="{step}", save_top_k=-1,
-                        save_on_train_epoch_end=False),
-        ModelCheckpoint(dirpath=root / "epochs", filename="{step}", save_top_k=-1,
-                        save_on_train_epoch_end=True, mode="max"),  # mode: a distinct state key
+        ModelCheckpoint(
+            dirpath=root / "steps", filename="{step}", save_top_k=-1, every_n_train_steps=1
+        ),
+        ModelCheckpoint(
+            dirpath=root / "val", filename="{step}", save_top_k=-1, save_on_train_epoch_end=False
+        ),
+        ModelCheckpoint(
+            dirpath=root / "epochs",
+            filename="{step}",
+            save_top_k=-1,
+            save_on_train_epoch_end=True,
+            mode="max",
+        ),  # mode: a distinct state key
     ]
-    trainer = L.Trainer(accelerator="cpu", max_epochs=3, logger=False,
-                        callbacks=[*checkpoints, ResumeFromEpochEnd()],  # as skelagnostic fit
-                        enable_progress_bar=False, enable_model_summary=False,
-                        default_root_dir=root, **options)
+    trainer = L.Trainer(
+        accelerator="cpu",
+        max_epochs=3,
+        logger=False,
+        callbacks=[*checkpoints, ResumeFromEpochEnd()],  # as skelagnostic fit
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        default_root_dir=root,
+        **options,
+    )
     return trainer, model, dm
 
 
 def _state(trainer: L.Trainer, model: ExampleAligner) -> dict:
-    return {"global_step": trainer.global_step, "epoch": trainer.current_epoch,
-            "state_dict": {k: v.clone() for k, v in model.state_dict().items()},
-            "optimizer_states": [copy.deepcopy(trainer.optimizers[0].state_dict())]}
+    return {
+        "global_step": trainer.global_step,
+        "epoch": trainer.current_epoch,
+        "state_dict": {k: v.clone() for k, v in model.state_dict().items()},
+        "optimizer_states": [copy.deepcopy(trainer.optimizers[0].state_dict())],
+    }
 
 
-@pytest.mark.parametrize("options", [
-    pytest.param({"limit_val_batches": 1}, id="validation"),
-    pytest.param({"limit_train_batches": 4, "limit_val_batches": 0}, id="limit_train_batches"),
-    # max_steps: Lightning restarts epoch-end checkpoints as unfinished (ResumeFromEpochEnd)
-    pytest.param({"max_steps": 16, "limit_val_batches": 0}, id="max_steps"),
-])
-def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path,
-                                                           options: dict) -> None:
+@pytest.mark.parametrize(
+    "options",
+    [
+        pytest.param({"limit_val_batches": 1}, id="validation"),
+        pytest.param({"limit_train_batches": 4, "limit_val_batches": 0}, id="limit_train_batches"),
+        # max_steps: Lightning restarts epoch-end checkpoints as unfinished (ResumeFromEpochEnd)
+        pytest.param({"max_steps": 16, "limit_val_batches": 0}, id="max_steps"),
+    ],
+)
+def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path, options: dict) -> None:
     trainer, model, dm = _trainer(tmp_path / "ref", **options)
     trainer.fit(model, datamodule=dm)
     reference = _state(trainer, model)
@@ -203,13 +259,14 @@ def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path,
     steps = {int(p.stem.split("=")[1]) for p in saved if p.parent.name == "steps"}
     assert steps == set(range(1, total + 1))  # every step: first, middle, last batch
     assert {p.parent.name for p in saved} == (
-        {"steps", "epochs"} if options.get("limit_val_batches") == 0 else {"steps", "val",
-                                                                           "epochs"})
+        {"steps", "epochs"} if options.get("limit_val_batches") == 0 else {"steps", "val", "epochs"}
+    )
     for ckpt in saved:
         if int(ckpt.stem.split("=")[1]) == options.get("max_steps"):
             continue  # written when max_steps had ended the run: no interruption to resume
-        trainer, model, dm = _trainer(tmp_path / "resumed" / ckpt.parent.name / ckpt.stem,
-                                      **options)
+        trainer, model, dm = _trainer(
+            tmp_path / "resumed" / ckpt.parent.name / ckpt.stem, **options
+        )
         trainer.fit(model, datamodule=dm, ckpt_path=ckpt)
         resumed = _state(trainer, model)
         assert resumed["global_step"] == reference["global_step"], ckpt

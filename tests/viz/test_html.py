@@ -27,8 +27,9 @@ def trot() -> sa.Motion:
 
 
 def _data(page: str) -> dict:
-    match = re.search(r'<script type="application/json" id="skelagnostic-data">(.*?)</script>',
-                      page, flags=re.S)
+    match = re.search(
+        r'<script type="application/json" id="skelagnostic-data">(.*?)</script>', page, flags=re.S
+    )
     assert match is not None
     return json.loads(match.group(1))
 
@@ -63,8 +64,13 @@ def test_decoded_positions_equal_forward_kinematics_in_metres(walk, trot):
 
 
 def test_names_colours_and_marks_are_in_the_page(walk, trot):
-    page = to_html([walk, trot], names=["human", "dog"], keyframes={0: [0, 15, 59]},
-                   transitions=[None, [20, 41]], title="A & B")
+    page = to_html(
+        [walk, trot],
+        names=["human", "dog"],
+        keyframes={0: [0, 15, 59]},
+        transitions=[None, [20, 41]],
+        title="A & B",
+    )
     payload = _data(page)
     human, dog = payload["clips"]
     assert (human["name"], dog["name"]) == ("human", "dog")

@@ -74,7 +74,8 @@ def test_skeletons_are_drawn_where_forward_kinematics_puts_them(motions, browser
     assert browser.call("frame") == FRAME
     browser.driver.find_element("tag name", "body").send_keys("h")  # hide labels and legend
     browser.driver.execute_async_script(
-        "const done = arguments[0]; requestAnimationFrame(() => requestAnimationFrame(done));")
+        "const done = arguments[0]; requestAnimationFrame(() => requestAnimationFrame(done));"
+    )
     image = browser.screenshot()
     camera = browser.call("camera")
     assert browser.console_errors() == []
@@ -120,8 +121,10 @@ def test_skeletons_are_drawn_where_forward_kinematics_puts_them(motions, browser
         assert (mask & inside).sum() >= 40, f"clip {k}: too few pixels of its colours"
         assert (mask & ~inside).sum() <= 0.02 * mask.sum(), f"clip {k}: its colours outside"
         # and joint by joint: a pixel of the clip's colours within 3 px of every joint
-        found = [mask[max(0, int(y) - 3): int(y) + 4, max(0, int(x) - 3): int(x) + 4].any()
-                 for x, y in projected[k]]
+        found = [
+            mask[max(0, int(y) - 3) : int(y) + 4, max(0, int(x) - 3) : int(x) + 4].any()
+            for x, y in projected[k]
+        ]
         assert all(found), f"clip {k}: joints {np.flatnonzero(~np.array(found))} not drawn"
 
 
@@ -131,15 +134,15 @@ def test_controls_play_and_switch_layout(motions, browser, tmp_path):
     payload = build_payload(motions)
     browser.open(page)
     assert browser.driver.execute_script("return document.getElementById('layout').value") == (
-        "overlay")
+        "overlay"
+    )
     for k in range(2):
         assert np.allclose(browser.call("offset", k), payload["clips"][k]["overlayOffset"])
     browser.driver.find_element("id", "play").click()
     browser._wait(lambda: browser.call("frame") > 20, 20.0, "playback did not advance")
     browser.driver.find_element("id", "play").click()
     paused = browser.call("frame")
-    browser.driver.execute_async_script(
-        "const done = arguments[0]; setTimeout(done, 200);")
+    browser.driver.execute_async_script("const done = arguments[0]; setTimeout(done, 200);")
     assert browser.call("frame") == paused
     from selenium.webdriver.support.ui import Select
 
@@ -155,10 +158,17 @@ def test_controls_play_and_switch_layout(motions, browser, tmp_path):
     before = browser.call("camera")
     browser.step_to(10)
     after = browser.call("camera")
-    roots = {frame: np.mean([motion.global_positions()[frame, 0].double().numpy() * 0.01
-                             + payload["clips"][k]["sideOffset"]
-                             for k, motion in enumerate(motions)], axis=0)
-             for frame in (10, 50)}
+    roots = {
+        frame: np.mean(
+            [
+                motion.global_positions()[frame, 0].double().numpy() * 0.01
+                + payload["clips"][k]["sideOffset"]
+                for k, motion in enumerate(motions)
+            ],
+            axis=0,
+        )
+        for frame in (10, 50)
+    }
     moved = np.subtract(after["position"], before["position"])
     assert np.allclose(moved[[0, 2]], (roots[10] - roots[50])[[0, 2]], atol=1e-3)
     assert np.allclose(np.subtract(after["target"], before["target"]), moved, atol=1e-6)
@@ -196,8 +206,9 @@ def test_ten_one_minute_clips_open_and_play_in_real_time(browser, tmp_path):
     for k in range(10):
         path = np.cumsum(rng.normal(0, 0.02, (frames, 1, 3)), axis=0) * [1, 0, 1]
         pose = rng.uniform(0, 1.7, (1, joints, 3))
-        figures.append(StickFigure(path + pose, parents=[-1, *range(joints - 1)], fps=30.0,
-                                   name=f"clip {k}"))
+        figures.append(
+            StickFigure(path + pose, parents=[-1, *range(joints - 1)], fps=30.0, name=f"clip {k}")
+        )
     page = tmp_path / "ten.html"
     to_html(figures, out=page, units="m")
     start = time.monotonic()
@@ -209,7 +220,8 @@ def test_ten_one_minute_clips_open_and_play_in_real_time(browser, tmp_path):
         "const done = arguments[0]; let n = 0; const t0 = performance.now();"
         "function count() { n++; if (performance.now() - t0 < 2000) requestAnimationFrame(count);"
         " else done(1000 * n / (performance.now() - t0)); }"
-        "requestAnimationFrame(count);")
+        "requestAnimationFrame(count);"
+    )
     advanced = browser.call("frame") - first
     print(f"{draws_per_second:.1f} draws/s, {advanced} frames in 2 s")
     browser.driver.find_element("id", "play").click()

@@ -21,8 +21,10 @@ def test_short_training_lowers_the_reconstruction_loss(trained: dict) -> None:
     names = trained["dm"].dataset_names
     for name in names:  # held-out clips: every dataset improves, the mean by a fifth
         assert after[f"val/rec/{name}"] < before[f"val/rec/{name}"], name
-    mean = {k: sum(d[f"val/rec/{n}"] for n in names) / len(names) for k, d in
-            (("before", before), ("after", after))}
+    mean = {
+        k: sum(d[f"val/rec/{n}"] for n in names) / len(names)
+        for k, d in (("before", before), ("after", after))
+    }
     assert mean["after"] < 0.8 * mean["before"]
     assert 0.0 < after["val/usage"] <= 1.0
     assert all(torch.isfinite(torch.tensor(v)) for v in after.values())
@@ -75,7 +77,8 @@ def test_checkpoint_round_trip_encodes_identically(trained: dict) -> None:
 
 
 def test_checkpoint_without_new_options_loads_with_the_papers_settings(
-        trained: dict, tmp_path: Path) -> None:
+    trained: dict, tmp_path: Path
+) -> None:
     # checkpoints written before model.frequency_head existed were trained with "mlp"
     ckpt = torch.load(trained["ckpt"], map_location="cpu", weights_only=False)
     ckpt["hyper_parameters"]["frequency_head"] = "centroid_residual"
@@ -101,8 +104,12 @@ def test_encode_gives_one_embedding_per_frame(trained: dict) -> None:
     frames = 2 * FPS + 1  # resampled to the dataset frame rate
     assert latent.fps == FPS
     assert latent.z.shape == (frames, 10)
-    for key, shape in {"phase": (frames,), "frequency": (frames,), "code": (frames,),
-                       "amplitude": (frames, 20)}.items():
+    for key, shape in {
+        "phase": (frames,),
+        "frequency": (frames,),
+        "code": (frames,),
+        "amplitude": (frames, 20),
+    }.items():
         assert latent.extras[key].shape == shape
     assert bool((latent.extras["frequency"] > 0).all())
 
@@ -149,8 +156,9 @@ def test_untrained_pose_mlp_cannot_decode(trained: dict) -> None:
         loaded.decode(loaded.encode(motion), motion.skeleton)
 
 
-def test_reinit_switch_off_keeps_codebook_usage_untracked(cache_dir: Path, tmp_path: Path,
-                                                           helpers: dict) -> None:
+def test_reinit_switch_off_keeps_codebook_usage_untracked(
+    cache_dir: Path, tmp_path: Path, helpers: dict
+) -> None:
     L.seed_everything(0, verbose=False)
     model = VqpaeAligner(num_codes=8, kernel_size=7, reinit=False, pose_mlp="none")
     helpers["trainer"](tmp_path, 3).fit(model, datamodule=helpers["datamodule"](cache_dir))
@@ -159,7 +167,8 @@ def test_reinit_switch_off_keeps_codebook_usage_untracked(cache_dir: Path, tmp_p
 
 
 def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
-        cache_dir: Path, tmp_path: Path, helpers: dict) -> None:
+    cache_dir: Path, tmp_path: Path, helpers: dict
+) -> None:
     import numpy as np
 
     L.seed_everything(0, verbose=False)
@@ -193,9 +202,15 @@ def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
         model.zero_grad()
         _, fresh = model.forward_dataset(k, batch["features"])
         model._phase_rate_loss(k, "procedural/quadruped", batch, fresh).backward()
-        return tuple(float(0 if w.grad is None else w.grad.abs().sum()) for w in
-                     (pae.freq_mlp[0].weight, pae.phase_conv.weight, pae.encoder[0].weight,
-                      pae.amp_mlp[0].weight))
+        return tuple(
+            float(0 if w.grad is None else w.grad.abs().sum())
+            for w in (
+                pae.freq_mlp[0].weight,
+                pae.phase_conv.weight,
+                pae.encoder[0].weight,
+                pae.amp_mlp[0].weight,
+            )
+        )
 
     freq, timing, encoder, amplitude = grads("network")
     assert freq > 0 and timing > 0 and encoder > 0 and amplitude == 0
@@ -214,7 +229,8 @@ def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
 
 
 def test_phase_rate_loss_without_partner_windows_is_a_clear_error(
-        cache_dir: Path, tmp_path: Path, helpers: dict) -> None:
+    cache_dir: Path, tmp_path: Path, helpers: dict
+) -> None:
     model = VqpaeAligner(num_codes=8, kernel_size=7, pose_mlp="none", lambda_phase_rate=1.0)
     dm = helpers["datamodule"](cache_dir)
     dm.pair_seconds, dm.pair_shift = 0.0, 0
@@ -238,35 +254,59 @@ def test_bad_options_are_rejected() -> None:
 def test_cli_run_with_the_registered_plugin(vqpae_pm, tmp_path: Path, cache_dir: Path) -> None:
     from skelagnostic.cli.app import compose, run
 
-    cfg = compose(["model=vqpae", f"run_dir={tmp_path}", "experiment=smoke", "callbacks=none",
-                   "logger=none", "model.num_codes=8", "model.kernel_size=7",
-                   f"data.cache_dir={cache_dir}", "data.seconds=2.0"], plugin_manager=vqpae_pm)
+    cfg = compose(
+        [
+            "model=vqpae",
+            f"run_dir={tmp_path}",
+            "experiment=smoke",
+            "callbacks=none",
+            "logger=none",
+            "model.num_codes=8",
+            "model.kernel_size=7",
+            f"data.cache_dir={cache_dir}",
+            "data.seconds=2.0",
+        ],
+        plugin_manager=vqpae_pm,
+    )
     metrics = run(cfg, vqpae_pm)
     assert "val/overlap" in metrics and "train/loss" in metrics
     assert (tmp_path / "config.yaml").exists()
 
 
-def test_cli_run_with_ema_averages_every_network(vqpae_pm, tmp_path: Path,
-                                                cache_dir: Path) -> None:
+def test_cli_run_with_ema_averages_every_network(vqpae_pm, tmp_path: Path, cache_dir: Path) -> None:
     """The networks are built from the data before callbacks=ema copies the model."""
     from skelagnostic.cli.app import compose, run
 
-    cfg = compose(["model=vqpae", f"run_dir={tmp_path}", "experiment=smoke", "callbacks=ema",
-                   "logger=none", "model.num_codes=8", "model.kernel_size=7",
-                   f"data.cache_dir={cache_dir}", "data.seconds=2.0"], plugin_manager=vqpae_pm)
+    cfg = compose(
+        [
+            "model=vqpae",
+            f"run_dir={tmp_path}",
+            "experiment=smoke",
+            "callbacks=ema",
+            "logger=none",
+            "model.num_codes=8",
+            "model.kernel_size=7",
+            f"data.cache_dir={cache_dir}",
+            "data.seconds=2.0",
+        ],
+        plugin_manager=vqpae_pm,
+    )
     run(cfg, vqpae_pm)
     ckpt = torch.load(tmp_path / "checkpoints" / "last.ckpt", weights_only=False)
     assert set(ckpt["current_model_state"]) <= set(ckpt["state_dict"])
     assert len(ckpt["state_dict"]) > 10
 
 
-@pytest.mark.parametrize(("experiment", "codes", "source"),
-                         [("vqpae_human_dog", 32, "human_dog"), ("vqpae_stylized", 64, "styles")])
+@pytest.mark.parametrize(
+    ("experiment", "codes", "source"),
+    [("vqpae_human_dog", 32, "human_dog"), ("vqpae_stylized", 64, "styles")],
+)
 def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, source: str) -> None:
     from skelagnostic.cli.app import build_datamodule, compose
 
-    cfg = compose(["model=vqpae", f"experiment={experiment}", "run_dir=/tmp/unused"],
-                  plugin_manager=vqpae_pm)
+    cfg = compose(
+        ["model=vqpae", f"experiment={experiment}", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm
+    )
     assert cfg.model.num_codes == codes
     assert cfg.data.source == source
     assert cfg.data.fps == 60 and cfg.data.stride == 1 and cfg.data.batch_size == 32
@@ -293,6 +333,7 @@ def test_fit_without_data_uses_procedural_biped_and_quadruped(vqpae_pm) -> None:
     assert cfg.model.padding_mode == "zeros" and not cfg.model.center_windows  # the authors'
     dm = build_datamodule(cfg, vqpae_pm)
     assert isinstance(dm, VqpaeDataModule) and dm.window == 61 and dm.stride == 1
-    override = compose(["model=vqpae", "run_dir=/tmp/unused", "data.fps=30"],
-                       plugin_manager=vqpae_pm)
+    override = compose(
+        ["model=vqpae", "run_dir=/tmp/unused", "data.fps=30"], plugin_manager=vqpae_pm
+    )
     assert override.data.fps == 30

@@ -158,13 +158,19 @@ def _step(book: SharedCodebook, raw: torch.Tensor) -> torch.Tensor:
 
 def _worker(rank: int, init_file: str, out_dir: str) -> None:
     torch.set_num_threads(1)
-    dist.init_process_group("gloo", init_method=f"file://{init_file}", rank=rank,
-                            world_size=WORLD, timeout=datetime.timedelta(seconds=60))
+    dist.init_process_group(
+        "gloo",
+        init_method=f"file://{init_file}",
+        rank=rank,
+        world_size=WORLD,
+        timeout=datetime.timedelta(seconds=60),
+    )
     try:
         book = _fresh()
         weights = [_step(book, _shards()[rank]), _step(book, _shards()[1 - rank] * 0.3)]
-        torch.save({"weights": weights, "usage": book.usage.clone()},
-                   Path(out_dir) / f"rank{rank}.pt")
+        torch.save(
+            {"weights": weights, "usage": book.usage.clone()}, Path(out_dir) / f"rank{rank}.pt"
+        )
     finally:
         dist.destroy_process_group()
 
@@ -174,10 +180,17 @@ def test_ddp_ranks_apply_the_same_update_as_one_process(tmp_path: Path) -> None:
     shards = _shards()
     single = _fresh()
     # one process seeing every rank's amplitudes, in rank order
-    want = [_step(single, torch.cat(shards)),
-            _step(single, torch.cat([shards[1] * 0.3, shards[0] * 0.3]))]
-    mp.start_processes(_worker, args=(str(tmp_path / "init"), str(tmp_path)), nprocs=WORLD,
-                       join=True, start_method="fork")
+    want = [
+        _step(single, torch.cat(shards)),
+        _step(single, torch.cat([shards[1] * 0.3, shards[0] * 0.3])),
+    ]
+    mp.start_processes(
+        _worker,
+        args=(str(tmp_path / "init"), str(tmp_path)),
+        nprocs=WORLD,
+        join=True,
+        start_method="fork",
+    )
     results = [torch.load(tmp_path / f"rank{r}.pt") for r in range(WORLD)]
     for res in results:
         for got, expected in zip(res["weights"], want, strict=True):

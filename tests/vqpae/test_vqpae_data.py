@@ -24,8 +24,9 @@ from skelagnostic.representations import RootLocalVelocities
 
 def _dm(cache_dir: Path, **kwargs: object) -> VqpaeDataModule:
     kwargs.setdefault("pair_seconds", 0.1)  # partner windows (the default is none)
-    src = ProceduralSource(kinds=["biped22", "quadruped"], gaits=["walk"], clips_per_gait=2,
-                           seconds=2.0)
+    src = ProceduralSource(
+        kinds=["biped22", "quadruped"], gaits=["walk"], clips_per_gait=2, seconds=2.0
+    )
     dm = VqpaeDataModule(src, fps=20, batch_size=4, cache_dir=cache_dir, **kwargs)
     dm.prepare_data()
     dm.setup()
@@ -52,8 +53,9 @@ def test_partner_windows_stay_inside_their_clip() -> None:
     feats = torch.arange(46.0).view(23, 2)
     poses = torch.arange(23.0).view(23, 1)
     # 9 frames (5 windows), 6 (2 windows), 5 (1 window), 3 (too short for a window)
-    ds = FrameWindows(feats, poses, [(0, 9), (9, 15), (15, 20), (20, 23)], window=5,
-                      stride=1, pair_shift=2)
+    ds = FrameWindows(
+        feats, poses, [(0, 9), (9, 15), (15, 20), (20, 23)], window=5, stride=1, pair_shift=2
+    )
     batch = ds.__getitems__(list(range(len(ds))))
     # later partner while it fits in the clip, else the earlier one
     assert batch["shift"].tolist() == [2, 2, 2, -2, -2, 0, 0, 0]
@@ -113,8 +115,10 @@ class _ConstantChannel(ClipSource):
     name = "pinned"
 
     def __init__(self) -> None:
-        self._clips = {f"c{i}": procedural.generate("biped22", "walk", seconds=2.0, fps=20,
-                                                    seed=i)[0] for i in range(2)}
+        self._clips = {
+            f"c{i}": procedural.generate("biped22", "walk", seconds=2.0, fps=20, seed=i)[0]
+            for i in range(2)
+        }
 
     def clips(self) -> list[ClipRef]:
         return [ClipRef(k, f"pinned-{k}") for k in self._clips]
@@ -129,8 +133,9 @@ class _ConstantChannel(ClipSource):
 
 
 def test_zero_variance_channels_give_no_nan(cache_dir: Path) -> None:
-    dm = VqpaeDataModule(_ConstantChannel(), fps=20, batch_size=4, cache_dir=cache_dir,
-                         val_fraction=0.0)
+    dm = VqpaeDataModule(
+        _ConstantChannel(), fps=20, batch_size=4, cache_dir=cache_dir, val_fraction=0.0
+    )
     dm.prepare_data()
     dm.setup()
     (name,) = dm.dataset_names
@@ -144,10 +149,8 @@ def test_zero_variance_channels_give_no_nan(cache_dir: Path) -> None:
 
 
 def test_multisource_gives_one_dataset_per_part(cache_dir: Path) -> None:
-    a = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=1, seconds=2.0,
-                         name="a")
-    b = ProceduralSource(kinds=["biped22"], gaits=["run"], clips_per_gait=1, seconds=2.0,
-                         name="b")
+    a = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=1, seconds=2.0, name="a")
+    b = ProceduralSource(kinds=["biped22"], gaits=["run"], clips_per_gait=1, seconds=2.0, name="b")
     dm = VqpaeDataModule(MultiSource([a, b]), fps=20, cache_dir=cache_dir, val_fraction=0.0)
     dm.prepare_data()
     dm.setup()
@@ -172,8 +175,10 @@ def test_nearly_constant_channels_are_floored(cache_dir: Path) -> None:
     dm = _dm(cache_dir, val_fraction=0.0, std_floor=0.05)
     raised = False
     for name in dm.dataset_names:
-        for got, ref in ((dm.representations[name], raw.representations[name]),
-                         (dm.pose_representations[name], raw.pose_representations[name])):
+        for got, ref in (
+            (dm.representations[name], raw.representations[name]),
+            (dm.pose_representations[name], raw.pose_representations[name]),
+        ):
             want = torch.maximum(ref.std, 0.05 * ref.std.mean())
             assert torch.allclose(got.std, want)
             raised = raised or bool((got.std > ref.std).any())
@@ -189,12 +194,16 @@ def test_streamed_windows_and_statistics_match_the_in_memory_ones(cache_dir: Pat
     for name in dm.dataset_names:
         train = dm.datasets["train"][name]
         assert isinstance(train, CachedFrameWindows)
-        raw = {part: [torch.from_numpy(np.array(e.open()[0])) for e in ds.entries]
-               for part, ds in ((p, dm.datasets[p][name]) for p in ("train", "val"))}
+        raw = {
+            part: [torch.from_numpy(np.array(e.open()[0])) for e in ds.entries]
+            for part, ds in ((p, dm.datasets[p][name]) for p in ("train", "val"))
+        }
         # statistics over all training frames at once (the concatenating computation)
         every = torch.cat(raw["train"]).double()
-        for rep, channels in ((dm.representations[name], slice(None, n_in)),
-                              (dm.pose_representations[name], slice(n_in, None))):
+        for rep, channels in (
+            (dm.representations[name], slice(None, n_in)),
+            (dm.pose_representations[name], slice(n_in, None)),
+        ):
             values = every[..., channels]
             std = values.std(0, unbiased=False)
             std = torch.where(std < 1e-6, torch.ones_like(std), std)
@@ -208,11 +217,20 @@ def test_streamed_windows_and_statistics_match_the_in_memory_ones(cache_dir: Pat
                 torch.cat([rep.normalize(a[..., :n_in]).flatten(1) for a in raw[part]]),
                 torch.cat([poses.normalize(a[..., n_in:]).flatten(1) for a in raw[part]]),
                 list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True)),
-                dm.window, dm.stride, ds.pair_shift)
+                dm.window,
+                dm.stride,
+                ds.pair_shift,
+            )
             assert len(held) == len(ds) > 0
             everything = list(range(len(ds)))
             want, got = held.__getitems__(everything), ds.__getitems__(everything)
-            assert set(want) == set(got) == ({"features", "poses", "clip", "pivot"} | (
-                {"shifted", "shift"} if part == "train" else set()))
+            assert (
+                set(want)
+                == set(got)
+                == (
+                    {"features", "poses", "clip", "pivot"}
+                    | ({"shifted", "shift"} if part == "train" else set())
+                )
+            )
             for key in want:
                 assert torch.equal(want[key], got[key]), (name, part, key)

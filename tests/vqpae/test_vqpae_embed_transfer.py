@@ -29,8 +29,9 @@ def test_embedding_round_trips_through_npz(trained: dict, tmp_path: Path) -> Non
     emb = embed_clip(trained["model"], motion)
     assert emb.dataset == "procedural/biped22" and len(emb) == motion.num_frames
     # the manifold point is Psi(A, phi) of the frame's own phase and amplitude
-    assert torch.allclose(emb.manifold, phase_manifold(emb.amplitude, emb.phase[:, None])[..., 0],
-                          atol=1e-5)
+    assert torch.allclose(
+        emb.manifold, phase_manifold(emb.amplitude, emb.phase[:, None])[..., 0], atol=1e-5
+    )
     back = ClipEmbedding.load(emb.save(tmp_path / "clip.npz"))
     assert back.dataset == emb.dataset and back.fps == emb.fps
     for key in ("phase", "frequency", "code", "amplitude", "manifold"):
@@ -67,10 +68,19 @@ def test_retrieval_finds_a_planted_cycle() -> None:
     frames = torch.arange(90)
     planted = phase_manifold(amp, frames * f / fps).t()  # phase 0 at frame 0, 30, 60
     other = phase_manifold(amp * 0.3, frames * 1.0 / fps).t()
+
     def emb(manifold: torch.Tensor) -> ClipEmbedding:
         n = len(manifold)
-        return ClipEmbedding(torch.zeros(n), torch.ones(n), torch.zeros(n, dtype=torch.long),
-                             amp.expand(n, 6), manifold, fps, "x")
+        return ClipEmbedding(
+            torch.zeros(n),
+            torch.ones(n),
+            torch.zeros(n, dtype=torch.long),
+            amp.expand(n, 6),
+            manifold,
+            fps,
+            "x",
+        )
+
     hits = retrieve([emb(other), emb(planted)], amp, f, top=3)
     assert hits[0].clip == 1 and hits[0].length == 15 and hits[0].frame % 15 == 0
     assert hits[0].distance < 1e-8
@@ -83,10 +93,16 @@ def test_ellipses_and_plots(trained: dict, tmp_path: Path) -> None:
     pts = ellipse_points(model.codebook.weight, samples=16)
     assert pts.shape == (8, 16, 10)
     embs = {
-        "biped": [embed_clip(model, procedural.generate("biped22", "walk", seconds=2.0,
-                                                        fps=FPS, seed=1)[0])],
-        "quadruped": [embed_clip(model, procedural.generate("quadruped", "trot", seconds=2.0,
-                                                            fps=FPS, seed=1)[0])],
+        "biped": [
+            embed_clip(
+                model, procedural.generate("biped22", "walk", seconds=2.0, fps=FPS, seed=1)[0]
+            )
+        ],
+        "quadruped": [
+            embed_clip(
+                model, procedural.generate("quadruped", "trot", seconds=2.0, fps=FPS, seed=1)[0]
+            )
+        ],
     }
     plot_manifold(model, embs, out=tmp_path / "manifold.png")
     plot_clip_timing({k: v[0] for k, v in embs.items()}, out=tmp_path / "timing.png")
@@ -96,8 +112,11 @@ def test_ellipses_and_plots(trained: dict, tmp_path: Path) -> None:
 
 def test_transfer_biped_to_quadruped_writes_a_bvh(trained: dict, tmp_path: Path) -> None:
     model = trained["model"]
-    dogs = [procedural.generate("quadruped", g, seconds=3.0, fps=FPS, seed=s)[0]
-            for g in ("walk", "trot", "gallop") for s in (1, 2)]
+    dogs = [
+        procedural.generate("quadruped", g, seconds=3.0, fps=FPS, seed=s)[0]
+        for g in ("walk", "trot", "gallop")
+        for s in (1, 2)
+    ]
     db = build_database(model, dogs)
     source, _ = procedural.generate("biped22", "run", seconds=2.5, fps=FPS, seed=7)
     result = transfer(model, source, db)
@@ -116,8 +135,10 @@ def test_transfer_biped_to_quadruped_writes_a_bvh(trained: dict, tmp_path: Path)
 def test_aligner_transfer_matches_the_module_function(trained: dict) -> None:
     model = trained["model"]
     assert model.supports("transfer")
-    dogs = [procedural.generate("quadruped", g, seconds=3.0, fps=FPS, seed=3)[0]
-            for g in ("walk", "trot")]
+    dogs = [
+        procedural.generate("quadruped", g, seconds=3.0, fps=FPS, seed=3)[0]
+        for g in ("walk", "trot")
+    ]
     source, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=FPS, seed=8)
     assert model.last_transitions is None
     out = model.transfer(source, dogs)
@@ -137,8 +158,14 @@ def test_predict_writes_per_clip_embeddings(trained: dict, tmp_path: Path) -> No
     import numpy as np
 
     model, dm = trained["model"], trained["dm"]
-    trainer = L.Trainer(accelerator="cpu", devices=1, logger=False, enable_progress_bar=False,
-                        enable_model_summary=False, default_root_dir=str(tmp_path))
+    trainer = L.Trainer(
+        accelerator="cpu",
+        devices=1,
+        logger=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        default_root_dir=str(tmp_path),
+    )
     batches = trainer.predict(model, datamodule=dm)
     path = tmp_path / "embeddings.npz"
     assert model.predictions_path == path and path.is_file()
@@ -151,8 +178,11 @@ def test_predict_writes_per_clip_embeddings(trained: dict, tmp_path: Path) -> No
     assert (np.diff(frames) > 0).all() and frames[0] == int(windows.pivots[0])
     with torch.no_grad():
         _, params = model.forward_dataset(0, windows[0]["features"][None])
-    for key, value in (("phase", params.phase), ("frequency", params.frequency),
-                       ("code", params.code)):
+    for key, value in (
+        ("phase", params.phase),
+        ("frequency", params.frequency),
+        ("code", params.code),
+    ):
         assert np.allclose(data[f"{name}/{clip}/{key}"][0], value[0].numpy(), atol=1e-5), key
     assert data[f"{name}/{clip}/manifold"].shape[1] == 10
     assert data[f"{name}/{clip}/amplitude"].shape[1] == 20

@@ -35,8 +35,9 @@ def test_manifold_protocol_on_held_out_clips(helpers, tmp_path) -> None:
     L.seed_everything(0, verbose=False)
     dm = helpers["datamodule"](tmp_path / "cache")
     dm.test_fraction = 0.25
-    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000,
-                         **PREVIOUS_DEFAULTS)
+    model = VqpaeAligner(
+        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+    )
     helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
     model.eval()
     held = held_out(dm)

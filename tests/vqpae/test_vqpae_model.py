@@ -41,10 +41,10 @@ class TestRelativeTimes:
 
 class TestMasonPhase:
     @pytest.mark.parametrize("phi0", [-0.45, -0.2, 0.0, 0.13, 0.37, 0.49])
-    @pytest.mark.parametrize(("freq", "tol"), [(1.0, 0.005), (2.0, 0.005), (1.7, 0.02),
-                                               (3.1, 0.01), (0.8, 0.04)])
-    def test_recovers_known_phase_of_a_sinusoid(self, phi0: float, freq: float,
-                                                tol: float) -> None:
+    @pytest.mark.parametrize(
+        ("freq", "tol"), [(1.0, 0.005), (2.0, 0.005), (1.7, 0.02), (3.1, 0.01), (0.8, 0.04)]
+    )
+    def test_recovers_known_phase_of_a_sinusoid(self, phi0: float, freq: float, tol: float) -> None:
         # exact for whole cycles in the window; a fractional cycle leaves a small bias
         t = relative_times(61, 60.0)
         y = 0.7 * torch.cos(2 * math.pi * (freq * t + phi0)) + 0.3  # offset must not matter
@@ -55,8 +55,10 @@ class TestMasonPhase:
     def test_phase_advances_with_the_pivot(self) -> None:
         freq, fps = 2.0, 60.0
         t = relative_times(61, fps)
-        phases = [float(mason_phase(torch.sin(2 * math.pi * freq * (t + k / fps)),
-                                    torch.tensor(freq), t)) for k in range(5)]
+        phases = [
+            float(mason_phase(torch.sin(2 * math.pi * freq * (t + k / fps)), torch.tensor(freq), t))
+            for k in range(5)
+        ]
         steps = [((b - a + 0.5) % 1.0) - 0.5 for a, b in itertools.pairwise(phases)]
         assert all(math.isclose(s, freq / fps, abs_tol=2e-3) for s in steps)
 
@@ -71,15 +73,17 @@ class TestManifold:
         phase = torch.rand(2, 5)
         got = phase_manifold(amp, phase)
         assert got.shape == (2, 3, 5)
-        want = (amp[:, :3, None] * torch.sin(2 * math.pi * phase[:, None])
-                + amp[:, 3:, None] * torch.cos(2 * math.pi * phase[:, None]))
+        want = amp[:, :3, None] * torch.sin(2 * math.pi * phase[:, None]) + amp[
+            :, 3:, None
+        ] * torch.cos(2 * math.pi * phase[:, None])
         assert torch.allclose(got, want)
 
     def test_is_periodic_in_phase(self) -> None:
         amp = torch.randn(6)
         phase = torch.rand(7)
-        assert torch.allclose(phase_manifold(amp, phase), phase_manifold(amp, phase + 1.0),
-                              atol=1e-5)
+        assert torch.allclose(
+            phase_manifold(amp, phase), phase_manifold(amp, phase + 1.0), atol=1e-5
+        )
 
 
 class TestVQPAE:
@@ -99,7 +103,9 @@ class TestVQPAE:
         net = VQPAE(66, 61, 60.0, freq_layers=5, phase_kernel=1)  # the paper's (not the defaults)
         convs = [m for m in net.encoder if isinstance(m, torch.nn.Conv1d)]
         assert [(c.in_channels, c.out_channels, c.kernel_size[0]) for c in convs] == [
-            (66, 22, 23), (22, 10, 23)]
+            (66, 22, 23),
+            (22, 10, 23),
+        ]
         assert net.phase_conv.kernel_size == (1,) and net.phase_conv.out_channels == 1
         freq = [m for m in net.freq_mlp if isinstance(m, torch.nn.Linear)]
         assert len(freq) == 5 and freq[0].in_features == 31 and freq[-1].out_features == 1
@@ -167,8 +173,11 @@ def test_average_pose_mlp_has_eight_layers() -> None:
     mlp = AveragePoseMLP(10, 63)
     linears = [m for m in mlp.net if isinstance(m, torch.nn.Linear)]
     assert len(linears) == 8
-    assert all(isinstance(m, torch.nn.LeakyReLU) and m.negative_slope == 0.2
-               for m in mlp.net if not isinstance(m, torch.nn.Linear))
+    assert all(
+        isinstance(m, torch.nn.LeakyReLU) and m.negative_slope == 0.2
+        for m in mlp.net
+        if not isinstance(m, torch.nn.Linear)
+    )
     assert mlp(torch.randn(5, 7, 10)).shape == (5, 7, 63)
 
 
@@ -250,8 +259,17 @@ class TestAuthorsOptions:
 
     def test_authors_timing_branch(self) -> None:
         torch.manual_seed(0)
-        net = VQPAE(12, 21, 20.0, latent=4, kernel_size=5, freq_layers=3, phase_kernel=5,
-                    freq_hidden_elu=True, padding_mode="zeros")
+        net = VQPAE(
+            12,
+            21,
+            20.0,
+            latent=4,
+            kernel_size=5,
+            freq_layers=3,
+            phase_kernel=5,
+            freq_hidden_elu=True,
+            padding_mode="zeros",
+        )
         assert net.phase_conv.kernel_size == (5,) and net.phase_conv.padding_mode == "zeros"
         kinds = [type(m).__name__ for m in net.freq_mlp]
         assert kinds == ["Linear", "LeakyReLU", "ELU"] * 2 + ["Linear"]

@@ -64,8 +64,13 @@ def _train_quadruped(steps: int, **options: str) -> tuple[float, float, dict[str
     """
     fps, window = 30.0, 31
     rep = RootLocalVelocities()
-    clips = [rep.encode(procedural.generate("quadruped", g, seconds=6.0, fps=fps, seed=s)[0])
-             .float().flatten(1) for g in ("walk", "trot", "gallop") for s in range(2)]
+    clips = [
+        rep.encode(procedural.generate("quadruped", g, seconds=6.0, fps=fps, seed=s)[0])
+        .float()
+        .flatten(1)
+        for g in ("walk", "trot", "gallop")
+        for s in range(2)
+    ]
     frames = torch.cat(clips)
     mean, std = frames.mean(0), frames.std(0).clamp_min(0.01 * frames.std(0).mean())
     windows = torch.cat([((c - mean) / std).unfold(0, window, 1) for c in clips])
@@ -92,8 +97,11 @@ def _train_quadruped(steps: int, **options: str) -> tuple[float, float, dict[str
         test = rep.encode(motion).float().flatten(1)
         with torch.no_grad():
             params = net.encode(((test - mean) / std).unfold(0, window, 1), book.quantizer(0))
-        held_out[gait] = (_phase_r2(params.phase), float(params.frequency.median()),
-                          float(info["frequency"]))
+        held_out[gait] = (
+            _phase_r2(params.phase),
+            float(params.frequency.median()),
+            float(info["frequency"]),
+        )
     return sum(losses[:20]) / 20, sum(losses[-20:]) / 20, held_out
 
 

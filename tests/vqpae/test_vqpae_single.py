@@ -11,19 +11,33 @@ import pytest
 
 @pytest.mark.data
 def test_fit_on_one_bvh_character_reports_overlap_not_applicable(
-        vqpae_pm, tmp_path: Path, cache_dir: Path, shared_data: Path,
-        caplog: pytest.LogCaptureFixture) -> None:
+    vqpae_pm, tmp_path: Path, cache_dir: Path, shared_data: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     from skelagnostic.cli.app import compose, run
 
     clips = shared_data / "human" / "lafan1"
     paths = [str(clips / "walk4_subject1.bvh"), str(clips / "obstacles1_subject5.bvh")]
     run_dir = tmp_path / "run"
-    cfg = compose(["model=vqpae", "data=bvh", f"data.paths=[{','.join(paths)}]",
-                   "data.units=cm", "data.fps=20", "data.stride=8", f"run_dir={run_dir}",
-                   "experiment=smoke", "callbacks=default", "logger=none", "model.num_codes=8",
-                   "model.kernel_size=7", f"data.cache_dir={cache_dir}",
-                   "trainer.max_epochs=1", "trainer.limit_train_batches=3"],
-                  plugin_manager=vqpae_pm)
+    cfg = compose(
+        [
+            "model=vqpae",
+            "data=bvh",
+            f"data.paths=[{','.join(paths)}]",
+            "data.units=cm",
+            "data.fps=20",
+            "data.stride=8",
+            f"run_dir={run_dir}",
+            "experiment=smoke",
+            "callbacks=default",
+            "logger=none",
+            "model.num_codes=8",
+            "model.kernel_size=7",
+            f"data.cache_dir={cache_dir}",
+            "trainer.max_epochs=1",
+            "trainer.limit_train_batches=3",
+        ],
+        plugin_manager=vqpae_pm,
+    )
     with caplog.at_level(logging.INFO, logger="skelagnostic_vqpae"):
         metrics = run(cfg, vqpae_pm)
     assert "train/loss" in metrics and "val/loss" in metrics

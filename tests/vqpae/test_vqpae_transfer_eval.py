@@ -92,8 +92,9 @@ def tiny_run(helpers, tmp_path):
     L.seed_everything(0, verbose=False)
     dm = helpers["datamodule"](tmp_path / "cache")
     dm.test_fraction = 0.3
-    model = VqpaeAligner(num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000,
-                         **PREVIOUS_DEFAULTS)
+    model = VqpaeAligner(
+        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+    )
     helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
     return model.eval(), held_out(dm)
 
@@ -164,8 +165,9 @@ def test_unscaled_transfer_replays_fixed_windows(tiny_run) -> None:
 
     model, held = tiny_run
     human = next(c for c in held.clips if model.dataset_of(c.skeleton) == 0)
-    dogs = [c for c in clips_of_split(held.datamodule, "train")
-            if model.dataset_of(c.skeleton) == 1]
+    dogs = [
+        c for c in clips_of_split(held.datamodule, "train") if model.dataset_of(c.skeleton) == 1
+    ]
     target = build_database(model, dogs)
     with torch.no_grad():
         result = transfer(model, human, target, scaled=False, replay_seconds=0.5)

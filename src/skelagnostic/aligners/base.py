@@ -132,8 +132,10 @@ class Aligner(L.LightningModule, ABC):
             CapabilityError: The aligner does not declare ``"interpolate"``.
         """
         self.require("interpolate")
-        raise NotImplementedError(f"{type(self).__name__} declares 'interpolate' but "
-                                  "does not override Aligner.interpolate")
+        raise NotImplementedError(
+            f"{type(self).__name__} declares 'interpolate' but "
+            "does not override Aligner.interpolate"
+        )
 
     def transfer(self, motion: Motion, targets: Sequence[Motion]) -> Motion:
         """Re-enact ``motion`` with another character's motion (capability ``"transfer"``).
@@ -157,8 +159,9 @@ class Aligner(L.LightningModule, ABC):
             CapabilityError: The aligner does not declare ``"transfer"``.
         """
         self.require("transfer")
-        raise NotImplementedError(f"{type(self).__name__} declares 'transfer' but "
-                                  "does not override Aligner.transfer")
+        raise NotImplementedError(
+            f"{type(self).__name__} declares 'transfer' but does not override Aligner.transfer"
+        )
 
     def export_graphs(self) -> list[ExportGraph]:
         """The networks an engine needs, for ``skelagnostic export`` (ONNX / TorchScript).

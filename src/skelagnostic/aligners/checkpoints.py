@@ -28,8 +28,14 @@ from skelagnostic.errors import SkelagnosticError
 if TYPE_CHECKING:
     import lightning as L
 
-__all__ = ["CheckpointError", "CheckpointNotFoundError", "architecture_mismatch",
-           "check_architecture", "load_checkpoint", "read_checkpoint"]
+__all__ = [
+    "CheckpointError",
+    "CheckpointNotFoundError",
+    "architecture_mismatch",
+    "check_architecture",
+    "load_checkpoint",
+    "read_checkpoint",
+]
 
 ModuleT = TypeVar("ModuleT", bound="L.LightningModule")
 
@@ -99,18 +105,35 @@ def read_checkpoint(
         found = re.search(r"GLOBAL ([\w.]+)", str(error))
         if found:
             raise CheckpointError(
-                file, f"{shown} holds a Python object ({found.group(1)}) that a safe load "
+                file,
+                f"{shown} holds a Python object ({found.group(1)}) that a safe load "
                 "refuses; skelagnostic loads checkpoints with torch.load(weights_only=True), "
-                "which allows tensors and plain data only", option) from None
-        raise CheckpointError(file, f"{shown} is not a readable checkpoint (truncated or "
-                                    "corrupt)", option) from None
-    except (EOFError, OSError, RuntimeError, ValueError, KeyError, IndexError, TypeError,
-            AttributeError, UnicodeDecodeError):
-        raise CheckpointError(file, f"{shown} is not a readable checkpoint (truncated or "
-                                    "corrupt)", option) from None
+                "which allows tensors and plain data only",
+                option,
+            ) from None
+        raise CheckpointError(
+            file, f"{shown} is not a readable checkpoint (truncated or corrupt)", option
+        ) from None
+    except (
+        EOFError,
+        OSError,
+        RuntimeError,
+        ValueError,
+        KeyError,
+        IndexError,
+        TypeError,
+        AttributeError,
+        UnicodeDecodeError,
+    ):
+        raise CheckpointError(
+            file, f"{shown} is not a readable checkpoint (truncated or corrupt)", option
+        ) from None
     if not isinstance(checkpoint, dict) or not isinstance(checkpoint.get("state_dict"), dict):
-        raise CheckpointError(file, f"{shown} is a torch file but not a Lightning checkpoint "
-                                    "(it has no state_dict)", option)
+        raise CheckpointError(
+            file,
+            f"{shown} is a torch file but not a Lightning checkpoint (it has no state_dict)",
+            option,
+        )
     if model is not None:
         _check_model(file, checkpoint, model, option, aligners or {})
     return checkpoint
@@ -144,13 +167,19 @@ def load_checkpoint(
     checkpoint = read_checkpoint(path, module, option=option, aligners=aligners)
     saved = dict(checkpoint.get("hyper_parameters") or {})
     with architecture_mismatch(path, saved, {**saved, **overrides}, option):
-        return module.load_from_checkpoint(Path(path), map_location="cpu", weights_only=True,
-                                           **overrides)
+        return module.load_from_checkpoint(
+            Path(path), map_location="cpu", weights_only=True, **overrides
+        )
 
 
 @contextlib.contextmanager
-def architecture_mismatch(path: str | Path, saved: Mapping[str, Any], used: Mapping[str, Any],
-                          option: str = "checkpoint", prefix: str = "model.") -> Iterator[None]:
+def architecture_mismatch(
+    path: str | Path,
+    saved: Mapping[str, Any],
+    used: Mapping[str, Any],
+    option: str = "checkpoint",
+    prefix: str = "model.",
+) -> Iterator[None]:
     """Turn a ``load_state_dict`` failure inside the block into a :class:`CheckpointError`.
 
     The message lists the hyperparameters whose values differ between the
@@ -179,13 +208,25 @@ def architecture_mismatch(path: str | Path, saved: Mapping[str, Any], used: Mapp
             found = re.search(rf"{kind.capitalize()} key\(s\) in state_dict: (.*)", text)
             if found:
                 counts[kind] = found.group(1).count(",") + 1
-        raise _architecture_error(path, saved, used, option, prefix, missing=counts["missing"],
-                                  unexpected=counts["unexpected"],
-                                  shapes=len(re.findall(r"size mismatch for ", text))) from None
+        raise _architecture_error(
+            path,
+            saved,
+            used,
+            option,
+            prefix,
+            missing=counts["missing"],
+            unexpected=counts["unexpected"],
+            shapes=len(re.findall(r"size mismatch for ", text)),
+        ) from None
 
 
-def check_architecture(path: str | Path, checkpoint: Mapping[str, Any], model: torch.nn.Module,
-                       option: str = "checkpoint", prefix: str = "model.") -> None:
+def check_architecture(
+    path: str | Path,
+    checkpoint: Mapping[str, Any],
+    model: torch.nn.Module,
+    option: str = "checkpoint",
+    prefix: str = "model.",
+) -> None:
     """Compare a checkpoint's weights with a built model before Lightning loads them.
 
     Weights of another shape, and weights of the model the checkpoint lacks,
@@ -206,32 +247,58 @@ def check_architecture(path: str | Path, checkpoint: Mapping[str, Any], model: t
         CheckpointError: The weights do not fit.
     """
     saved, own = checkpoint["state_dict"], model.state_dict()
-    shapes = sum(1 for key, value in own.items() if key in saved
-                 and tuple(getattr(saved[key], "shape", ())) != tuple(value.shape))
+    shapes = sum(
+        1
+        for key, value in own.items()
+        if key in saved and tuple(getattr(saved[key], "shape", ())) != tuple(value.shape)
+    )
     strict = getattr(model, "strict_loading", True)
     missing = sum(1 for key in own if key not in saved) if strict else 0
     if shapes or missing:
-        raise _architecture_error(path, dict(checkpoint.get("hyper_parameters") or {}),
-                                  dict(getattr(model, "hparams", {})), option, prefix,
-                                  missing=missing, unexpected=0, shapes=shapes)
+        raise _architecture_error(
+            path,
+            dict(checkpoint.get("hyper_parameters") or {}),
+            dict(getattr(model, "hparams", {})),
+            option,
+            prefix,
+            missing=missing,
+            unexpected=0,
+            shapes=shapes,
+        )
 
 
-def _architecture_error(path: str | Path, saved: Mapping[str, Any], used: Mapping[str, Any],
-                        option: str, prefix: str, missing: int, unexpected: int,
-                        shapes: int) -> CheckpointError:
+def _architecture_error(
+    path: str | Path,
+    saved: Mapping[str, Any],
+    used: Mapping[str, Any],
+    option: str,
+    prefix: str,
+    missing: int,
+    unexpected: int,
+    shapes: int,
+) -> CheckpointError:
     """The "different architecture" error: the hyperparameters that differ, else the counts."""
-    differ = [f"{prefix}{key}={saved[key]!r} in the checkpoint, {used[key]!r} here"
-              for key in saved
-              if key in used and _plain(saved[key]) and _plain(used[key])
-              and saved[key] != used[key]]
+    differ = [
+        f"{prefix}{key}={saved[key]!r} in the checkpoint, {used[key]!r} here"
+        for key in saved
+        if key in used and _plain(saved[key]) and _plain(used[key]) and saved[key] != used[key]
+    ]
     if differ:
         what = "; ".join(differ)
     else:
-        parts = [f"{n} {kind}" for n, kind in ((missing, "missing"), (unexpected, "unexpected"),
-                                                (shapes, "of another shape")) if n]
+        parts = [
+            f"{n} {kind}"
+            for n, kind in (
+                (missing, "missing"),
+                (unexpected, "unexpected"),
+                (shapes, "of another shape"),
+            )
+            if n
+        ]
         what = "its weights do not fit (" + ", ".join(parts or ["different keys"]) + ")"
-    return CheckpointError(path, f"{str(Path(path))!r} is of a different architecture: {what}",
-                           option)
+    return CheckpointError(
+        path, f"{str(Path(path))!r} is of a different architecture: {what}", option
+    )
 
 
 def _plain(value: Any) -> bool:
@@ -243,8 +310,11 @@ def _plain(value: Any) -> bool:
 def _accepted(cls: type) -> tuple[set[str], bool]:
     """The keyword arguments of ``cls.__init__`` and whether it takes ``**kwargs``."""
     params = inspect.signature(cls.__init__).parameters
-    names = {name for name, p in params.items()
-             if name != "self" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    names = {
+        name
+        for name, p in params.items()
+        if name != "self" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    }
     return names, any(p.kind is p.VAR_KEYWORD for p in params.values())
 
 
@@ -256,8 +326,13 @@ def _fit(cls: type, keys: set[str]) -> int | None:
     return 10**6 if var_keyword else None
 
 
-def _check_model(file: Path, checkpoint: dict[str, Any], model: str | type, option: str,
-                 aligners: Mapping[str, type]) -> None:
+def _check_model(
+    file: Path,
+    checkpoint: dict[str, Any],
+    model: str | type,
+    option: str,
+    aligners: Mapping[str, type],
+) -> None:
     """Raise :class:`CheckpointError` if the hyperparameters belong to another aligner.
 
     Lightning does not store the class of the module in the checkpoint, but
@@ -284,11 +359,15 @@ def _check_model(file: Path, checkpoint: dict[str, Any], model: str | type, opti
     writers = sorted(n for n, f in fits.items() if f == best and n != name)
     shown = repr(str(file))
     if writers:
-        raise CheckpointError(file, f"{shown} is a checkpoint of model={writers[0]}, this is "
-                                    f"model={name}", option)
+        raise CheckpointError(
+            file, f"{shown} is a checkpoint of model={writers[0]}, this is model={name}", option
+        )
     names, _ = _accepted(cls)
     foreign = sorted(keys - names)
     raise CheckpointError(
-        file, f"{shown} is not a checkpoint of model={name}: its hyperparameters "
-              f"{', '.join(foreign[:5])}{' ...' if len(foreign) > 5 else ''} are not options "
-              f"of model={name}", option)
+        file,
+        f"{shown} is not a checkpoint of model={name}: its hyperparameters "
+        f"{', '.join(foreign[:5])}{' ...' if len(foreign) > 5 else ''} are not options "
+        f"of model={name}",
+        option,
+    )

@@ -72,6 +72,10 @@ class FinalStepCheckpoint(L.Callback):
         for callback in trainer.checkpoint_callbacks:
             saved = getattr(callback, "_last_global_step_saved", None)
             save = getattr(callback, "_save_last_checkpoint", None)
-            if (getattr(callback, "save_last", False) and save is not None
-                    and saved is not None and saved < trainer.global_step):
+            if (
+                getattr(callback, "save_last", False)
+                and save is not None
+                and saved is not None
+                and saved < trainer.global_step
+            ):
                 save(trainer, callback._monitor_candidates(trainer))

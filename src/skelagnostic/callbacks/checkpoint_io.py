@@ -47,8 +47,13 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike[str]) -> None:
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(target, lambda fh: torch.save(obj, fh), follow_symlinks=False,
-                 temp_suffix=TEMP_SUFFIX, sync_directory=True)
+    atomic_write(
+        target,
+        lambda fh: torch.save(obj, fh),
+        follow_symlinks=False,
+        temp_suffix=TEMP_SUFFIX,
+        sync_directory=True,
+    )
 
 
 class AtomicCheckpointIO(TorchCheckpointIO):
@@ -79,8 +84,9 @@ class AtomicCheckpointIO(TorchCheckpointIO):
         'AtomicCheckpointIO'
     """
 
-    def save_checkpoint(self, checkpoint: dict[str, Any], path: _PATH,
-                        storage_options: Any | None = None) -> None:
+    def save_checkpoint(
+        self, checkpoint: dict[str, Any], path: _PATH, storage_options: Any | None = None
+    ) -> None:
         """Write ``checkpoint`` to ``path`` atomically (local paths; others as Lightning does).
 
         Args:

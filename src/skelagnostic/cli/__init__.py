@@ -18,24 +18,48 @@ VERBS: dict[str, tuple[str, str, str]] = {
     "validate": ("skelagnostic.cli.app", "validate", "evaluate on the validation split"),
     "test": ("skelagnostic.cli.app", "test", "evaluate on the test split"),
     "predict": ("skelagnostic.cli.app", "predict", "aligner outputs -> predictions.pt"),
-    "evaluate": ("skelagnostic.cli.evaluate", "main",
-                 "a plugin's protocol on held-out clips: model vs baselines -> evaluation.json"),
-    "plugins": ("skelagnostic.cli.plugins", "main",
-                "list plugins and what they provide; plugins NAME: an aligner's defaults"),
-    "new-plugin": ("skelagnostic.cli.new_plugin", "main",
-                   "write a third-party aligner package: new-plugin NAME [--dir DIR]"),
+    "evaluate": (
+        "skelagnostic.cli.evaluate",
+        "main",
+        "a plugin's protocol on held-out clips: model vs baselines -> evaluation.json",
+    ),
+    "plugins": (
+        "skelagnostic.cli.plugins",
+        "main",
+        "list plugins and what they provide; plugins NAME: an aligner's defaults",
+    ),
+    "new-plugin": (
+        "skelagnostic.cli.new_plugin",
+        "main",
+        "write a third-party aligner package: new-plugin NAME [--dir DIR]",
+    ),
     "cache": ("skelagnostic.cli.cache", "main", "window cache: info (entries, size) or clear"),
-    "data": ("skelagnostic.cli.data", "main",
-             "install a dataset: data prepare PRESET --zip FILE --dest DIR, or data get"),
+    "data": (
+        "skelagnostic.cli.data",
+        "main",
+        "install a dataset: data prepare PRESET --zip FILE --dest DIR, or data get",
+    ),
     "render": ("skelagnostic.cli.render", "main", "render a motion to PNG/GIF"),
-    "retarget": ("skelagnostic.cli.infer", "retarget",
-                 "a trained aligner moves a BVH onto another skeleton"),
-    "interpolate": ("skelagnostic.cli.infer", "interpolate",
-                    "a trained aligner fills the frames between keyframes of a BVH"),
-    "transfer": ("skelagnostic.cli.infer", "transfer",
-                 "a trained aligner re-enacts a BVH with another character's clips"),
-    "export": ("skelagnostic.cli.export", "main",
-               "a trained aligner's networks -> ONNX / TorchScript files + JSON sidecars"),
+    "retarget": (
+        "skelagnostic.cli.infer",
+        "retarget",
+        "a trained aligner moves a BVH onto another skeleton",
+    ),
+    "interpolate": (
+        "skelagnostic.cli.infer",
+        "interpolate",
+        "a trained aligner fills the frames between keyframes of a BVH",
+    ),
+    "transfer": (
+        "skelagnostic.cli.infer",
+        "transfer",
+        "a trained aligner re-enacts a BVH with another character's clips",
+    ),
+    "export": (
+        "skelagnostic.cli.export",
+        "main",
+        "a trained aligner's networks -> ONNX / TorchScript files + JSON sidecars",
+    ),
 }
 
 
@@ -96,8 +120,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _complete(args)
     verb, rest = args[0], args[1:]
     if verb not in VERBS:
-        print(f"skelagnostic: error: unknown verb {verb!r} (verbs: {', '.join(VERBS)}); "
-              "see 'skelagnostic --help'", file=sys.stderr)
+        print(
+            f"skelagnostic: error: unknown verb {verb!r} (verbs: {', '.join(VERBS)}); "
+            "see 'skelagnostic --help'",
+            file=sys.stderr,
+        )
         return 2
     module_name, func_name, _ = VERBS[verb]
     func = getattr(importlib.import_module(module_name), func_name)

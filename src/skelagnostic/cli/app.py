@@ -106,8 +106,12 @@ def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModul
     dm_params = datamodule_options(spec.datamodule)  # through the subclass's **kwargs
     dm_kwargs = {k: data.pop(k) for k in list(data) if k in dm_params and k not in _DATA_KEYS}
     for owner in dict.fromkeys(dm_params[k] for k in dm_kwargs):  # typed where declared
-        _check_options({k: v for k, v in dm_kwargs.items() if dm_params[k] is owner}, owner,
-                       "data", spec.datamodule.__name__)
+        _check_options(
+            {k: v for k, v in dm_kwargs.items() if dm_params[k] is owner},
+            owner,
+            "data",
+            spec.datamodule.__name__,
+        )
     options = {k: v for k, v in data.items() if k not in _DATA_KEYS}
     factory_params = inspect.signature(dataset.factory).parameters
     if not any(p.kind is p.VAR_KEYWORD for p in factory_params.values()):
@@ -185,14 +189,14 @@ def _describe(exc: BaseException) -> str:
 def _mentioned(text: str, options: dict[str, Any]) -> str | None:
     """The first option of ``options`` an error message names (`` `key` ``, ``key=``, ``'key'``)."""
     for key in options:
-        if re.search(rf"(`{re.escape(key)}[`=(]|\b{re.escape(key)}=|'{re.escape(key)}')",
-                     text):
+        if re.search(rf"(`{re.escape(key)}[`=(]|\b{re.escape(key)}=|'{re.escape(key)}')", text):
             return key
     return None
 
 
-def _build_trainer(trainer_kwargs: dict[str, Any], callbacks: list[Any], loggers: list[Any],
-                   run_dir: Path) -> L.Trainer:
+def _build_trainer(
+    trainer_kwargs: dict[str, Any], callbacks: list[Any], loggers: list[Any], run_dir: Path
+) -> L.Trainer:
     """``lightning.Trainer`` of the config; its errors name the ``trainer.<key>`` at fault.
 
     Lightning's messages rarely name the option (``trainer.accelerator=tpu`` fails
@@ -209,8 +213,12 @@ def _build_trainer(trainer_kwargs: dict[str, Any], callbacks: list[Any], loggers
             raise ConfigError(f"trainer.{key}={value!r} must be a positive integer")
 
     def build(kwargs: dict[str, Any]) -> L.Trainer:
-        return L.Trainer(**kwargs, callbacks=list(callbacks), logger=loggers or False,
-                         default_root_dir=str(run_dir))
+        return L.Trainer(
+            **kwargs,
+            callbacks=list(callbacks),
+            logger=loggers or False,
+            default_root_dir=str(run_dir),
+        )
 
     try:
         return build(trainer_kwargs)
@@ -246,8 +254,12 @@ def _name_config_key(exc: MisconfigurationException, cfg: DictConfig) -> ConfigE
             if node is None:
                 continue
             for key, value in node.items():
-                if key != "_target_" and isinstance(value, str) and value and (
-                        f"{key}={value!r}" in text or f"{key}='{value}'" in text):
+                if (
+                    key != "_target_"
+                    and isinstance(value, str)
+                    and value
+                    and (f"{key}={value!r}" in text or f"{key}='{value}'" in text)
+                ):
                     return ConfigError(f"{group}.{name}.{key}={value!r}: {text}")
     return None
 
@@ -283,10 +295,15 @@ def _check_options(options: dict[str, Any], cls: type, prefix: str, owner: str) 
     if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
         unknown = sorted(set(options) - set(params))
         if unknown:
-            accepted = sorted(k for k, p in params.items() if k != "self"
-                              and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY))
-            raise ConfigError(f"{prefix}.{unknown[0]} is not an option of {owner}; "
-                              f"accepted: {', '.join(accepted)}")
+            accepted = sorted(
+                k
+                for k, p in params.items()
+                if k != "self" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+            )
+            raise ConfigError(
+                f"{prefix}.{unknown[0]} is not an option of {owner}; "
+                f"accepted: {', '.join(accepted)}"
+            )
     try:
         hints = typing.get_type_hints(cls.__init__)
     except Exception:  # unresolvable annotations: no type check
@@ -295,8 +312,9 @@ def _check_options(options: dict[str, Any], cls: type, prefix: str, owner: str) 
         if key in hints and not _accepts(hints[key], value):
             hint = hints[key]
             hint = hint.__name__ if isinstance(hint, type) else str(hint).replace("typing.", "")
-            raise ConfigError(f"{prefix}.{key}={value!r} has the wrong type for {owner} "
-                              f"(expected {hint})")
+            raise ConfigError(
+                f"{prefix}.{key}={value!r} has the wrong type for {owner} (expected {hint})"
+            )
 
 
 def _require_test_split(datamodule: L.LightningDataModule) -> None:
@@ -368,17 +386,21 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     source_run: Path | None = None
     external = pm.checkpoint_reader_of(ckpt) if ckpt else None
     if external is not None and task != "evaluate":
-        raise ConfigError(f"ckpt_path={ckpt!r} (checkpoint reader {external[0].name!r}) is "
-                          f"read by evaluate and the inference verbs, not by {task}")
+        raise ConfigError(
+            f"ckpt_path={ckpt!r} (checkpoint reader {external[0].name!r}) is "
+            f"read by evaluate and the inference verbs, not by {task}"
+        )
     # an external checkpoint (a plugin's reader) is read below, once the data are built
     if external is None and ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
         source_run = find_run_dir(ckpt)  # a run directory stands for its best/last checkpoint
         ckpt = str(checkpoint_of(ckpt))
-        checkpoint = read_checkpoint(ckpt, spec.name, option="ckpt_path",
-                                     aligners=pm.aligner_classes())
+        checkpoint = read_checkpoint(
+            ckpt, spec.name, option="ckpt_path", aligners=pm.aligner_classes()
+        )
     if task == "evaluate" and checkpoint is None and external is None:
-        raise ConfigError("evaluate: give ckpt_path=<checkpoint or run directory> of the "
-                          "trained model")
+        raise ConfigError(
+            "evaluate: give ckpt_path=<checkpoint or run directory> of the trained model"
+        )
     if cfg.seed is not None and (not isinstance(cfg.seed, int) or isinstance(cfg.seed, bool)):
         raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
     threads = cfg.get("threads")
@@ -397,8 +419,11 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     recorded = read_split(source_run) if source_run is not None else None
     if recorded is not None and hasattr(datamodule, "recorded_splits"):
         datamodule.recorded_splits = recorded  # never evaluate on the run's training clips
-    model_kwargs = {k: v for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
-                    if k not in ("name", "_target_")}
+    model_kwargs = {
+        k: v
+        for k, v in OmegaConf.to_container(cfg.model, resolve=True).items()
+        if k not in ("name", "_target_")
+    }
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
     model = spec.module(**model_kwargs)
     saved: dict[str, Any] = {}
@@ -421,8 +446,13 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             ResumeFromEpochEnd,
         )
 
-        callbacks += [LatestWithoutValidation(), FinalStepCheckpoint(), ResumeFromEpochEnd(),
-                      RecordSplit(run_dir), AdaptiveLogInterval()]
+        callbacks += [
+            LatestWithoutValidation(),
+            FinalStepCheckpoint(),
+            ResumeFromEpochEnd(),
+            RecordSplit(run_dir),
+            AdaptiveLogInterval(),
+        ]
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
     _check_options(trainer_kwargs, L.Trainer, "trainer", "lightning.Trainer")
@@ -430,8 +460,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         from skelagnostic.callbacks import AtomicCheckpointIO
 
         plugins = trainer_kwargs.get("plugins") or []
-        trainer_kwargs["plugins"] = [*(plugins if isinstance(plugins, list) else [plugins]),
-                                     AtomicCheckpointIO()]
+        trainer_kwargs["plugins"] = [
+            *(plugins if isinstance(plugins, list) else [plugins]),
+            AtomicCheckpointIO(),
+        ]
     trainer = _build_trainer(trainer_kwargs, callbacks, loggers, run_dir)
     _save_config(cfg, run_dir)
     # weights_only=True: a checkpoint is never unpickled into code (what skelagnostic's
@@ -441,13 +473,16 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             if task == "fit":
                 trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
             elif task == "validate":
-                trainer.validate(model, datamodule=datamodule, ckpt_path=ckpt,
-                                 weights_only=True)
+                trainer.validate(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
             elif task == "test":
                 trainer.test(model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True)
             else:
-                _save_predictions(trainer.predict(model, datamodule=datamodule, ckpt_path=ckpt,
-                                                  weights_only=True), run_dir)
+                _save_predictions(
+                    trainer.predict(
+                        model, datamodule=datamodule, ckpt_path=ckpt, weights_only=True
+                    ),
+                    run_dir,
+                )
     except MisconfigurationException as exc:
         named = _name_config_key(exc, cfg)
         if named is None:
@@ -483,20 +518,25 @@ def register_model_configs(pm: PluginManager) -> None:
     shipped = {name for url in pm.config_paths for name in config_names(url, "model")}
     for name, spec in pm.aligners.items():
         if name not in shipped:
-            store.store(group="model", name=name,
-                        node={"_target_": target_of(spec.module), **dict(spec.config)},
-                        provider=_PROVIDER)
+            store.store(
+                group="model",
+                name=name,
+                node={"_target_": target_of(spec.module), **dict(spec.config)},
+                provider=_PROVIDER,
+            )
         data: dict[str, Any] = dict(spec.data) if spec.data else {}
         base = "/data_defaults@_here_" if data else "/data/procedural@_here_"
-        store.store(group="data", name=name, node={"defaults": [base, "_self_"], **data},
-                    provider=_PROVIDER)
+        store.store(
+            group="data", name=name, node={"defaults": [base, "_self_"], **data}, provider=_PROVIDER
+        )
         node: dict[str, Any] = {"model": {"name": name}}
         if spec.data_options:
             node["data"] = dict(spec.data_options)
         if spec.trainer_options:
             node["trainer"] = dict(spec.trainer_options)
-        store.store(group=ALIGNER_GROUP, name=name, node=node, package="_global_",
-                    provider=_PROVIDER)
+        store.store(
+            group=ALIGNER_GROUP, name=name, node=node, package="_global_", provider=_PROVIDER
+        )
 
 
 def compose(
@@ -555,8 +595,16 @@ def _patched(argv: list[str], env: dict[str, str]) -> Iterator[None]:
 
 
 #: Files a run directory holds before it produced anything (Hydra's and ours).
-_BOOKKEEPING = frozenset({".hydra/config.yaml", ".hydra/hydra.yaml", ".hydra/overrides.yaml",
-                          "app.log", "config.yaml", "csv/hparams.yaml"})
+_BOOKKEEPING = frozenset(
+    {
+        ".hydra/config.yaml",
+        ".hydra/hydra.yaml",
+        ".hydra/overrides.yaml",
+        "app.log",
+        "config.yaml",
+        "csv/hparams.yaml",
+    }
+)
 
 
 def _discard_failed_run(run_dir: Path) -> str:
@@ -569,8 +617,7 @@ def _discard_failed_run(run_dir: Path) -> str:
         Text appended to the error line.
     """
     cwd = Path.cwd()
-    if rank_zero_only.rank != 0 or not run_dir.is_dir() or run_dir.resolve() in (cwd,
-                                                                                 *cwd.parents):
+    if rank_zero_only.rank != 0 or not run_dir.is_dir() or run_dir.resolve() in (cwd, *cwd.parents):
         return ""
     files = {p.relative_to(run_dir).as_posix() for p in run_dir.rglob("*") if not p.is_dir()}
     kept = sorted(f for f in files if f not in _BOOKKEEPING and not f.endswith(".log"))
@@ -626,8 +673,13 @@ def _hidden_groups_in_help(flags: Sequence[str]) -> Iterator[None]:
             yield
     finally:
         hidden = f"{ALIGNER_GROUP}: "
-        sys.stdout.write("".join(line for line in buffer.getvalue().splitlines(keepends=True)
-                                 if not line.startswith(hidden)))
+        sys.stdout.write(
+            "".join(
+                line
+                for line in buffer.getvalue().splitlines(keepends=True)
+                if not line.startswith(hidden)
+            )
+        )
 
 
 def split_hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -669,7 +721,8 @@ def split_hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
         if "=" in token or action.nargs == 0:
             continue
         takes_value = action.nargs is None or (
-            action.nargs == "?" and i < len(tokens)
+            action.nargs == "?"
+            and i < len(tokens)
             and (action.choices is None or tokens[i] in action.choices)
         )
         if takes_value and i < len(tokens):
@@ -679,8 +732,9 @@ def split_hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
 
 
 #: Hydra flags that show something instead of running a job.
-_INFO_FLAGS = frozenset({"--help", "-h", "--cfg", "-c", "--info", "-i",
-                         "--shell-completion", "-sc"})
+_INFO_FLAGS = frozenset(
+    {"--help", "-h", "--cfg", "-c", "--info", "-i", "--shell-completion", "-sc"}
+)
 
 
 def _informational(flags: Sequence[str]) -> bool:
@@ -763,9 +817,14 @@ def main(task: str, argv: Sequence[str]) -> int:
             with _patched(outer_argv, {}):  # Lightning's DDP launcher re-executes sys.argv
                 try:
                     metrics = run(cfg, pm)
-                    ckpt = checkpoint_of(cfg.ckpt_path) if cfg.ckpt_path and task != "fit" \
-                        and cfg.ckpt_path not in _CKPT_ALIASES \
-                        and pm.checkpoint_reader_of(cfg.ckpt_path) is None else None
+                    ckpt = (
+                        checkpoint_of(cfg.ckpt_path)
+                        if cfg.ckpt_path
+                        and task != "fit"
+                        and cfg.ckpt_path not in _CKPT_ALIASES
+                        and pm.checkpoint_reader_of(cfg.ckpt_path) is None
+                        else None
+                    )
                     results.append((Path(cfg.run_dir), metrics, ckpt))
                 except (SkelagnosticError, MisconfigurationException, HydraException) as exc:
                     failures.append(exc)  # re-raised below, after Hydra cleaned up
@@ -773,10 +832,10 @@ def main(task: str, argv: Sequence[str]) -> int:
                     terminated.append(True)
 
         check_config_package()
-        entry = hydra.main(config_path=f"pkg://{CONFIG_MODULE}", config_name="config",
-                           version_base="1.3")(task_function)
-        with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}), \
-                quiet_lightning():
+        entry = hydra.main(
+            config_path=f"pkg://{CONFIG_MODULE}", config_name="config", version_base="1.3"
+        )(task_function)
+        with _patched([outer_argv[0], *hydra_args], {"HYDRA_FULL_ERROR": "1"}), quiet_lightning():
             try:
                 with _hidden_groups_in_help(flags):
                     entry()
@@ -792,13 +851,19 @@ def main(task: str, argv: Sequence[str]) -> int:
             return SIGTERM_EXIT_CODE
         for run_dir, metrics, ckpt in results:  # evaluate printed its own table
             summary_table(task, run_dir, {} if task == "evaluate" else metrics, checkpoint=ckpt)
-    except (SkelagnosticError, HydraException, OmegaConfBaseException,
-            MisconfigurationException) as exc:
+    except (
+        SkelagnosticError,
+        HydraException,
+        OmegaConfBaseException,
+        MisconfigurationException,
+    ) as exc:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)
         if debug:
             raise
-        print(f"skelagnostic {task}: error: {_one_line(exc)}{_failed_plugins(pm)}{kept}",
-              file=sys.stderr)
+        print(
+            f"skelagnostic {task}: error: {_one_line(exc)}{_failed_plugins(pm)}{kept}",
+            file=sys.stderr,
+        )
         return 1
     return 0
 

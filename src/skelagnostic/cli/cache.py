@@ -26,10 +26,15 @@ def info(cache: WindowCache, verbose: bool) -> int:
     if verbose:
         for key, array, meta in rows:
             size = array.stat().st_size + (
-                array.with_suffix(".json").stat().st_size if array.with_suffix(".json").exists()
-                else 0)
-            what = "(unreadable metadata)" if meta is None else (
-                f"{meta.get('clip', '?')} ({len(meta.get('starts', []))} windows)")
+                array.with_suffix(".json").stat().st_size
+                if array.with_suffix(".json").exists()
+                else 0
+            )
+            what = (
+                "(unreadable metadata)"
+                if meta is None
+                else (f"{meta.get('clip', '?')} ({len(meta.get('starts', []))} windows)")
+            )
             print(f"  {key[:12]}  {_size(size):>10}  {what}")
     return 0
 
@@ -54,14 +59,25 @@ def main(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(
         prog="skelagnostic cache",
         description="Show or empty the window cache (data.cache_dir; default "
-                    f"${CACHE_ENV} or ~/.cache/skelagnostic).",
+        f"${CACHE_ENV} or ~/.cache/skelagnostic).",
     )
-    parser.add_argument("action", choices=("info", "clear"),
-                        help="info: directory, entries and size; clear: delete every entry")
-    parser.add_argument("--cache-dir", type=Path, default=None,
-                        help="the cache directory (default: the one training uses)")
-    parser.add_argument("-v", "--verbose", action="store_true",
-                        help="info: one line per entry (key, size, clip, windows)")
+    parser.add_argument(
+        "action",
+        choices=("info", "clear"),
+        help="info: directory, entries and size; clear: delete every entry",
+    )
+    parser.add_argument(
+        "--cache-dir",
+        type=Path,
+        default=None,
+        help="the cache directory (default: the one training uses)",
+    )
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="info: one line per entry (key, size, clip, windows)",
+    )
     args = parser.parse_args(list(argv))
     cache = WindowCache(args.cache_dir if args.cache_dir is not None else default_cache_dir())
     if cache.root.exists() and not cache.root.is_dir():

@@ -57,14 +57,18 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
     flags = [w for w in argv if w.startswith("--")]
     if flags:
         name = flags[0][2:].split("=", 1)[0].replace("no-gif", "gif")
-        raise SkelagnosticError(f"option {flags[0]}: every verb takes key=value options, "
-                                f"e.g. {name}=...; see 'skelagnostic demo --help'")
+        raise SkelagnosticError(
+            f"option {flags[0]}: every verb takes key=value options, "
+            f"e.g. {name}=...; see 'skelagnostic demo --help'"
+        )
     words, raw = parse_arguments(argv)
     apply_threads(raw)
     unknown = sorted(set(raw) - set(OPTIONS))
     if unknown:
-        raise SkelagnosticError(f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
-                                "see 'skelagnostic demo --help'")
+        raise SkelagnosticError(
+            f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
+            "see 'skelagnostic demo --help'"
+        )
     options: dict[str, Any] = {"out": Path(raw.get("out", "runs/demo"))}
     for key, kind, default in (("seconds", float, 3.0), ("fps", float, 30.0), ("seed", int, 0)):
         try:
@@ -76,8 +80,7 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
         raise SkelagnosticError(f"option gif={raw['gif']!r}: true or false")
     options["gif"] = gif == "true"
     html = raw.get("html")
-    options["html"] = None if html in (None, "false") else (
-        "demo.html" if html == "true" else html)
+    options["html"] = None if html in (None, "false") else ("demo.html" if html == "true" else html)
     return [Path(w) for w in words], options
 
 

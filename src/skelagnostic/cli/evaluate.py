@@ -64,8 +64,9 @@ def evaluate_checkpoint(
     protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
     options = _protocol_options(cfg, protocol.name, protocol.function)
     if aligner is None:
-        aligner = load_checkpoint(module, ckpt, option="ckpt_path",
-                                  aligners=pm.aligner_classes()).eval()
+        aligner = load_checkpoint(
+            module, ckpt, option="ckpt_path", aligners=pm.aligner_classes()
+        ).eval()
     held = held_out(datamodule)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

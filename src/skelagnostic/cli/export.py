@@ -59,16 +59,20 @@ def main(argv: list[str]) -> int:
 
         words, options = parse_arguments(argv)
         if words:
-            raise SkelagnosticError(f"unexpected argument {words[0]!r}; options are key=value, "
-                                    "see 'skelagnostic export --help'")
+            raise SkelagnosticError(
+                f"unexpected argument {words[0]!r}; options are key=value, "
+                "see 'skelagnostic export --help'"
+            )
         if "ckpt" in options and "ckpt_path" in options:
             raise SkelagnosticError("give ckpt_path= or ckpt=, not both")
         if "ckpt" in options:
             options["ckpt_path"] = options.pop("ckpt")
         unknown = sorted(set(options) - set(_OPTIONS))
         if unknown:
-            raise SkelagnosticError(f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
-                                    "see 'skelagnostic export --help'")
+            raise SkelagnosticError(
+                f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
+                "see 'skelagnostic export --help'"
+            )
         apply_threads(options)
         for key in ("ckpt_path", "format"):
             if key not in options:
@@ -77,8 +81,11 @@ def main(argv: list[str]) -> int:
         if fmt not in FORMATS:
             raise SkelagnosticError(f"option format={fmt!r}: use one of {', '.join(FORMATS)}")
         ckpt = expand_path(options["ckpt_path"])
-        out = (expand_path(options["out"]) if options.get("out")
-               else ckpt.parent / f"{ckpt.stem}-{fmt}")
+        out = (
+            expand_path(options["out"])
+            if options.get("out")
+            else ckpt.parent / f"{ckpt.stem}-{fmt}"
+        )
         aligner = load_from_checkpoint(ckpt, options.get("model"))
         name = options.get("model") or _registered_name(aligner)
         for path in export_aligner(aligner, fmt, out, name):

@@ -38,17 +38,16 @@ if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
     from skelagnostic.core.motion import Motion
 
-__all__ = ["interpolate", "keyframes_from_options", "load_from_checkpoint", "retarget",
-           "transfer"]
+__all__ = ["interpolate", "keyframes_from_options", "load_from_checkpoint", "retarget", "transfer"]
 
 _COMMON = {
     "ckpt": "checkpoint written by `skelagnostic fit`, or <scheme>:<path> read by a "
-            "plugin's checkpoint reader (e.g. authors:<run dir>) (required)",
+    "plugin's checkpoint reader (e.g. authors:<run dir>) (required)",
     "model": "registered aligner name; default: model.name of the run's config.yaml",
     "out": "output BVH path (required); written atomically",
     "render": "also draw input and result side by side (.gif, .mp4, .png or .html)",
     "units": "length unit of the input BVH files (m, cm, mm, inch, ft, cmu); "
-             "default: the aligner guesses",
+    "default: the aligner guesses",
     "threads": THREADS_HELP,
 }
 
@@ -120,8 +119,9 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
         read_checkpoint(path, option="ckpt")  # raises the "no checkpoint file" error
     if model is None:
         model = _model_name_near(path)
-    return load_checkpoint(pm.aligner(model).module, path, option="ckpt",
-                           aligners=pm.aligner_classes()).eval()
+    return load_checkpoint(
+        pm.aligner(model).module, path, option="ckpt", aligners=pm.aligner_classes()
+    ).eval()
 
 
 def _model_name_near(ckpt: Path) -> str:
@@ -223,9 +223,13 @@ def _bvh_paths(items: Sequence[str]) -> list[Path]:
 Apply = Callable[["Aligner"], tuple["Motion", "Motion"]]
 
 
-def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
-         prepare: Callable[[list[Path], dict[str, str]], Apply],
-         marks: dict[str, dict[int, list[int]]] | None = None) -> int:
+def _run(
+    verb: str,
+    argv: list[str],
+    positional: tuple[int, int | None],
+    prepare: Callable[[list[Path], dict[str, str]], Apply],
+    marks: dict[str, dict[int, list[int]]] | None = None,
+) -> int:
     """Shared driver: parse, check options, read the inputs, load the aligner, apply, write.
 
     ``prepare`` reads and checks the inputs before the (slower) checkpoint is
@@ -271,8 +275,9 @@ def _run(verb: str, argv: list[str], positional: tuple[int, int | None],
         if "render" in options or "html" in options:
             labels = options.get("labels")
             render_options = {**options, "labels": labels or f"input,{verb}"}
-            for path in render_from_options([source, result], render_options, out_key="render",
-                                            **(marks or {})):
+            for path in render_from_options(
+                [source, result], render_options, out_key="render", **(marks or {})
+            ):
                 print(path)
     except SkelagnosticError as error:
         print(f"skelagnostic {verb}: error: {error}", file=sys.stderr)
@@ -300,8 +305,7 @@ def interpolate(argv: list[str]) -> int:
 
     def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         motion = _read(paths[0], options)
-        keys = keyframes_from_options(motion.num_frames, options.get("every"),
-                                      options.get("keys"))
+        keys = keyframes_from_options(motion.num_frames, options.get("every"), options.get("keys"))
 
         def apply(aligner: Aligner) -> tuple[Motion, Motion]:
             aligner.require("interpolate")

@@ -58,8 +58,10 @@ def _status(info: PluginInfo) -> str:
 
 def _print_plugin(console: Console, info: PluginInfo) -> None:
     version = f" {info.version}" if info.version else ""
-    console.print(f"[bold]{escape(info.name)}[/]{version} ({escape(info.source)}) "
-                  f"{_status(info)}", highlight=False)
+    console.print(
+        f"[bold]{escape(info.name)}[/]{version} ({escape(info.source)}) {_status(info)}",
+        highlight=False,
+    )
     if info.description:
         console.print(f"  {escape(info.description)}", highlight=False)
     grouped = _grouped(info.provides)
@@ -105,27 +107,32 @@ def _print_aligner(console: Console, details: dict[str, Any], info: PluginInfo |
     from omegaconf import OmegaConf
 
     plugin = details["plugin"] + (f" {info.version}, {info.source}" if info else "")
-    console.print(f"[bold]aligner {escape(details['name'])}[/] (plugin {escape(plugin)})",
-                  highlight=False)
+    console.print(
+        f"[bold]aligner {escape(details['name'])}[/] (plugin {escape(plugin)})", highlight=False
+    )
     if details["description"]:
         console.print(f"  {escape(details['description'])}", highlight=False)
-    console.print(f"  module: {details['module']}\n  datamodule: {details['datamodule']}",
-                  highlight=False)
+    console.print(
+        f"  module: {details['module']}\n  datamodule: {details['datamodule']}", highlight=False
+    )
     console.print("capabilities:")
     for label, cap in HEADLINE_CAPABILITIES:
         mark = "[green]yes[/]" if details["capabilities"][cap] else "[dim]no[/]"
         console.print(f"  {label}: {mark}")
     console.print(f"  declared: {', '.join(details['declared']) or 'none'}", highlight=False)
-    sections = (("defaults (model.<key>=...)", "config"),
-                ("default data (used without data=...)", "data"),
-                ("data options (data.<key>=...)", "data_options"),
-                ("trainer options (trainer.<key>=...)", "trainer_options"))
+    sections = (
+        ("defaults (model.<key>=...)", "config"),
+        ("default data (used without data=...)", "data"),
+        ("data options (data.<key>=...)", "data_options"),
+        ("trainer options (trainer.<key>=...)", "trainer_options"),
+    )
     for title, key in sections:
         if details[key]:
             console.print(f"{title}:")
             text = OmegaConf.to_yaml(OmegaConf.create(details[key])).rstrip()
-            console.print("\n".join(f"  {line}" for line in text.splitlines()),
-                          highlight=False, markup=False)
+            console.print(
+                "\n".join(f"  {line}" for line in text.splitlines()), highlight=False, markup=False
+            )
 
 
 def main(argv: Sequence[str]) -> int:
@@ -143,10 +150,14 @@ def main(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(
         prog="skelagnostic plugins",
         description="List plugins (version, status, description, aligners, experiments, data "
-                    "presets) or, with NAME, one aligner's capabilities and default config.",
+        "presets) or, with NAME, one aligner's capabilities and default config.",
     )
-    parser.add_argument("name", nargs="?", metavar="NAME",
-                        help="an aligner (model=NAME) or a plugin (each of its aligners)")
+    parser.add_argument(
+        "name",
+        nargs="?",
+        metavar="NAME",
+        help="an aligner (model=NAME) or a plugin (each of its aligners)",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of text")
     args = parser.parse_args(list(argv))
     with warnings.catch_warnings():  # failures are shown in the listing instead
@@ -166,14 +177,23 @@ def main(argv: Sequence[str]) -> int:
     elif args.name in infos:
         specs = [s for s in pm.aligners.values() if s.plugin == args.name]
     else:
-        print(f"skelagnostic plugins: {args.name!r} is neither an aligner nor a plugin; "
-              f"aligners: {', '.join(sorted(pm.aligners)) or 'none'}; "
-              f"plugins: {', '.join(infos)}", file=sys.stderr)
+        print(
+            f"skelagnostic plugins: {args.name!r} is neither an aligner nor a plugin; "
+            f"aligners: {', '.join(sorted(pm.aligners)) or 'none'}; "
+            f"plugins: {', '.join(infos)}",
+            file=sys.stderr,
+        )
         return 2
     details = [aligner_details(spec) for spec in specs]
     if args.json:
-        print(json.dumps(details[0] if args.name in pm.aligners else
-                         {"plugin": asdict(infos[args.name]), "aligners": details}, indent=2))
+        print(
+            json.dumps(
+                details[0]
+                if args.name in pm.aligners
+                else {"plugin": asdict(infos[args.name]), "aligners": details},
+                indent=2,
+            )
+        )
         return 0
     if args.name not in pm.aligners:
         _print_plugin(console, infos[args.name])

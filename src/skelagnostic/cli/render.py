@@ -56,8 +56,9 @@ options:
 
 
 def _usage() -> str:
-    lines = [f"  {key:<11} {text}"
-             for key, text in {**RENDER_OPTIONS, "threads": THREADS_HELP}.items()]
+    lines = [
+        f"  {key:<11} {text}" for key, text in {**RENDER_OPTIONS, "threads": THREADS_HELP}.items()
+    ]
     return _USAGE.format(options="\n".join(lines))
 
 
@@ -159,8 +160,11 @@ def render_from_options(
         for name, given in (("keyframes", keyframes), ("transitions", transitions))
     }
     written = []
-    html_paths = [options[key] for key in (out_key, "html") if key in options
-                  and Path(options[key]).suffix.lower() in (".html", ".htm")]
+    html_paths = [
+        options[key]
+        for key in (out_key, "html")
+        if key in options and Path(options[key]).suffix.lower() in (".html", ".htm")
+    ]
     if "html" in options and options["html"] not in html_paths:
         raise SkelagnosticError(f"option html={options['html']!r}: must be an .html path")
     for path in html_paths:

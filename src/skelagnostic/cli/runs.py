@@ -27,8 +27,16 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
-__all__ = ["RecordSplit", "checkpoint_of", "find_run_dir", "quiet_lightning", "read_split",
-           "reuse_run_config", "summary_table", "value_of"]
+__all__ = [
+    "RecordSplit",
+    "checkpoint_of",
+    "find_run_dir",
+    "quiet_lightning",
+    "read_split",
+    "reuse_run_config",
+    "summary_table",
+    "value_of",
+]
 
 #: The resolved config a run writes.
 CONFIG_FILE = "config.yaml"
@@ -72,8 +80,10 @@ def checkpoint_of(path: str | Path) -> Path:
         for candidate in (path / "checkpoints" / name, path / name):
             if candidate.is_file():
                 return candidate
-    raise SkelagnosticError(f"ckpt_path: the directory {str(path)!r} holds no "
-                            "checkpoints/best.ckpt or checkpoints/last.ckpt")
+    raise SkelagnosticError(
+        f"ckpt_path: the directory {str(path)!r} holds no "
+        "checkpoints/best.ckpt or checkpoints/last.ckpt"
+    )
 
 
 def value_of(overrides: Sequence[str], key: str) -> str | None:
@@ -104,11 +114,15 @@ def run_of_overrides(overrides: Sequence[str]) -> DictConfig | None:
         saved = OmegaConf.load(path)
         name = saved.model.name if isinstance(saved, DictConfig) else None
     except Exception as exc:  # YAML errors, missing keys: the file is not a run's config
-        raise SkelagnosticError(f"{path}: not the config.yaml of a skelagnostic run "
-                                f"({type(exc).__name__}); give model=... and data=...") from exc
+        raise SkelagnosticError(
+            f"{path}: not the config.yaml of a skelagnostic run "
+            f"({type(exc).__name__}); give model=... and data=..."
+        ) from exc
     if not isinstance(name, str):
-        raise SkelagnosticError(f"{path}: not the config.yaml of a skelagnostic run (no "
-                                "model.name); give model=... and data=...")
+        raise SkelagnosticError(
+            f"{path}: not the config.yaml of a skelagnostic run (no "
+            "model.name); give model=... and data=..."
+        )
     return saved
 
 
@@ -134,7 +148,8 @@ def reuse_run_config(cfg: DictConfig, saved: DictConfig, overrides: Sequence[str
                 continue
             cfg[node] = saved[node]
             for override in parser.parse_overrides(
-                    [o for o in overrides if o.lstrip("+~").startswith(f"{node}.")]):
+                [o for o in overrides if o.lstrip("+~").startswith(f"{node}.")]
+            ):
                 key = override.key_or_group
                 if override.is_delete():
                     parent, _, leaf = key.rpartition(".")
@@ -174,15 +189,22 @@ class RecordSplit(L.Callback):
         assigned = getattr(trainer.datamodule, "assigned_splits", None)
         if assigned and trainer.is_global_zero:
             self.run_dir.mkdir(parents=True, exist_ok=True)
-            counts = {part: sum(v == part for v in assigned.values())
-                      for part in ("train", "val", "test")}
+            counts = {
+                part: sum(v == part for v in assigned.values()) for part in ("train", "val", "test")
+            }
             payload = {"counts": counts, "clips": dict(sorted(assigned.items()))}
-            (self.run_dir / SPLIT_FILE).write_text(json.dumps(payload, indent=1) + "\n",
-                                                   encoding="utf-8")
+            (self.run_dir / SPLIT_FILE).write_text(
+                json.dumps(payload, indent=1) + "\n", encoding="utf-8"
+            )
 
 
-def summary_table(task: str, run_dir: Path, metrics: Mapping[str, float],
-                  checkpoint: Path | None = None, limit: int = 16) -> None:
+def summary_table(
+    task: str,
+    run_dir: Path,
+    metrics: Mapping[str, float],
+    checkpoint: Path | None = None,
+    limit: int = 16,
+) -> None:
     """Print the run directory, the checkpoints and the headline metrics (one Rich table).
 
     Args:
@@ -284,4 +306,3 @@ def max_steps_overrides(overrides: Sequence[str]) -> list[str]:
         if value is not None and re.fullmatch(r"\d+", value) and int(value) > 0:
             return ["trainer.max_epochs=-1"]
     return []
-

@@ -41,8 +41,9 @@ SPLITS = ("train", "val", "test")
 STATS_CHUNK_VALUES = 1 << 20
 
 
-def check_statistics(dataset: str, representation: MotionRepresentation,
-                     label: str = "features") -> None:
+def check_statistics(
+    dataset: str, representation: MotionRepresentation, label: str = "features"
+) -> None:
     """Fail loudly if a fitted normalisation statistic is NaN or infinite.
 
     Non-finite statistics (a training clip with NaN or infinite values, e.g. a
@@ -166,10 +167,10 @@ class _ResumableSampler(DistributedSampler):
     global RNG), so a resumed run sees the same windows as an uninterrupted one.
     """
 
-    def __init__(self, dataset: Dataset, num_replicas: int, rank: int, shuffle: bool,
-                 seed: int) -> None:
-        super().__init__(dataset, num_replicas=num_replicas, rank=rank, shuffle=shuffle,
-                         seed=seed)
+    def __init__(
+        self, dataset: Dataset, num_replicas: int, rank: int, shuffle: bool, seed: int
+    ) -> None:
+        super().__init__(dataset, num_replicas=num_replicas, rank=rank, shuffle=shuffle, seed=seed)
         #: Indices to drop from the start of the next pass (set when resuming).
         self.skip = 0
 
@@ -201,10 +202,16 @@ class ResumableDataLoader(DataLoader):
         num_workers: Worker processes.
     """
 
-    def __init__(self, dataset: Dataset, batch_size: int, sampler: _ResumableSampler,
-                 num_workers: int = 0) -> None:
-        super().__init__(dataset, batch_size=batch_size, sampler=sampler,
-                         num_workers=num_workers, persistent_workers=num_workers > 0)
+    def __init__(
+        self, dataset: Dataset, batch_size: int, sampler: _ResumableSampler, num_workers: int = 0
+    ) -> None:
+        super().__init__(
+            dataset,
+            batch_size=batch_size,
+            sampler=sampler,
+            num_workers=num_workers,
+            persistent_workers=num_workers > 0,
+        )
         self._served = 0
         #: ``(epoch, batches served)`` of the interrupted pass, set by :meth:`load_state_dict`.
         self._resume_at: tuple[int, int] | None = None
@@ -272,25 +279,29 @@ def _split_clips(
     }
 
 
-def _keep_recorded(split: dict[str, list[ClipRef]], recorded: dict[str, str],
-                   test_fraction: float, seed: int) -> dict[str, list[ClipRef]]:
+def _keep_recorded(
+    split: dict[str, list[ClipRef]], recorded: dict[str, str], test_fraction: float, seed: int
+) -> dict[str, list[ClipRef]]:
     """``split`` with the recorded clips moved back to their recorded split."""
     out: dict[str, list[ClipRef]] = {part: [] for part in SPLITS}
     for part in SPLITS:
         for clip in split.get(part, []):
             out[recorded.get(clip.id, part) if recorded.get(clip.id) in SPLITS else part].append(
-                clip)
+                clip
+            )
     if test_fraction > 0 and not out["test"] and out["val"]:
         total = sum(len(v) for v in out.values())
         n = min(len(out["val"]), max(1, round(test_fraction * total)))
-        ordered = sorted(out["val"],
-                         key=lambda c: hashlib.sha256(f"{seed}:test:{c.id}".encode()).hexdigest())
+        ordered = sorted(
+            out["val"], key=lambda c: hashlib.sha256(f"{seed}:test:{c.id}".encode()).hexdigest()
+        )
         out["test"], out["val"] = ordered[:n], ordered[n:]
     return out
 
 
-def describe_dataset(name: str, members: Sequence[tuple[ClipRef, CacheEntry]],
-                     assigned: dict[str, str]) -> str:
+def describe_dataset(
+    name: str, members: Sequence[tuple[ClipRef, CacheEntry]], assigned: dict[str, str]
+) -> str:
     """One log line on a dataset: clips per split, joints, standing height and its unit.
 
     The unit is what a wrong ``data.units`` (or a wrong guess) would show
@@ -309,12 +320,16 @@ def describe_dataset(name: str, members: Sequence[tuple[ClipRef, CacheEntry]],
     elif units is not None:
         size = f"height {height:.3g} {units}"
     else:
-        size = (f"height {height:.3g} in the files' unit (not converted; data.units or a "
-                f"data.paths entry's units: sets it; the height suggests {infer_units(skeleton)})")
+        size = (
+            f"height {height:.3g} in the files' unit (not converted; data.units or a "
+            f"data.paths entry's units: sets it; the height suggests {infer_units(skeleton)})"
+        )
     parts = [assigned.get(clip.id) for clip, _ in members]
     splits = ", ".join(f"{part} {parts.count(part)}" for part in SPLITS if part in parts)
-    return (f"data: dataset {name!r}: {len(members)} clip(s) ({splits}), "
-            f"{skeleton.num_joints} joints, {size}")
+    return (
+        f"data: dataset {name!r}: {len(members)} clip(s) ({splits}), "
+        f"{skeleton.num_joints} joints, {size}"
+    )
 
 
 class MotionDataModule(L.LightningDataModule):
@@ -378,12 +393,18 @@ class MotionDataModule(L.LightningDataModule):
         per_element_stats: bool = True,
     ) -> None:
         super().__init__()
-        for arg, value, low in (("fps", fps, 0), ("window", window, 0), ("stride", stride, 0),
-                                ("batch_size", batch_size, 0), ("num_workers", num_workers, -1)):
+        for arg, value, low in (
+            ("fps", fps, 0),
+            ("window", window, 0),
+            ("stride", stride, 0),
+            ("batch_size", batch_size, 0),
+            ("num_workers", num_workers, -1),
+        ):
             if value <= low:
                 raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
-        if not (0 <= val_fraction < 1 and 0 <= test_fraction < 1
-                and val_fraction + test_fraction < 1):
+        if not (
+            0 <= val_fraction < 1 and 0 <= test_fraction < 1 and val_fraction + test_fraction < 1
+        ):
             raise SkelagnosticError(
                 f"data.val_fraction ({val_fraction}) and data.test_fraction ({test_fraction}) "
                 "must be in [0, 1) with a sum below 1"
@@ -398,8 +419,9 @@ class MotionDataModule(L.LightningDataModule):
         self.val_fraction = float(val_fraction)
         self.test_fraction = float(test_fraction)
         self.split_seed = int(split_seed)
-        self.cache = WindowCache(expand_path(cache_dir) if cache_dir is not None
-                                 else default_cache_dir())
+        self.cache = WindowCache(
+            expand_path(cache_dir) if cache_dir is not None else default_cache_dir()
+        )
         self.per_element_stats = per_element_stats
         #: ``split -> dataset name -> WindowDataset``, filled by :meth:`setup`.
         self.datasets: dict[str, dict[str, WindowDataset]] = {s: {} for s in SPLITS}
@@ -467,17 +489,25 @@ class MotionDataModule(L.LightningDataModule):
         starts = list(range(0, motion.num_frames - self.window + 1, self.stride))
         rep = self.representation
         if not starts:
-            windows = np.zeros((0, self.window, rep.num_elements(motion.skeleton),
-                                len(rep.channels)), np.float32)
+            windows = np.zeros(
+                (0, self.window, rep.num_elements(motion.skeleton), len(rep.channels)), np.float32
+            )
         elif rep.window_dependent:
-            windows = torch.stack(
-                [rep.encode(motion[s : s + self.window]) for s in starts]
-            ).float().numpy()
+            windows = (
+                torch.stack([rep.encode(motion[s : s + self.window]) for s in starts])
+                .float()
+                .numpy()
+            )
         else:
             feats = rep.encode(motion).float()
             windows = feats.unfold(0, self.window, self.stride).permute(0, 3, 1, 2).numpy()
-        meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(), "starts": starts,
-                "fps": self.fps, "units": motion.units}
+        meta = {
+            "clip": clip.id,
+            "skeleton": motion.skeleton.to_dict(),
+            "starts": starts,
+            "fps": self.fps,
+            "units": motion.units,
+        }
         return windows, meta
 
     def prepare_data(self) -> None:
@@ -550,8 +580,7 @@ class MotionDataModule(L.LightningDataModule):
         """
         split = _split_clips(clips, self.val_fraction, self.test_fraction, self.split_seed)
         if self.recorded_splits:
-            split = _keep_recorded(split, self.recorded_splits, self.test_fraction,
-                                   self.split_seed)
+            split = _keep_recorded(split, self.recorded_splits, self.test_fraction, self.split_seed)
         for part, members in split.items():
             self.assigned_splits.update((c.id, part) for c in members)
         return split
@@ -639,9 +668,12 @@ class MotionDataModule(L.LightningDataModule):
         replicas, rank = (trainer.world_size, trainer.global_rank) if trainer else (1, 0)
         seed = int(os.environ.get("PL_GLOBAL_SEED", "0"))
         loaders = {
-            name: ResumableDataLoader(ds, self.batch_size,
-                                      _ResumableSampler(ds, replicas, rank, True, seed),
-                                      self.num_workers)
+            name: ResumableDataLoader(
+                ds,
+                self.batch_size,
+                _ResumableSampler(ds, replicas, rank, True, seed),
+                self.num_workers,
+            )
             for name, ds in self.datasets["train"].items()
         }
         return CombinedLoader(loaders, mode="max_size_cycle")
@@ -663,8 +695,12 @@ class MotionDataModule(L.LightningDataModule):
         """
         split = "test" if self.datasets["test"] else "val"
         loaders = [
-            DataLoader(ds, batch_size=self.batch_size, num_workers=self.num_workers,
-                       collate_fn=_Tagged(name))
+            DataLoader(
+                ds,
+                batch_size=self.batch_size,
+                num_workers=self.num_workers,
+                collate_fn=_Tagged(name),
+            )
             for name, ds in self.datasets[split].items()
         ]
         return CombinedLoader(loaders, mode="sequential")

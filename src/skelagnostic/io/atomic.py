@@ -97,9 +97,14 @@ def _create_temporary(target: Path, temp_suffix: str | None) -> tuple[int, Path]
     raise FileExistsError(errno.EEXIST, "no free temporary file name", str(target.parent))
 
 
-def atomic_write(path: str | Path, data: bytes | Callable[[BinaryIO], object], *,
-                 follow_symlinks: bool = True, temp_suffix: str | None = None,
-                 sync_directory: bool = False) -> Path:
+def atomic_write(
+    path: str | Path,
+    data: bytes | Callable[[BinaryIO], object],
+    *,
+    follow_symlinks: bool = True,
+    temp_suffix: str | None = None,
+    sync_directory: bool = False,
+) -> Path:
     """Write a file atomically, with the permissions the umask allows.
 
     Args:

@@ -118,14 +118,17 @@ def load_aligner(name: str, checkpoint: str | Path | None = None, **overrides: A
         external = pm.read_external_checkpoint(checkpoint, name)
         if external is not None:
             if overrides:
-                raise PluginError(f"checkpoint {str(checkpoint)!r}: a checkpoint reader takes no "
-                                  f"hyperparameter overrides, got {sorted(overrides)}")
+                raise PluginError(
+                    f"checkpoint {str(checkpoint)!r}: a checkpoint reader takes no "
+                    f"hyperparameter overrides, got {sorted(overrides)}"
+                )
             return external
     if checkpoint is None:
         model = spec.module(**{**spec.config, **overrides})
     else:
         from skelagnostic.aligners.checkpoints import load_checkpoint
 
-        model = load_checkpoint(spec.module, Path(checkpoint),
-                                aligners=pm.aligner_classes(), **overrides)
+        model = load_checkpoint(
+            spec.module, Path(checkpoint), aligners=pm.aligner_classes(), **overrides
+        )
     return model.eval()

@@ -40,8 +40,14 @@ BUILTIN_NAME = "skelagnostic"
 #: Marker for hook implementations in plugins: ``@hookimpl def register_aligners(register): ...``.
 hookimpl = pluggy.HookimplMarker(ENTRY_POINT_GROUP)
 
-_HOOKS = ("register_aligners", "register_representations", "register_datasets",
-          "register_config_paths", "register_evaluations", "register_checkpoint_readers")
+_HOOKS = (
+    "register_aligners",
+    "register_representations",
+    "register_datasets",
+    "register_config_paths",
+    "register_evaluations",
+    "register_checkpoint_readers",
+)
 
 #: The ``<scheme>`` of ``ckpt=<scheme>:<path>`` (two characters or more, so a Windows drive
 #: letter is never one).
@@ -241,8 +247,15 @@ class PluginManager:
         if load_entrypoints:
             self.load_entrypoints(_allowed_plugins() if only is None else frozenset(only))
 
-    def register(self, plugin: object, name: str, *, version: str = "", source: str = "",
-                 description: str | None = None) -> None:
+    def register(
+        self,
+        plugin: object,
+        name: str,
+        *,
+        version: str = "",
+        source: str = "",
+        description: str | None = None,
+    ) -> None:
         """Register a plugin object (usually a module with ``@hookimpl`` functions).
 
         Args:
@@ -272,8 +285,9 @@ class PluginManager:
         hooks = tuple(h.name for h in self._pm.get_hookcallers(plugin) or ())
         if description is None:
             description = _first_line(getattr(plugin, "__doc__", None))
-        self._infos[name] = PluginInfo(name, version, source, "loaded", hooks=hooks,
-                                       description=description)
+        self._infos[name] = PluginInfo(
+            name, version, source, "loaded", hooks=hooks, description=description
+        )
         self._collected = None
 
     def load_entrypoints(self, only: frozenset[str] | None = None) -> None:
@@ -288,14 +302,16 @@ class PluginManager:
             source = dist.name if dist is not None else ep.value
             summary = (dist.metadata["Summary"] or "") if dist is not None else ""
             if only is not None and ep.name not in only:
-                self._infos.setdefault(ep.name, PluginInfo(ep.name, version, source, "disabled",
-                                                           description=summary))
+                self._infos.setdefault(
+                    ep.name, PluginInfo(ep.name, version, source, "disabled", description=summary)
+                )
                 continue
             try:
                 plugin = ep.load()
                 described = _first_line(getattr(plugin, "__doc__", None)) or summary
-                self.register(plugin, ep.name, version=version, source=source,
-                              description=described)
+                self.register(
+                    plugin, ep.name, version=version, source=source, description=described
+                )
                 self._require_hooks(plugin, ep.name, ep.value)
             except PluginError as exc:
                 if not isinstance(exc.__cause__, pluggy.PluginValidationError):
@@ -333,8 +349,9 @@ class PluginManager:
         old = self._infos.get(name)
         hooks = old.hooks if old is not None else ()
         description = old.description if old is not None else ""
-        self._infos[name] = PluginInfo(name, version, source, "failed", _error_text(exc), hooks,
-                                       description=description)
+        self._infos[name] = PluginInfo(
+            name, version, source, "failed", _error_text(exc), hooks, description=description
+        )
 
     def plugins(self) -> list[PluginInfo]:
         """Every plugin seen, in registration order, with what it provides."""
@@ -397,12 +414,18 @@ class PluginManager:
             return None
         if Path(text).exists():
             return None
-        known = ", ".join(f"{s.name}: ({s.model}) {s.description}"
-                          for s in self.checkpoint_readers.values()) or "none"
+        known = (
+            ", ".join(
+                f"{s.name}: ({s.model}) {s.description}" for s in self.checkpoint_readers.values()
+            )
+            or "none"
+        )
         spec = self.checkpoint_readers.get(scheme)
         if spec is None:
-            raise PluginError(f"checkpoint {text!r}: no checkpoint reader {scheme!r} is "
-                              f"registered (readers: {known})")
+            raise PluginError(
+                f"checkpoint {text!r}: no checkpoint reader {scheme!r} is "
+                f"registered (readers: {known})"
+            )
         if not rest:
             raise PluginError(f"checkpoint {text!r}: give the path after '{scheme}:'")
         return spec, rest
@@ -426,14 +449,18 @@ class PluginManager:
             return None
         spec, path = found
         if model is not None and model != spec.model:
-            raise PluginError(f"checkpoint {str(ckpt)!r} is read as model={spec.model} (plugin "
-                              f"{spec.plugin!r}), not model={model}")
+            raise PluginError(
+                f"checkpoint {str(ckpt)!r} is read as model={spec.model} (plugin "
+                f"{spec.plugin!r}), not model={model}"
+            )
         cls = self.aligner(spec.model).module
         aligner = spec.reader(path)
         if not isinstance(aligner, cls):
-            raise PluginError(f"checkpoint reader {spec.name!r} (plugin {spec.plugin!r}) returned "
-                              f"{type(aligner).__name__}, not the {cls.__name__} of "
-                              f"model={spec.model}")
+            raise PluginError(
+                f"checkpoint reader {spec.name!r} (plugin {spec.plugin!r}) returned "
+                f"{type(aligner).__name__}, not the {cls.__name__} of "
+                f"model={spec.model}"
+            )
         return aligner.eval()
 
     def evaluation(self, name: str | None, model: str) -> EvaluationSpec:
@@ -448,16 +475,21 @@ class PluginManager:
         if name is None:
             default = [s for s in self._collect().evaluations if s.model == model and s.default]
             if not default:
-                raise PluginError(f"model={model} has no default evaluation protocol; give "
-                                  f"protocol=NAME (protocols of model={model}: {listed})")
+                raise PluginError(
+                    f"model={model} has no default evaluation protocol; give "
+                    f"protocol=NAME (protocols of model={model}: {listed})"
+                )
             return default[0]
         spec = self.evaluations.get(name)
         if spec is None:
-            raise PluginError(f"unknown evaluation protocol {name!r}; protocols of "
-                              f"model={model}: {listed}")
+            raise PluginError(
+                f"unknown evaluation protocol {name!r}; protocols of model={model}: {listed}"
+            )
         if spec.model != model:
-            raise PluginError(f"protocol {name!r} evaluates model={spec.model}, not "
-                              f"model={model}; protocols of model={model}: {listed}")
+            raise PluginError(
+                f"protocol {name!r} evaluates model={spec.model}, not "
+                f"model={model}; protocols of model={model}: {listed}"
+            )
         return spec
 
     def aligner(self, name: str) -> AlignerSpec:
@@ -537,9 +569,9 @@ def config_names(url: str, group: str) -> list[str]:
     """
     try:
         if url.startswith("pkg://"):
-            root: Any = resources.files(url[len("pkg://"):].strip("/").replace("/", "."))
+            root: Any = resources.files(url[len("pkg://") :].strip("/").replace("/", "."))
         elif url.startswith("file://"):
-            root = Path(url[len("file://"):])
+            root = Path(url[len("file://") :])
         else:
             return []
         folder = root.joinpath(group)
@@ -560,29 +592,37 @@ def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | 
         hooks: The hooks pluggy found implemented.
     """
     functions = {
-        attr: value for attr in dir(plugin)
-        if not attr.startswith("_") and callable(value := getattr(plugin, attr, None))
+        attr: value
+        for attr in dir(plugin)
+        if not attr.startswith("_")
+        and callable(value := getattr(plugin, attr, None))
         and (inspect.isfunction(value) or inspect.ismethod(value))
     }
     marker = f"{ENTRY_POINT_GROUP}_impl"
-    unmarked = {a: f for a, f in functions.items() if a.startswith("register")
-                and not hasattr(f, marker)}
-    foreign = sorted(a for a, f in unmarked.items()
-                     if any(k.endswith("_impl") for k in getattr(f, "__dict__", {})))
+    unmarked = {
+        a: f for a, f in functions.items() if a.startswith("register") and not hasattr(f, marker)
+    }
+    foreign = sorted(
+        a
+        for a, f in unmarked.items()
+        if any(k.endswith("_impl") for k in getattr(f, "__dict__", {}))
+    )
     undecorated = sorted(a for a in unmarked if a in _HOOKS)
     if undecorated or (foreign and not hooks):
         names = undecorated or foreign
-        why = (" (marked by another project's HookimplMarker)"
-               if set(names) & set(foreign) else "")
-        return (f"{target}: {', '.join(names)} is not decorated with "
-                f"@skelagnostic.plugins.hookimpl{why}, so skelagnostic never calls it")
+        why = " (marked by another project's HookimplMarker)" if set(names) & set(foreign) else ""
+        return (
+            f"{target}: {', '.join(names)} is not decorated with "
+            f"@skelagnostic.plugins.hookimpl{why}, so skelagnostic never calls it"
+        )
     if hooks:
         return None
-    close = sorted(a for a in unmarked
-                   if difflib.get_close_matches(a, _HOOKS, n=1, cutoff=0.8))
+    close = sorted(a for a in unmarked if difflib.get_close_matches(a, _HOOKS, n=1, cutoff=0.8))
     hint = f" (misspelt hook? {', '.join(close)})" if close else ""
-    return (f"{target} implements no skelagnostic hook{hint}: decorate functions named "
-            f"{', '.join(_HOOKS)} with @skelagnostic.plugins.hookimpl")
+    return (
+        f"{target} implements no skelagnostic hook{hint}: decorate functions named "
+        f"{', '.join(_HOOKS)} with @skelagnostic.plugins.hookimpl"
+    )
 
 
 def _config_urls(path: str, plugin_name: str) -> list[str]:
@@ -599,7 +639,7 @@ def _config_urls(path: str, plugin_name: str) -> list[str]:
     """
     if not path.startswith("pkg://"):
         return [path]
-    package = path[len("pkg://"):].strip("/").replace("/", ".")
+    package = path[len("pkg://") :].strip("/").replace("/", ".")
     try:
         spec = importlib.util.find_spec(package)
     except (ImportError, ValueError) as exc:
@@ -655,8 +695,10 @@ def read_model_config(package: str, name: str) -> dict[str, Any]:
         raise PluginError(f"model config {where}: expected a mapping of constructor arguments")
     config: dict[str, Any] = OmegaConf.to_container(node, resolve=False)  # type: ignore[assignment]
     if not isinstance(config.get("_target_"), str):
-        raise PluginError(f"model config {where}: needs '_target_', the dotted path of the "
-                          "aligner class (e.g. 'my_plugin.aligner.MyAligner')")
+        raise PluginError(
+            f"model config {where}: needs '_target_', the dotted path of the "
+            "aligner class (e.g. 'my_plugin.aligner.MyAligner')"
+        )
     return config
 
 
@@ -675,8 +717,10 @@ def _check_target(name: str, target: Any, module: type) -> None:
         except ImportError:
             resolved = None
     if resolved is not module:
-        raise PluginError(f"aligner {name!r}: config _target_={target!r} does not name the "
-                          f"registered module {target_of(module)!r}")
+        raise PluginError(
+            f"aligner {name!r}: config _target_={target!r} does not name the "
+            f"registered module {target_of(module)!r}"
+        )
 
 
 def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
@@ -722,10 +766,17 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
         if data and "source" not in data:
             raise PluginError(f"aligner {name!r}: data needs a 'source' (a registered dataset)")
         out.aligners.append(
-            AlignerSpec(name, module, datamodule, MappingProxyType(config), description,
-                        plugin_name, MappingProxyType(data),
-                        MappingProxyType(dict(data_options or {})),
-                        MappingProxyType(dict(trainer_options or {})))
+            AlignerSpec(
+                name,
+                module,
+                datamodule,
+                MappingProxyType(config),
+                description,
+                plugin_name,
+                MappingProxyType(data),
+                MappingProxyType(dict(data_options or {})),
+                MappingProxyType(dict(trainer_options or {})),
+            )
         )
 
     def register_representation(name: str, cls: type) -> None:
@@ -733,8 +784,7 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
 
         if not (isinstance(cls, type) and issubclass(cls, MotionRepresentation)):
             raise PluginError(
-                f"representation {name!r}: cls must be a MotionRepresentation subclass, "
-                f"got {cls!r}"
+                f"representation {name!r}: cls must be a MotionRepresentation subclass, got {cls!r}"
             )
         out.representations.append(RepresentationSpec(name, cls, plugin_name))
 
@@ -752,32 +802,51 @@ def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _
         for url in _config_urls(path, plugin_name):
             out.config_paths.append((url, plugin_name))
 
-    def register_evaluation(name: str, function: Callable[..., Any], model: str,
-                            description: str = "", default: bool = False) -> None:
+    def register_evaluation(
+        name: str,
+        function: Callable[..., Any],
+        model: str,
+        description: str = "",
+        default: bool = False,
+    ) -> None:
         if not callable(function):
             raise PluginError(f"evaluation {name!r}: function must be callable, got {function!r}")
         if not isinstance(model, str) or not model:
             raise PluginError(f"evaluation {name!r}: model must be an aligner name, got {model!r}")
         if default and any(e.default and e.model == model for e in out.evaluations):
-            raise PluginError(f"evaluation {name!r}: model={model} already has a default "
-                              "protocol")
-        out.evaluations.append(EvaluationSpec(name, function, model, description or
-                                              _first_line(function.__doc__), bool(default),
-                                              plugin_name))
+            raise PluginError(f"evaluation {name!r}: model={model} already has a default protocol")
+        out.evaluations.append(
+            EvaluationSpec(
+                name,
+                function,
+                model,
+                description or _first_line(function.__doc__),
+                bool(default),
+                plugin_name,
+            )
+        )
 
-    def register_checkpoint_reader(scheme: str, reader: Callable[[str], Any], model: str,
-                                   description: str = "") -> None:
+    def register_checkpoint_reader(
+        scheme: str, reader: Callable[[str], Any], model: str, description: str = ""
+    ) -> None:
         if not isinstance(scheme, str) or not CHECKPOINT_SCHEME.fullmatch(scheme):
-            raise PluginError(f"checkpoint reader {scheme!r}: the scheme must be a lower-case "
-                              "word of two or more letters, digits or underscores")
+            raise PluginError(
+                f"checkpoint reader {scheme!r}: the scheme must be a lower-case "
+                "word of two or more letters, digits or underscores"
+            )
         if not callable(reader):
-            raise PluginError(f"checkpoint reader {scheme!r}: reader must be callable, "
-                              f"got {reader!r}")
+            raise PluginError(
+                f"checkpoint reader {scheme!r}: reader must be callable, got {reader!r}"
+            )
         if not isinstance(model, str) or not model:
-            raise PluginError(f"checkpoint reader {scheme!r}: model must be an aligner name, "
-                              f"got {model!r}")
-        out.checkpoint_readers.append(CheckpointReaderSpec(
-            scheme, reader, model, description or _first_line(reader.__doc__), plugin_name))
+            raise PluginError(
+                f"checkpoint reader {scheme!r}: model must be an aligner name, got {model!r}"
+            )
+        out.checkpoint_readers.append(
+            CheckpointReaderSpec(
+                scheme, reader, model, description or _first_line(reader.__doc__), plugin_name
+            )
+        )
 
     callbacks = {
         "register_aligners": register_aligner,

@@ -149,8 +149,10 @@ class MotionRepresentation(ABC):
                 f"features have {features.shape[-2]} elements but the statistics were fitted "
                 f"for {self.mean.shape[0]}"
             )
-        return (self.mean.to(features.device, features.dtype),
-                self.std.to(features.device, features.dtype))
+        return (
+            self.mean.to(features.device, features.dtype),
+            self.std.to(features.device, features.dtype),
+        )
 
     def _check(self, features: torch.Tensor, what: str) -> None:
         if features.dim() < 2 or features.shape[-1] != len(self.channels):

@@ -108,8 +108,9 @@ class PointCloud(MotionRepresentation):
         """
         rot = global_rotations[..., samples.joints, :]
         local = samples.local.to(global_positions.dtype).to(global_positions.device)
-        return global_positions[..., samples.joints, :] + Q.rotate(rot, local.expand_as(
-            global_positions[..., samples.joints, :]))
+        return global_positions[..., samples.joints, :] + Q.rotate(
+            rot, local.expand_as(global_positions[..., samples.joints, :])
+        )
 
     def encode(self, motion: Motion) -> torch.Tensor:
         """``[T, P, 8]`` point positions and one-hot body groups."""

@@ -89,8 +89,11 @@ class ViewerBrowser:
         self._profile = tempfile.mkdtemp(prefix="skelagnostic-chromium-")
         options = webdriver.ChromeOptions()
         options.binary_location = str(_first(_BROWSERS, "chromium"))
-        for flag in (*_FLAGS, f"--window-size={size[0]},{size[1]}",
-                     f"--user-data-dir={self._profile}"):
+        for flag in (
+            *_FLAGS,
+            f"--window-size={size[0]},{size[1]}",
+            f"--user-data-dir={self._profile}",
+        ):
             options.add_argument(flag)
         options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
         service = Service(executable_path=str(_first(_DRIVERS, "chromedriver")))
@@ -125,9 +128,13 @@ class ViewerBrowser:
             RenderError: If the page has not drawn within ``timeout``.
         """
         self.driver.get(Path(page).resolve().as_uri())
-        self._wait(lambda: self.driver.execute_script(
-            "return !!(window.skelagnostic && window.skelagnostic.drawnFrame() >= 0)"), timeout,
-            "the viewer did not draw a frame")
+        self._wait(
+            lambda: self.driver.execute_script(
+                "return !!(window.skelagnostic && window.skelagnostic.drawnFrame() >= 0)"
+            ),
+            timeout,
+            "the viewer did not draw a frame",
+        )
 
     def _wait(self, ready: Any, timeout: float, what: str) -> None:
         end = time.monotonic() + timeout
@@ -157,19 +164,25 @@ class ViewerBrowser:
         self.driver.execute_script(
             "arguments[0].value = arguments[1];"
             "arguments[0].dispatchEvent(new Event('input', {bubbles: true}));",
-            scrub, str(frame - 1))
+            scrub,
+            str(frame - 1),
+        )
         self.driver.find_element(By.ID, "next").click()
-        self._wait(lambda: self.driver.execute_script(
-            "return window.skelagnostic.drawnFrame()") == frame, timeout,
-            f"frame {frame} was not drawn")
+        self._wait(
+            lambda: self.driver.execute_script("return window.skelagnostic.drawnFrame()") == frame,
+            timeout,
+            f"frame {frame} was not drawn",
+        )
         # the frame counter is set before the draw returns: wait one more animation frame
         self.driver.execute_async_script(
-            "const done = arguments[0]; requestAnimationFrame(() => requestAnimationFrame(done));")
+            "const done = arguments[0]; requestAnimationFrame(() => requestAnimationFrame(done));"
+        )
 
     def call(self, name: str, *args: Any) -> Any:
         """Call ``window.skelagnostic[name](*args)`` in the page and return its result."""
         return self.driver.execute_script(
-            f"return window.skelagnostic.{name}(...arguments);", *args)
+            f"return window.skelagnostic.{name}(...arguments);", *args
+        )
 
     def screenshot(self) -> np.ndarray:
         """The window as an ``[H, W, 3]`` uint8 RGB image (CSS pixels)."""

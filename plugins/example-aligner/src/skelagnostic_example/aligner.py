@@ -97,8 +97,12 @@ class ExampleAligner(Aligner):
     def training_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         """Mean reconstruction loss over the datasets of the step."""
         loss = torch.stack([self._loss(b) for b in batch.values()]).mean()
-        self.log("train/loss", loss, prog_bar=True, batch_size=sum(
-            len(b["features"]) for b in batch.values()))
+        self.log(
+            "train/loss",
+            loss,
+            prog_bar=True,
+            batch_size=sum(len(b["features"]) for b in batch.values()),
+        )
         return loss
 
     def _evaluate(self, batch: dict[str, Any], stage: str) -> torch.Tensor:
@@ -131,12 +135,21 @@ class ExampleAligner(Aligner):
         """Input and reconstruction of the first window (for ``callbacks=render``)."""
         name, b = next((n, b) for n, b in batch.items() if b is not None)
         base = self.trainer.datamodule.skeletons[name]
-        skeleton = Skeleton(base.joint_names, base.parents, b["offsets"][0].cpu(),
-                            up_axis=base.up_axis, morphology=base.morphology)
+        skeleton = Skeleton(
+            base.joint_names,
+            base.parents,
+            b["offsets"][0].cpu(),
+            up_axis=base.up_axis,
+            morphology=base.morphology,
+        )
         scale = b["height"][:1].view(-1, 1, 1, 1)
         template = b["template"][:1] / scale[:, 0]
-        rec = self.decode_positions(self.encode_positions(b["features"][:1] / scale, template),
-                                    template) * scale
+        rec = (
+            self.decode_positions(
+                self.encode_positions(b["features"][:1] / scale, template), template
+            )
+            * scale
+        )
         rep, fps = GlobalPositions(frame="root"), self.trainer.datamodule.fps
         return {
             "input": rep.decode(b["features"][0].double().cpu(), skeleton, fps),
@@ -159,30 +172,52 @@ class ExampleAligner(Aligner):
         hp = self.hparams
         positions, template = torch.randn(2, 7, 5, 3), torch.randn(2, 5, 3)
         z = torch.randn(2, 7, hp.latent)
-        prepare = ("positions: GlobalPositions(frame='root') of the motion (root-local joint "
-                   "positions), divided by the skeleton height (Skeleton.height); template: "
-                   "Skeleton.template() divided by the same height")
-        common = {"representation": "GlobalPositions(frame='root')",
-                  "normalisation": {"divide_by": "skeleton height (Skeleton.height)"},
-                  "skeleton": "any: the template is an input", "preprocess": prepare}
+        prepare = (
+            "positions: GlobalPositions(frame='root') of the motion (root-local joint "
+            "positions), divided by the skeleton height (Skeleton.height); template: "
+            "Skeleton.template() divided by the same height"
+        )
+        common = {
+            "representation": "GlobalPositions(frame='root')",
+            "normalisation": {"divide_by": "skeleton height (Skeleton.height)"},
+            "skeleton": "any: the template is an input",
+            "preprocess": prepare,
+        }
         return [
             ExportGraph(
-                "encoder", Method(self, "encode_positions"), (positions, template),
-                ("positions", "template"), ("z",),
-                {"positions": {0: "batch", 1: "time", 2: "joints"},
-                 "template": {0: "batch", 1: "joints"}, "z": {0: "batch", 1: "time"}},
+                "encoder",
+                Method(self, "encode_positions"),
+                (positions, template),
+                ("positions", "template"),
+                ("z",),
+                {
+                    "positions": {0: "batch", 1: "time", 2: "joints"},
+                    "template": {0: "batch", 1: "joints"},
+                    "z": {0: "batch", 1: "time"},
+                },
                 description="height-normalised root-local positions and the skeleton "
-                            "template -> per-frame latent",
-                metadata=common),
+                "template -> per-frame latent",
+                metadata=common,
+            ),
             ExportGraph(
-                "decoder", Method(self, "decode_positions"), (z, template),
-                ("z", "template"), ("positions",),
-                {"z": {0: "batch", 1: "time"}, "template": {0: "batch", 1: "joints"},
-                 "positions": {0: "batch", 1: "time", 2: "joints"}},
+                "decoder",
+                Method(self, "decode_positions"),
+                (z, template),
+                ("z", "template"),
+                ("positions",),
+                {
+                    "z": {0: "batch", 1: "time"},
+                    "template": {0: "batch", 1: "joints"},
+                    "positions": {0: "batch", 1: "time", 2: "joints"},
+                },
                 description="per-frame latent and a target template -> height-normalised "
-                            "root-local positions of the target's joints",
-                metadata={**common, "postprocess": "multiply by the target skeleton height; "
-                                                   "inverse kinematics gives rotations"}),
+                "root-local positions of the target's joints",
+                metadata={
+                    **common,
+                    "postprocess": "multiply by the target skeleton height; "
+                    "inverse kinematics gives rotations",
+                },
+            ),
         ]
 
     # ------------------------------------------------------------------ aligner
@@ -220,8 +255,9 @@ class ExampleAligner(Aligner):
         local = local - centre
         if "root_positions" in latent.extras:
             up = int(latent.extras["up"])
-            ground = latent.extras["root_positions"].clone() * (height / float(
-                latent.extras["height"]))
+            ground = latent.extras["root_positions"].clone() * (
+                height / float(latent.extras["height"])
+            )
             ground[:, up] = 0.0
             world = Q.rotate(latent.extras["facing"].unsqueeze(1), local) + ground.unsqueeze(1)
         else:

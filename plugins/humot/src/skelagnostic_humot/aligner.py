@@ -101,27 +101,42 @@ class HumotAligner(Aligner):
         {"encode", "decode", "retarget", "unseen_topology", "denoise"}
     )
 
-    def __init__(self, dim: int = 128, latent: int = 128, blocks: int = 4, heads: int = 8,
-                 kernel_size: int = 5, mlp_ratio: float = 4.0, layer_scale: float = 1.0,
-                 lambda_blc: float = 0.5, subsampling: bool = True, p_major: float = 0.1,
-                 p_other: float = 0.5, lr_min: float = 1e-5, lr_max: float = 1e-4,
-                 lr_period_epochs: float = 10.0, betas: Sequence[float] = (0.9, 0.999),
-                 chunk: int = 30, fast_path: bool = True) -> None:
+    def __init__(
+        self,
+        dim: int = 128,
+        latent: int = 128,
+        blocks: int = 4,
+        heads: int = 8,
+        kernel_size: int = 5,
+        mlp_ratio: float = 4.0,
+        layer_scale: float = 1.0,
+        lambda_blc: float = 0.5,
+        subsampling: bool = True,
+        p_major: float = 0.1,
+        p_other: float = 0.5,
+        lr_min: float = 1e-5,
+        lr_max: float = 1e-4,
+        lr_period_epochs: float = 10.0,
+        betas: Sequence[float] = (0.9, 0.999),
+        chunk: int = 30,
+        fast_path: bool = True,
+    ) -> None:
         super().__init__()
-        checks = (("dim", dim > 0 and dim % heads == 0, "a positive multiple of heads"),
-                  ("lambda_blc", lambda_blc >= 0, ">= 0"),
-                  ("p_major", 0 <= p_major < 1, "in [0, 1)"),
-                  ("p_other", 0 <= p_other < 1, "in [0, 1)"),
-                  ("lr_min", 0 < lr_min <= lr_max, "in (0, lr_max]"),
-                  ("lr_period_epochs", lr_period_epochs > 0, "> 0"),
-                  ("chunk", chunk > 0, "> 0"),
-                  ("kernel_size", kernel_size % 2 == 1, "odd"))
+        checks = (
+            ("dim", dim > 0 and dim % heads == 0, "a positive multiple of heads"),
+            ("lambda_blc", lambda_blc >= 0, ">= 0"),
+            ("p_major", 0 <= p_major < 1, "in [0, 1)"),
+            ("p_other", 0 <= p_other < 1, "in [0, 1)"),
+            ("lr_min", 0 < lr_min <= lr_max, "in (0, lr_max]"),
+            ("lr_period_epochs", lr_period_epochs > 0, "> 0"),
+            ("chunk", chunk > 0, "> 0"),
+            ("kernel_size", kernel_size % 2 == 1, "odd"),
+        )
         for name, ok, what in checks:
             if not ok:
                 raise SkelagnosticError(f"model.{name} must be {what}, got {locals()[name]!r}")
         self.save_hyperparameters()
-        self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale,
-                         fast_path)
+        self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
         self._topologies: dict[tuple[Any, ...], Topology] = {}
 
     # ----------------------------------------------------------------- topology
@@ -136,8 +151,13 @@ class HumotAligner(Aligner):
         return self.topology(self.trainer.datamodule.skeletons[name])
 
     # ------------------------------------------------------------------ losses
-    def chunk_loss(self, world: torch.Tensor, topology: Topology, up_axis: str = "y",
-                   subsample: bool | None = None) -> dict[str, torch.Tensor]:
+    def chunk_loss(
+        self,
+        world: torch.Tensor,
+        topology: Topology,
+        up_axis: str = "y",
+        subsample: bool | None = None,
+    ) -> dict[str, torch.Tensor]:
         """Losses of a batch of chunks of one topology.
 
         Args:
@@ -155,19 +175,29 @@ class HumotAligner(Aligner):
             subsample = self.hparams.subsampling and self.training
         if subsample:
             major = topology.major
-            s1 = gather_subset(sample_keep(major, len(pos), self.hparams.p_major,
-                                           self.hparams.p_other), topology.skeleton.parents)
-            s2 = gather_subset(sample_keep(major, len(pos), self.hparams.p_major,
-                                           self.hparams.p_other), topology.skeleton.parents)
-            pred = self.net(s1.take(pos, 2), s1.take(tmpl, 1), s2.take(tmpl, 1),
-                            s1.mask.to(pos.device), s2.mask.to(pos.device))
+            s1 = gather_subset(
+                sample_keep(major, len(pos), self.hparams.p_major, self.hparams.p_other),
+                topology.skeleton.parents,
+            )
+            s2 = gather_subset(
+                sample_keep(major, len(pos), self.hparams.p_major, self.hparams.p_other),
+                topology.skeleton.parents,
+            )
+            pred = self.net(
+                s1.take(pos, 2),
+                s1.take(tmpl, 1),
+                s2.take(tmpl, 1),
+                s1.mask.to(pos.device),
+                s2.mask.to(pos.device),
+            )
             target, mask = s2.take(pos, 2), s2.mask.to(pos.device)
             bones, bone_mask = s2.bones.to(pos.device), s2.bone_mask.to(pos.device)
         else:
             pred = self.net(pos, tmpl, tmpl)
             target, mask, bone_mask = pos, None, None
             bones = torch.tensor(topology.skeleton.bones(), device=pos.device).expand(
-                len(pos), -1, -1)
+                len(pos), -1, -1
+            )
         rec = reconstruction_loss(pred, target, mask)
         blc = bone_length_consistency_loss(pred, target, bones, bone_mask)
         err = (pred - target).norm(dim=-1)
@@ -176,14 +206,15 @@ class HumotAligner(Aligner):
         else:
             m = mask[:, None].to(err.dtype).expand_as(err)
             mpjpe = (err * m).sum() / m.sum()
-        return {"loss": rec + self.hparams.lambda_blc * blc, "rec": rec, "blc": blc,
-                "mpjpe": mpjpe}
+        return {"loss": rec + self.hparams.lambda_blc * blc, "rec": rec, "blc": blc, "mpjpe": mpjpe}
 
     def _step(self, batch: dict[str, Any], stage: str) -> torch.Tensor:
         parts = {n: b for n, b in batch.items() if b is not None}
         dm = self.trainer.datamodule
-        out = [self.chunk_loss(b["features"], self._dataset_topology(n), dm.skeletons[n].up_axis)
-               for n, b in parts.items()]
+        out = [
+            self.chunk_loss(b["features"], self._dataset_topology(n), dm.skeletons[n].up_axis)
+            for n, b in parts.items()
+        ]
         size = sum(len(b["features"]) for b in parts.values())
         metrics = {k: torch.stack([o[k] for o in out]).mean() for k in out[0]}
         sync = stage != "train"
@@ -206,14 +237,16 @@ class HumotAligner(Aligner):
         """As :meth:`validation_step`, logged under ``test/``."""
         return self._step(batch, "test")
 
-    def predict_step(self, batch: dict[str, Any], batch_idx: int, dataloader_idx: int = 0
-                     ) -> dict[str, torch.Tensor]:
+    def predict_step(
+        self, batch: dict[str, Any], batch_idx: int, dataloader_idx: int = 0
+    ) -> dict[str, torch.Tensor]:
         """Per dataset, the latent codes ``[B, F, Z]`` of the (full-skeleton) chunks."""
         out = {}
         for name, b in batch.items():
             topo = self._dataset_topology(name)
-            pos, tmpl = prepare_chunks(b["features"].float(), topo,
-                                       self.trainer.datamodule.skeletons[name].up_axis)
+            pos, tmpl = prepare_chunks(
+                b["features"].float(), topo, self.trainer.datamodule.skeletons[name].up_axis
+            )
             out[name] = self.net.encoder(pos, tmpl)
         return out
 
@@ -224,10 +257,17 @@ class HumotAligner(Aligner):
         per_epoch = steps_per_epoch(self._trainer)
         half = max(1, round(hp.lr_period_epochs * per_epoch / 2))
         scheduler = torch.optim.lr_scheduler.CyclicLR(
-            optimizer, base_lr=hp.lr_min, max_lr=hp.lr_max, step_size_up=half,
-            mode="triangular", cycle_momentum=False)
-        return {"optimizer": optimizer,
-                "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+            optimizer,
+            base_lr=hp.lr_min,
+            max_lr=hp.lr_max,
+            step_size_up=half,
+            mode="triangular",
+            cycle_momentum=False,
+        )
+        return {
+            "optimizer": optimizer,
+            "lr_scheduler": {"scheduler": scheduler, "interval": "step"},
+        }
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Any]:
@@ -238,8 +278,9 @@ class HumotAligner(Aligner):
         names = [n for n, b in batch.items() if b is not None]
         src = names[0]
         topo = self._dataset_topology(src)
-        pos, tmpl = prepare_chunks(batch[src]["features"][:1].float(), topo,
-                                   dm.skeletons[src].up_axis)
+        pos, tmpl = prepare_chunks(
+            batch[src]["features"][:1].float(), topo, dm.skeletons[src].up_axis
+        )
         z = self.net.encoder(pos, tmpl)
         figs = {"input": (pos[0], topo), "reconstruction": (self.net.decoder(z, tmpl)[0], topo)}
         others = [n for n in dm.skeletons if n != src]
@@ -247,9 +288,12 @@ class HumotAligner(Aligner):
             dst = self._dataset_topology(others[0])
             dst_tmpl = dst.templates(dst.skeleton.bone_lengths().float())[None].to(z)
             figs[f"retarget -> {others[0]}"] = (self.net.decoder(z, dst_tmpl)[0], dst)
-        return {k: StickFigure(p.cpu(), t.skeleton.parents, t.skeleton.body_groups,
-                               fps=dm.fps, name=k, up_axis="z")
-                for k, (p, t) in figs.items()}
+        return {
+            k: StickFigure(
+                p.cpu(), t.skeleton.parents, t.skeleton.body_groups, fps=dm.fps, name=k, up_axis="z"
+            )
+            for k, (p, t) in figs.items()
+        }
 
     def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
         """The render of the fit summary: ``humot_retarget.gif`` / ``.png``.
@@ -282,40 +326,59 @@ class HumotAligner(Aligner):
             "units": "m",
             "fps": 30.0,
             "chunk_frames": int(hp.chunk),
-            "model_frame": {"description": "Z up, X the character's left, Y backward; "
-                                           "model = positions @ matrix.T",
-                            "matrix_from_up_axis": {k: v for k, v in _TO_MODEL.items()}},
+            "model_frame": {
+                "description": "Z up, X the character's left, Y backward; "
+                "model = positions @ matrix.T",
+                "matrix_from_up_axis": {k: v for k, v in _TO_MODEL.items()},
+            },
             "preprocess": (
                 "resample to 30 fps, convert to metres, rotate to the model frame, cut into "
                 f"{int(hp.chunk)}-frame chunks every {int(hp.chunk) // 2} frames, subtract from "
                 "every chunk the mean of its major joints (hips, knees, ankles, shoulders, "
-                "elbows, wrists; all joints if none) over all its frames"),
+                "elbows, wrists; all joints if none) over all its frames"
+            ),
             "template": (
                 "[J, 3] neutral pose in the model frame, root at the origin, with the clip's "
                 "median bone lengths: skelagnostic_humot.data.Topology.of(skeleton)"
-                ".templates(lengths)"),
+                ".templates(lengths)"
+            ),
             "postprocess": (
                 "add the chunk centres back (scaled by the target/source leg-length ratio), "
                 "cross-fade overlapping chunks with triangular weights, rotate back from the "
-                "model frame; inverse kinematics gives rotations"),
+                "model frame; inverse kinematics gives rotations"
+            ),
         }
         return [
             ExportGraph(
-                "encoder", Method(self.net.encoder, "forward"), (motion, template),
-                ("motion", "template"), ("z",),
-                {"motion": {0: "batch", 1: "time", 2: "joints"},
-                 "template": {0: "batch", 1: "joints"}, "z": {0: "batch", 1: "time"}},
+                "encoder",
+                Method(self.net.encoder, "forward"),
+                (motion, template),
+                ("motion", "template"),
+                ("z",),
+                {
+                    "motion": {0: "batch", 1: "time", 2: "joints"},
+                    "template": {0: "batch", 1: "joints"},
+                    "z": {0: "batch", 1: "time"},
+                },
                 description="E(X | T): centred joint positions [B, F, J, 3] (metres, model "
-                            "frame) and the source template [B, J, 3] -> latent [B, F, Z]",
-                metadata=meta),
+                "frame) and the source template [B, J, 3] -> latent [B, F, Z]",
+                metadata=meta,
+            ),
             ExportGraph(
-                "decoder", Method(self.net.decoder, "forward"), (z, template),
-                ("z", "template"), ("motion",),
-                {"z": {0: "batch", 1: "time"}, "template": {0: "batch", 1: "joints"},
-                 "motion": {0: "batch", 1: "time", 2: "joints"}},
+                "decoder",
+                Method(self.net.decoder, "forward"),
+                (z, template),
+                ("z", "template"),
+                ("motion",),
+                {
+                    "z": {0: "batch", 1: "time"},
+                    "template": {0: "batch", 1: "joints"},
+                    "motion": {0: "batch", 1: "time", 2: "joints"},
+                },
                 description="D(z | T): latent [B, F, Z] and a target template [B, J, 3] -> "
-                            "centred joint positions [B, F, J, 3] of the target skeleton",
-                metadata=meta),
+                "centred joint positions [B, F, J, 3] of the target skeleton",
+                metadata=meta,
+            ),
         ]
 
     # ------------------------------------------------------------------ aligner
@@ -349,15 +412,21 @@ class HumotAligner(Aligner):
         lengths = (positions - positions[:, parents.cpu()]).norm(dim=-1).median(dim=0).values
         tmpl = topo.templates(lengths.to(world))
         z = self.net.encoder(world - centres[:, None, None], tmpl.expand(len(starts), -1, -1))
-        return Latent(z.cpu(), 30.0, {
-            "starts": torch.tensor(starts), "centres": centres.cpu(),
-            "num_frames": torch.tensor(frames), "leg_length": torch.tensor(
-                leg_length(tmpl.cpu(), skeleton)),
-        })
+        return Latent(
+            z.cpu(),
+            30.0,
+            {
+                "starts": torch.tensor(starts),
+                "centres": centres.cpu(),
+                "num_frames": torch.tensor(frames),
+                "leg_length": torch.tensor(leg_length(tmpl.cpu(), skeleton)),
+            },
+        )
 
     @torch.no_grad()
-    def decode_positions(self, latent: Latent, skeleton: Skeleton,
-                         lengths: torch.Tensor | None = None) -> torch.Tensor:
+    def decode_positions(
+        self, latent: Latent, skeleton: Skeleton, lengths: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Decode to ``[T, J, 3]`` positions (metres, model frame) of ``skeleton``.
 
         Args:
@@ -420,8 +489,13 @@ class HumotAligner(Aligner):
         rotations, root = inverse_kinematics(pos, skeleton)
         return Motion(skeleton, rotations, root, latent.fps)
 
-    def retarget(self, motion: Motion, target: Skeleton, source_units: str | None = None,
-                 target_units: str | None = None) -> Motion:
+    def retarget(
+        self,
+        motion: Motion,
+        target: Skeleton,
+        source_units: str | None = None,
+        target_units: str | None = None,
+    ) -> Motion:
         """Encode with the source template, decode with the target's (Sec. 4.2).
 
         The root trajectory (chunk centres) is scaled by the leg-length ratio.
@@ -434,8 +508,7 @@ class HumotAligner(Aligner):
         """Encode and decode on the motion's own skeleton (Sec. 4.3)."""
         return self.decode(self.encode(motion, units), motion.skeleton, units)
 
-    def upsample_joints(self, motion: Motion, full: Skeleton, units: str | None = None
-                        ) -> Motion:
+    def upsample_joints(self, motion: Motion, full: Skeleton, units: str | None = None) -> Motion:
         """Motion of a joint subset of ``full`` -> motion of ``full`` (Sec. 4.4).
 
         Args:

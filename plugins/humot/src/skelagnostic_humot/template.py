@@ -130,11 +130,21 @@ def skeleton_template(skeleton: Skeleton, positions: torch.Tensor | None = None)
     if positions is not None:
         lengths = median_bone_lengths(positions.to(sk.offsets.dtype), sk)
         norms = sk.offsets.norm(dim=-1, keepdim=True)
-        unit = torch.where(norms > 0, sk.offsets / norms.clamp_min(1e-12),
-                           torch.tensor([0.0, 1.0, 0.0], dtype=sk.offsets.dtype))
-        sk = Skeleton(sk.joint_names, sk.parents, unit * lengths[:, None],
-                      body_groups=sk.body_groups, up_axis=sk.up_axis, name=sk.name,
-                      morphology=sk.morphology, body_root=sk.body_root)
+        unit = torch.where(
+            norms > 0,
+            sk.offsets / norms.clamp_min(1e-12),
+            torch.tensor([0.0, 1.0, 0.0], dtype=sk.offsets.dtype),
+        )
+        sk = Skeleton(
+            sk.joint_names,
+            sk.parents,
+            unit * lengths[:, None],
+            body_groups=sk.body_groups,
+            up_axis=sk.up_axis,
+            name=sk.name,
+            morphology=sk.morphology,
+            body_root=sk.body_root,
+        )
     return to_model_frame(sk.template(), "y")
 
 

@@ -39,8 +39,9 @@ def farthest_point_sampling(points: torch.Tensor, num_samples: int, start: int =
     """
     num = points.shape[-2]
     if not 1 <= num_samples <= num:
-        raise SkelagnosticError(f"farthest_point_sampling: num_samples={num_samples} must be "
-                                f"in [1, {num}]")
+        raise SkelagnosticError(
+            f"farthest_point_sampling: num_samples={num_samples} must be in [1, {num}]"
+        )
     if not 0 <= start < num:
         raise SkelagnosticError(f"farthest_point_sampling: start={start} out of range [0, {num})")
     lead = points.shape[:-2]

@@ -562,7 +562,8 @@ class PcmrlInterpAligner(Aligner):
             for first in range(0, len(group), self.interpolate_batch):
                 batch = group[first : first + self.interpolate_batch]
                 frames = torch.stack([torch.arange(s, e + 1) for s, e, _, _ in batch]).to(
-                    self.device)
+                    self.device
+                )
                 mask = torch.zeros(frames.shape, dtype=torch.bool, device=self.device)
                 for row, (s, _, ki, end_i) in enumerate(batch):
                     mask[row, [k - s for k in keys[ki : end_i + 1]]] = True

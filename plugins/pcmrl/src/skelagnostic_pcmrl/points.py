@@ -170,7 +170,9 @@ class PointLayout:
         return self.alpha * bone + self.sigma * self.noise
 
     def points(
-        self, global_rotations: torch.Tensor, global_positions: torch.Tensor,
+        self,
+        global_rotations: torch.Tensor,
+        global_positions: torch.Tensor,
         offsets: torch.Tensor,
     ) -> torch.Tensor:
         """``[..., T, P, 3]`` point trajectories of a pose sequence (differentiable).
@@ -187,10 +189,16 @@ class PointLayout:
         # one layout per sequence: gather the head joints per sequence
         idx = self.heads.unsqueeze(-2).unsqueeze(-1)  # [..., 1, P, 1]
         frames = global_positions.shape[-3]
-        rot = torch.gather(global_rotations, -2,
-                           idx.expand(*self.heads.shape[:-1], frames, self.heads.shape[-1], 4))
-        pos = torch.gather(global_positions, -2,
-                           idx.expand(*self.heads.shape[:-1], frames, self.heads.shape[-1], 3))
+        rot = torch.gather(
+            global_rotations,
+            -2,
+            idx.expand(*self.heads.shape[:-1], frames, self.heads.shape[-1], 4),
+        )
+        pos = torch.gather(
+            global_positions,
+            -2,
+            idx.expand(*self.heads.shape[:-1], frames, self.heads.shape[-1], 3),
+        )
         return pos + Q.rotate(rot, local.unsqueeze(-3))
 
     def onehot(self, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -230,15 +238,17 @@ def sample_layout(
     bones = skeleton.bones()
     lengths = skeleton.bone_lengths().double()
     zero = set(zero_length_bones(skeleton))
-    weights = torch.tensor([0.0 if c in zero else float(lengths[c]) for _, c in bones],
-                           dtype=torch.float64)
+    weights = torch.tensor(
+        [0.0 if c in zero else float(lengths[c]) for _, c in bones], dtype=torch.float64
+    )
     if not bones or float(weights.sum()) <= 0:
         raise SkeletonError(f"{skeleton!r} has no bone of non-zero length to sample points on")
     heads = torch.tensor([p for p, _ in bones], dtype=torch.long)
     tails = torch.tensor([c for _, c in bones], dtype=torch.long)
     count = math.prod(batch) if batch else 1
-    pick = torch.multinomial(weights.expand(count, -1), num_points, replacement=True,
-                             generator=generator)
+    pick = torch.multinomial(
+        weights.expand(count, -1), num_points, replacement=True, generator=generator
+    )
     alpha = torch.rand(count, num_points, 1, generator=generator, dtype=torch.float64)
     noise = torch.randn(count, num_points, 3, generator=generator, dtype=torch.float64)
     shape = tuple(batch)
@@ -252,8 +262,13 @@ def sample_layout(
         float(sigma),
     )
     if device is not None:
-        layout = PointLayout(*(t.to(device) for t in (layout.heads, layout.tails, layout.alpha,
-                                                       layout.noise, layout.groups)), layout.sigma)
+        layout = PointLayout(
+            *(
+                t.to(device)
+                for t in (layout.heads, layout.tails, layout.alpha, layout.noise, layout.groups)
+            ),
+            layout.sigma,
+        )
     return layout
 
 
@@ -263,8 +278,11 @@ def end_effector_pairs(source: Skeleton, target: Skeleton) -> list[tuple[int, in
     Uses :meth:`Skeleton.end_effectors` (hands, feet/toes, head) on both sides.
     """
     by_group = {source.body_groups[j]: j for j in source.end_effectors()}
-    return [(by_group[target.body_groups[j]], j) for j in target.end_effectors()
-            if target.body_groups[j] in by_group]
+    return [
+        (by_group[target.body_groups[j]], j)
+        for j in target.end_effectors()
+        if target.body_groups[j] in by_group
+    ]
 
 
 def lateral_direction(points: torch.Tensor, groups: torch.Tensor, up: int = 1) -> torch.Tensor:
@@ -289,8 +307,9 @@ def lateral_direction(points: torch.Tensor, groups: torch.Tensor, up: int = 1) -
     return lateral
 
 
-def heading_frames(points: torch.Tensor, groups: torch.Tensor, up: int = 1, width: int = 15
-                   ) -> torch.Tensor:
+def heading_frames(
+    points: torch.Tensor, groups: torch.Tensor, up: int = 1, width: int = 15
+) -> torch.Tensor:
     """``[B, T, 4]`` rotations about ``up`` that map the canonical axis onto each frame's heading.
 
     The canonical axis is ``(up + 1) % 3``; a frame's heading is its
@@ -312,11 +331,15 @@ def heading_frames(points: torch.Tensor, groups: torch.Tensor, up: int = 1, widt
     frames = lateral.shape[1]
     if width > 1 and frames > 1:
         # mean over the frames of the window that exist (padding not counted)
-        mean = torch.nn.functional.avg_pool1d(lateral.transpose(1, 2), width, stride=1,
-                                              padding=width // 2, count_include_pad=False)
+        mean = torch.nn.functional.avg_pool1d(
+            lateral.transpose(1, 2), width, stride=1, padding=width // 2, count_include_pad=False
+        )
         lateral = mean[..., :frames].transpose(1, 2)
     forward = (up + 1) % 3
     heading = Q.heading_from_direction(lateral, up=up, forward=forward)
     degenerate = lateral.norm(dim=-1, keepdim=True) < 1e-6
-    return torch.where(degenerate, Q.identity(*heading.shape[:-1], dtype=heading.dtype,
-                                              device=heading.device), heading)
+    return torch.where(
+        degenerate,
+        Q.identity(*heading.shape[:-1], dtype=heading.dtype, device=heading.device),
+        heading,
+    )

@@ -56,10 +56,10 @@ __all__ = ["PcmrlReconAligner", "end_effector_pairs"]
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
-
 def _batch_size(batch: dict[str, Any]) -> int:
     """Windows in a ``{dataset: batch}`` step (Lightning cannot infer it from a dict)."""
     return sum(len(sub["features"]) for sub in batch.values() if sub is not None)
+
 
 class PcmrlReconAligner(Aligner):
     """PC-MRL point-cloud-to-motion reconstruction onto one target skeleton.
@@ -178,25 +178,38 @@ class PcmrlReconAligner(Aligner):
                 f"model.stage={stage!r}: model=pcmrl is PC-MRL stage 1 (reconstruction); the "
                 "interpolation stage is model=pcmrl_interp"
             )
-        for name, value in (("num_source_points", num_source_points),
-                            ("num_target_points", num_target_points), ("knn_k", knn_k)):
+        for name, value in (
+            ("num_source_points", num_source_points),
+            ("num_target_points", num_target_points),
+            ("knn_k", knn_k),
+        ):
             if value < 1:
                 raise SkelagnosticError(f"model.{name} must be positive, got {value}")
         if num_target_points < knn_k:
-            raise SkelagnosticError(f"model.num_target_points={num_target_points} is below "
-                                    f"model.knn_k={knn_k}")
+            raise SkelagnosticError(
+                f"model.num_target_points={num_target_points} is below model.knn_k={knn_k}"
+            )
         if sigma < 0:
             raise SkelagnosticError(f"model.sigma must be non-negative, got {sigma}")
         if yaw_window < 1:
             raise SkelagnosticError(f"model.yaw_window must be at least 1 frame, got {yaw_window}")
         self.save_hyperparameters()
-        self.encoder = PointTransformerEncoder(len(POINT_GROUPS), dim, stages, point_heads,
-                                               group_k, attention=point_attention,
-                                               attention_k=attention_k, layer_scale=layer_scale,
-                                               layout=layout)
+        self.encoder = PointTransformerEncoder(
+            len(POINT_GROUPS),
+            dim,
+            stages,
+            point_heads,
+            group_k,
+            attention=point_attention,
+            attention_k=attention_k,
+            layer_scale=layer_scale,
+            layout=layout,
+        )
         if layout == "authors" and temporal_dim is not None:
-            raise SkelagnosticError("model.temporal_dim must be null with model.layout=authors "
-                                    "(the width is the frame feature width + 16)")
+            raise SkelagnosticError(
+                "model.temporal_dim must be null with model.layout=authors "
+                "(the width is the frame feature width + 16)"
+            )
         self.temporal: TemporalTransformer | None = None
         self.target_skeleton: Skeleton | None = None
         self.target_units: str | None = None
@@ -227,18 +240,27 @@ class PcmrlReconAligner(Aligner):
             source_of.append(slot[j] if j in slot else source_of[p])
         self.register_buffer("_source_of", torch.tensor(source_of), persistent=False)
         self.register_buffer("_target_offsets", skeleton.offsets.float(), persistent=False)
-        rest_heading = heading_frames(skeleton.rest_positions().float()[None, None],
-                                      group_of_joints(skeleton)[None],
-                                      _AXES[skeleton.up_axis], 1)[0, 0]
+        rest_heading = heading_frames(
+            skeleton.rest_positions().float()[None, None],
+            group_of_joints(skeleton)[None],
+            _AXES[skeleton.up_axis],
+            1,
+        )[0, 0]
         self.register_buffer("_rest_heading_inv", Q.inv(rest_heading), persistent=False)
         hp = self.hparams
         layout = hp.get("layout", "skelagnostic")
         width = hp.temporal_dim or self.encoder.out_channels
         if layout == "authors":
             width = self.encoder.out_channels + AUTHORS_POSITION_DIM
-        self.temporal = TemporalTransformer(self.encoder.out_channels, width, hp.temporal_layers,
-                                            hp.temporal_heads, 3 + 4 * len(joints), hp.dropout,
-                                            layout=layout)
+        self.temporal = TemporalTransformer(
+            self.encoder.out_channels,
+            width,
+            hp.temporal_layers,
+            hp.temporal_heads,
+            3 + 4 * len(joints),
+            hp.dropout,
+            layout=layout,
+        )
         out = self.temporal.out
         last = out if isinstance(out, torch.nn.Linear) else out[-1]
         with torch.no_grad():  # start from the target's rest pose at the cloud centre
@@ -270,8 +292,11 @@ class PcmrlReconAligner(Aligner):
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         """Store the target skeleton, its units and the window."""
         skeleton = self._require_target()
-        checkpoint["pcmrl"] = {"target": skeleton.to_dict(), "target_units": self.target_units,
-                               "window": self.window}
+        checkpoint["pcmrl"] = {
+            "target": skeleton.to_dict(),
+            "target_units": self.target_units,
+            "window": self.window,
+        }
 
     def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         """Rebuild the output heads before the weights are loaded."""
@@ -299,15 +324,18 @@ class PcmrlReconAligner(Aligner):
             centre[..., up] = 0.0
         return centre
 
-    def encode_points(self, points: torch.Tensor, groups: torch.Tensor,
-                      frames_per_call: int | None = None) -> torch.Tensor:
+    def encode_points(
+        self, points: torch.Tensor, groups: torch.Tensor, frames_per_call: int | None = None
+    ) -> torch.Tensor:
         """``[B, T, F]`` frame features of centred clouds ``[B, T, P, 3]``, groups ``[B, P]``."""
         onehot = torch.nn.functional.one_hot(groups, len(POINT_GROUPS)).to(points.dtype)
         x = torch.cat([points, onehot.unsqueeze(1).expand(*points.shape[:3], -1)], dim=-1)
         if frames_per_call is None:
             return self.encoder(x)
-        parts = [self.encoder(x[:, s:s + frames_per_call])
-                 for s in range(0, x.shape[1], frames_per_call)]
+        parts = [
+            self.encoder(x[:, s : s + frames_per_call])
+            for s in range(0, x.shape[1], frames_per_call)
+        ]
         return torch.cat(parts, dim=1)
 
     def heads(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -320,8 +348,9 @@ class PcmrlReconAligner(Aligner):
         """``[..., J, 4]`` unit global rotations of all target joints from the predicted ones."""
         return Q.normalize(raw)[..., self._source_of, :]
 
-    def canonical(self, points: torch.Tensor, groups: torch.Tensor, up: int
-                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def canonical(
+        self, points: torch.Tensor, groups: torch.Tensor, up: int
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The clouds ``[B, T, P, 3]`` as the encoder sees them, and how to undo that.
 
         Returns:
@@ -332,14 +361,23 @@ class PcmrlReconAligner(Aligner):
         centre = self._centre(points, up)
         cloud = points - centre.unsqueeze(2)
         if not self.hparams.canonical_yaw:
-            return cloud, centre, Q.identity(*cloud.shape[:2], dtype=cloud.dtype,
-                                             device=cloud.device)
-        heading = heading_frames(cloud.detach(), groups.expand(cloud.shape[0], -1), up,
-                                 int(self.hparams.yaw_window))
+            return (
+                cloud,
+                centre,
+                Q.identity(*cloud.shape[:2], dtype=cloud.dtype, device=cloud.device),
+            )
+        heading = heading_frames(
+            cloud.detach(), groups.expand(cloud.shape[0], -1), up, int(self.hparams.yaw_window)
+        )
         return Q.rotate(Q.inv(heading).unsqueeze(2), cloud), centre, heading
 
-    def to_world(self, root: torch.Tensor, rotations: torch.Tensor, centre: torch.Tensor,
-                 heading: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def to_world(
+        self,
+        root: torch.Tensor,
+        rotations: torch.Tensor,
+        centre: torch.Tensor,
+        heading: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Root ``[B, T, 3]`` and global rotations ``[B, T, J, 4]`` from the heading-free frame.
 
         The target's rest pose faces the canonical axis at identity rotations, so the
@@ -351,8 +389,9 @@ class PcmrlReconAligner(Aligner):
         turn = Q.mul(heading, self._rest_heading_inv.to(heading))
         return root, Q.mul(turn.unsqueeze(-2), rotations)
 
-    def reconstruct(self, points: torch.Tensor, groups: torch.Tensor, up: int = 1
-                    ) -> dict[str, torch.Tensor]:
+    def reconstruct(
+        self, points: torch.Tensor, groups: torch.Tensor, up: int = 1
+    ) -> dict[str, torch.Tensor]:
         """Run the network on source clouds ``[B, T, P, 3]`` (metres), groups ``[B, P]``.
 
         Returns:
@@ -382,46 +421,67 @@ class PcmrlReconAligner(Aligner):
         hp = self.hparams
         up = _AXES[target.up_axis]
         points = torch.randn(2, 6, hp.num_source_points, 3)
-        groups = torch.arange(hp.num_source_points).remainder(len(POINT_GROUPS))[None].expand(
-            2, -1).contiguous()
-        return [ExportGraph(
-            "reconstruction", _ReconstructionGraph(self, up), (points, groups),
-            ("points", "groups"), ("root", "global_rotations", "local_rotations", "positions"),
-            {"points": {0: "batch", 1: "time"}, "groups": {0: "batch"},
-             "root": {0: "batch", 1: "time"}, "global_rotations": {0: "batch", 1: "time"},
-             "local_rotations": {0: "batch", 1: "time"}, "positions": {0: "batch", 1: "time"}},
-            description=(
-                f"source point clouds [B, T, {hp.num_source_points}, 3] (metres, "
-                f"{target.up_axis} up) with their body groups [B, {hp.num_source_points}] -> "
-                f"motion of the target skeleton ({target.num_joints} joints): root [B, T, 3], "
-                "global and local unit quaternions (w, x, y, z) [B, T, J, 4], joint positions "
-                "[B, T, J, 3] (metres)"),
-            fixed_axes={"points": f"{hp.num_source_points} points per cloud: the point "
-                                  f"encoder pools them to one in {hp.stages} stages"},
-            metadata={
-                "target_skeleton": target.to_dict(),
-                "target_units": self.target_units,
-                "units": "m",
-                "up_axis": target.up_axis,
-                "point_groups": list(POINT_GROUPS),
-                "sigma": float(hp.sigma),
-                "training_window": self.window,
-                "canonical_yaw": bool(hp.canonical_yaw),
-                "preprocess": (
-                    "draw the cloud layout once per source skeleton "
-                    "(skelagnostic_pcmrl.points.sample_layout: a bone per point with "
-                    "probability proportional to its length, a position along it and a "
-                    "Gaussian offset of sigma metres) and place it on every frame "
-                    "(PointLayout.points); groups are the layout's body-group ids"),
-                "postprocess": (
-                    "rotations are unit quaternions (w, x, y, z); sequences longer than "
-                    "the training window: run overlapping chunks and blend them, as "
-                    "PcmrlReconAligner.decode does"),
-            })]
+        groups = (
+            torch.arange(hp.num_source_points)
+            .remainder(len(POINT_GROUPS))[None]
+            .expand(2, -1)
+            .contiguous()
+        )
+        return [
+            ExportGraph(
+                "reconstruction",
+                _ReconstructionGraph(self, up),
+                (points, groups),
+                ("points", "groups"),
+                ("root", "global_rotations", "local_rotations", "positions"),
+                {
+                    "points": {0: "batch", 1: "time"},
+                    "groups": {0: "batch"},
+                    "root": {0: "batch", 1: "time"},
+                    "global_rotations": {0: "batch", 1: "time"},
+                    "local_rotations": {0: "batch", 1: "time"},
+                    "positions": {0: "batch", 1: "time"},
+                },
+                description=(
+                    f"source point clouds [B, T, {hp.num_source_points}, 3] (metres, "
+                    f"{target.up_axis} up) with their body groups [B, {hp.num_source_points}] -> "
+                    f"motion of the target skeleton ({target.num_joints} joints): root [B, T, 3], "
+                    "global and local unit quaternions (w, x, y, z) [B, T, J, 4], joint positions "
+                    "[B, T, J, 3] (metres)"
+                ),
+                fixed_axes={
+                    "points": f"{hp.num_source_points} points per cloud: the point "
+                    f"encoder pools them to one in {hp.stages} stages"
+                },
+                metadata={
+                    "target_skeleton": target.to_dict(),
+                    "target_units": self.target_units,
+                    "units": "m",
+                    "up_axis": target.up_axis,
+                    "point_groups": list(POINT_GROUPS),
+                    "sigma": float(hp.sigma),
+                    "training_window": self.window,
+                    "canonical_yaw": bool(hp.canonical_yaw),
+                    "preprocess": (
+                        "draw the cloud layout once per source skeleton "
+                        "(skelagnostic_pcmrl.points.sample_layout: a bone per point with "
+                        "probability proportional to its length, a position along it and a "
+                        "Gaussian offset of sigma metres) and place it on every frame "
+                        "(PointLayout.points); groups are the layout's body-group ids"
+                    ),
+                    "postprocess": (
+                        "rotations are unit quaternions (w, x, y, z); sequences longer than "
+                        "the training window: run overlapping chunks and blend them, as "
+                        "PcmrlReconAligner.decode does"
+                    ),
+                },
+            )
+        ]
 
     # --------------------------------------------------------------- training
-    def _step(self, batch: dict[str, Any], generator: torch.Generator | None,
-              prefix: str) -> torch.Tensor:
+    def _step(
+        self, batch: dict[str, Any], generator: torch.Generator | None, prefix: str
+    ) -> torch.Tensor:
         hp = self.hparams
         target = self._require_target()
         dm = self.trainer.datamodule
@@ -433,18 +493,28 @@ class PcmrlReconAligner(Aligner):
             feats = sub["features"].float()
             size = feats.shape[0]
             rot_l, trans = Q.normalize(feats[..., :4]), feats[..., 4:]
-            grot, gpos = forward_kinematics(rot_l, trans[..., 0, :], sub["offsets"][0],
-                                            source.parents, translations=trans)
-            src_layout = sample_layout(source, hp.num_source_points, hp.sigma, (size,),
-                                       generator, self.device)
+            grot, gpos = forward_kinematics(
+                rot_l, trans[..., 0, :], sub["offsets"][0], source.parents, translations=trans
+            )
+            src_layout = sample_layout(
+                source, hp.num_source_points, hp.sigma, (size,), generator, self.device
+            )
             src_pts = src_layout.points(grot, gpos, sub["offsets"])
             out = self.reconstruct(src_pts, src_layout.groups, _AXES[source.up_axis])
-            tgt_layout = sample_layout(target, hp.num_target_points, hp.sigma, (size,),
-                                       generator, self.device)
+            tgt_layout = sample_layout(
+                target, hp.num_target_points, hp.sigma, (size,), generator, self.device
+            )
             tgt_pts = tgt_layout.points(out["rotations"], out["positions"], self._target_offsets)
-            knn = temporal_knn_loss(tgt_pts, src_pts, tgt_layout.groups, src_layout.groups,
-                                    hp.knn_k, hp.knn_reduction, hp.knn_variant,
-                                    alpha=self._knn_alpha())
+            knn = temporal_knn_loss(
+                tgt_pts,
+                src_pts,
+                tgt_layout.groups,
+                src_layout.groups,
+                hp.knn_k,
+                hp.knn_reduction,
+                hp.knn_variant,
+                alpha=self._knn_alpha(),
+            )
             norm = unit_norm_penalty(out["raw"])
             end = end_effector_loss(out["positions"], gpos, end_effector_pairs(source, target))
             loss = knn + hp.lambda_q * norm + hp.lambda_end * end
@@ -487,8 +557,9 @@ class PcmrlReconAligner(Aligner):
 
     def configure_optimizers(self) -> torch.optim.Optimizer:
         """AdamW."""
-        return torch.optim.AdamW(self.parameters(), lr=self.hparams.lr,
-                                 weight_decay=self.hparams.weight_decay)
+        return torch.optim.AdamW(
+            self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
+        )
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Motion]:
@@ -515,10 +586,19 @@ class PcmrlReconAligner(Aligner):
         metric = motion.to_metres().to(torch.float32, self.device)
         warn_zero_length_bones(metric.skeleton, "source skeleton")
         gen = torch.Generator().manual_seed(self.hparams.sample_seed)
-        layout = sample_layout(metric.skeleton, self.hparams.num_source_points,
-                               self.hparams.sigma, (), gen, self.device)
-        pts = layout.points(metric.global_rotations(), metric.global_positions(),
-                            metric.skeleton.offsets.float().to(self.device))[None]
+        layout = sample_layout(
+            metric.skeleton,
+            self.hparams.num_source_points,
+            self.hparams.sigma,
+            (),
+            gen,
+            self.device,
+        )
+        pts = layout.points(
+            metric.global_rotations(),
+            metric.global_positions(),
+            metric.skeleton.offsets.float().to(self.device),
+        )[None]
         up = _AXES[metric.skeleton.up_axis]
         cloud, centre, heading = self.canonical(pts, layout.groups[None], up)
         feats = self.encode_points(cloud, layout.groups[None], frames_per_call=256)
@@ -572,8 +652,10 @@ class PcmrlReconAligner(Aligner):
             r, q = self.heads(feats[:, start:stop])
             q = Q.normalize(q[0])
             n = stop - start
-            ramp = torch.minimum(torch.arange(1, n + 1, device=feats.device),
-                                 torch.arange(n, 0, -1, device=feats.device)).float()
+            ramp = torch.minimum(
+                torch.arange(1, n + 1, device=feats.device),
+                torch.arange(n, 0, -1, device=feats.device),
+            ).float()
             sign = torch.where((quat[start:stop] * q).sum(-1, keepdim=True) < 0, -1.0, 1.0)
             root[start:stop] += ramp[:, None] * r[0]
             quat[start:stop] += ramp[:, None, None] * sign * q
@@ -581,8 +663,12 @@ class PcmrlReconAligner(Aligner):
         heading = latent.extras.get("heading")
         if heading is None:  # a latent of a model without canonical_yaw
             heading = Q.identity(frames, dtype=root.dtype, device=root.device)
-        root, rot = self.to_world(root / weight[:, None], self.full_rotations(quat),
-                                  latent.extras["centre"].to(root), heading.to(root))
+        root, rot = self.to_world(
+            root / weight[:, None],
+            self.full_rotations(quat),
+            latent.extras["centre"].to(root),
+            heading.to(root),
+        )
         rot = Q.continuity(rot, dim=-3)
         units = self._output_units(skeleton)
         local = Q.normalize(local_from_global(rot, skeleton.parents))
@@ -597,8 +683,9 @@ class _ReconstructionGraph(torch.nn.Module):
         self.aligner = aligner
         self.up = up
 
-    def forward(self, points: torch.Tensor, groups: torch.Tensor
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    def forward(
+        self, points: torch.Tensor, groups: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """Clouds ``[B, T, P, 3]``, groups ``[B, P]`` -> root, rotations (global, local), joints."""
         out = self.aligner.reconstruct(points, groups, self.up)
         parents = self.aligner._require_target().parents

@@ -93,8 +93,9 @@ class PcmrlReconDataModule(MotionDataModule):
 
             sources = [ProceduralSource(kinds=("biped22",))]
         sources = flatten_sources(sources)
-        super().__init__([MetresSource(s, source_units) for s in sources],
-                         batch_size=batch_size, **kwargs)
+        super().__init__(
+            [MetresSource(s, source_units) for s in sources], batch_size=batch_size, **kwargs
+        )
         if not isinstance(self.representation, LocalQuaternions):
             raise SkelagnosticError(
                 "model=pcmrl needs data.representation=local_quaternions (or null), got "

@@ -115,8 +115,9 @@ def _clips_in_frame_order(cat: Mapping[str, Tensor]) -> list[tuple[int, Tensor]]
 class _Character(nn.Module):
     """One dataset's VQ-PAE, average-pose MLP and normalisation statistics."""
 
-    def __init__(self, spec: DatasetSpec, latent: int, pose_layers: int,
-                 **pae_options: Any) -> None:
+    def __init__(
+        self, spec: DatasetSpec, latent: int, pose_layers: int, **pae_options: Any
+    ) -> None:
         super().__init__()
         channels, window = int(spec["channels"]), int(spec["window"])
         pose = int(spec.get("pose_channels") or channels)  # an authors' phase decoder: more
@@ -146,8 +147,11 @@ class _PivotEncoder(nn.Module):
         latent = self.pae.encoder(windows)
         phase, frequency, _ = self.pae.timing(latent)
         raw = self.pae.amp_mlp(latent.mean(dim=-1))
-        d2 = (raw.square().sum(1, keepdim=True) - 2 * raw @ self.codebook.t()
-              + self.codebook.square().sum(1))
+        d2 = (
+            raw.square().sum(1, keepdim=True)
+            - 2 * raw @ self.codebook.t()
+            + self.codebook.square().sum(1)
+        )
         code = d2.argmin(dim=1)
         amplitude = self.codebook[code]
         point = phase_manifold(amplitude, phase.unsqueeze(-1))[..., 0]
@@ -224,8 +228,9 @@ class VqpaeAligner(Aligner):
         SkelagnosticError: An option is out of range.
     """
 
-    capabilities: ClassVar[frozenset[str]] = frozenset({"encode", "decode", "phase",
-                                                        "quadruped", "transfer"})
+    capabilities: ClassVar[frozenset[str]] = frozenset(
+        {"encode", "decode", "phase", "quadruped", "transfer"}
+    )
 
     def __init__(
         self,
@@ -266,13 +271,20 @@ class VqpaeAligner(Aligner):
         if schedule not in SCHEDULES:
             raise SkelagnosticError(f"model.schedule must be one of {SCHEDULES}, got {schedule!r}")
         if phase_rate_grad not in PHASE_RATE_GRADS:
-            raise SkelagnosticError(f"model.phase_rate_grad must be one of {PHASE_RATE_GRADS}, "
-                                    f"got {phase_rate_grad!r}")
+            raise SkelagnosticError(
+                f"model.phase_rate_grad must be one of {PHASE_RATE_GRADS}, got {phase_rate_grad!r}"
+            )
         if not lambda_phase_rate >= 0:
             raise SkelagnosticError(
-                f"model.lambda_phase_rate must be >= 0, got {lambda_phase_rate}")
-        for arg, value in (("latent", latent), ("num_codes", num_codes), ("lr", lr),
-                           ("restart_period", restart_period), ("restart_mult", restart_mult)):
+                f"model.lambda_phase_rate must be >= 0, got {lambda_phase_rate}"
+            )
+        for arg, value in (
+            ("latent", latent),
+            ("num_codes", num_codes),
+            ("lr", lr),
+            ("restart_period", restart_period),
+            ("restart_mult", restart_mult),
+        ):
             if value <= 0:
                 raise SkelagnosticError(f"model.{arg} must be positive, got {value}")
         self.save_hyperparameters()
@@ -295,18 +307,33 @@ class VqpaeAligner(Aligner):
         hp = self.hparams
         self.dataset_names = list(datasets)
         self.characters = nn.ModuleList(
-            _Character(spec, hp.latent, hp.pose_layers, kernel_size=hp.kernel_size,
-                       freq_layers=hp.freq_layers, amp_layers=hp.amp_layers,
-                       decoder_centering=hp.decoder_centering, spectrum=hp.spectrum,
-                       padding_mode=hp.padding_mode,
-                       frequency_head=hp.frequency_head,
-                       phase_kernel=hp.phase_kernel,
-                       freq_hidden_elu=hp.freq_hidden_elu)
+            _Character(
+                spec,
+                hp.latent,
+                hp.pose_layers,
+                kernel_size=hp.kernel_size,
+                freq_layers=hp.freq_layers,
+                amp_layers=hp.amp_layers,
+                decoder_centering=hp.decoder_centering,
+                spectrum=hp.spectrum,
+                padding_mode=hp.padding_mode,
+                frequency_head=hp.frequency_head,
+                phase_kernel=hp.phase_kernel,
+                freq_hidden_elu=hp.freq_hidden_elu,
+            )
             for spec in datasets.values()
         )
-        self.codebook = SharedCodebook(hp.num_codes, 2 * hp.latent, len(datasets), hp.beta,
-                                       hp.reinit_decay, hp.reinit_eps, hp.reinit,
-                                       hp.reinit_squared_distance, hp.seed)
+        self.codebook = SharedCodebook(
+            hp.num_codes,
+            2 * hp.latent,
+            len(datasets),
+            hp.beta,
+            hp.reinit_decay,
+            hp.reinit_eps,
+            hp.reinit,
+            hp.reinit_squared_distance,
+            hp.seed,
+        )
 
     def configure_model(self) -> None:
         """Build the networks from the data module's datasets and copy its statistics.
@@ -321,8 +348,12 @@ class VqpaeAligner(Aligner):
         fn = self.trainer.state.fn
         dm.setup(fn.value if fn is not None else "fit")
         specs = {
-            name: {"channels": dm.channels(name), "window": dm.window, "fps": dm.fps,
-                   "skeleton": dm.skeletons[name].to_dict()}
+            name: {
+                "channels": dm.channels(name),
+                "window": dm.window,
+                "fps": dm.fps,
+                "skeleton": dm.skeletons[name].to_dict(),
+            }
             for name in dm.dataset_names
         }
         self.hparams["datasets"] = specs
@@ -345,8 +376,7 @@ class VqpaeAligner(Aligner):
         """
         saved = checkpoint.get("hyper_parameters", {})
         legacy = {**PREVIOUS_DEFAULTS, "lambda_phase_rate": 0.0}
-        changed = {k: v for k, v in legacy.items()
-                   if k not in saved and self.hparams.get(k) != v}
+        changed = {k: v for k, v in legacy.items() if k not in saved and self.hparams.get(k) != v}
         self.hparams.update(changed)
         if changed and self.codebook is not None:
             self._build({name: self.hparams["datasets"][name] for name in self.dataset_names})
@@ -404,13 +434,15 @@ class VqpaeAligner(Aligner):
                 logs[f"pose_mpjpe/{name}"] = self._pivot_mpjpe(k, params, b["poses"])
         return torch.stack(parts).mean(), logs
 
-    def _phase_rate_loss(self, k: int, name: str, batch: Mapping[str, Tensor],
-                         params: PhaseParameters) -> Tensor:
+    def _phase_rate_loss(
+        self, k: int, name: str, batch: Mapping[str, Tensor], params: PhaseParameters
+    ) -> Tensor:
         """Mean L1 (Hz) between the two windows' frequencies and their phase advance rate."""
         if "shifted" not in batch:
             raise SkelagnosticError(
                 f"model.lambda_phase_rate > 0 needs partner windows, but the training batch of "
-                f"dataset {name!r} has none: set data.pair_seconds > 0 (VqpaeDataModule)")
+                f"dataset {name!r} has none: set data.pair_seconds > 0 (VqpaeDataModule)"
+            )
         pae = self.characters[k].pae
         shift = batch["shift"].to(params.phase)
         valid = shift != 0
@@ -433,10 +465,10 @@ class VqpaeAligner(Aligner):
             phase2 = phases.chunk(2)[1]
         else:
             phase2, freq2, _ = pae.phase_and_frequency(batch["shifted"])
-        rate = phase_advance_rate(params.phase[valid], phase2[valid], shift[valid],
-                                  pae.fps).detach()
-        return 0.5 * ((freq1[valid] - rate).abs().mean()
-                      + (freq2[valid] - rate).abs().mean())
+        rate = phase_advance_rate(
+            params.phase[valid], phase2[valid], shift[valid], pae.fps
+        ).detach()
+        return 0.5 * ((freq1[valid] - rate).abs().mean() + (freq2[valid] - rate).abs().mean())
 
     def _pivot_mpjpe(self, k: int, params: PhaseParameters, poses: Tensor) -> Tensor:
         char = self.characters[k]
@@ -470,14 +502,14 @@ class VqpaeAligner(Aligner):
         loss, logs = self._losses(batch)
         size = sum(len(b["features"]) for b in batch.values() if b is not None)
         self.log(f"{stage}/loss", loss, prog_bar=True, batch_size=size, sync_dist=True)
-        self.log_dict({f"{stage}/{k}": v for k, v in logs.items()}, batch_size=size,
-                      sync_dist=True)
+        self.log_dict({f"{stage}/{k}": v for k, v in logs.items()}, batch_size=size, sync_dist=True)
         return loss
 
     def _start_overlap(self) -> None:
         if self.codebook is not None:
-            self._metrics["overlap"] = ManifoldOverlap(self.codebook.num_codes,
-                                                       len(self.dataset_names)).to(self.device)
+            self._metrics["overlap"] = ManifoldOverlap(
+                self.codebook.num_codes, len(self.dataset_names)
+            ).to(self.device)
 
     def _log_overlap(self, stage: str) -> None:
         metric = self._metrics.pop("overlap", None)
@@ -519,8 +551,9 @@ class VqpaeAligner(Aligner):
         """Log manifold overlap and codebook usage of the test codes."""
         self._log_overlap("test")
 
-    def predict_step(self, batch: Mapping[str, Any], batch_idx: int,
-                     dataloader_idx: int = 0) -> dict[str, dict[str, Tensor]]:
+    def predict_step(
+        self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0
+    ) -> dict[str, dict[str, Tensor]]:
         """Per dataset: pivot phase, frequency, code, amplitude and manifold point of every window.
 
         The outputs are also collected; at the end of the predict epoch they are
@@ -531,7 +564,8 @@ class VqpaeAligner(Aligner):
         for name, b in batch.items():
             out[name] = self._pivot_embedding(self.dataset_names.index(name), b)
             self._predictions.setdefault(name, []).append(
-                {k: v.detach().cpu() for k, v in out[name].items()})
+                {k: v.detach().cpu() for k, v in out[name].items()}
+            )
         return out
 
     def on_predict_epoch_start(self) -> None:
@@ -579,8 +613,13 @@ class VqpaeAligner(Aligner):
         main = [p for c in self.characters for p in c.pae.parameters()] + [book.weight]
         groups = [{"params": main, "lr": hp.lr, "weight_decay": hp.weight_decay}]
         if hp.pose_mlp != "none":
-            groups.append({"params": [p for c in self.characters for p in c.pose.parameters()],
-                           "lr": hp.pose_lr, "weight_decay": 0.0})
+            groups.append(
+                {
+                    "params": [p for c in self.characters for p in c.pose.parameters()],
+                    "lr": hp.pose_lr,
+                    "weight_decay": 0.0,
+                }
+            )
         # the fused kernel is 3-4x faster than foreach on this model's ~60 small tensors
         # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
         fused = all(p.device.type in ("cpu", "cuda") for p in main)
@@ -589,14 +628,18 @@ class VqpaeAligner(Aligner):
             from skelagnostic_vqpae.schedule import CyclicRestarts
 
             epoch_size, batch_size = self._authors_epoch()
-            scheduler: Any = CyclicRestarts(optimizer, epoch_size, batch_size,
-                                            hp.restart_period, hp.restart_mult, groups=1)
+            scheduler: Any = CyclicRestarts(
+                optimizer, epoch_size, batch_size, hp.restart_period, hp.restart_mult, groups=1
+            )
         else:
             steps = steps_per_epoch(self._trainer)
             scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
-                optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult)
-        return {"optimizer": optimizer,
-                "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+                optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult
+            )
+        return {
+            "optimizer": optimizer,
+            "lr_scheduler": {"scheduler": scheduler, "interval": "step"},
+        }
 
     def _authors_epoch(self) -> tuple[int, int]:
         """``(samples, batch size)`` of the authors' epoch: one pass over the smallest dataset.
@@ -623,8 +666,9 @@ class VqpaeAligner(Aligner):
         return fit_summary(self, trainer)
 
     @torch.no_grad()
-    def embed_datasets(self, datasets: Mapping[str, Any], fps: float,
-                      batch_size: int = 1024) -> dict[str, list[Any]]:
+    def embed_datasets(
+        self, datasets: Mapping[str, Any], fps: float, batch_size: int = 1024
+    ) -> dict[str, list[Any]]:
         """Embed every window of a data-module split, grouped into per-clip embeddings.
 
         Args:
@@ -648,9 +692,14 @@ class VqpaeAligner(Aligner):
                 for key, value in self._pivot_embedding(k, b).items():
                     parts.setdefault(key, []).append(value.detach().cpu())
             cat = {key: torch.cat(v) for key, v in parts.items()}
-            out[name] = [ClipEmbedding(*(cat[key][sel] for key in EMBEDDING_FIELDS),
-                                       float(fps), name)
-                         for _, sel in _clips_in_frame_order(cat)] if cat else []
+            out[name] = (
+                [
+                    ClipEmbedding(*(cat[key][sel] for key in EMBEDDING_FIELDS), float(fps), name)
+                    for _, sel in _clips_in_frame_order(cat)
+                ]
+                if cat
+                else []
+            )
         return out
 
     @torch.no_grad()
@@ -673,7 +722,8 @@ class VqpaeAligner(Aligner):
         char = self.characters[k]
         if not bool(char.pose_fitted):
             raise SkelagnosticError(
-                f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not trained")
+                f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not trained"
+            )
         return char.pose(points.to(char.pose_mean)) * char.pose_std + char.pose_mean
 
     def _dataset_index(self, dataset: int | str) -> int:
@@ -682,12 +732,14 @@ class VqpaeAligner(Aligner):
         if isinstance(dataset, str):
             if dataset not in self.dataset_names:
                 raise SkelagnosticError(
-                    f"VqpaeAligner: unknown dataset {dataset!r}; known: {self.dataset_names}")
+                    f"VqpaeAligner: unknown dataset {dataset!r}; known: {self.dataset_names}"
+                )
             return self.dataset_names.index(dataset)
         if 0 <= dataset < len(self.dataset_names):
             return int(dataset)
-        raise SkelagnosticError(f"VqpaeAligner: dataset index {dataset} out of range "
-                                f"[0, {len(self.dataset_names)})")
+        raise SkelagnosticError(
+            f"VqpaeAligner: dataset index {dataset} out of range [0, {len(self.dataset_names)})"
+        )
 
     @torch.no_grad()
     def embed_windows(self, x: Tensor, dataset: int | str) -> dict[str, Tensor]:
@@ -709,17 +761,27 @@ class VqpaeAligner(Aligner):
         """
         k = self._dataset_index(dataset)
         rec, p = self.forward_dataset(k, x.to(self.device))
-        return {"phase": p.phase, "frequency": p.frequency, "code": p.code,
-                "amplitude": p.amplitude,
-                "manifold": phase_manifold(p.amplitude, p.phase.unsqueeze(-1))[..., 0],
-                "reconstruction": rec}
+        return {
+            "phase": p.phase,
+            "frequency": p.frequency,
+            "code": p.code,
+            "amplitude": p.amplitude,
+            "manifold": phase_manifold(p.amplitude, p.phase.unsqueeze(-1))[..., 0],
+            "reconstruction": rec,
+        }
 
     def _pivot_embedding(self, k: int, batch: Mapping[str, Tensor]) -> dict[str, Tensor]:
         """Dataset ``k``'s embedding of each window's pivot, with its ``clip`` and ``pivot``."""
         p = self.encode_dataset(k, batch["features"])
-        return {"phase": p.phase, "frequency": p.frequency, "code": p.code,
-                "amplitude": p.amplitude, "manifold": p.manifold[..., p.manifold.shape[-1] // 2],
-                "clip": batch["clip"], "pivot": batch["pivot"]}
+        return {
+            "phase": p.phase,
+            "frequency": p.frequency,
+            "code": p.code,
+            "amplitude": p.amplitude,
+            "manifold": p.manifold[..., p.manifold.shape[-1] // 2],
+            "clip": batch["clip"],
+            "pivot": batch["pivot"],
+        }
 
     def on_train_epoch_end(self) -> None:
         """Mark the pose MLPs as trained (they learn alongside, unless ``pose_mlp="none"``)."""
@@ -781,42 +843,68 @@ class VqpaeAligner(Aligner):
                 "pivot": window // 2,
                 "channels": channels,
             }
-            fixed = {"window": f"{window} frames ({float(spec['fps']):g} fps): the frequency "
-                               f"MLP reads the {window // 2 + 1} rfft bins of the window"}
-            graphs.append(ExportGraph(
-                f"encoder_{stem}", _PivotEncoder(char.pae, book),
-                (torch.zeros(2, channels, window).normal_(),), ("windows",),
-                ("phase", "frequency", "code", "amplitude", "manifold"),
-                {k: {0: "batch"} for k in ("windows", "phase", "frequency", "code",
-                                           "amplitude", "manifold")},
-                description=(
-                    f"{name!r}: normalised windows [B, {channels}, {window}] centred on the "
-                    "pivot frame -> pivot phase (cycles), frequency (Hz), codebook index, "
-                    "quantised amplitude [B, 2d] and phase-manifold point [B, d]"),
-                fixed_axes=fixed,
-                metadata={**meta,
-                          "representation": "RootLocalVelocities, [T, J, 3] flattened to "
-                                            "[T, J*3] and transposed to [J*3, T]",
-                          "normalisation": {"input_mean": char.input_mean,
-                                            "input_std": char.input_std,
-                                            "formula": "(features - input_mean) / input_std"},
-                          "preprocess": "resample to fps; the window of frame i holds frames "
-                                        "i - pivot .. i + pivot (repeat the end frames at "
-                                        "the clip edges)"}))
+            fixed = {
+                "window": f"{window} frames ({float(spec['fps']):g} fps): the frequency "
+                f"MLP reads the {window // 2 + 1} rfft bins of the window"
+            }
+            graphs.append(
+                ExportGraph(
+                    f"encoder_{stem}",
+                    _PivotEncoder(char.pae, book),
+                    (torch.zeros(2, channels, window).normal_(),),
+                    ("windows",),
+                    ("phase", "frequency", "code", "amplitude", "manifold"),
+                    {
+                        k: {0: "batch"}
+                        for k in ("windows", "phase", "frequency", "code", "amplitude", "manifold")
+                    },
+                    description=(
+                        f"{name!r}: normalised windows [B, {channels}, {window}] centred on the "
+                        "pivot frame -> pivot phase (cycles), frequency (Hz), codebook index, "
+                        "quantised amplitude [B, 2d] and phase-manifold point [B, d]"
+                    ),
+                    fixed_axes=fixed,
+                    metadata={
+                        **meta,
+                        "representation": "RootLocalVelocities, [T, J, 3] flattened to "
+                        "[T, J*3] and transposed to [J*3, T]",
+                        "normalisation": {
+                            "input_mean": char.input_mean,
+                            "input_std": char.input_std,
+                            "formula": "(features - input_mean) / input_std",
+                        },
+                        "preprocess": "resample to fps; the window of frame i holds frames "
+                        "i - pivot .. i + pivot (repeat the end frames at "
+                        "the clip edges)",
+                    },
+                )
+            )
             if bool(char.pose_fitted) and not spec.get("pose_features"):
-                graphs.append(ExportGraph(
-                    f"pose_decoder_{stem}", Method(char.pose, "forward"),
-                    (torch.zeros(2, self.hparams.latent).normal_(),), ("manifold",),
-                    ("pose",), {"manifold": {0: "batch"}, "pose": {0: "batch"}},
-                    description=(f"{name!r}: phase-manifold point [B, d] -> normalised "
-                                 f"average root-local pose [B, {channels}] (Sec. 5.2)"),
-                    metadata={**meta,
-                              "representation": "GlobalPositions(frame='root'), [J, 3] "
-                                                "flattened to [J*3]",
-                              "normalisation": {"pose_mean": char.pose_mean,
-                                                "pose_std": char.pose_std,
-                                                "formula": "pose * pose_std + pose_mean"},
-                              "postprocess": "inverse kinematics gives rotations"}))
+                graphs.append(
+                    ExportGraph(
+                        f"pose_decoder_{stem}",
+                        Method(char.pose, "forward"),
+                        (torch.zeros(2, self.hparams.latent).normal_(),),
+                        ("manifold",),
+                        ("pose",),
+                        {"manifold": {0: "batch"}, "pose": {0: "batch"}},
+                        description=(
+                            f"{name!r}: phase-manifold point [B, d] -> normalised "
+                            f"average root-local pose [B, {channels}] (Sec. 5.2)"
+                        ),
+                        metadata={
+                            **meta,
+                            "representation": "GlobalPositions(frame='root'), [J, 3] "
+                            "flattened to [J*3]",
+                            "normalisation": {
+                                "pose_mean": char.pose_mean,
+                                "pose_std": char.pose_std,
+                                "formula": "pose * pose_std + pose_mean",
+                            },
+                            "postprocess": "inverse kinematics gives rotations",
+                        },
+                    )
+                )
         return graphs
 
     def dataset_of(self, skeleton: Skeleton) -> int:
@@ -831,7 +919,8 @@ class VqpaeAligner(Aligner):
             if sk is None:
                 continue
             if list(sk["joint_names"]) == list(skeleton.joint_names) and list(
-                    sk["parents"]) == list(skeleton.parents):
+                sk["parents"]
+            ) == list(skeleton.parents):
                 return k
         raise SkelagnosticError(
             f"VqpaeAligner: no trained dataset has the topology of {skeleton!r} "
@@ -865,8 +954,9 @@ class VqpaeAligner(Aligner):
         windows, motion = self._windows(k, motion)
         was_training = self.training
         self.eval()
-        outs: dict[str, list[Tensor]] = {n: [] for n in ("z", "phase", "frequency", "code",
-                                                         "amplitude", "raw_amplitude")}
+        outs: dict[str, list[Tensor]] = {
+            n: [] for n in ("z", "phase", "frequency", "code", "amplitude", "raw_amplitude")
+        }
         for chunk in windows.split(batch_size):
             p = self.encode_dataset(k, chunk)
             outs["z"].append(p.manifold[..., p.manifold.shape[-1] // 2])
@@ -898,7 +988,8 @@ class VqpaeAligner(Aligner):
             raise SkelagnosticError(
                 f"VqpaeAligner: {self.dataset_names[k]!r} has the authors' phase decoder, which "
                 f"predicts their exporter's features {list(features)}, not root-local joint "
-                "positions: run it with average_pose() (skelagnostic_vqpae.authors)")
+                "positions: run it with average_pose() (skelagnostic_vqpae.authors)"
+            )
         if not bool(char.pose_fitted):
             raise SkelagnosticError(
                 f"VqpaeAligner: the average-pose MLP of {self.dataset_names[k]!r} is not "

@@ -169,8 +169,9 @@ class SharedCodebook(nn.Module):
         self.num_codes, self.dim, self.num_datasets = num_codes, dim, num_datasets
         self.beta, self.decay, self.eps = beta, decay, eps
         self.reinit, self.squared_distance = reinit, squared_distance
-        self.weight = nn.Parameter(torch.empty(num_codes, dim).uniform_(-1 / num_codes,
-                                                                        1 / num_codes))
+        self.weight = nn.Parameter(
+            torch.empty(num_codes, dim).uniform_(-1 / num_codes, 1 / num_codes)
+        )
         self.register_buffer("usage", torch.zeros(num_datasets, num_codes))
         self.generator = torch.Generator().manual_seed(seed)
         self._pending: dict[int, tuple[Tensor, Tensor]] = {}
@@ -178,8 +179,11 @@ class SharedCodebook(nn.Module):
     def nearest(self, raw: Tensor) -> Tensor:
         """``[..., 2d]`` raw amplitudes -> ``[...]`` index of the nearest entry (Euclidean)."""
         flat = raw.detach().reshape(-1, self.dim)
-        d2 = (flat.square().sum(1, keepdim=True) - 2 * flat @ self.weight.detach().t()
-              + self.weight.detach().square().sum(1))
+        d2 = (
+            flat.square().sum(1, keepdim=True)
+            - 2 * flat @ self.weight.detach().t()
+            + self.weight.detach().square().sum(1)
+        )
         return d2.argmin(dim=1).view(raw.shape[:-1])
 
     def quantize(self, raw: Tensor, dataset: int | None = None) -> tuple[Tensor, Tensor, Tensor]:
@@ -200,7 +204,8 @@ class SharedCodebook(nn.Module):
         codes = self.nearest(raw)
         quantized = self.weight[codes]
         loss = (quantized - raw.detach()).square().mean() + self.beta * (
-            raw - quantized.detach()).square().mean()
+            raw - quantized.detach()
+        ).square().mean()
         if self.training and self.reinit and dataset is not None:
             if not 0 <= dataset < self.num_datasets:
                 raise SkelagnosticError(
@@ -241,8 +246,10 @@ class SharedCodebook(nn.Module):
             return False
         usages, raws = [], []
         for k in datasets:
-            empty = (self.weight.new_zeros(0, self.dim),
-                     torch.zeros(0, dtype=torch.long, device=self.weight.device))
+            empty = (
+                self.weight.new_zeros(0, self.dim),
+                torch.zeros(0, dtype=torch.long, device=self.weight.device),
+            )
             raw, codes = pending.get(k, empty)
             counts = torch.bincount(codes, minlength=self.num_codes).to(self.usage)
             total = counts.new_tensor(float(codes.numel()))
@@ -253,8 +260,9 @@ class SharedCodebook(nn.Module):
             self.usage[k].mul_(self.decay).add_(counts / total.clamp_min(1.0), alpha=1 - self.decay)
             usages.append(self.usage[k].clone())
             raws.append(raw)
-        new = reinit_update(self.weight, usages, raws, self.generator, self.decay, self.eps,
-                            self.squared_distance)
+        new = reinit_update(
+            self.weight, usages, raws, self.generator, self.decay, self.eps, self.squared_distance
+        )
         if ddp:
             dist.broadcast(new, src=0)
         self.weight.data.copy_(new)

@@ -53,8 +53,14 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
 
-__all__ = ["CachedFrameWindows", "FrameWindows", "MultiSource", "VqpaeDataModule",
-           "human_dog_source", "styles_source"]
+__all__ = [
+    "CachedFrameWindows",
+    "FrameWindows",
+    "MultiSource",
+    "VqpaeDataModule",
+    "human_dog_source",
+    "styles_source",
+]
 
 #: Version of the cached per-clip layout (velocities and root-local positions per frame).
 _LAYOUT = "vqpae-frames-1"
@@ -133,13 +139,21 @@ class FrameWindows(Dataset):
         pair_shift: Frames between a window and its partner (0: no partner).
     """
 
-    def __init__(self, features: Tensor, poses: Tensor, bounds: Sequence[tuple[int, int]],
-                 window: int, stride: int, pair_shift: int = 0) -> None:
+    def __init__(
+        self,
+        features: Tensor,
+        poses: Tensor,
+        bounds: Sequence[tuple[int, int]],
+        window: int,
+        stride: int,
+        pair_shift: int = 0,
+    ) -> None:
         self.features, self.poses = features, poses
         self._index(bounds, window, stride, pair_shift)
 
-    def _index(self, bounds: Sequence[tuple[int, int]], window: int, stride: int,
-               pair_shift: int) -> None:
+    def _index(
+        self, bounds: Sequence[tuple[int, int]], window: int, stride: int, pair_shift: int
+    ) -> None:
         """Window starts, pivots, clips and partner shifts of clips at ``bounds``."""
         if pair_shift < 0:
             raise SkelagnosticError(f"data.pair_shift must be >= 0 frames, got {pair_shift}")
@@ -183,8 +197,9 @@ class FrameWindows(Dataset):
         }
         if partners:
             shift = self.shifts[idx]
-            item["shifted"] = self._take(self.starts[idx] + shift, poses=False)[0].transpose(
-                1, 2).contiguous()
+            item["shifted"] = (
+                self._take(self.starts[idx] + shift, poses=False)[0].transpose(1, 2).contiguous()
+            )
             item["shift"] = shift
         return item
 
@@ -219,18 +234,29 @@ class CachedFrameWindows(FrameWindows):
         pair_shift: Frames between a window and its partner (0: no partner).
     """
 
-    def __init__(self, entries: Sequence[CacheEntry], representation: MotionRepresentation,
-                 poses: MotionRepresentation, window: int, stride: int,
-                 pair_shift: int = 0) -> None:
+    def __init__(
+        self,
+        entries: Sequence[CacheEntry],
+        representation: MotionRepresentation,
+        poses: MotionRepresentation,
+        window: int,
+        stride: int,
+        pair_shift: int = 0,
+    ) -> None:
         self.entries = list(entries)
         self._n_in = len(representation.channels)
-        self._stats = [(r.mean.clone(), r.std.clone())  # type: ignore[union-attr]
-                       for r in (representation, poses)]
-        lengths = np.cumsum([0] + [e.layout[1][1] if e.num_windows else 0
-                                   for e in self.entries])
+        self._stats = [
+            (r.mean.clone(), r.std.clone())  # type: ignore[union-attr]
+            for r in (representation, poses)
+        ]
+        lengths = np.cumsum([0] + [e.layout[1][1] if e.num_windows else 0 for e in self.entries])
         self._firsts = torch.as_tensor(lengths[:-1], dtype=torch.long)
-        self._index(list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True)),
-                    window, stride, pair_shift)
+        self._index(
+            list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True)),
+            window,
+            stride,
+            pair_shift,
+        )
 
     def _read(self, clip: int, first: int, count: int) -> np.ndarray:
         """Raw frames ``first:first + count`` of clip ``clip``, ``[count, J, C_in + C_pose]``."""
@@ -251,10 +277,18 @@ class CachedFrameWindows(FrameWindows):
 
     def _take(self, starts: Tensor, poses: bool = True) -> tuple[Tensor, Tensor | None]:
         clips = torch.searchsorted(self._firsts, starts, right=True) - 1
-        raw = torch.from_numpy(np.stack([
-            self._read(int(c), int(s - self._firsts[c]), self.window)
-            for c, s in zip(clips.tolist(), starts.tolist(), strict=True)
-        ])) if len(starts) else torch.zeros(0, self.window, 0, 0)
+        raw = (
+            torch.from_numpy(
+                np.stack(
+                    [
+                        self._read(int(c), int(s - self._firsts[c]), self.window)
+                        for c, s in zip(clips.tolist(), starts.tolist(), strict=True)
+                    ]
+                )
+            )
+            if len(starts)
+            else torch.zeros(0, self.window, 0, 0)
+        )
         return self._normalize(raw, poses)
 
     def frames(self) -> Iterator[tuple[Tensor, Tensor]]:
@@ -262,7 +296,8 @@ class CachedFrameWindows(FrameWindows):
         for clip, entry in enumerate(self.entries):
             if entry.num_windows:
                 feats, poses = self._normalize(
-                    torch.from_numpy(self._read(clip, 0, entry.layout[1][1])))
+                    torch.from_numpy(self._read(clip, 0, entry.layout[1][1]))
+                )
                 yield feats, poses  # type: ignore[misc]
 
     @property
@@ -276,8 +311,9 @@ class CachedFrameWindows(FrameWindows):
         return torch.cat([p for _, p in self.frames()])
 
 
-def _frame_chunks(entries: Sequence[CacheEntry], channels: slice,
-                  chunk_values: int = STATS_CHUNK_VALUES) -> Iterator[Tensor]:
+def _frame_chunks(
+    entries: Sequence[CacheEntry], channels: slice, chunk_values: int = STATS_CHUNK_VALUES
+) -> Iterator[Tensor]:
     """The ``channels`` of every frame of ``entries`` in ``[frames, J, C]`` chunks.
 
     Chunks hold a fixed number of frames (``chunk_values`` values with all
@@ -405,10 +441,16 @@ class VqpaeDataModule(MotionDataModule):
             motion = motion.resample(self.fps)
         feats = torch.cat([self.representation.encode(motion), self._poses.encode(motion)], -1)
         long_enough = motion.num_frames >= self.window
-        array = feats.float().numpy()[None] if long_enough else np.zeros(
-            (0, *feats.shape), np.float32)
-        meta = {"clip": clip.id, "skeleton": motion.skeleton.to_dict(),
-                "starts": [0] if long_enough else [], "fps": self.fps, "units": motion.units}
+        array = (
+            feats.float().numpy()[None] if long_enough else np.zeros((0, *feats.shape), np.float32)
+        )
+        meta = {
+            "clip": clip.id,
+            "skeleton": motion.skeleton.to_dict(),
+            "starts": [0] if long_enough else [],
+            "fps": self.fps,
+            "units": motion.units,
+        }
         return array, meta
 
     def add_dataset(self, name: str, members: list[tuple[ClipRef, CacheEntry]]) -> None:
@@ -431,8 +473,14 @@ class VqpaeDataModule(MotionDataModule):
         for part, clips in split.items():
             if not clips:
                 continue
-            ds = CachedFrameWindows([entries[c.id] for c in clips], rep, poses, self.window,
-                                    self.stride, self.pair_shift if part == "train" else 0)
+            ds = CachedFrameWindows(
+                [entries[c.id] for c in clips],
+                rep,
+                poses,
+                self.window,
+                self.stride,
+                self.pair_shift if part == "train" else 0,
+            )
             if len(ds):
                 self.datasets[part][name] = ds  # type: ignore[assignment]
                 self.clip_ids[part][name] = [c.id for c in clips]
@@ -468,8 +516,12 @@ class VqpaeDataModule(MotionDataModule):
 
         split = "test" if self.datasets["test"] else "val"
         loaders = [
-            DataLoader(ds, batch_size=self.batch_size, num_workers=self.num_workers,
-                       collate_fn=_Tagged(name))
+            DataLoader(
+                ds,
+                batch_size=self.batch_size,
+                num_workers=self.num_workers,
+                collate_fn=_Tagged(name),
+            )
             for name, ds in self.datasets[split].items()
         ]
         return CombinedLoader(loaders, mode="sequential")
@@ -477,8 +529,10 @@ class VqpaeDataModule(MotionDataModule):
     def state_dict(self) -> dict[str, Any]:
         """Velocity and pose normalisation statistics per dataset."""
         return {
-            name: {"input": rep.normalization_state(),
-                   "pose": self.pose_representations[name].normalization_state()}
+            name: {
+                "input": rep.normalization_state(),
+                "pose": self.pose_representations[name].normalization_state(),
+            }
             for name, rep in self.representations.items()
         }
 

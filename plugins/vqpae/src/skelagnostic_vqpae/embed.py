@@ -66,10 +66,16 @@ class ClipEmbedding:
         """Write an ``.npz`` with arrays ``phase frequency code amplitude manifold fps dataset``."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(path, phase=self.phase.numpy(), frequency=self.frequency.numpy(),
-                 code=self.code.numpy(), amplitude=self.amplitude.numpy(),
-                 manifold=self.manifold.numpy(), fps=np.float64(self.fps),
-                 dataset=np.str_(self.dataset))
+        np.savez(
+            path,
+            phase=self.phase.numpy(),
+            frequency=self.frequency.numpy(),
+            code=self.code.numpy(),
+            amplitude=self.amplitude.numpy(),
+            manifold=self.manifold.numpy(),
+            fps=np.float64(self.fps),
+            dataset=np.str_(self.dataset),
+        )
         return path
 
     @classmethod
@@ -80,14 +86,27 @@ class ClipEmbedding:
             SkelagnosticError: The file lacks one of the arrays.
         """
         with np.load(Path(path)) as data:
-            missing = {"phase", "frequency", "code", "amplitude", "manifold", "fps",
-                       "dataset"} - set(data.files)
+            missing = {
+                "phase",
+                "frequency",
+                "code",
+                "amplitude",
+                "manifold",
+                "fps",
+                "dataset",
+            } - set(data.files)
             if missing:
                 raise SkelagnosticError(
-                    f"{path}: not a VQ-PAE embedding (missing {sorted(missing)})")
-            return cls(*(torch.from_numpy(data[k]) for k in ("phase", "frequency", "code",
-                                                             "amplitude", "manifold")),
-                       float(data["fps"]), str(data["dataset"]))
+                    f"{path}: not a VQ-PAE embedding (missing {sorted(missing)})"
+                )
+            return cls(
+                *(
+                    torch.from_numpy(data[k])
+                    for k in ("phase", "frequency", "code", "amplitude", "manifold")
+                ),
+                float(data["fps"]),
+                str(data["dataset"]),
+            )
 
 
 def embed_clip(aligner: VqpaeAligner, motion: Motion) -> ClipEmbedding:
@@ -102,12 +121,20 @@ def embed_clip(aligner: VqpaeAligner, motion: Motion) -> ClipEmbedding:
     """
     latent = aligner.encode(motion)
     x = latent.extras
-    return ClipEmbedding(x["phase"], x["frequency"], x["code"], x["amplitude"], latent.z,
-                         latent.fps, aligner.dataset_names[int(x["dataset"])])
+    return ClipEmbedding(
+        x["phase"],
+        x["frequency"],
+        x["code"],
+        x["amplitude"],
+        latent.z,
+        latent.fps,
+        aligner.dataset_names[int(x["dataset"])],
+    )
 
 
-def fit_average_pose(aligner: VqpaeAligner, datamodule: Any, epochs: int = 1,
-                     lr: float = 1e-3) -> dict[str, float]:
+def fit_average_pose(
+    aligner: VqpaeAligner, datamodule: Any, epochs: int = 1, lr: float = 1e-3
+) -> dict[str, float]:
     """Train every dataset's average-pose MLP on the frozen VQ-PAE (Sec. 5.2, Eq. 10).
 
     Each window frame's manifold point ``P[:, t]`` is mapped to its normalised
@@ -136,8 +163,9 @@ def fit_average_pose(aligner: VqpaeAligner, datamodule: Any, epochs: int = 1,
             for batch in loader:
                 with torch.no_grad():
                     p = aligner.encode_dataset(k, batch["features"].to(aligner.device))
-                loss = torch.nn.functional.mse_loss(mlp(p.manifold.transpose(1, 2)),
-                                                    batch["poses"].to(aligner.device))
+                loss = torch.nn.functional.mse_loss(
+                    mlp(p.manifold.transpose(1, 2)), batch["poses"].to(aligner.device)
+                )
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
@@ -203,13 +231,19 @@ def retrieve(
         windows = emb.manifold.float().unfold(0, n, 1).transpose(1, 2)  # [W, N, d]
         dist = (windows - query).square().sum((1, 2))
         best = torch.topk(dist, min(top, len(dist)), largest=False)
-        found += [Retrieval(c, int(i), n, float(d)) for d, i in zip(best.values, best.indices,
-                                                                     strict=True)]
+        found += [
+            Retrieval(c, int(i), n, float(d))
+            for d, i in zip(best.values, best.indices, strict=True)
+        ]
     return sorted(found, key=lambda r: r.distance)[:top]
 
 
-def plot_manifold(aligner: VqpaeAligner, embeddings: Mapping[str, Sequence[ClipEmbedding]],
-                  out: str | Path | None = None, samples: int = 64) -> Any:
+def plot_manifold(
+    aligner: VqpaeAligner,
+    embeddings: Mapping[str, Sequence[ClipEmbedding]],
+    out: str | Path | None = None,
+    samples: int = 64,
+) -> Any:
     """The phase manifold like Fig. 1: PCA of the codebook ellipses, one panel per character.
 
     Args:
@@ -234,7 +268,10 @@ def plot_clip_timing(embeddings: Mapping[str, ClipEmbedding], out: str | Path | 
     from skelagnostic.viz import plot_phase_over_time
 
     fps = next(iter(embeddings.values())).fps
-    return plot_phase_over_time({n: e.phase.numpy() for n, e in embeddings.items()},
-                                {n: e.frequency.numpy() for n, e in embeddings.items()},
-                                {n: e.code.numpy() for n, e in embeddings.items()},
-                                fps=fps, out=out)
+    return plot_phase_over_time(
+        {n: e.phase.numpy() for n, e in embeddings.items()},
+        {n: e.frequency.numpy() for n, e in embeddings.items()},
+        {n: e.code.numpy() for n, e in embeddings.items()},
+        fps=fps,
+        out=out,
+    )

@@ -311,8 +311,10 @@ def training_codes(aligner: Any, datamodule: Any) -> dict[str, torch.Tensor]:
             if name not in aligner.dataset_names:
                 continue
             k = aligner.dataset_names.index(name)
-            codes = [aligner.encode_dataset(k, b["features"].to(aligner.device)).code.cpu()
-                     for b in track(loader, f"{name}: codes of the training windows")]
+            codes = [
+                aligner.encode_dataset(k, b["features"].to(aligner.device)).code.cpu()
+                for b in track(loader, f"{name}: codes of the training windows")
+            ]
             if codes:
                 out[name] = torch.cat(codes)
     return out
@@ -611,9 +613,12 @@ def manifold_protocol(
     pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
     notes = [
         "codes_shared_training / frame_share_training_shared: "
-        + ("codes every character uses on the training split of the evaluated data"
-           if trained is not None else "omitted, the evaluated data has no training split "
-           "with a dataset of every character's name"),
+        + (
+            "codes every character uses on the training split of the evaluated data"
+            if trained is not None
+            else "omitted, the evaluated data has no training split "
+            "with a dataset of every character's name"
+        ),
         f"shared codes: {len(shared)} of {num_codes}, over the held-out clips of "
         f"{', '.join(by_character)}; chance = shared / K; codes shared / codes used by any "
         f"character: {table['codes_shared']} / {table['codes_used_any']}",

@@ -128,8 +128,11 @@ def transfer_summary(
     try:
         rows, outputs = transfer_rows(aligner, excerpts, database)
     except SkelagnosticError as error:  # e.g. frequencies whose periods no clip holds
-        return {"metrics": {"skipped": str(error)}, "renders": {},
-                "notes": f"## Transfer of held-out clips\n\nNot run: {error}\n"}
+        return {
+            "metrics": {"skipped": str(error)},
+            "renders": {},
+            "notes": f"## Transfer of held-out clips\n\nNot run: {error}\n",
+        }
     means = mean_rows(rows)
     source, target = aligner.dataset_names[0], aligner.dataset_names[1]
     lines = [

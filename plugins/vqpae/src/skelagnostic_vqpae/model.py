@@ -281,17 +281,24 @@ class VQPAE(nn.Module):
         super().__init__()
         if frequency_head not in FREQUENCY_HEADS:
             raise SkelagnosticError(
-                f"VQPAE: frequency_head must be one of {FREQUENCY_HEADS}, got {frequency_head!r}")
+                f"VQPAE: frequency_head must be one of {FREQUENCY_HEADS}, got {frequency_head!r}"
+            )
         self.frequency_head = frequency_head
         if padding_mode not in PADDING_MODES:
             raise SkelagnosticError(
-                f"VQPAE: padding_mode must be one of {PADDING_MODES}, got {padding_mode!r}")
+                f"VQPAE: padding_mode must be one of {PADDING_MODES}, got {padding_mode!r}"
+            )
         if spectrum not in ("normalized", "power"):
             raise SkelagnosticError(
-                f"VQPAE: spectrum must be 'normalized' or 'power', got {spectrum!r}")
+                f"VQPAE: spectrum must be 'normalized' or 'power', got {spectrum!r}"
+            )
         self.spectrum = spectrum
-        for arg, value in (("channels", channels), ("latent", latent),
-                           ("freq_layers", freq_layers), ("amp_layers", amp_layers)):
+        for arg, value in (
+            ("channels", channels),
+            ("latent", latent),
+            ("freq_layers", freq_layers),
+            ("amp_layers", amp_layers),
+        ):
             if value <= 0:
                 raise SkelagnosticError(f"VQPAE: {arg} must be positive, got {value}")
         for arg, value in (("kernel_size", kernel_size), ("phase_kernel", phase_kernel)):
@@ -302,20 +309,27 @@ class VQPAE(nn.Module):
             raise SkelagnosticError(f"VQPAE: intermediate must be positive, got {mid}")
         self.channels, self.window, self.fps, self.latent = channels, window, float(fps), latent
         self.register_buffer("times", relative_times(window, fps), persistent=False)
+
         def conv(c_in: int, c_out: int) -> nn.Conv1d:
             return nn.Conv1d(c_in, c_out, kernel_size, padding="same", padding_mode=padding_mode)
 
         self.encoder = nn.Sequential(
-            conv(channels, mid), TemporalCentering(), nn.ELU(),
-            conv(mid, latent), TemporalCentering(), nn.ELU(),
+            conv(channels, mid),
+            TemporalCentering(),
+            nn.ELU(),
+            conv(mid, latent),
+            TemporalCentering(),
+            nn.ELU(),
         )
-        self.phase_conv = nn.Conv1d(latent, 1, phase_kernel, padding="same",
-                                    padding_mode=padding_mode)
+        self.phase_conv = nn.Conv1d(
+            latent, 1, phase_kernel, padding="same", padding_mode=padding_mode
+        )
         bins = window // 2 + 1
         self.freq_mlp = _mlp([bins] * freq_layers + [1], hidden_elu=freq_hidden_elu)
         # frequency of every rfft bin (Hz): k / (T dt)
-        self.register_buffer("bin_hz", torch.arange(bins, dtype=torch.float32) * self.fps / window,
-                             persistent=False)
+        self.register_buffer(
+            "bin_hz", torch.arange(bins, dtype=torch.float32) * self.fps / window, persistent=False
+        )
         if frequency_head == "centroid_residual":  # the untrained head is the centroid
             last = self.freq_mlp[-1]
             nn.init.zeros_(last.weight)
@@ -385,8 +399,16 @@ class VQPAE(nn.Module):
         raw = self.amp_mlp(latent.mean(dim=-1))
         amplitude, code, vq_loss = quantize(raw)
         big_phi = phase.unsqueeze(-1) + frequency.unsqueeze(-1) * self.times
-        return PhaseParameters(phase, frequency, raw, amplitude, code,
-                               phase_manifold(amplitude, big_phi), signal, vq_loss)
+        return PhaseParameters(
+            phase,
+            frequency,
+            raw,
+            amplitude,
+            code,
+            phase_manifold(amplitude, big_phi),
+            signal,
+            vq_loss,
+        )
 
     def forward(self, x: Tensor, quantize: Quantizer) -> tuple[Tensor, PhaseParameters]:
         """Reconstruct ``x [B, C_in, T]``: ``(reconstruction [B, C_in, T], parameters)``."""
