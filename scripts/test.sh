@@ -15,6 +15,7 @@ fi
   -c constraints.txt -e ".[test,bench,docs,export]"
 echo "== ruff"
 "$VENV/bin/ruff" check src tests benchmarks plugins
+"$VENV/bin/ruff" format --check src tests benchmarks plugins scripts
 echo "== pytest"
 "$VENV/bin/python" -m pytest -n 2 --durations=15 "$@"
 echo "== doctests (the docstring examples of the library and of the built-in plugins)"
