@@ -162,5 +162,6 @@ def test_noreinit_preset_is_the_cpu2h_run_without_reinitialisation(vqpae_pm) -> 
         plugin_manager=vqpae_pm,
     )
     assert base.model.reinit is True and ablation.model.reinit is False
+    assert base.model.pose_mlp == "joint"  # the authors' average-pose MLPs (report section 25)
     ablation.model.reinit = True
     assert ablation == base
