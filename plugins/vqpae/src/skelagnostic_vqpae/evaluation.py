@@ -855,16 +855,13 @@ def locomotion_runs(
         >>> locomotion_runs(walk), locomotion_runs(walk, min_seconds=5.0)
         ([(0, 121)], [])
     """
-    moving = [*locomotion_frames(motion).tolist(), False]
-    runs, start = [], None
-    for t, m in enumerate(moving):
-        if m and start is None:
-            start = t
-        elif not m and start is not None:
-            if (t - start) / motion.fps >= min_seconds:
-                runs.append((start, t))
-            start = None
-    return runs
+    edges = np.diff(np.r_[0, locomotion_frames(motion).numpy().astype(np.int8), 0])
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [
+        (int(a), int(b))
+        for a, b in zip(starts, ends, strict=True)
+        if (b - a) / motion.fps >= min_seconds
+    ]
 
 
 def _rate_in_runs(
