@@ -13,6 +13,7 @@ import yaml
 from skelagnostic import cli
 from skelagnostic.data import MotionDataModule
 from skelagnostic.data.sources import ClipRef
+from skelagnostic.errors import SkelagnosticError
 
 FIT = [
     "model=example",
@@ -109,6 +110,50 @@ def test_explicit_overrides_still_win(
     assert config["data"]["batch_size"] == 3 and config["data"]["window"] == 16
     assert config["ckpt_path"] == str(fitted)  # a run directory stands for its best.ckpt
     assert str(fitted / "checkpoints" / "best.ckpt") in capsys.readouterr().out
+
+
+def test_a_run_directory_stands_for_the_checkpoint_its_run_chose(
+    fitted: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    last = fitted / "checkpoints" / "last.ckpt"
+    best = fitted / "checkpoints" / "best.ckpt"
+    # the command line chooses
+    assert cli.main(["validate", f"ckpt_path={fitted}", "run_checkpoint=last"]) == 0
+    (row,) = [line for line in capsys.readouterr().out.splitlines() if "evaluated" in line]
+    assert str(last) in row
+    # else the run's config (a preset whose last step is its model writes last)
+    config = fitted / "config.yaml"
+    saved = yaml.safe_load(config.read_text())
+    assert saved["run_checkpoint"] is None  # the fit's own: best
+    assert cli.runs.checkpoint_of(fitted) == best
+    config.write_text(yaml.safe_dump({**saved, "run_checkpoint": "last"}))
+    assert cli.runs.checkpoint_of(fitted) == last
+    assert cli.runs.checkpoint_of(fitted / "checkpoints") == last
+    assert cli.runs.checkpoint_of(fitted, "best") == best
+    # a missing preferred file falls back to the other one
+    moved = best.rename(tmp_path / "best.ckpt")
+    assert cli.runs.checkpoint_of(fitted, "best") == last
+    moved.rename(best)
+    # a wrong value names where it came from
+    config.write_text(config.read_text().replace("run_checkpoint: last", "run_checkpoint: top"))
+    with pytest.raises(SkelagnosticError, match=r"config.yaml: run_checkpoint .*'top'"):
+        cli.runs.checkpoint_of(fitted)
+    assert cli.main(["validate", f"ckpt_path={fitted}", "run_checkpoint=first"]) == 1
+    assert "run_checkpoint must be 'best' or 'last', got 'first'" in capsys.readouterr().err
+
+
+def test_a_resumed_fit_continues_from_the_last_checkpoint() -> None:
+    from omegaconf import OmegaConf
+
+    from skelagnostic.cli.app import _preferred_checkpoint
+
+    def chosen(**cfg: object) -> str | None:
+        return _preferred_checkpoint(OmegaConf.create({"run_checkpoint": None, **cfg}))
+
+    assert chosen(task="fit") == "last"
+    assert chosen(task="evaluate") is None  # the run's own choice, else best
+    assert chosen(task="fit", run_checkpoint="best") == "best"
+    assert chosen(task="test", run_checkpoint="last") == "last"
 
 
 def test_test_with_an_empty_split_is_an_error(

@@ -163,5 +163,6 @@ def test_noreinit_preset_is_the_cpu2h_run_without_reinitialisation(vqpae_pm) -> 
     )
     assert base.model.reinit is True and ablation.model.reinit is False
     assert base.model.pose_mlp == "joint"  # the authors' average-pose MLPs (report section 25)
+    assert base.run_checkpoint == "last"  # the cosine cycle's end is the model, not best val
     ablation.model.reinit = True
     assert ablation == base

@@ -89,6 +89,20 @@ class ConfigError(SkelagnosticError):
 
 
 # ----------------------------------------------------------------------------- run
+
+
+def _preferred_checkpoint(cfg: DictConfig) -> str | None:
+    """Which checkpoint a run directory given as ``ckpt_path`` stands for.
+
+    ``run_checkpoint=`` on the command line; else ``last`` for a resumed ``fit`` (it
+    continues where the run stopped); else ``None``: the run's own choice.
+    """
+    chosen = cfg.get("run_checkpoint")
+    if chosen is None and cfg.get("task") == "fit":
+        return "last"
+    return chosen
+
+
 def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModule:
     """The data module of ``cfg.model.name`` configured by ``cfg.data``.
 
@@ -393,7 +407,7 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     # an external checkpoint (a plugin's reader) is read below, once the data are built
     if external is None and ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):
         source_run = find_run_dir(ckpt)  # a run directory stands for its best/last checkpoint
-        ckpt = str(checkpoint_of(ckpt))
+        ckpt = str(checkpoint_of(ckpt, _preferred_checkpoint(cfg)))
         checkpoint = read_checkpoint(
             ckpt, spec.name, option="ckpt_path", aligners=pm.aligner_classes()
         )
@@ -818,7 +832,7 @@ def main(task: str, argv: Sequence[str]) -> int:
                 try:
                     metrics = run(cfg, pm)
                     ckpt = (
-                        checkpoint_of(cfg.ckpt_path)
+                        checkpoint_of(cfg.ckpt_path, _preferred_checkpoint(cfg))
                         if cfg.ckpt_path
                         and task != "fit"
                         and cfg.ckpt_path not in _CKPT_ALIASES

@@ -67,17 +67,43 @@ def find_run_dir(ckpt: str | Path) -> Path | None:
     return next((c for c in candidates if (c / CONFIG_FILE).is_file()), None)
 
 
-def checkpoint_of(path: str | Path) -> Path:
-    """``path`` itself, or for a run directory its ``best.ckpt`` (else ``last.ckpt``).
+def checkpoint_of(path: str | Path, prefer: str | None = None) -> Path:
+    """``path`` itself, or for a run directory the checkpoint that stands for its model.
+
+    That is ``best.ckpt`` (lowest ``val/loss``) unless ``prefer`` or, without it, the
+    run's own ``config.yaml`` says ``run_checkpoint: last`` (a schedule whose last
+    step is the trained model, such as a cosine cycle that ends at zero). When the
+    preferred file is missing the other one is taken.
+
+    Args:
+        path: A checkpoint file, or a run directory (or its ``checkpoints`` folder).
+        prefer: ``"best"`` or ``"last"``; ``None``: the run's ``run_checkpoint``, else best.
 
     Raises:
-        SkelagnosticError: A directory without either checkpoint.
+        SkelagnosticError: ``prefer`` (or the run's ``run_checkpoint``) is neither best
+            nor last, or the directory holds neither checkpoint.
+
+    Example:
+        >>> checkpoint_of("/nonexistent/run/checkpoints/last.ckpt").name
+        'last.ckpt'
     """
     path = expand_path(path)
     if not path.is_dir():
         return path
-    for name in ("best.ckpt", "last.ckpt"):
-        for candidate in (path / "checkpoints" / name, path / name):
+    source = "run_checkpoint"
+    if prefer is None:
+        run_dir = next((d for d in (path, path.parent) if (d / CONFIG_FILE).is_file()), None)
+        if run_dir is not None:
+            with contextlib.suppress(Exception):  # a broken config is reported by its reader
+                saved = OmegaConf.load(run_dir / CONFIG_FILE)
+                prefer = saved.get("run_checkpoint") if isinstance(saved, DictConfig) else None
+                source = f"{run_dir / CONFIG_FILE}: run_checkpoint"
+    prefer = "best" if prefer is None else prefer
+    if prefer not in ("best", "last"):
+        raise SkelagnosticError(f"{source} must be 'best' or 'last', got {prefer!r}")
+    order = (prefer, "last" if prefer == "best" else "best")
+    for name in order:
+        for candidate in (path / "checkpoints" / f"{name}.ckpt", path / f"{name}.ckpt"):
             if candidate.is_file():
                 return candidate
     raise SkelagnosticError(
