@@ -15,7 +15,7 @@ import torch
 from lightning.pytorch.callbacks import ModelCheckpoint
 from torch.utils.data import TensorDataset
 
-from skelagnostic.callbacks import ResumeFromEpochEnd
+from skelagnostic.callbacks import FinalStepValidation, ResumeFromEpochEnd
 from skelagnostic.data.datamodule import ResumableDataLoader, _ResumableSampler
 from skelagnostic.data.sources import ProceduralSource
 
@@ -185,7 +185,9 @@ def test_killed_fit_resumes_bitwise(
 
 
 # ------------------------------------------------ resume from every checkpoint of a run
-def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner, ExampleDataModule]:
+def _trainer(
+    root: Path, callbacks: tuple[L.Callback, ...] = (), **options: object
+) -> tuple[L.Trainer, ExampleAligner, ExampleDataModule]:
     """A 3-epoch example-aligner fit that checkpoints at every point Lightning can.
 
     After every training batch (``steps/``), after every validation run
@@ -221,7 +223,7 @@ def _trainer(root: Path, **options: object) -> tuple[L.Trainer, ExampleAligner, 
         accelerator="cpu",
         max_epochs=3,
         logger=False,
-        callbacks=[*checkpoints, ResumeFromEpochEnd()],  # as skelagnostic fit
+        callbacks=[*checkpoints, ResumeFromEpochEnd(), *callbacks],  # as skelagnostic fit
         enable_progress_bar=False,
         enable_model_summary=False,
         default_root_dir=root,
@@ -271,3 +273,49 @@ def test_resume_from_every_checkpoint_of_a_run_is_bitwise(tmp_path: Path, option
         resumed = _state(trainer, model)
         assert resumed["global_step"] == reference["global_step"], ckpt
         assert_same_training_state(resumed, reference)
+
+
+class _CountValidations(L.Callback):
+    def __init__(self) -> None:
+        self.steps: list[int] = []
+
+    def on_validation_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        if not trainer.sanity_checking:
+            self.steps.append(trainer.global_step)
+
+
+@pytest.mark.parametrize("final_validation", [False, True])
+def test_a_run_that_max_steps_stops_inside_an_epoch_validates_its_final_weights(
+    tmp_path: Path, final_validation: bool
+) -> None:
+    count = _CountValidations()
+    extra = (count, FinalStepValidation()) if final_validation else (count,)
+    trainer, model, dm = _trainer(tmp_path / "run", extra, max_steps=16, limit_val_batches=1)
+    trainer.fit(model, datamodule=dm)
+    per_epoch = trainer.num_training_batches
+    assert trainer.global_step == 16 and 16 % per_epoch and 16 > 2 * per_epoch
+    epoch_ends = [per_epoch, 2 * per_epoch]
+    assert count.steps == ([*epoch_ends, 16] if final_validation else epoch_ends)
+    # the validation's checkpoint callbacks saw the final weights
+    newest = torch.load(
+        tmp_path / "run" / "val" / f"step={count.steps[-1]}.ckpt", weights_only=False
+    )
+    final = model.state_dict()
+    same = all(torch.equal(newest["state_dict"][k], v) for k, v in final.items())
+    assert same == final_validation
+    assert "val/loss" in trainer.callback_metrics
+
+
+def test_a_run_that_ends_with_its_epoch_validates_once(tmp_path: Path) -> None:
+    count = _CountValidations()
+    trainer, model, dm = _trainer(tmp_path / "probe", limit_val_batches=0, max_steps=1)
+    trainer.fit(model, datamodule=dm)
+    per_epoch = trainer.num_training_batches
+    trainer, model, dm = _trainer(
+        tmp_path / "run",
+        (count, FinalStepValidation()),
+        max_steps=2 * per_epoch,
+        limit_val_batches=1,
+    )
+    trainer.fit(model, datamodule=dm)
+    assert count.steps == [per_epoch, 2 * per_epoch]

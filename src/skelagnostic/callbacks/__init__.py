@@ -1,6 +1,10 @@
 """Lightning callbacks of skelagnostic (this package imports lightning)."""
 
-from skelagnostic.callbacks.checkpoint import FinalStepCheckpoint, LatestWithoutValidation
+from skelagnostic.callbacks.checkpoint import (
+    FinalStepCheckpoint,
+    FinalStepValidation,
+    LatestWithoutValidation,
+)
 from skelagnostic.callbacks.checkpoint_io import AtomicCheckpointIO
 from skelagnostic.callbacks.ema import EMAWeights
 from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
@@ -12,6 +16,7 @@ __all__ = [
     "AtomicCheckpointIO",
     "EMAWeights",
     "FinalStepCheckpoint",
+    "FinalStepValidation",
     "FitSummary",
     "LatestWithoutValidation",
     "RenderSampleSource",

@@ -1,4 +1,4 @@
-"""Checkpoints of runs that have no validation data.
+"""Checkpoints of runs without validation data, and of runs that stop inside an epoch.
 
 Lightning's :class:`~lightning.pytorch.callbacks.ModelCheckpoint` writes
 ``last.ckpt`` only after it saved a top-k checkpoint in the same step. When it
@@ -15,7 +15,7 @@ from __future__ import annotations
 import lightning as L
 from lightning.pytorch.utilities import rank_zero_info
 
-__all__ = ["FinalStepCheckpoint", "LatestWithoutValidation"]
+__all__ = ["FinalStepCheckpoint", "FinalStepValidation", "LatestWithoutValidation"]
 
 
 class LatestWithoutValidation(L.Callback):
@@ -79,3 +79,35 @@ class FinalStepCheckpoint(L.Callback):
                 and saved < trainer.global_step
             ):
                 save(trainer, callback._monitor_candidates(trainer))
+
+
+class FinalStepValidation(L.Callback):
+    """Validate the final step of a run that ``max_steps`` stops inside an epoch.
+
+    Lightning validates at the end of each epoch (or every ``val_check_interval``
+    batches); a run sized in steps that ends between two validations then has no
+    validation figure of its trained weights, and ``best.ckpt`` can only be an
+    earlier state. At the batch that reaches ``trainer.max_steps`` this callback
+    asks the trainer to stop (``trainer.should_stop``), which Lightning answers
+    with one more validation, as after early stopping; its checkpoint callbacks
+    then compare the final weights too. Runs that end at an epoch's last batch,
+    epochs without validation (``check_val_every_n_epoch``) and runs without
+    validation data are left alone. ``skelagnostic fit`` adds this callback to
+    every run.
+    """
+
+    def on_train_batch_end(
+        self,
+        trainer: L.Trainer,
+        pl_module: L.LightningModule,
+        outputs: object,
+        batch: object,
+        batch_idx: int,
+    ) -> None:
+        """Request the stop (and so the validation) at the batch that reaches ``max_steps``."""
+        limit = trainer.max_steps
+        if limit is None or limit < 0 or trainer.global_step < limit or trainer.should_stop:
+            return
+        if trainer.fit_loop.epoch_loop.batch_progress.is_last_batch:
+            return  # the epoch ends here: Lightning validates anyway
+        trainer.should_stop = True

@@ -456,6 +456,7 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     if task == "fit":
         from skelagnostic.callbacks import (
             FinalStepCheckpoint,
+            FinalStepValidation,
             LatestWithoutValidation,
             ResumeFromEpochEnd,
         )
@@ -463,6 +464,7 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         callbacks += [
             LatestWithoutValidation(),
             FinalStepCheckpoint(),
+            FinalStepValidation(),
             ResumeFromEpochEnd(),
             RecordSplit(run_dir),
             AdaptiveLogInterval(),
