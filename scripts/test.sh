@@ -14,7 +14,7 @@ fi
 "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
   -c constraints.txt -e ".[test,bench,docs,export]"
 echo "== ruff"
-"$VENV/bin/ruff" check src tests benchmarks plugins
+"$VENV/bin/ruff" check src tests benchmarks plugins scripts
 "$VENV/bin/ruff" format --check src tests benchmarks plugins scripts
 echo "== pytest"
 "$VENV/bin/python" -m pytest -n 2 --durations=15 "$@"
