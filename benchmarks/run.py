@@ -6,7 +6,8 @@ Usage::
                              [--threads N]
     python benchmarks/run.py --suite all --size smoke
     python benchmarks/run.py --suite training --authors-repo walkthedog=DIR,pcmrl=DIR
-    python benchmarks/run.py --suite scaling [--data-root DIR] [--compile] [--plot DIR]
+    python benchmarks/run.py --suite scaling [--data-root DIR] [--methods NAME,...] [--compile]
+                             [--plot DIR]
 
 ``--authors-repo`` names checkouts of the methods' official repositories; the
 suites that compare with them (``training``, ``matching``) then time the authors'
@@ -15,9 +16,9 @@ Without it those baselines are absent (``null``).
 
 ``--data-root DIR`` is the folder of the training corpora (``DIR/lafan1``) the
 ``scaling`` suite reads (default ``$SKELAGNOSTIC_DATA``, else ``../shared/datasets``);
-``--compile`` also times ``torch.compile``d models there; ``--plot DIR`` writes the
-figures of the suites that draw some (a module-level ``plot(report, out_dir, date, size)``)
-as PNG files into ``DIR``.
+``--methods`` limits it to some methods, ``--compile`` also times ``torch.compile``d
+models there; ``--plot DIR`` writes the figures of the suites that draw some (a
+module-level ``plot(report, out_dir, date, size)``) as PNG files into ``DIR``.
 
 The JSON (read by external tooling; keep the format stable) is::
 
@@ -60,7 +61,7 @@ from benchmarks.harness import (  # noqa: E402
     machine_info,
     versions,
 )
-from benchmarks.suites.scaling import COMPILE_ENV, DATA_ENV  # noqa: E402
+from benchmarks.suites.scaling import COMPILE_ENV, DATA_ENV, METHODS_ENV, selected_methods  # noqa: E402
 
 #: Suite name -> module exposing ``run(size) -> list[Result]``.
 SUITES: dict[str, str] = {
@@ -163,6 +164,13 @@ def main(argv: list[str] | None = None) -> int:
         help="scaling suite: also time every method with torch.compile (against eager)",
     )
     parser.add_argument(
+        "--methods",
+        default=None,
+        metavar="NAME[,NAME]",
+        help="scaling suite: measure only these methods (vqpae, humot, pcmrl_recon, "
+        "pcmrl_interp; default: all)",
+    )
+    parser.add_argument(
         "--plot", type=Path, default=None, metavar="DIR", help="write the suites' figures here"
     )
     args = parser.parse_args(argv)
@@ -179,6 +187,12 @@ def main(argv: list[str] | None = None) -> int:
         os.environ[DATA_ENV] = str(args.data_root.expanduser().resolve())
     if args.compile:
         os.environ[COMPILE_ENV] = "1"
+    if args.methods is not None:
+        try:
+            selected_methods(args.methods)
+        except ValueError as err:
+            parser.error(f"--methods: {err}")
+        os.environ[METHODS_ENV] = args.methods
     apply_threads()
     names = list(SUITES) if args.suite == "all" else [args.suite]
     load_start = os.getloadavg()[0]

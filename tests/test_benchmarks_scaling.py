@@ -102,6 +102,41 @@ def test_results_leave_absent_figures_absent() -> None:
     assert "humot_prepare_peak_rss_mib_lafan1_2clips" in rows
 
 
+def test_methods_choose_a_subset_in_report_order(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(scaling.METHODS_ENV, raising=False)
+    assert scaling.selected_methods() == scaling.METHODS
+    assert scaling.selected_methods("humot, vqpae") == ("vqpae", "humot")
+    monkeypatch.setenv(scaling.METHODS_ENV, "pcmrl_interp")
+    assert scaling.selected_methods() == ("pcmrl_interp",)
+    with pytest.raises(ValueError, match=r"unknown method\(s\) dog; known: vqpae, humot"):
+        scaling.selected_methods("vqpae,dog")
+    with pytest.raises(ValueError, match="unknown method"):
+        scaling.selected_methods(",")
+    # a run of some methods has the rows of those only
+    raw = _raw()
+    del raw["methods"]["humot"], raw["methods"]["pcmrl_recon"]
+    names = set(_by_name(scaling.results(raw, "smoke")))
+    assert {n.split("_windows")[0].removesuffix("_ddp2") for n in names if "_windows" in n} == {
+        "vqpae",
+        "pcmrl_interp",
+    }
+
+
+def test_run_py_refuses_an_unknown_method() -> None:
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "benchmarks/run.py", "--suite", "scaling", "--methods", "cat"],
+        cwd=Path(__file__).resolve().parents[1],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 2
+    assert "--methods: scaling: unknown method(s) cat" in done.stderr
+
+
 def test_results_gpu_and_compiled_rows() -> None:
     rows = _by_name(scaling.results(_raw(gpu=True, compiled=True), "smoke"))
     gpu = rows["humot_windows_per_s_b4_gpu_bf16"]

@@ -69,6 +69,8 @@ METHODS = ("vqpae", "humot", "pcmrl_recon", "pcmrl_interp")
 DATA_ENV = "SKELAGNOSTIC_BENCH_DATA"
 #: Environment variable set by ``run.py --compile``: also time ``torch.compile``d models.
 COMPILE_ENV = "SKELAGNOSTIC_BENCH_COMPILE"
+#: Environment variable set by ``run.py --methods``: the methods to measure (comma-separated).
+METHODS_ENV = "SKELAGNOSTIC_BENCH_METHODS"
 #: Length of a generated clip (when the LaFAN1 files are absent), per size.
 GENERATED_SECONDS = {"smoke": 10.0, "default": 150.0, "large": 150.0}
 #: Tiny model options of the ``smoke`` size (as the DDP tests' runs).
@@ -524,6 +526,27 @@ def _import_everything() -> None:
     import skelagnostic.data  # noqa: F401
 
 
+def selected_methods(names: str | None = None) -> tuple[str, ...]:
+    """The methods to measure: ``names`` (comma-separated; default ``$METHODS_ENV``), else all.
+
+    Kept in the order of :data:`METHODS`.
+
+    Raises:
+        ValueError: A name that is not one of :data:`METHODS`.
+    """
+    names = os.environ.get(METHODS_ENV) if names is None else names
+    if not names:
+        return METHODS
+    chosen = {n.strip() for n in names.split(",") if n.strip()}
+    unknown = sorted(chosen - set(METHODS))
+    if unknown or not chosen:
+        raise ValueError(
+            f"scaling: unknown method(s) {', '.join(unknown) or repr(names)}; "
+            f"known: {', '.join(METHODS)}"
+        )
+    return tuple(m for m in METHODS if m in chosen)
+
+
 def measure_all(size: str, compiled: bool = False) -> dict[str, Any]:
     """Child process: every measurement of ``size``, each in a process forked from this one.
 
@@ -562,7 +585,7 @@ def measure_all(size: str, compiled: bool = False) -> dict[str, Any]:
         )
     small = sizes[0]
     with tempfile.TemporaryDirectory(prefix="skelagnostic-scaling-") as tmp:
-        for method in METHODS:
+        for method in selected_methods():
             cache = str(Path(tmp) / method / "curves")
             ref = settings.reference(method)
             out: dict[str, Any] = {"cpu": {}, "gpu_bf16": {}, "compiled": {}, "memory": {}}
@@ -633,7 +656,7 @@ def results(raw: dict[str, Any], size: str) -> list[Result]:
         for label, frames in raw["corpus_frames"].items()
     ]
     labels = list(raw["corpus_frames"])
-    for method in METHODS:
+    for method in (m for m in METHODS if m in raw["methods"]):  # run.py --methods: a subset
         got = raw["methods"][method]
         batches, ref = settings.batches[method], settings.reference(method)
         cpu, small = got["cpu"], batches[0]
@@ -714,6 +737,7 @@ def _rate(name: str, value: float, base: tuple[str, float] | None) -> Result:
 
 def run(size: str) -> list[Result]:
     """Run the suite at ``size`` (one child process that forks every measurement)."""
+    selected_methods()  # an unknown --methods name fails before the child starts
     raw, _ = run_child(
         "benchmarks.suites.scaling:measure_all",
         size=size,
