@@ -788,7 +788,7 @@ def plot(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.ticker import ScalarFormatter
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
 
     values = _figures(report)
     if not values:
@@ -853,8 +853,11 @@ def plot(
     axes[2].set_xticks(range(len(bars)), [b[0] for b in bars])
     axes[2].set(ylabel="x 1 process, 1 thread", title="2 cores: threads or DDP")
     for ax in axes[:2]:
+        low, high = ax.get_xlim()
         ax.xaxis.set_major_formatter(ScalarFormatter())
-        ax.xaxis.set_minor_formatter(ScalarFormatter())
+        # minor ticks get labels only within one decade (else they run into each other)
+        wide = low > 0 and high / low > 10
+        ax.xaxis.set_minor_formatter(NullFormatter() if wide else ScalarFormatter())
         ax.legend(fontsize=6, ncol=2)
     axes[2].legend(fontsize=7)
     for ax in axes:
