@@ -121,6 +121,13 @@ def test_a_run_directory_stands_for_the_checkpoint_its_run_chose(
     assert cli.main(["validate", f"ckpt_path={fitted}", "run_checkpoint=last"]) == 0
     (row,) = [line for line in capsys.readouterr().out.splitlines() if "evaluated" in line]
     assert str(last) in row
+    # the run's checkpoints folder stands for the run too: its config and split are reused
+    assert cli.runs.find_run_dir(fitted / "checkpoints") == fitted
+    assert cli.main(["validate", f"ckpt_path={fitted / 'checkpoints'}"]) == 0
+    assert str(best) in capsys.readouterr().out
+    newest = max((tmp_path / "runs" / "example" / "validate").iterdir())
+    reused = yaml.safe_load((newest / "config.yaml").read_text())
+    assert reused["model"]["hidden"] == 8 and reused["data"]["window"] == 16
     # else the run's config (a preset whose last step is its model writes last)
     config = fitted / "config.yaml"
     saved = yaml.safe_load(config.read_text())

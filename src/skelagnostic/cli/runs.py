@@ -47,20 +47,23 @@ REUSED = ("model", "data")
 
 
 def find_run_dir(ckpt: str | Path) -> Path | None:
-    """The run directory of a checkpoint (or the directory itself), if it has a ``config.yaml``.
+    """The run directory of a checkpoint (or of a directory), if it has a ``config.yaml``.
 
-    Looks at the checkpoint's folder, the one above it (``<run>/checkpoints/last.ckpt``)
-    and, for a checkpoint deeper in a run's ``checkpoints`` folder (a second
-    ``ModelCheckpoint`` writing to ``<run>/checkpoints/periodic/``), the folder that
-    holds ``checkpoints``.
+    For a checkpoint file, looks at its folder, the one above it
+    (``<run>/checkpoints/last.ckpt``) and, for a checkpoint deeper in a run's
+    ``checkpoints`` folder (a second ``ModelCheckpoint`` writing to
+    ``<run>/checkpoints/periodic/``), the folder that holds ``checkpoints``. A
+    directory is the run directory itself or its ``checkpoints`` folder.
 
     Example:
         >>> find_run_dir("/nonexistent/run/checkpoints/last.ckpt") is None
         True
     """
     path = expand_path(ckpt)
-    candidates = [path] if path.is_dir() else [path.parent, path.parent.parent]
-    if not path.is_dir():
+    if path.is_dir():
+        candidates = [path, path.parent] if path.name == "checkpoints" else [path]
+    else:
+        candidates = [path.parent, path.parent.parent]
         inside = next((p for p in path.parents if p.name == "checkpoints"), None)
         if inside is not None:
             candidates.append(inside.parent)
@@ -92,7 +95,7 @@ def checkpoint_of(path: str | Path, prefer: str | None = None) -> Path:
         return path
     source = "run_checkpoint"
     if prefer is None:
-        run_dir = next((d for d in (path, path.parent) if (d / CONFIG_FILE).is_file()), None)
+        run_dir = find_run_dir(path)
         if run_dir is not None:
             with contextlib.suppress(Exception):  # a broken config is reported by its reader
                 saved = OmegaConf.load(run_dir / CONFIG_FILE)
