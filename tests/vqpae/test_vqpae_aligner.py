@@ -141,6 +141,33 @@ def test_decode_gives_the_average_pose_on_the_skeleton(trained: dict) -> None:
     assert bool(torch.isfinite(out.global_positions()).all())
 
 
+def test_encode_and_decode_work_in_the_clips_length_units(trained: dict) -> None:
+    """The model sees a clip in metres, as the data sources gave it in training.
+
+    A clip in centimetres or millimetres (stated, or guessed from its height, as
+    ``read_bvh`` leaves it) embeds like the same clip in metres, and the average
+    pose comes back in the units of the skeleton it is decoded onto.
+    """
+    model: VqpaeAligner = trained["model"].eval()
+    metres, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=FPS, seed=5)
+    metres = metres.to_metres()
+    cm = metres.convert_units("cm")
+    guessed = cm.scaled(1.0)
+    guessed.units = None  # what read_bvh gives: the unit is guessed from the height
+    ref = model.encode(metres)
+    for other in (cm, guessed, metres.convert_units("mm")):
+        latent = model.encode(other)
+        assert torch.allclose(latent.z, ref.z, atol=1e-5)
+        for key in ("phase", "frequency", "amplitude"):
+            assert torch.allclose(latent.extras[key], ref.extras[key], atol=1e-5), key
+        assert torch.equal(latent.extras["code"], ref.extras["code"])
+    out_m = model.decode(ref, metres.skeleton)
+    out_cm = model.decode(ref, cm.skeleton)
+    assert (out_m.units, out_cm.units) == ("m", "cm")
+    assert torch.allclose(out_cm.global_positions(), 100 * out_m.global_positions(), atol=1e-6)
+    assert torch.allclose(out_m.rotations, out_cm.rotations, atol=1e-9)
+
+
 def test_unknown_skeleton_is_rejected(trained: dict) -> None:
     motion, _ = procedural.generate("biped17", "walk", seconds=1.0, fps=FPS, seed=1)
     with pytest.raises(SkelagnosticError, match="no trained dataset"):

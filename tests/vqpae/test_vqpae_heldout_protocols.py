@@ -381,7 +381,7 @@ def test_manifold_protocol_tables_per_character(tiny, tmp_path) -> None:
         )
     clip, _ = procedural.generate("biped22", "walk", seconds=6.0, fps=20, seed=gaits["seeds"][0])
     with torch.no_grad():
-        emb = embed_clip(model, clip.scaled(0.01))
+        emb = embed_clip(model, clip.convert_units("m"))  # metres, as in training
     first = gaits["clips"][0]
     assert first["gait"] == "walk" and first["kind"] == "biped22"
     assert first["predicted_hz"] == pytest.approx(float(emb.frequency[10:-10].median()))

@@ -42,6 +42,7 @@ from torch import Tensor, nn
 from skelagnostic.aligners import Aligner, Latent, steps_per_epoch
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph, Method
 from skelagnostic.lazy import deprecated_aliases
@@ -928,9 +929,15 @@ class VqpaeAligner(Aligner):
         )
 
     def _windows(self, k: int, motion: Motion) -> tuple[Tensor, Motion]:
-        """Normalised windows centred on every frame ``[F, C, T]`` (edges repeat the end frames)."""
+        """Normalised windows centred on every frame ``[F, C, T]`` (edges repeat the end frames).
+
+        The features are those of the motion in metres (:meth:`Motion.to_metres`:
+        its ``units``, else the guess from its skeleton's height), as the data
+        sources give them in training.
+        """
         spec = self.hparams["datasets"][self.dataset_names[k]]
         fps, window = float(spec["fps"]), int(spec["window"])
+        motion = motion.to_metres()
         if motion.fps != fps:
             motion = motion.resample(fps)
         char = self.characters[k]
@@ -943,6 +950,12 @@ class VqpaeAligner(Aligner):
     @torch.no_grad()
     def encode(self, motion: Motion, batch_size: int = 512) -> Latent:
         """Per-frame embedding of a whole clip (each frame = pivot of its own 1 s window).
+
+        Args:
+            motion: A clip on a trained skeleton, any frame rate and length unit
+                (``motion.units``, else guessed from the skeleton's height: the model
+                sees it in metres, as in training).
+            batch_size: Windows per forward pass.
 
         Returns:
             ``Latent`` with ``z`` the ``[F, d]`` manifold points at the dataset frame
@@ -971,11 +984,18 @@ class VqpaeAligner(Aligner):
         return Latent(z, motion.fps, {**cat, "dataset": torch.tensor(k)})
 
     @torch.no_grad()
-    def decode(self, latent: Latent, skeleton: Skeleton) -> Motion:
+    def decode(self, latent: Latent, skeleton: Skeleton, units: str | None = None) -> Motion:
         """The average pose at every manifold point, on ``skeleton`` (Sec. 5.2).
 
-        The dataset's average-pose MLP gives root-local joint positions; inverse
-        kinematics turns them into a motion standing at the origin.
+        The dataset's average-pose MLP gives root-local joint positions (metres);
+        inverse kinematics turns them into a motion standing at the origin, in the
+        skeleton's units.
+
+        Args:
+            latent: A latent of :meth:`encode`.
+            skeleton: A trained skeleton.
+            units: Length unit of ``skeleton`` (default: guessed from its height with
+                :func:`~skelagnostic.core.units.infer_units`).
 
         Raises:
             SkelagnosticError: ``skeleton`` is not a trained topology or its pose MLP
@@ -997,9 +1017,10 @@ class VqpaeAligner(Aligner):
                 "skelagnostic_vqpae.embed.fit_average_pose)"
             )
         pose = char.pose(latent.z.to(char.pose_mean)) * char.pose_std + char.pose_mean
-        positions = pose.view(len(pose), -1, 3).double().cpu()
+        unit = infer_units(skeleton, units)
+        positions = pose.view(len(pose), -1, 3).double().cpu() / UNITS[unit]
         rotations, root = inverse_kinematics(positions, skeleton)
-        return Motion(skeleton, rotations, root, latent.fps)
+        return Motion(skeleton, rotations, root, latent.fps, units=unit)
 
 
 #: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.

@@ -491,8 +491,8 @@ def procedural_gaits(aligner: Any, held: HeldOut, seeds_per_gait: int = 2) -> di
     :data:`PROCEDURAL_SECONDS` long at the character's frame rate, with seeds from
     :data:`PROCEDURAL_SEED` upwards, above every seed a procedural training source of
     the run used (a seed sets the body size, stride frequency and turning, so these
-    clips were never seen). The clips are scaled to the training skeleton's length
-    unit (the power of ten nearest the ratio of the heights). Per clip, on the
+    clips were never seen). The model sees them in metres, as it saw its training
+    clips (:meth:`VqpaeAligner.encode`). Per clip, on the
     frames whose window lies inside the clip: the median of the frequency head
     against the generator's stride frequency, the rate at which the phase advances
     (slope of :func:`phase_line`) against the same, and the phase's R^2.
@@ -523,8 +523,6 @@ def procedural_gaits(aligner: Any, held: HeldOut, seeds_per_gait: int = 2) -> di
             continue
         spec = specs[name]
         fps, half = float(spec["fps"]), int(spec["window"]) // 2
-        train_height = Skeleton.from_dict(spec["skeleton"]).height()
-        factor = 10.0 ** round(math.log10(train_height / procedural.skeleton(kind).height()))
         morphology = "quadruped" if kind == "quadruped" else "biped"
         for gait in procedural.GAITS[morphology]:
             if gait == "idle":
@@ -533,7 +531,7 @@ def procedural_gaits(aligner: Any, held: HeldOut, seeds_per_gait: int = 2) -> di
                 motion, info = procedural.generate(
                     kind, gait, seconds=PROCEDURAL_SECONDS, fps=fps, seed=seed
                 )
-                emb = embed_clip(aligner, motion.scaled(factor))
+                emb = embed_clip(aligner, motion)
                 inner = slice(half, max(len(emb) - half, half + 2))
                 truth = float(info["frequency"])
                 predicted = float(emb.frequency[inner].median())
