@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+from pathlib import Path
 
 import lightning as L
 import pytest
@@ -195,3 +197,121 @@ def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
     assert cfg.data.pair_seconds == 0.1
     default = compose(["model=vqpae", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm)
     assert default.model.num_codes == 32 and default.data.fps == 60  # paper-size defaults
+
+
+def _touchdowns_by_hand(motion: Motion, max_interval: float = 2.0) -> list[float]:
+    """Per frame: the mean over the feet of fps / (the stride interval holding the frame)."""
+    from skelagnostic_vqpae.evaluation import motion_onsets
+
+    onsets = [list(map(float, o)) for o in motion_onsets(motion)]
+    out = []
+    for t in range(motion.num_frames):
+        rates = [
+            motion.fps / (b - a)
+            for foot in onsets
+            for a, b in itertools.pairwise(foot)
+            if a <= t <= b and 0 < b - a <= max_interval * motion.fps
+        ]
+        out.append(sum(rates) / len(rates) if rates else math.nan)
+    return out
+
+
+def test_touchdown_frequency_equals_the_stride_intervals_counted_by_hand(
+    shared_data: Path,
+) -> None:
+    from skelagnostic_vqpae.evaluation import contact_frequency, touchdown_frequency
+
+    from skelagnostic.io import read_bvh
+
+    walk, _ = procedural.generate("quadruped", "trot", seconds=5.0, fps=30, seed=7)
+    human = read_bvh(shared_data / "human" / "lafan1" / "walk4_subject1.bvh")[:1800]
+    for motion in (walk, human):
+        got = touchdown_frequency(motion)
+        expected = torch.tensor(_touchdowns_by_hand(motion), dtype=torch.float32)
+        assert torch.isfinite(got).sum() > motion.num_frames // 4
+        assert torch.equal(torch.isnan(got), torch.isnan(expected))
+        assert torch.allclose(got.nan_to_num(), expected.nan_to_num(), rtol=1e-5)
+    # a steady gait: the per-frame rate is the clip's touch-down rate
+    assert float(touchdown_frequency(walk).nanmean()) == pytest.approx(
+        contact_frequency(walk), rel=0.05
+    )
+    # a standing pose has no stride
+    still = Motion(
+        walk.skeleton,
+        walk.rotations[:1].expand_as(walk.rotations).clone(),
+        walk.root_positions[:1].expand_as(walk.root_positions).clone(),
+        30,
+    )
+    assert bool(torch.isnan(touchdown_frequency(still)).all())
+
+
+def test_known_frequencies_replace_the_rules_where_given(tiny_run) -> None:
+    from skelagnostic_vqpae.transfer import build_database, matching_frequency, transfer
+
+    from skelagnostic.errors import SkelagnosticError
+    from skelagnostic.evaluation import clips_of_split
+
+    model, held = tiny_run
+    human = next(c for c in held.clips if model.dataset_of(c.skeleton) == 0)
+    dogs = [
+        c for c in clips_of_split(held.datamodule, "train") if model.dataset_of(c.skeleton) == 1
+    ]
+    with torch.no_grad():
+        plain = build_database(model, dogs)
+        rule = [matching_frequency(e, model.characters[1].pae.window)[0] for e in plain.embeddings]
+        known = [torch.full_like(r, float("nan")) for r in rule]
+        known[0][: len(known[0]) // 2] = 1.25  # half of the first clip known
+        given = build_database(model, dogs, frequencies=known)
+        pairs = zip(known, rule, strict=True)
+        expected = torch.cat([torch.where(torch.isnan(k), r, k) for k, r in pairs])
+        assert torch.equal(given.database.raw("frequency")[:, 0], expected)
+        # the query: all-NaN keeps the rule, so the transfer is the plain one
+        base = transfer(model, human, plain)
+        frames = len(base.source)
+        same = transfer(model, human, plain, frequency=torch.full((frames,), float("nan")))
+        assert torch.equal(same.motion.rotations, base.motion.rotations)
+        slow = transfer(model, human, plain, frequency=torch.full((frames,), 0.5))
+        assert [s.out_length for s in slow.match.segments] != [
+            s.out_length for s in base.match.segments
+        ]
+        with pytest.raises(SkelagnosticError, match=r"transfer: frequency: 3 frames"):
+            transfer(model, human, plain, frequency=torch.ones(3))
+        with pytest.raises(SkelagnosticError, match="must be positive"):
+            transfer(model, human, plain, frequency=torch.zeros(frames))
+        with pytest.raises(SkelagnosticError, match=r"frequencies\[0\]"):
+            build_database(model, dogs, frequencies=[torch.ones(2), *known[1:]])
+        with pytest.raises(SkelagnosticError, match="frequency tracks"):
+            build_database(model, dogs, frequencies=known[:1])
+
+
+def test_transfer_protocol_reports_the_touchdown_bound(tiny_run, tmp_path) -> None:
+    from skelagnostic_vqpae.evaluation import rhythm_figures, touchdown_frequency
+    from skelagnostic_vqpae.transfer import build_database, transfer
+
+    from skelagnostic.evaluation import clips_of_split
+
+    model, held = tiny_run
+    with torch.no_grad():
+        out = transfer_protocol(model, held, tmp_path)
+    bound = out.extra["touchdown_periods"]
+    assert set(bound["per_clip"]) == {r["clip"] for r in out.rows}
+    assert 0 < bound["replaced"]["source"] <= 1 and 0 < bound["replaced"]["database"] <= 1
+    for key, mean in bound["mean"].items():
+        values = [f[key] for f in bound["per_clip"].values() if not math.isnan(f[key])]
+        assert mean == pytest.approx(sum(values) / len(values)) if values else math.isnan(mean)
+    assert any("touchdown_periods" in note for note in out.notes)
+    # the first clip again, by hand: the frequencies from the feet on both sides
+    human = next(c for c in held.clips if model.dataset_of(c.skeleton) == 0)
+    dogs = [
+        c for c in clips_of_split(held.datamodule, "train") if model.dataset_of(c.skeleton) == 1
+    ]
+    fps = model.hparams["datasets"][model.dataset_names[1]]["fps"]
+
+    def at(m: Motion) -> Motion:
+        return m if m.fps == fps else m.resample(fps)
+
+    with torch.no_grad():
+        db = build_database(model, dogs, frequencies=[touchdown_frequency(at(d)) for d in dogs])
+        made = transfer(model, human, db, frequency=touchdown_frequency(at(human)))
+    figures = rhythm_figures(human, made.motion)
+    assert bound["per_clip"][str(human.name)] == pytest.approx(figures, nan_ok=True)

@@ -168,6 +168,21 @@ def matching_frequency(
     return torch.where(replaced, measured.float(), head), replaced
 
 
+def _known(rule: Tensor, known: Tensor | None, field: str) -> Tensor:
+    """``rule`` with the finite frames of ``known`` (Hz, same length) put in."""
+    if known is None:
+        return rule
+    known = torch.as_tensor(known, dtype=rule.dtype).reshape(-1)
+    if known.numel() != rule.numel():
+        raise SkelagnosticError(
+            f"{field}: {known.numel()} frames, the clip's embedding has {rule.numel()} "
+            "(give one value per frame at the model's frame rate)"
+        )
+    if bool((known <= 0).any()):
+        raise SkelagnosticError(f"{field}: frequencies must be positive (NaN: unknown)")
+    return torch.where(torch.isfinite(known), known, rule)
+
+
 def _window(aligner: VqpaeAligner, motion: Motion) -> int:
     """Frames of the VQ-PAE window of ``motion``'s character."""
     return int(aligner.characters[aligner.dataset_of(motion.skeleton)].pae.window)
@@ -178,12 +193,13 @@ def build_database(
     motions: Sequence[Motion],
     names: Sequence[str] | None = None,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
+    frequencies: Sequence[Tensor | None] | None = None,
 ) -> TransferDatabase:
     """Embed the target character's clips and build the matching database.
 
     The ``frequency`` group holds :func:`matching_frequency` (the head's estimate,
     or the measured phase rate where they disagree by more than
-    ``frequency_tolerance``).
+    ``frequency_tolerance``), or the frequencies given in ``frequencies``.
 
     Args:
         aligner: A trained aligner that knows the clips' skeleton.
@@ -191,15 +207,23 @@ def build_database(
         names: Optional clip names.
         frequency_tolerance: See :func:`matching_frequency`; None: the head's
             estimates as they are.
+        frequencies: Optional known frequencies per clip (Hz, one value per frame
+            at the model's frame rate, e.g. from contact annotations; None for a
+            clip, or NaN for a frame, keeps the rule's value there).
 
     Returns:
         The database.
 
     Raises:
-        SkelagnosticError: No clip, or clips of different topologies.
+        SkelagnosticError: No clip, clips of different topologies, or ``frequencies``
+            whose count or lengths do not match the clips.
     """
     if not motions:
         raise SkelagnosticError("build_database: motions is empty")
+    if frequencies is not None and len(frequencies) != len(motions):
+        raise SkelagnosticError(
+            f"build_database: {len(frequencies)} frequency tracks for {len(motions)} clips"
+        )
     datasets = {aligner.dataset_of(m.skeleton) for m in motions}
     if len(datasets) != 1:
         raise SkelagnosticError("build_database: the clips belong to different characters")
@@ -208,9 +232,11 @@ def build_database(
     window = _window(aligner, motions[0])
     resampled = [m if m.fps == fps else m.resample(fps) for m in motions]
     clips = []
-    for m, e in zip(resampled, embeddings, strict=True):
+    known = frequencies if frequencies is not None else [None] * len(motions)
+    for i, (m, e) in enumerate(zip(resampled, embeddings, strict=True)):
         pose = GlobalPositions(frame="root").encode(m).float().flatten(1) / m.skeleton.height()
         frequency, _ = matching_frequency(e, window, frequency_tolerance)
+        frequency = _known(frequency, known[i], f"build_database: frequencies[{i}]")
         clips.append(
             {"manifold": e.manifold.float(), "frequency": frequency[:, None], "pose": pose}
         )
@@ -229,6 +255,7 @@ def transfer(
     replay_seconds: float = 1.0,
     halflife: float | None = HALFLIFE,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
+    frequency: Tensor | None = None,
 ) -> TransferResult:
     """Transfer ``source`` onto the target character by frequency-scaled motion matching.
 
@@ -252,6 +279,9 @@ def transfer(
         frequency_tolerance: Rule of the source's periods (:func:`matching_frequency`);
             None: the frequency head's estimates (the paper). The database's
             periods follow the rule it was built with (:func:`build_database`).
+        frequency: Optional known frequencies of the source (Hz, one per frame at
+            the model's frame rate; NaN keeps the rule's value), as
+            :func:`build_database`'s ``frequencies``.
 
     Returns:
         The transferred motion (target skeleton, database frame rate).
@@ -267,7 +297,8 @@ def transfer(
         )
     if halflife is not None and not halflife > 0:
         raise SkelagnosticError(f"transfer: halflife must be > 0 seconds (or None), got {halflife}")
-    frequency, _ = matching_frequency(emb, _window(aligner, source), frequency_tolerance)
+    rule, _ = matching_frequency(emb, _window(aligner, source), frequency_tolerance)
+    frequency = _known(rule, frequency, "transfer: frequency")
     query = {"manifold": emb.manifold.float(), "frequency": frequency[:, None]}
     if not scaled:
         if not replay_seconds > 0:
