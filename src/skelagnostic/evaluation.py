@@ -354,6 +354,18 @@ def portable_names(names: Sequence[str]) -> dict[str, str]:
     }
 
 
+def _renamed(value: Any, names: Mapping[str, str]) -> Any:
+    """``value`` with every string (or mapping key) that is a clip id in ``names`` renamed."""
+    if isinstance(value, Mapping):
+        return {
+            names.get(k, k) if isinstance(k, str) else k: _renamed(v, names)
+            for k, v in value.items()
+        }
+    if isinstance(value, list | tuple):
+        return [_renamed(v, names) for v in value]
+    return names.get(value, value) if isinstance(value, str) else value
+
+
 def write_evaluation(
     result: Evaluation,
     out_dir: str | Path,
@@ -393,6 +405,7 @@ def write_evaluation(
     mean = mean_rows(result.rows)
     portable = portable_names([*held.names, *(str(row["clip"]) for row in result.rows)])
     rows = [{**row, "clip": portable[str(row["clip"])]} for row in result.rows]
+    extra = _renamed(result.extra, portable)
     plot_method_comparison(mean, title=protocol, out=out / "evaluation.png")
     report = {
         "schema": SCHEMA_VERSION,
@@ -412,7 +425,7 @@ def write_evaluation(
         "metrics": dict(result.metrics),
         "mean": mean,
         "per_clip": rows,
-        "extra": result.extra,
+        "extra": extra,
         "plots": ["evaluation.png", *result.plots],
         "notes": list(result.notes),
     }

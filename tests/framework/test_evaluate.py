@@ -222,7 +222,8 @@ def test_evaluation_json_names_file_clips_without_the_machines_folders(tmp_path:
         {"clip": clip_id, "values": {"model": {"mpjpe_cm": float(i)}}}
         for i, clip_id in enumerate([*ids, "window_3"])
     ]
-    result = Evaluation({"mpjpe_cm": "an error"}, rows)
+    extra = {"bound": {"per_clip": {ids[0]: 1.0}, "clips": [ids[1], "window_3"]}, "n": 2}
+    result = Evaluation({"mpjpe_cm": "an error"}, rows, extra=extra)
     report = write_evaluation(
         result,
         tmp_path / "out",
@@ -236,6 +237,11 @@ def test_evaluation_json_names_file_clips_without_the_machines_folders(tmp_path:
     names = ["lafan1/walk1_subject5.bvh", "mann_dog/D1_004.bvh"]
     assert report["data"]["clips"] == names
     assert [r["clip"] for r in report["per_clip"]] == [*names, "window_3"]
+    # clip ids inside extra (keys and values) too
+    assert report["extra"] == {
+        "bound": {"per_clip": {names[0]: 1.0}, "clips": [names[1], "window_3"]},
+        "n": 2,
+    }
     written = (tmp_path / "out" / "evaluation.json").read_text()
     assert str(tmp_path) not in written
     assert str(tmp_path) not in (tmp_path / "out" / "evaluation.md").read_text()
