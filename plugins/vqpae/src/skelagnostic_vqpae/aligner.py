@@ -867,8 +867,8 @@ class VqpaeAligner(Aligner):
                     fixed_axes=fixed,
                     metadata={
                         **meta,
-                        "representation": "RootLocalVelocities, [T, J, 3] flattened to "
-                        "[T, J*3] and transposed to [J*3, T]",
+                        "representation": "RootLocalVelocities of the motion in metres, "
+                        "[T, J, 3] flattened to [T, J*3] and transposed to [J*3, T]",
                         "normalisation": {
                             "input_mean": char.input_mean,
                             "input_std": char.input_std,
