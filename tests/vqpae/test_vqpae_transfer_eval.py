@@ -276,8 +276,9 @@ def test_known_frequencies_replace_the_rules_where_given(tiny_run) -> None:
         ]
         with pytest.raises(SkelagnosticError, match=r"transfer: frequency: 3 frames"):
             transfer(model, human, plain, frequency=torch.ones(3))
-        with pytest.raises(SkelagnosticError, match="must be positive"):
-            transfer(model, human, plain, frequency=torch.zeros(frames))
+        for bad in (0.0, -1.0, float("inf")):
+            with pytest.raises(SkelagnosticError, match="must be positive and finite"):
+                transfer(model, human, plain, frequency=torch.full((frames,), bad))
         with pytest.raises(SkelagnosticError, match=r"frequencies\[0\]"):
             build_database(model, dogs, frequencies=[torch.ones(2), *known[1:]])
         with pytest.raises(SkelagnosticError, match="frequency tracks"):

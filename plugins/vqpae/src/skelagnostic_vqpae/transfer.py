@@ -178,9 +178,9 @@ def _known(rule: Tensor, known: Tensor | None, field: str) -> Tensor:
             f"{field}: {known.numel()} frames, the clip's embedding has {rule.numel()} "
             "(give one value per frame at the model's frame rate)"
         )
-    if bool((known <= 0).any()):
-        raise SkelagnosticError(f"{field}: frequencies must be positive (NaN: unknown)")
-    return torch.where(torch.isfinite(known), known, rule)
+    if bool((known <= 0).any() | torch.isinf(known).any()):
+        raise SkelagnosticError(f"{field}: frequencies must be positive and finite (NaN: unknown)")
+    return torch.where(torch.isnan(known), rule, known)
 
 
 def _window(aligner: VqpaeAligner, motion: Motion) -> int:
