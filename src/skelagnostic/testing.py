@@ -1,7 +1,7 @@
 """A reusable contract test for aligners: what ``skelagnostic fit`` and users rely on.
 
 Subclass :class:`AlignerContract` in a pytest module of your plugin and name
-your aligner; pytest then runs four tests against it, at the sizes you give::
+your aligner; pytest then runs five tests against it, at the sizes you give::
 
     from skelagnostic.testing import AlignerContract
 
@@ -24,6 +24,10 @@ optimizer steps, one validation pass, CPU) made through the same
   ``decode`` it (and ``retarget``, if declared) onto :meth:`~AlignerContract.target_skeleton`:
   a finite :class:`~skelagnostic.core.motion.Motion` of that skeleton with the
   clip's length and frame rate;
+* ``test_encode_ignores_the_length_unit``: the same clip in metres and in
+  centimetres (and in centimetres with its unit left to the height guess, as
+  ``read_bvh`` leaves a file's) encodes to the same latent: models train on the
+  data sources' metres, and users pass files in any unit;
 * ``test_logging_is_ddp_safe``: every ``self.log`` in a step passes an explicit
   ``batch_size`` (batches are dicts of datasets, which Lightning cannot size),
   and every epoch-level value logged in a step (validation, test, ``on_epoch=True``)
@@ -33,7 +37,8 @@ optimizer steps, one validation pass, CPU) made through the same
 
 The same checks are plain functions (:func:`fit_for_contract`,
 :func:`check_fit`, :func:`check_checkpoint_round_trip`,
-:func:`check_encode_decode`, :func:`check_logging`) for other test runners.
+:func:`check_encode_decode`, :func:`check_length_units`, :func:`check_logging`) for
+other test runners.
 This module imports pytest: use it from tests.
 """
 
@@ -327,6 +332,31 @@ def check_encode_decode(run: ContractRun, motion: Motion, target: Skeleton) -> N
         assert bool(torch.isfinite(out.global_positions()).all()), f"{name}: non-finite output"
 
 
+def check_length_units(run: ContractRun, motion: Motion) -> None:
+    """``encode`` gives the same latent for a clip in metres, centimetres, or an unstated unit.
+
+    Args:
+        run: The contract run.
+        motion: A clip of a skeleton the aligner was trained on.
+    """
+    model = run.model.eval()
+    metres = motion.to_metres()
+    guessed = metres.convert_units("cm")
+    guessed.units = None  # as read_bvh leaves a file: the unit is guessed from the height
+    reference = model.encode(metres).z.float().cpu()
+    for label, other in (("centimetres", metres.convert_units("cm")), ("no unit", guessed)):
+        torch.testing.assert_close(
+            model.encode(other).z.float().cpu(),
+            reference,
+            rtol=1e-4,
+            atol=1e-5,
+            msg=lambda m, label=label: (
+                f"{type(model).__name__}.encode: the clip in {label} encodes differently from "
+                f"the same clip in metres (convert with Motion.to_metres before the network): {m}"
+            ),
+        )
+
+
 def check_logging(run: ContractRun) -> None:
     """Explicit ``batch_size`` in step logs; ``sync_dist=True`` for epoch-level step values.
 
@@ -397,6 +427,10 @@ class AlignerContract:
         """``encode``/``decode`` (and ``retarget``) shapes, fps and finiteness."""
         motion = self.motion(contract_run)
         check_encode_decode(contract_run, motion, self.target_skeleton(contract_run, motion))
+
+    def test_encode_ignores_the_length_unit(self, contract_run: ContractRun) -> None:
+        """A clip in metres, centimetres or an unstated unit encodes the same."""
+        check_length_units(contract_run, self.motion(contract_run))
 
     def test_logging_is_ddp_safe(self, contract_run: ContractRun) -> None:
         """``batch_size`` in step logs, ``sync_dist`` for epoch-level values."""
