@@ -341,10 +341,11 @@ def check_length_units(run: ContractRun, motion: Motion) -> None:
     """
     model = run.model.eval()
     metres = motion.to_metres()
-    guessed = metres.convert_units("cm")
-    guessed.units = None  # as read_bvh leaves a file: the unit is guessed from the height
+    cm = metres.convert_units("cm")
+    guessed = cm.scaled(1.0)  # a copy, whose unit is left to the height guess (as read_bvh)
+    guessed.units = None
     reference = model.encode(metres).z.float().cpu()
-    for label, other in (("centimetres", metres.convert_units("cm")), ("no unit", guessed)):
+    for label, other in (("centimetres", cm), ("no unit", guessed)):
         torch.testing.assert_close(
             model.encode(other).z.float().cpu(),
             reference,

@@ -246,7 +246,12 @@ def test_touchdown_frequency_equals_the_stride_intervals_counted_by_hand(
 
 
 def test_known_frequencies_replace_the_rules_where_given(tiny_run) -> None:
-    from skelagnostic_vqpae.transfer import build_database, matching_frequency, transfer
+    from skelagnostic_vqpae.transfer import (
+        build_database,
+        matching_frequency,
+        transfer,
+        with_known_frequencies,
+    )
 
     from skelagnostic.errors import SkelagnosticError
     from skelagnostic.evaluation import clips_of_split
@@ -265,6 +270,11 @@ def test_known_frequencies_replace_the_rules_where_given(tiny_run) -> None:
         pairs = zip(known, rule, strict=True)
         expected = torch.cat([torch.where(torch.isnan(k), r, k) for k, r in pairs])
         assert torch.equal(given.database.raw("frequency")[:, 0], expected)
+        # the same from the built database, without embedding its clips again
+        again = with_known_frequencies(model, plain, known)
+        assert again.embeddings == plain.embeddings
+        for group in ("manifold", "frequency", "pose"):
+            assert torch.equal(again.database.raw(group), given.database.raw(group)), group
         # the query: all-NaN keeps the rule, so the transfer is the plain one
         base = transfer(model, human, plain)
         frames = len(base.source)

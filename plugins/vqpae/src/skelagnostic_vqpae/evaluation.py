@@ -58,7 +58,14 @@ from skelagnostic.evaluation import (
 from skelagnostic.metrics.functional import manifold_overlap
 from skelagnostic.representations import GlobalPositions
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip, plot_manifold
-from skelagnostic_vqpae.transfer import FREQUENCY_TOLERANCE, HALFLIFE, build_database, transfer
+from skelagnostic_vqpae.transfer import (
+    FREQUENCY_TOLERANCE,
+    HALFLIFE,
+    TransferDatabase,
+    build_database,
+    transfer,
+    with_known_frequencies,
+)
 
 __all__ = [
     "CONTACT_ENTER",
@@ -1122,7 +1129,7 @@ def acceleration(motion: Motion) -> tuple[float, float]:
 def transfer_rows(
     aligner: Any,
     sources: Sequence[Motion],
-    database: Sequence[Motion],
+    database: Sequence[Motion] | TransferDatabase,
     replay_seconds: float = 1.0,
     halflife: float | None = HALFLIFE,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
@@ -1141,7 +1148,9 @@ def transfer_rows(
     Args:
         aligner: A trained aligner that knows both skeletons.
         sources: Clips of the source character (e.g. held-out human clips).
-        database: Clips of the target character (e.g. its training clips).
+        database: Clips of the target character (e.g. its training clips), or their
+            database already built with ``frequency_tolerance``
+            (:func:`~skelagnostic_vqpae.transfer.build_database`).
         replay_seconds: Replay length of the baseline.
         halflife: Inertialization halflife of the transitions, seconds; None: hard
             cuts (:func:`~skelagnostic_vqpae.transfer.transfer`).
@@ -1154,8 +1163,15 @@ def transfer_rows(
         (plus ``source_hz`` per row), and ``clip id -> [source, model output, baseline
         output, unscaled-matching output, own-rate output]``.
     """
-    target = build_database(
-        aligner, database, [str(m.name) for m in database], frequency_tolerance=frequency_tolerance
+    target = (
+        database
+        if isinstance(database, TransferDatabase)
+        else build_database(
+            aligner,
+            database,
+            [str(m.name) for m in database],
+            frequency_tolerance=frequency_tolerance,
+        )
     )
     shortest = min(m.duration for m in target.motions)
     rows, outputs = [], {}
@@ -1209,7 +1225,7 @@ def transfer_rows(
 def touchdown_bound(
     aligner: Any,
     sources: Sequence[Motion],
-    database: Sequence[Motion],
+    target: TransferDatabase,
     halflife: float | None = HALFLIFE,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
 ) -> dict[str, Any]:
@@ -1221,44 +1237,38 @@ def touchdown_bound(
     covers the frame. It uses the source's own feet, so it is a bound on what
     better frequency estimates can give the rhythm figures, not a method.
 
+    Args:
+        aligner: A trained aligner that knows both skeletons.
+        sources: Clips of the source character.
+        target: The target character's database, built with ``frequency_tolerance``
+            (its embeddings are reused).
+        halflife: Inertialization halflife of the transitions, seconds.
+        frequency_tolerance: The period rule where no foot steps.
+
     Returns:
         ``per_clip`` (clip id -> :func:`rhythm_figures`), ``mean`` (of each figure
-        over the clips, NaN skipped) and ``replaced`` (share of the source's and the
-        database's frames whose frequency came from the feet).
+        over the clips, NaN skipped, as the rows' means) and ``replaced`` (share of
+        the source's and the database's frames whose frequency came from the feet).
     """
-
-    def at_fps(m: Motion) -> Motion:  # the frames of the model's embedding
-        name = aligner.dataset_names[aligner.dataset_of(m.skeleton)]
-        fps = float(aligner.hparams["datasets"][name]["fps"])
-        return m if m.fps == fps else m.resample(fps)
-
-    known = [touchdown_frequency(at_fps(m)) for m in database]
-    target = build_database(
-        aligner,
-        database,
-        [str(m.name) for m in database],
-        frequency_tolerance=frequency_tolerance,
-        frequencies=known,
-    )
+    known = [touchdown_frequency(m) for m in target.motions]  # at the database's rate
+    feet = with_known_frequencies(aligner, target, known, frequency_tolerance)
+    fps = target.database.fps
     per_clip: dict[str, dict[str, float]] = {}
     source_frames = source_known = 0
     for clip in track(sources, "transfer: touch-down periods"):
-        frequency = touchdown_frequency(at_fps(clip))
+        frequency = touchdown_frequency(clip if clip.fps == fps else clip.resample(fps))
         source_frames += frequency.numel()
         source_known += int(torch.isfinite(frequency).sum())
         out = transfer(
             aligner,
             clip,
-            target,
+            feet,
             halflife=halflife,
             frequency_tolerance=frequency_tolerance,
             frequency=frequency,
         ).motion
         per_clip[str(clip.name)] = rhythm_figures(clip, out)
-    mean = {}
-    for key in next(iter(per_clip.values()), {}):
-        values = np.array([f[key] for f in per_clip.values()], dtype=float)
-        mean[key] = math.nan if np.isnan(values).all() else float(np.nanmean(values))
+    mean = mean_rows([{"values": {"bound": f}} for f in per_clip.values()]).get("bound", {})
     db_frames = sum(f.numel() for f in known)
     return {
         "per_clip": per_clip,
@@ -1293,8 +1303,9 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
     ]
     if not database:
         raise EvaluationError(f"vqpae.transfer: no training clip of {names[1]!r} for the database")
-    rows, outputs = transfer_rows(aligner, sources, database)
-    bound = touchdown_bound(aligner, sources, database)
+    target = build_database(aligner, database, [str(m.name) for m in database])
+    rows, outputs = transfer_rows(aligner, sources, target)
+    bound = touchdown_bound(aligner, sources, target)
 
     def bounded(metric: str) -> float:
         return float(bound["mean"].get(metric, math.nan))

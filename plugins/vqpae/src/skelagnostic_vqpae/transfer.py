@@ -51,6 +51,7 @@ __all__ = [
     "matching_frequency",
     "phase_rate",
     "transfer",
+    "with_known_frequencies",
 ]
 
 #: Inertialization halflife of the transitions, seconds. The paper inertializes every
@@ -220,28 +221,65 @@ def build_database(
     """
     if not motions:
         raise SkelagnosticError("build_database: motions is empty")
-    if frequencies is not None and len(frequencies) != len(motions):
-        raise SkelagnosticError(
-            f"build_database: {len(frequencies)} frequency tracks for {len(motions)} clips"
-        )
     datasets = {aligner.dataset_of(m.skeleton) for m in motions}
     if len(datasets) != 1:
         raise SkelagnosticError("build_database: the clips belong to different characters")
     embeddings = [embed_clip(aligner, m) for m in motions]
     fps = embeddings[0].fps
-    window = _window(aligner, motions[0])
     resampled = [m if m.fps == fps else m.resample(fps) for m in motions]
-    clips = []
+    return _assemble(aligner, resampled, embeddings, names, frequency_tolerance, frequencies)
+
+
+def with_known_frequencies(
+    aligner: VqpaeAligner,
+    target: TransferDatabase,
+    frequencies: Sequence[Tensor | None],
+    frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
+) -> TransferDatabase:
+    """``target`` again with known frequencies, without embedding its clips again.
+
+    The same database as :func:`build_database` with ``frequencies`` would give for
+    ``target``'s clips (one ``[F]`` Hz tensor or None per clip, at the database's
+    frame rate; NaN keeps the rule's value).
+
+    Raises:
+        SkelagnosticError: ``frequencies`` whose count or lengths do not match the clips.
+    """
+    return _assemble(
+        aligner,
+        target.motions,
+        target.embeddings,
+        target.database.clip_names,
+        frequency_tolerance,
+        frequencies,
+    )
+
+
+def _assemble(
+    aligner: VqpaeAligner,
+    motions: Sequence[Motion],
+    embeddings: Sequence[ClipEmbedding],
+    names: Sequence[str] | None,
+    frequency_tolerance: float | None,
+    frequencies: Sequence[Tensor | None] | None,
+) -> TransferDatabase:
+    """The database of embedded clips (``motions`` at the embeddings' frame rate)."""
+    if frequencies is not None and len(frequencies) != len(motions):
+        raise SkelagnosticError(
+            f"build_database: {len(frequencies)} frequency tracks for {len(motions)} clips"
+        )
+    window = _window(aligner, motions[0])
     known = frequencies if frequencies is not None else [None] * len(motions)
-    for i, (m, e) in enumerate(zip(resampled, embeddings, strict=True)):
+    clips = []
+    for i, (m, e) in enumerate(zip(motions, embeddings, strict=True)):
         pose = GlobalPositions(frame="root").encode(m).float().flatten(1) / m.skeleton.height()
         frequency, _ = matching_frequency(e, window, frequency_tolerance)
         frequency = _known(frequency, known[i], f"build_database: frequencies[{i}]")
         clips.append(
             {"manifold": e.manifold.float(), "frequency": frequency[:, None], "pose": pose}
         )
-    db = MotionDatabase.from_clips(clips, fps=fps, clip_names=names)
-    return TransferDatabase(db, resampled, embeddings)
+    db = MotionDatabase.from_clips(clips, fps=embeddings[0].fps, clip_names=names)
+    return TransferDatabase(db, list(motions), list(embeddings))
 
 
 def transfer(
