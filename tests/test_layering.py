@@ -32,6 +32,7 @@ LAYERS: dict[str, int] = {
     "skelagnostic.lazy": 0,
     "skelagnostic.version": 0,
     "skelagnostic.core": 1,
+    "skelagnostic.allocator": 1,
     "skelagnostic.io": 2,
     "skelagnostic.baselines": 3,
     "skelagnostic.representations": 4,

@@ -11,6 +11,9 @@ import os
 import sys
 from collections.abc import Sequence
 
+from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
+from skelagnostic.errors import SkelagnosticError
+
 #: verb -> ("module", "function", one-line help)
 VERBS: dict[str, tuple[str, str, str]] = {
     "demo": ("skelagnostic.cli.demo", "main", "procedural/BVH motion -> FK -> BVH + PNG"),
@@ -106,6 +109,10 @@ def _complete(args: list[str]) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``skelagnostic`` console script.
 
+    When ``argv`` is ``None`` (a new process) and ``SKELAGNOSTIC_ALLOCATOR`` names a
+    memory allocator that is not loaded, the command first restarts itself on it
+    (:func:`skelagnostic.allocator.reexec_with_allocator`).
+
     Args:
         argv: Arguments without the program name (defaults to ``sys.argv[1:]``).
 
@@ -113,6 +120,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         The process exit code.
     """
     args = list(sys.argv[1:] if argv is None else argv)
+    if argv is None and os.environ.get(ALLOCATOR_ENV):  # a process start: pick the allocator
+        try:
+            reexec_with_allocator(args)
+        except SkelagnosticError as exc:
+            print(f"skelagnostic: error: {exc}", file=sys.stderr)
+            return 2
     if not args or args[0] in {"-h", "--help", "help"}:
         print(_usage())
         return 0

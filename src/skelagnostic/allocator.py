@@ -1,0 +1,215 @@
+"""Choose the process's memory allocator: glibc's, tcmalloc or jemalloc.
+
+PyTorch's CPU tensors come from ``malloc``. glibc serves every block above its
+``mmap`` threshold (at most 32 MiB) with a fresh ``mmap`` and returns it to the
+kernel on ``free``, so a training step whose activations are large maps and
+zeroes them again at every step: page faults, counted as system time. PC-MRL's
+stage 1 at the paper's batch spends about a third of its step there
+(docs/performance.md, "Memory allocator"). tcmalloc keeps freed blocks for the
+next step; PyTorch's own CPU tuning guide recommends it or jemalloc.
+
+An allocator has to be loaded before the process starts (``LD_PRELOAD``), so
+the ``skelagnostic`` command re-executes itself once when
+``SKELAGNOSTIC_ALLOCATOR`` asks for one that is not loaded
+(:func:`reexec_with_allocator`); ``benchmarks/run.py --allocator`` does the
+same. Only Linux (and glibc-based systems) is supported; elsewhere the
+variable is an error.
+
+Example:
+    >>> from skelagnostic.allocator import active_allocator
+    >>> active_allocator() in ("system", "tcmalloc", "jemalloc")
+    True
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from skelagnostic.errors import SkelagnosticError
+
+
+class AllocatorError(SkelagnosticError, ValueError):
+    """``SKELAGNOSTIC_ALLOCATOR`` names an allocator that cannot be loaded here."""
+
+
+#: Environment variable naming the allocator of the ``skelagnostic`` command.
+ALLOCATOR_ENV = "SKELAGNOSTIC_ALLOCATOR"
+#: Allocator -> library names searched, in order (``lib<name>.so*``).
+LIBRARIES: dict[str, tuple[str, ...]] = {
+    "tcmalloc": ("tcmalloc_minimal", "tcmalloc"),
+    "jemalloc": ("jemalloc",),
+}
+#: Names that keep the C library's allocator.
+SYSTEM = ("system", "glibc", "default", "")
+#: ``MALLOC_CONF`` given to jemalloc when the environment sets none: the options of
+#: PyTorch's CPU launcher (``torch.backends.xeon.run_cpu``) plus no decay, so freed
+#: pages stay mapped for the next step as with tcmalloc. With jemalloc's defaults, or
+#: the launcher's options alone, training steps were slower than on glibc here
+#: (docs/performance.md, "Suite allocators").
+JEMALLOC_CONF = (
+    "oversize_threshold:1,background_thread:true,metadata_thp:auto,"
+    "dirty_decay_ms:-1,muzzy_decay_ms:-1"
+)
+#: Where to get each allocator, for the error message.
+PACKAGES: dict[str, str] = {
+    "tcmalloc": "Debian/Ubuntu: apt install libtcmalloc-minimal4; conda: conda install gperftools",
+    "jemalloc": "Debian/Ubuntu: apt install libjemalloc2; conda: conda install jemalloc",
+}
+
+
+def _search_dirs(environ: Mapping[str, str]) -> list[Path]:
+    """Library folders searched before the linker's cache: environments first."""
+    import sysconfig
+
+    dirs = [Path(environ[v]) / "lib" for v in ("VIRTUAL_ENV", "CONDA_PREFIX") if environ.get(v)]
+    dirs.append(Path(sys.prefix) / "lib")
+    multiarch = sysconfig.get_config_var("MULTIARCH")
+    for root in ("/usr/local/lib", "/usr/lib", "/lib"):
+        if multiarch:
+            dirs.append(Path(root) / multiarch)
+        dirs.append(Path(root))
+    dirs += [Path("/usr/lib64"), Path("/usr/local/lib64")]
+    return dirs
+
+
+def find_allocator(name: str, environ: Mapping[str, str] | None = None) -> str:
+    """The shared library to preload for allocator ``name``.
+
+    Args:
+        name: ``"tcmalloc"`` or ``"jemalloc"``, or the path of a shared library
+            (a build of your own).
+        environ: The environment whose ``VIRTUAL_ENV`` / ``CONDA_PREFIX`` are searched
+            (default: this process's).
+
+    Returns:
+        A path (or, when only the linker's cache knows it, a library file name
+        the dynamic linker finds).
+
+    Raises:
+        AllocatorError: Unknown name, a path that is not a file, or the library is
+            not installed (the message says which package provides it).
+    """
+    environ = os.environ if environ is None else environ
+    if "/" in name:
+        if not Path(name).is_file():
+            raise AllocatorError(f"{ALLOCATOR_ENV}={name!r}: no such shared library file")
+        return str(Path(name).resolve())
+    if name not in LIBRARIES:
+        raise AllocatorError(
+            f"{ALLOCATOR_ENV}={name!r}: unknown allocator; use one of "
+            f"{', '.join(LIBRARIES)}, 'system', or the path of a shared library"
+        )
+    dirs = _search_dirs(environ)
+    for library in LIBRARIES[name]:
+        for folder in dirs:
+            found = sorted(folder.glob(f"lib{library}.so*"))
+            if found:
+                return str(found[0])
+    import ctypes.util
+
+    for library in LIBRARIES[name]:
+        soname = ctypes.util.find_library(library)
+        if soname:
+            return soname
+    raise AllocatorError(
+        f"{ALLOCATOR_ENV}={name!r}: no lib{LIBRARIES[name][0]}.so found (looked in "
+        f"{', '.join(str(d) for d in dirs if d.is_dir())} and the linker's cache); "
+        f"install it ({PACKAGES[name]}) or unset {ALLOCATOR_ENV}"
+    )
+
+
+def active_allocator() -> str:
+    """The allocator this process runs on: ``"tcmalloc"``, ``"jemalloc"`` or ``"system"``.
+
+    Read from the libraries mapped into the process (``/proc/self/maps``);
+    ``"system"`` where that file does not exist.
+    """
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return "system"
+    for line in maps.splitlines():
+        library = line.rsplit("/", 1)[-1]
+        for name, candidates in LIBRARIES.items():
+            if any(library.startswith(f"lib{c}.so") for c in candidates):
+                return name
+    return "system"
+
+
+def preload_environment(
+    name: str, environ: Mapping[str, str] | None = None, active: str | None = None
+) -> dict[str, str] | None:
+    """The environment that starts a process on allocator ``name``, or ``None`` if this one will do.
+
+    Args:
+        name: A value of ``SKELAGNOSTIC_ALLOCATOR`` (see :func:`find_allocator`;
+            ``"system"`` or empty: the C library's own).
+        environ: The current environment (default: this process's).
+        active: The allocator this process runs on (default: :func:`active_allocator`).
+
+    Returns:
+        ``environ`` with the library put first in ``LD_PRELOAD`` (and, for jemalloc,
+        ``MALLOC_CONF`` set to :data:`JEMALLOC_CONF` unless it is set); ``None`` when
+        ``name`` is the system allocator or already the active one.
+
+    Raises:
+        AllocatorError: See :func:`find_allocator`; on a system other than Linux; when
+            ``LD_PRELOAD`` already names the library but it is not active (it failed
+            to load: restarting again would loop).
+    """
+    environ = dict(os.environ if environ is None else environ)
+    name = name.strip()
+    if name.lower() in SYSTEM:
+        return None
+    active = active_allocator() if active is None else active
+    if name in LIBRARIES and active == name:
+        return None
+    if not sys.platform.startswith("linux"):
+        raise AllocatorError(
+            f"{ALLOCATOR_ENV}={name!r}: choosing the allocator is supported on Linux only "
+            f"(this is {sys.platform}); unset {ALLOCATOR_ENV}"
+        )
+    library = find_allocator(name, environ)
+    preload = [p for p in environ.get("LD_PRELOAD", "").replace(" ", ":").split(":") if p]
+    if library in preload:
+        if "/" in name:  # a custom library: it is what was asked for
+            return None
+        raise AllocatorError(
+            f"{ALLOCATOR_ENV}={name!r}: LD_PRELOAD already names {library} but the process "
+            f"runs on the {active} allocator (the library failed to load; see the dynamic "
+            "linker's message above)"
+        )
+    environ["LD_PRELOAD"] = ":".join([library, *preload])
+    if name == "jemalloc":
+        environ.setdefault("MALLOC_CONF", JEMALLOC_CONF)
+    return environ
+
+
+def reexec_with_allocator(args: Sequence[str], environ: Mapping[str, str] | None = None) -> None:
+    """Restart ``python -m skelagnostic.cli ARGS`` on the allocator of ``SKELAGNOSTIC_ALLOCATOR``.
+
+    Returns without doing anything when the variable is unset, names the system
+    allocator, or names the one already running. Otherwise prints one line to
+    stderr and replaces this process (``os.execve``; nothing after it runs).
+
+    Args:
+        args: The command's arguments (without the program name).
+        environ: The environment (default: this process's).
+
+    Raises:
+        AllocatorError: See :func:`preload_environment`.
+    """
+    environ = os.environ if environ is None else environ
+    env = preload_environment(environ.get(ALLOCATOR_ENV, ""), environ)
+    if env is None:
+        return
+    print(
+        f"skelagnostic: restarting on {env['LD_PRELOAD'].split(':')[0]} ({ALLOCATOR_ENV})",
+        file=sys.stderr,
+        flush=True,
+    )
+    sys.stdout.flush()
+    os.execve(sys.executable, [sys.executable, "-m", "skelagnostic.cli", *args], env)

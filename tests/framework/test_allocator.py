@@ -1,0 +1,142 @@
+"""SKELAGNOSTIC_ALLOCATOR: finding tcmalloc/jemalloc, the preload environment, the CLI restart."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from skelagnostic import allocator
+from skelagnostic.allocator import (
+    ALLOCATOR_ENV,
+    AllocatorError,
+    active_allocator,
+    find_allocator,
+    preload_environment,
+)
+
+
+def installed(name: str) -> str | None:
+    try:
+        return find_allocator(name)
+    except AllocatorError:
+        return None
+
+
+def fake_library(folder: Path, file: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / file).write_bytes(b"\x7fELF")
+    return folder / file
+
+
+def test_find_prefers_the_virtual_environment(tmp_path: Path) -> None:
+    lib = fake_library(tmp_path / "venv" / "lib", "libjemalloc.so.2")
+    found = find_allocator("jemalloc", {"VIRTUAL_ENV": str(tmp_path / "venv")})
+    assert found == str(lib)
+    # tcmalloc: the minimal build first (no heap profiler), the full one otherwise
+    fake_library(tmp_path / "conda" / "lib", "libtcmalloc.so.4")
+    minimal = fake_library(tmp_path / "conda" / "lib", "libtcmalloc_minimal.so.4")
+    assert find_allocator("tcmalloc", {"CONDA_PREFIX": str(tmp_path / "conda")}) == str(minimal)
+
+
+def test_find_names_the_package_when_missing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(allocator, "_search_dirs", lambda environ: [tmp_path])
+    monkeypatch.setattr("ctypes.util.find_library", lambda name: None)
+    with pytest.raises(AllocatorError) as err:
+        find_allocator("tcmalloc", {})
+    message = str(err.value)
+    assert f"{ALLOCATOR_ENV}='tcmalloc'" in message and "libtcmalloc_minimal.so" in message
+    assert "apt install libtcmalloc-minimal4" in message and str(tmp_path) in message
+
+
+def test_find_rejects_unknown_names_and_missing_paths(tmp_path: Path) -> None:
+    with pytest.raises(AllocatorError, match=r"unknown allocator.*tcmalloc, jemalloc"):
+        find_allocator("mimalloc")
+    with pytest.raises(AllocatorError, match="no such shared library file"):
+        find_allocator(str(tmp_path / "libnothing.so"))
+    lib = fake_library(tmp_path, "libmine.so")
+    assert find_allocator(str(lib)) == str(lib.resolve())
+
+
+def test_preload_environment(tmp_path: Path) -> None:
+    lib = fake_library(tmp_path / "lib", "libtcmalloc_minimal.so.4")
+    environ = {"VIRTUAL_ENV": str(tmp_path), "LD_PRELOAD": "/opt/other.so", "KEEP": "1"}
+    env = preload_environment("tcmalloc", environ, active="system")
+    assert env is not None and env["LD_PRELOAD"] == f"{lib}:/opt/other.so" and env["KEEP"] == "1"
+    assert environ["LD_PRELOAD"] == "/opt/other.so"  # the caller's mapping is left alone
+    # nothing to do: the system allocator, or the one already running
+    for name in ("system", "glibc", "", " "):
+        assert preload_environment(name, environ, active="jemalloc") is None
+    assert preload_environment("tcmalloc", environ, active="tcmalloc") is None
+    # already preloaded but not running: the library failed to load; restarting would loop
+    with pytest.raises(AllocatorError, match="failed to load"):
+        preload_environment("tcmalloc", env, active="system")
+
+
+def test_jemalloc_gets_options_unless_the_user_set_some(tmp_path: Path) -> None:
+    fake_library(tmp_path / "lib", "libjemalloc.so.2")
+    environ = {"VIRTUAL_ENV": str(tmp_path)}
+    env = preload_environment("jemalloc", environ, active="system")
+    assert env is not None and env["MALLOC_CONF"] == allocator.JEMALLOC_CONF
+    assert "dirty_decay_ms:-1" in env["MALLOC_CONF"]
+    mine = preload_environment("jemalloc", {**environ, "MALLOC_CONF": "narenas:1"}, "system")
+    assert mine is not None and mine["MALLOC_CONF"] == "narenas:1"
+    fake_library(tmp_path / "lib", "libtcmalloc_minimal.so.4")
+    tcmalloc = preload_environment("tcmalloc", environ, active="system")
+    assert tcmalloc is not None and "MALLOC_CONF" not in tcmalloc
+
+
+def test_preload_environment_off_linux(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "platform", "darwin")
+    with pytest.raises(AllocatorError, match="Linux only"):
+        preload_environment("jemalloc", {}, active="system")
+    assert preload_environment("system", {}, active="system") is None
+
+
+@pytest.mark.parametrize("name", ["tcmalloc", "jemalloc"])
+def test_active_allocator_reads_the_loaded_library(name: str) -> None:
+    library = installed(name)
+    if library is None:
+        pytest.skip(f"{name} is not installed")
+    code = "from skelagnostic.allocator import active_allocator; print(active_allocator())"
+    env = preload_environment(name, active="system")
+    assert env is not None
+    env.pop(ALLOCATOR_ENV, None)
+    got = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert got.stdout.strip() == name
+    assert active_allocator() in ("system", name)  # this process: whatever pytest runs on
+
+
+def test_cli_restarts_on_the_allocator(subprocess_env: dict[str, str], tmp_path: Path) -> None:
+    library = installed("tcmalloc")
+    if library is None:
+        pytest.skip("tcmalloc is not installed")
+    env = {**subprocess_env, ALLOCATOR_ENV: "tcmalloc"}
+    env.pop("LD_PRELOAD", None)
+    cmd = [sys.executable, "-m", "skelagnostic.cli", "plugins"]
+    proc = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    # the restarted process runs on tcmalloc, else it would refuse to restart again (exit 2)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stderr.count("restarting on") == 1 and library in proc.stderr
+    assert "example" in proc.stdout  # the verb itself ran, with the same arguments
+
+    env[ALLOCATOR_ENV] = "mimalloc"
+    proc = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        f"skelagnostic: error: {ALLOCATOR_ENV}='mimalloc': unknown allocator; use one of "
+        "tcmalloc, jemalloc, 'system', or the path of a shared library"
+    )
+
+
+def test_cli_in_process_never_restarts(monkeypatch: pytest.MonkeyPatch) -> None:
+    from skelagnostic import cli
+
+    monkeypatch.setenv(ALLOCATOR_ENV, "mimalloc")  # would be an error at a process start
+    assert cli.main(["--help"]) == 0
