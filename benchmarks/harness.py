@@ -28,7 +28,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -225,12 +225,16 @@ def run_process(
     return subprocess.CompletedProcess(args, proc.returncode, stdout, stderr)
 
 
-def run_child(target: str, **kwargs: Any) -> tuple[Any, float]:
+def run_child(
+    target: str, *, child_env: Mapping[str, str] | None = None, **kwargs: Any
+) -> tuple[Any, float]:
     """Run ``module:function(**kwargs)`` in a fresh Python process.
 
     The function must return something JSON-serialisable. A fresh process makes
     its peak RSS a measure of that work alone. The child dies with this process
-    (:func:`run_process`, and :func:`die_with_parent` in the child).
+    (:func:`run_process`, and :func:`die_with_parent` in the child). Its
+    environment is ``child_env`` (default: this process's), with the repository
+    put on ``PYTHONPATH``.
 
     Returns:
         ``(return value, peak RSS of the child in MiB)``.
@@ -241,7 +245,7 @@ def run_child(target: str, **kwargs: Any) -> tuple[Any, float]:
         "from benchmarks.harness import _child_main\n"
         f"_child_main({module!r}, {function!r}, json.loads(sys.stdin.read()), {os.getpid()})\n"
     )
-    env = dict(os.environ)
+    env = dict(os.environ if child_env is None else child_env)
     env["PYTHONPATH"] = os.pathsep.join(
         p for p in (str(REPO_ROOT), str(REPO_ROOT / "src"), env.get("PYTHONPATH")) if p
     )
@@ -282,7 +286,9 @@ def _ram_bytes() -> int | None:
 
 
 def machine_info() -> dict[str, Any]:
-    """CPU count, platform, processor and RAM of this machine."""
+    """CPU count, platform, processor and RAM of this machine, and the memory allocator."""
+    from skelagnostic.allocator import active_allocator
+
     processor = platform.processor()
     cpuinfo = Path("/proc/cpuinfo")
     if cpuinfo.exists():
@@ -298,6 +304,7 @@ def machine_info() -> dict[str, Any]:
         "platform": platform.platform(),
         "processor": processor,
         "ram_gib": None if ram is None else round(ram / 2**30, 2),
+        "allocator": active_allocator(),
     }
 
 

@@ -37,6 +37,11 @@ def render(reports: list[dict[str, Any]]) -> str:
             f"({machine['processor']}), {machine['ram_gib']} GiB RAM"
             + (f", {threads} torch thread(s)" if threads else "")
             + (
+                f", {machine['allocator']} allocator"
+                if machine.get("allocator", "system") != "system"
+                else ""
+            )
+            + (
                 f", load average {machine['load_average_start']:g} -> "
                 f"{machine['load_average_end']:g}"
                 if "load_average_start" in machine

@@ -7,7 +7,8 @@ Usage::
     python benchmarks/run.py --suite all --size smoke
     python benchmarks/run.py --suite training --authors-repo walkthedog=DIR,pcmrl=DIR
     python benchmarks/run.py --suite scaling [--data-root DIR] [--methods NAME,...] [--compile]
-                             [--plot DIR]
+                             [--plot DIR] [--allocator tcmalloc|jemalloc|system]
+    python benchmarks/run.py --suite allocators [--methods NAME,...]
 
 ``--authors-repo`` names checkouts of the methods' official repositories; the
 suites that compare with them (``training``, ``matching``) then time the authors'
@@ -19,6 +20,12 @@ Without it those baselines are absent (``null``).
 ``--methods`` limits it to some methods, ``--compile`` also times ``torch.compile``d
 models there; ``--plot DIR`` writes the figures of the suites that draw some (a
 module-level ``plot(report, out_dir, date, size)``) as PNG files into ``DIR``.
+``--methods`` also limits the ``allocators`` suite.
+
+``--allocator NAME`` restarts the run on that memory allocator (as
+``SKELAGNOSTIC_ALLOCATOR=NAME`` does for the ``skelagnostic`` command; see
+:mod:`skelagnostic.allocator`), so every suite and its children measure with it;
+``machine["allocator"]`` in the JSON records the one in use.
 
 The JSON (read by external tooling; keep the format stable) is::
 
@@ -73,11 +80,13 @@ SUITES: dict[str, str] = {
     "quality": "benchmarks.suites.quality",
     "inference": "benchmarks.suites.inference",
     "scaling": "benchmarks.suites.scaling",
+    "allocators": "benchmarks.suites.allocators",
 }
 #: Parts of a suite that also run alone (``--suite training_humot``); ``all`` runs them only
 #: inside their suite.
 PARTS: dict[str, str] = {
     "training_humot": "benchmarks.suites.training_humot",
+    "training_pcmrl": "benchmarks.suites.training_pcmrl",
 }
 
 
@@ -131,6 +140,30 @@ def run_suites(
     return results, baselines
 
 
+#: Set in the environment of a run restarted by ``--allocator`` (it is not restarted again).
+RESTARTED_ENV = "SKELAGNOSTIC_BENCH_ALLOCATOR_SET"
+
+
+def _restart_on(allocator: str, parser: argparse.ArgumentParser, argv: list[str]) -> None:
+    """Replace this process by the same run on ``allocator`` unless it already runs on it."""
+    from benchmarks.suites.allocators import environment
+    from skelagnostic.allocator import SYSTEM, AllocatorError, active_allocator
+
+    if os.environ.get(RESTARTED_ENV) == allocator:
+        return
+    if active_allocator() == ("system" if allocator.lower() in SYSTEM else allocator):
+        return
+    try:
+        env = environment(allocator)
+    except AllocatorError as err:
+        parser.error(f"--allocator: {err}")
+    env[RESTARTED_ENV] = allocator
+    library = env.get("LD_PRELOAD", "no preloaded library").split(":")[0]
+    print(f"run.py: restarting on {allocator} ({library})", file=sys.stderr, flush=True)
+    sys.stdout.flush()
+    os.execve(sys.executable, [sys.executable, str(Path(__file__).resolve()), *argv], env)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--suite", required=True, choices=[*SUITES, *PARTS, "all"])
@@ -173,7 +206,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--plot", type=Path, default=None, metavar="DIR", help="write the suites' figures here"
     )
+    parser.add_argument(
+        "--allocator",
+        default=None,
+        metavar="NAME",
+        help="restart on this memory allocator first: tcmalloc, jemalloc, system, or a "
+        "library path (see SKELAGNOSTIC_ALLOCATOR in docs/performance.md)",
+    )
     args = parser.parse_args(argv)
+    if args.allocator is not None:
+        _restart_on(args.allocator, parser, sys.argv[1:] if argv is None else argv)
     try:
         repos = parse_authors_repos(args.authors_repo)
     except AuthorsRepoError as err:
