@@ -127,6 +127,14 @@ def test_cli_restarts_on_the_allocator(subprocess_env: dict[str, str], tmp_path:
     assert "example" in proc.stdout  # the verb itself ran, with the same arguments
 
     env[ALLOCATOR_ENV] = "mimalloc"
+    # shell completion answers at once, without a restart (nor its error)
+    line = {"COMP_LINE": "skelagnostic plu", "COMP_POINT": "16"}
+    done = subprocess.run(
+        [sys.executable, "-m", "skelagnostic.cli", "-sc", "query=bash"],
+        env={**env, **line}, cwd=tmp_path, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 0 and "restarting" not in done.stderr, done.stderr
+    assert "plugins" in done.stdout
     proc = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert proc.stderr.strip() == (

@@ -120,7 +120,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         The process exit code.
     """
     args = list(sys.argv[1:] if argv is None else argv)
-    if argv is None and os.environ.get(ALLOCATOR_ENV):  # a process start: pick the allocator
+    completing = args[:1] in (["-sc"], ["--shell-completion"])  # answered by this process
+    if argv is None and os.environ.get(ALLOCATOR_ENV) and not completing:  # a process start
         try:
             reexec_with_allocator(args)
         except SkelagnosticError as exc:
