@@ -244,15 +244,29 @@ def test_pcmrl_baseline_only_on_stage_1_and_absent_without_the_option(
     monkeypatch.setattr(training_pcmrl, "accelerators", lambda: ["cpu"])
     monkeypatch.setattr(training_pcmrl, "run_child", lambda target, **kw: _fake_measure())
     monkeypatch.setattr(training_pcmrl, "authors_stage1", pytest.fail)
-    assert all(r.baseline_value is None for r in training_pcmrl.run("smoke"))
+    alone = training_pcmrl.run("smoke")
+    assert all(r.baseline_value is None for r in alone)
+    assert not any("authors_layout" in r.name for r in alone)  # only beside their trainer
     export_authors_repos({"pcmrl": fake_checkout(tmp_path / "pc", "pcmrl")})
     monkeypatch.setattr(
         training_pcmrl, "authors_stage1", lambda repo, steps, batch: ({"median_step_s": 0.5}, 900.0)
     )
+    layouts: list[Any] = []
+
+    def fake(target: str, **kwargs: Any) -> tuple[dict[str, Any], float]:
+        layouts.append(kwargs.get("layout"))
+        step = 0.04 if kwargs.get("layout") == "authors" else 0.05
+        return {"median_step_s": step, "data_share": 0.01}, 500.0
+
+    monkeypatch.setattr(training_pcmrl, "run_child", fake)
     try:
         by_name = {r.name: r for r in training_pcmrl.run("smoke")}
     finally:
         export_authors_repos({})
+    assert layouts == [None, "authors", None]  # recon, recon with their layout, interp
+    same = by_name["pcmrl_recon_authors_layout_steps_per_s"]
+    assert same.value == pytest.approx(25.0) and same.speedup == pytest.approx(12.5)
+    assert same.baseline == training_pcmrl.AUTHORS
     assert by_name["pcmrl_recon_steps_per_s"].speedup == pytest.approx(10.0)
     assert by_name["pcmrl_recon_windows_per_s"].baseline_value == pytest.approx(
         training_pcmrl.BATCH["smoke"] / 0.5

@@ -25,7 +25,11 @@ same sizes (their config: 256 / 1024 points, sigma 0.05, d_model 64, 6 temporal
 layers, K = 8; batch 16 windows of 64 frames set to ours) on the same LaFAN1
 clip, onto the CMU-31 skeleton of ``human/xia_cmu/neutral_01_000.bvh`` (their
 loader knows the MotionBuilder joint names of that file, not the 3ds Max names of
-131_01: the same 31-joint skeleton). It is the baseline of the ``recon`` rows.
+131_01: the same 31-joint skeleton). It is the baseline of the ``recon`` rows,
+and of the ``recon_authors_layout`` rows, measured only with the option: the
+same step with ``model.layout=authors``, their point encoder and temporal
+transformer (86.4 M parameters, as their network at these settings; the default
+layout has 94.6 M), so that the two trainers are compared on the same network.
 Stage 2 has none: their stage-2 step also runs the stage-1 network on fresh
 point clouds to make its training data, and its batch is fixed by the keyframe
 range (32 windows), so it is not the same step as ours. Without the option the
@@ -180,15 +184,19 @@ def measure(
     accelerator: str = "cpu",
     batch: int = BATCH["default"],
     fast_path: bool = True,
+    layout: str | None = None,
 ) -> dict[str, Any]:
     """Median step time and data share of ``steps`` steps of ``stage`` (recon or interp).
 
-    ``fast_path=False`` (stage 2 only) times the reference network that encodes every frame.
+    ``fast_path=False`` (stage 2 only) times the reference network that encodes every frame;
+    ``layout`` (stage 1 only) is ``model.layout`` (default: the aligner's).
     """
     import lightning as L
     import torch
 
-    options = {} if stage == "recon" else {"fast_path": fast_path}
+    options: dict[str, Any] = {} if stage == "recon" else {"fast_path": fast_path}
+    if layout is not None:
+        options["layout"] = layout
     model, dm, data = setup(stage, batch, **options)
     L.seed_everything(0, verbose=False)  # the same windows and keyframes for both networks
     timing = time_fit(model, dm, steps, accelerator=accelerator)
@@ -249,12 +257,35 @@ def run(size: str) -> list[Result]:
                     fast_path=False,
                 )  # fmt: skip
                 base, name = ref["median_step_s"], REFERENCE
-            results += [
-                Result(f"pcmrl_{tag}_steps_per_s", "steps/s", 1.0 / step, name,
-                       base and 1.0 / base, higher_is_better=True),
-                Result(f"pcmrl_{tag}_windows_per_s", "windows/s", batch / step, name,
-                       base and batch / base, higher_is_better=True),
-                Result(f"pcmrl_{tag}_data_share", "fraction", out["data_share"]),
-                Result(f"pcmrl_{tag}_peak_rss_mib", "MiB", rss, name, base_rss),
-            ]  # fmt: skip
+            results += _rows(tag, batch, step, out["data_share"], rss, name, base, base_rss)
+            if theirs is not None and stage == "recon" and device == "cpu":
+                same, same_rss = run_child(
+                    child, stage=stage, steps=steps, accelerator=device, batch=batch,
+                    layout="authors",
+                )  # fmt: skip
+                results += _rows(
+                    f"{tag}_authors_layout", batch, same["median_step_s"], same["data_share"],
+                    same_rss, name, base, base_rss,
+                )  # fmt: skip
     return results
+
+
+def _rows(
+    tag: str,
+    batch: int,
+    step: float,
+    data_share: float,
+    rss: float,
+    name: str | None,
+    base: float | None,
+    base_rss: float | None,
+) -> list[Result]:
+    """Steps/s, windows/s, data share and peak RSS of one measurement against its baseline."""
+    return [
+        Result(f"pcmrl_{tag}_steps_per_s", "steps/s", 1.0 / step, name,
+               base and 1.0 / base, higher_is_better=True),
+        Result(f"pcmrl_{tag}_windows_per_s", "windows/s", batch / step, name,
+               base and batch / base, higher_is_better=True),
+        Result(f"pcmrl_{tag}_data_share", "fraction", data_share),
+        Result(f"pcmrl_{tag}_peak_rss_mib", "MiB", rss, name, base_rss),
+    ]  # fmt: skip
