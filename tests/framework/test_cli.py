@@ -210,6 +210,23 @@ def test_usage_lists_the_verbs(capsys: pytest.CaptureFixture[str]) -> None:
         assert f"  {verb}" in out
 
 
+def test_usage_lists_the_environment_variables_the_modules_read(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from skelagnostic.allocator import ALLOCATOR_ENV
+    from skelagnostic.data.cache import CACHE_ENV
+    from skelagnostic.data.sources import DATA_ROOT_ENV
+    from skelagnostic.plugins.manager import LOAD_PLUGINS_ENV
+
+    read = {ALLOCATOR_ENV, CACHE_ENV, DATA_ROOT_ENV, LOAD_PLUGINS_ENV, app.DEBUG_ENV}
+    assert set(cli.ENVIRONMENT) == read
+    assert cli.main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.index("environment:") > out.index("verbs:")
+    for name in read:
+        assert f"\n  {name} " in out
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

@@ -71,9 +71,24 @@ def _usage() -> str:
     width = max(len(v) for v in VERBS)
     for verb, (_, _, text) in VERBS.items():
         lines.append(f"  {verb:<{width}}  {text}")
+    lines += ["", "environment:"]
+    width = max(len(name) for name in ENVIRONMENT)
+    lines += [f"  {name:<{width}}  {text}" for name, text in ENVIRONMENT.items()]
     lines.append("")
     lines.append("Run 'skelagnostic VERB --help' for the options of one verb.")
     return "\n".join(lines)
+
+
+#: Environment variables the command reads -> one-line help (``skelagnostic --help``). The
+#: names are those of the modules that read them (a test checks), spelled out here so that
+#: the help does not import them.
+ENVIRONMENT: dict[str, str] = {
+    "SKELAGNOSTIC_DATA": "folder of the corpora presets (data=lafan1: $SKELAGNOSTIC_DATA/lafan1)",
+    "SKELAGNOSTIC_CACHE": "window cache folder (default ~/.cache/skelagnostic)",
+    "SKELAGNOSTIC_ALLOCATOR": "tcmalloc | jemalloc: restart on that memory allocator (Linux)",
+    "SKELAGNOSTIC_LOAD_PLUGINS": "comma-separated plugins to load (unset: all)",
+    "SKELAGNOSTIC_DEBUG": "1: full tracebacks instead of one-line errors",
+}
 
 
 #: Verbs that are one Hydra application (flags, overrides, shell completion).
