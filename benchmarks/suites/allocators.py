@@ -11,10 +11,12 @@ fresh process per allocator:
 
 * ``system``: the C library's ``malloc`` (no ``LD_PRELOAD``), the **baseline**
   of every row;
-* ``tcmalloc`` and ``jemalloc``: the libraries :func:`skelagnostic.allocator.find_allocator`
-  finds, preloaded as ``SKELAGNOSTIC_ALLOCATOR`` does (jemalloc with its default
-  options). An allocator that is not installed has no rows (a message says so),
-  never an estimate.
+* ``tcmalloc`` and ``jemalloc``: the libraries
+  :func:`skelagnostic.allocator.find_allocator` finds, preloaded as
+  ``SKELAGNOSTIC_ALLOCATOR`` does (jemalloc with
+  :data:`skelagnostic.allocator.JEMALLOC_CONF` unless ``MALLOC_CONF`` is set).
+  An allocator that is not installed has no rows (a message says so), never an
+  estimate.
 
 Results per method, allocator and batch: ``<method>_windows_per_s_b<B>_<allocator>``
 (baseline: ``system``, same batch), ``<method>_sys_share_b<B>_<allocator>``: the
