@@ -148,3 +148,40 @@ def test_cli_in_process_never_restarts(monkeypatch: pytest.MonkeyPatch) -> None:
 
     monkeypatch.setenv(ALLOCATOR_ENV, "mimalloc")  # would be an error at a process start
     assert cli.main(["--help"]) == 0
+
+
+def test_kernel_time_hint_only_for_long_kernel_heavy_runs_on_the_system_allocator() -> None:
+    from skelagnostic.allocator import kernel_time_hint
+
+    hint = kernel_time_hint(60.0, 40.0, "system")
+    assert hint is not None and hint.startswith("40 % of this run's CPU time")
+    assert f"{ALLOCATOR_ENV}=tcmalloc" in hint
+    assert kernel_time_hint(60.0, 15.0, "system") is None  # 20 % in the kernel
+    assert kernel_time_hint(60.0, 20.0, "system") is not None  # 25 %: the threshold
+    assert kernel_time_hint(6.0, 4.0, "system") is None  # too short to judge
+    assert kernel_time_hint(60.0, 40.0, "tcmalloc") is None
+
+
+def test_fit_prints_the_hint_after_its_table(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from skelagnostic import cli
+    from skelagnostic.cli import app
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    fast = ["model=example", "experiment=smoke", "data.seconds=2.0", "data.clips_per_gait=1",
+            "data.window=16", "data.stride=8", "model.hidden=16", "model.latent=4"]  # fmt: skip
+    monkeypatch.setattr(allocator, "active_allocator", lambda: "system")
+    # the command's own CPU time counts: (500, 100) before it, (570, 130) after it
+    times = iter([(500.0, 100.0), (570.0, 130.0)])
+    monkeypatch.setattr(app, "_cpu_times", lambda: next(times))
+    assert cli.main(["fit", *fast, "runs_dir=a"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("skelagnostic fit: hint: 30 % of this run's CPU time")
+    times = iter([(500.0, 100.0), (590.0, 110.0)])  # 10 % in the kernel: no hint
+    assert cli.main(["fit", *fast, "runs_dir=b"]) == 0
+    assert "hint" not in capsys.readouterr().err

@@ -44,6 +44,7 @@ from skelagnostic.aligners.checkpoints import (
     check_architecture,
     read_checkpoint,
 )
+from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.runs import (
     AdaptiveLogInterval,
     RecordSplit,
@@ -791,6 +792,7 @@ def main(task: str, argv: Sequence[str]) -> int:
     Returns:
         The exit code.
     """
+    cpu_start = _cpu_times()
     args = [a for a in argv if a != "--debug"]
     debug = len(args) != len(argv) or os.environ.get(DEBUG_ENV, "") not in {"", "0"}
     outer_argv = list(sys.argv)
@@ -867,6 +869,10 @@ def main(task: str, argv: Sequence[str]) -> int:
             return SIGTERM_EXIT_CODE
         for run_dir, metrics, ckpt in results:  # evaluate printed its own table
             summary_table(task, run_dir, {} if task == "evaluate" else metrics, checkpoint=ckpt)
+        if task == "fit":  # this command's CPU time, not the process's (tests, notebooks)
+            (user, system), (user0, system0) = _cpu_times(), cpu_start
+            if (hint := kernel_time_hint(user - user0, system - system0)) is not None:
+                print(f"skelagnostic fit: hint: {hint}", file=sys.stderr)
     except (
         SkelagnosticError,
         HydraException,
@@ -882,6 +888,16 @@ def main(task: str, argv: Sequence[str]) -> int:
         )
         return 1
     return 0
+
+
+def _cpu_times() -> tuple[float, float]:
+    """This process's user and system CPU time so far (seconds; zeros without ``resource``)."""
+    try:
+        import resource
+    except ImportError:  # not POSIX
+        return 0.0, 0.0
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime, usage.ru_stime
 
 
 def fit(argv: Sequence[str]) -> int:
