@@ -146,15 +146,19 @@ RESTARTED_ENV = "SKELAGNOSTIC_BENCH_ALLOCATOR_SET"
 
 def _restart_on(allocator: str, parser: argparse.ArgumentParser, argv: list[str]) -> None:
     """Replace this process by the same run on ``allocator`` unless it already runs on it."""
-    from benchmarks.suites.allocators import environment
-    from skelagnostic.allocator import SYSTEM, AllocatorError, active_allocator
+    from skelagnostic.allocator import (
+        SYSTEM,
+        AllocatorError,
+        active_allocator,
+        allocator_environment,
+    )
 
     if os.environ.get(RESTARTED_ENV) == allocator:
         return
     if active_allocator() == ("system" if allocator.lower() in SYSTEM else allocator):
         return
     try:
-        env = environment(allocator)
+        env = allocator_environment(allocator)
     except AllocatorError as err:
         parser.error(f"--allocator: {err}")
     env[RESTARTED_ENV] = allocator

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import os
 import resource
 import statistics
 import sys
@@ -59,26 +58,19 @@ def batches(method: str, size: str) -> tuple[int, ...]:
 
 
 def environment(allocator: str, environ: dict[str, str] | None = None) -> dict[str, str]:
-    """The environment of a child on ``allocator``: any preloaded allocator removed first.
+    """The environment of a child on ``allocator``, whatever this process runs on.
+
+    :func:`skelagnostic.allocator.allocator_environment`, without ``SKELAGNOSTIC_ALLOCATOR``
+    (the children are not the ``skelagnostic`` command).
 
     Raises:
         skelagnostic.allocator.AllocatorError: The allocator is not installed.
     """
-    from skelagnostic.allocator import LIBRARIES, preload_environment
+    from skelagnostic.allocator import ALLOCATOR_ENV, allocator_environment
 
-    env = dict(os.environ if environ is None else environ)
-    names = tuple(f"lib{lib}.so" for libs in LIBRARIES.values() for lib in libs)
-    kept = [
-        p
-        for p in env.get("LD_PRELOAD", "").replace(" ", ":").split(":")
-        if p and not os.path.basename(p).startswith(names)
-    ]
-    if kept:
-        env["LD_PRELOAD"] = ":".join(kept)
-    else:
-        env.pop("LD_PRELOAD", None)
-    env.pop("SKELAGNOSTIC_ALLOCATOR", None)
-    return preload_environment(allocator, env, active="system") or env
+    env = allocator_environment(allocator, environ)
+    env.pop(ALLOCATOR_ENV, None)
+    return env
 
 
 def measure(

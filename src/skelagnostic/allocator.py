@@ -151,7 +151,8 @@ def preload_environment(
         active: The allocator this process runs on (default: :func:`active_allocator`).
 
     Returns:
-        ``environ`` with the library put first in ``LD_PRELOAD`` (and, for jemalloc,
+        ``environ`` with the library put first in ``LD_PRELOAD`` and any other known
+        allocator taken out (see :func:`allocator_environment`; for jemalloc,
         ``MALLOC_CONF`` set to :data:`JEMALLOC_CONF` unless it is set); ``None`` when
         ``name`` is the system allocator or already the active one.
 
@@ -173,8 +174,7 @@ def preload_environment(
             f"(this is {sys.platform}); unset {ALLOCATOR_ENV}"
         )
     library = find_allocator(name, environ)
-    preload = [p for p in environ.get("LD_PRELOAD", "").replace(" ", ":").split(":") if p]
-    if library in preload:
+    if library in _preloads(environ):
         if "/" in name:  # a custom library: it is what was asked for
             return None
         raise AllocatorError(
@@ -182,7 +182,47 @@ def preload_environment(
             f"runs on the {active} allocator (the library failed to load; see the dynamic "
             "linker's message above)"
         )
-    environ["LD_PRELOAD"] = ":".join([library, *preload])
+    return _with_library(environ, name, library)
+
+
+def allocator_environment(name: str, environ: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment of a new process on allocator ``name``, whatever this one runs on.
+
+    Any allocator of :data:`LIBRARIES` already in ``LD_PRELOAD`` is taken out (two
+    preloaded allocators would each claim ``malloc``); other preloads stay.
+
+    Args:
+        name: ``"tcmalloc"``, ``"jemalloc"``, a library path, or ``"system"`` (the
+            C library's allocator: the preloaded allocators taken out only).
+        environ: The environment to start from (default: this process's).
+
+    Returns:
+        A new environment (``environ`` is not changed).
+
+    Raises:
+        AllocatorError: See :func:`find_allocator`.
+    """
+    environ = dict(os.environ if environ is None else environ)
+    name = name.strip()
+    if name.lower() in SYSTEM:
+        return _with_library(environ, name, None)
+    return _with_library(environ, name, find_allocator(name, environ))
+
+
+def _preloads(environ: Mapping[str, str]) -> list[str]:
+    """The entries of ``LD_PRELOAD`` (colon- or space-separated)."""
+    return [p for p in environ.get("LD_PRELOAD", "").replace(" ", ":").split(":") if p]
+
+
+def _with_library(environ: dict[str, str], name: str, library: str | None) -> dict[str, str]:
+    """``environ`` with the known allocators out of ``LD_PRELOAD`` and ``library`` first."""
+    known = tuple(f"lib{lib}.so" for libs in LIBRARIES.values() for lib in libs)
+    kept = [p for p in _preloads(environ) if not os.path.basename(p).startswith(known)]
+    preload = ([library] if library else []) + kept
+    if preload:
+        environ["LD_PRELOAD"] = ":".join(preload)
+    else:
+        environ.pop("LD_PRELOAD", None)
     if name == "jemalloc":
         environ.setdefault("MALLOC_CONF", JEMALLOC_CONF)
     return environ

@@ -77,6 +77,24 @@ def test_preload_environment(tmp_path: Path) -> None:
         preload_environment("tcmalloc", env, active="system")
 
 
+def test_switching_allocators_takes_the_preloaded_one_out(tmp_path: Path) -> None:
+    from skelagnostic.allocator import allocator_environment
+
+    jemalloc = fake_library(tmp_path / "lib", "libjemalloc.so.2")
+    environ = {
+        "VIRTUAL_ENV": str(tmp_path),
+        "LD_PRELOAD": "/usr/lib/libtcmalloc_minimal.so.4 /opt/keep.so",
+    }
+    env = preload_environment("jemalloc", environ, active="tcmalloc")
+    assert env is not None and env["LD_PRELOAD"] == f"{jemalloc}:/opt/keep.so"
+    # a new process on the C library's allocator, whatever this one runs on
+    assert allocator_environment("system", environ)["LD_PRELOAD"] == "/opt/keep.so"
+    alone = allocator_environment("system", {"LD_PRELOAD": "libjemalloc.so.2"})
+    assert "LD_PRELOAD" not in alone and "MALLOC_CONF" not in alone
+    assert allocator_environment("jemalloc", environ)["LD_PRELOAD"] == env["LD_PRELOAD"]
+    assert environ["LD_PRELOAD"].startswith("/usr/lib/libtcmalloc")  # left alone
+
+
 def test_jemalloc_gets_options_unless_the_user_set_some(tmp_path: Path) -> None:
     fake_library(tmp_path / "lib", "libjemalloc.so.2")
     environ = {"VIRTUAL_ENV": str(tmp_path)}
