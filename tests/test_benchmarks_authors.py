@@ -248,13 +248,18 @@ def test_pcmrl_baseline_only_on_stage_1_and_absent_without_the_option(
     assert all(r.baseline_value is None for r in alone)
     assert not any("authors_layout" in r.name for r in alone)  # only beside their trainer
     export_authors_repos({"pcmrl": fake_checkout(tmp_path / "pc", "pcmrl")})
-    monkeypatch.setattr(
-        training_pcmrl, "authors_stage1", lambda repo, steps, batch: ({"median_step_s": 0.5}, 900.0)
-    )
+    batches: list[int] = []
+
+    def theirs(repo: Path, steps: int, batch: int) -> tuple[dict[str, Any], float]:
+        batches.append(batch)
+        return {"median_step_s": 0.5}, 900.0
+
+    monkeypatch.setattr(training_pcmrl, "authors_stage1", theirs)
     layouts: list[Any] = []
 
     def fake(target: str, **kwargs: Any) -> tuple[dict[str, Any], float]:
         layouts.append(kwargs.get("layout"))
+        batches.append(kwargs["batch"])
         step = 0.04 if kwargs.get("layout") == "authors" else 0.05
         return {"median_step_s": step, "data_share": 0.01}, 500.0
 
@@ -264,12 +269,15 @@ def test_pcmrl_baseline_only_on_stage_1_and_absent_without_the_option(
     finally:
         export_authors_repos({})
     assert layouts == [None, "authors", None]  # recon, recon with their layout, interp
+    # smoke's batch (2) is below what their trainer runs: both sides take its minimum
+    assert training_pcmrl.BATCH["smoke"] < training_pcmrl.AUTHORS_MIN_BATCH
+    assert batches == [training_pcmrl.AUTHORS_MIN_BATCH] * 4
     same = by_name["pcmrl_recon_authors_layout_steps_per_s"]
     assert same.value == pytest.approx(25.0) and same.speedup == pytest.approx(12.5)
     assert same.baseline == training_pcmrl.AUTHORS
     assert by_name["pcmrl_recon_steps_per_s"].speedup == pytest.approx(10.0)
     assert by_name["pcmrl_recon_windows_per_s"].baseline_value == pytest.approx(
-        training_pcmrl.BATCH["smoke"] / 0.5
+        training_pcmrl.AUTHORS_MIN_BATCH / 0.5
     )
     assert by_name["pcmrl_recon_peak_rss_mib"].baseline_value == 900.0
     assert by_name["pcmrl_interp_steps_per_s"].baseline_value is None
@@ -303,6 +311,15 @@ def test_pcmrl_interp_rows_take_the_reference_network_as_baseline(
     calls.clear()
     assert all(r.baseline_value is None for r in training_pcmrl.run("smoke"))
     assert all("fast_path" not in c for c in calls)
+
+
+def test_authors_stage1_refuses_a_batch_their_loop_cannot_draw(tmp_path: Path) -> None:
+    from benchmarks.suites.authors_pcmrl import VISUALISED_WINDOWS, train_stage1
+
+    with pytest.raises(ValueError, match=f"batch_size >= {VISUALISED_WINDOWS}.*got 2"):
+        train_stage1(
+            str(tmp_path), "walk.bvh", "cmu.bvh", steps=1, batch_size=2
+        )  # before their code is imported: no checkout needed
 
 
 def test_pytorch3d_stand_ins_compute_the_definitions() -> None:

@@ -170,6 +170,11 @@ def install_stand_ins() -> None:
     torch.Tensor.cuda = lambda self, *a, **k: self  # type: ignore[method-assign]
 
 
+#: Windows of each batch that the authors' training loop draws every 50 iterations
+#: (``n_vis`` in their ``train_pointcloud.py``): their smallest workable batch.
+VISUALISED_WINDOWS = 4
+
+
 class _Stop(Exception):
     """Raised by the timing ``print`` once enough iterations ran."""
 
@@ -200,6 +205,11 @@ def train_stage1(
     """
     import json
 
+    if batch_size < VISUALISED_WINDOWS:
+        raise ValueError(
+            f"the authors' stage 1 needs batch_size >= {VISUALISED_WINDOWS} (its training loop "
+            f"draws the first {VISUALISED_WINDOWS} windows of each batch), got {batch_size}"
+        )
     install_stand_ins()
     sys.path.insert(0, str(repo))
     cfg = json.loads((Path(repo) / "config.json").read_text())

@@ -53,6 +53,7 @@ from typing import Any
 
 from benchmarks.authors import authors_repo
 from benchmarks.harness import REPO_ROOT, Result, run_child, shared_data
+from benchmarks.suites.authors_pcmrl import VISUALISED_WINDOWS
 from benchmarks.suites.steptime import accelerators, suffix, time_fit
 
 #: Timed steps per size (after one warm-up step) for (reconstruction, interpolation). One
@@ -61,6 +62,11 @@ STEPS = {"smoke": (1, 1), "default": (3, 3), "large": (10, 20)}
 #: Windows per step (the batch size) of both stages, per size: ``smoke`` only checks that
 #: the part runs (CI), so it takes 2 windows instead of the measured sizes' 16.
 BATCH = {"smoke": 2, "default": 16, "large": 16}
+#: The smallest batch the authors' trainer runs (it draws the first windows of each batch
+#: every 50 iterations, from its first on, and fails on a smaller one). With
+#: ``--authors-repo pcmrl=DIR`` every row of this part takes at least this batch, so both
+#: sides train the same batch.
+AUTHORS_MIN_BATCH = VISUALISED_WINDOWS
 AUTHORS = "authors' train_pointcloud.py (same run)"
 #: Baseline of the stage-2 rows (sizes ``default`` and ``large``).
 REFERENCE = "reference network (fast_path=false), same run"
@@ -240,7 +246,7 @@ def run(size: str) -> list[Result]:
     ``default`` and ``large`` have the reference network (:data:`REFERENCE`).
     """
     repo = authors_repo("pcmrl")
-    batch = BATCH[size]
+    batch = BATCH[size] if repo is None else max(BATCH[size], AUTHORS_MIN_BATCH)
     theirs = authors_stage1(repo, STEPS[size][0], batch) if repo is not None else None
     results = []
     for device in accelerators():
