@@ -153,8 +153,11 @@ def preload_environment(
     Returns:
         ``environ`` with the library put first in ``LD_PRELOAD`` and any other known
         allocator taken out (see :func:`allocator_environment`; for jemalloc,
-        ``MALLOC_CONF`` set to :data:`JEMALLOC_CONF` unless it is set); ``None`` when
-        ``name`` is the system allocator or already the active one.
+        ``MALLOC_CONF`` set to :data:`JEMALLOC_CONF` unless it is set); for the system
+        allocator while a preloaded one runs (inherited ``LD_PRELOAD``), ``environ``
+        with the known allocators taken out of ``LD_PRELOAD``. ``None`` when ``name``
+        is already the active allocator, or the active one is not preloaded (linked
+        in: a restart could not change it).
 
     Raises:
         AllocatorError: See :func:`find_allocator`; on a system other than Linux; when
@@ -163,9 +166,12 @@ def preload_environment(
     """
     environ = dict(os.environ if environ is None else environ)
     name = name.strip()
-    if name.lower() in SYSTEM:
-        return None
     active = active_allocator() if active is None else active
+    if name.lower() in SYSTEM:
+        if active == "system":
+            return None
+        env = _with_library(dict(environ), name, None)
+        return None if _preloads(env) == _preloads(environ) else env
     if name in LIBRARIES and active == name:
         return None
     if not sys.platform.startswith("linux"):
@@ -264,9 +270,10 @@ def kernel_time_hint(
 def reexec_with_allocator(args: Sequence[str], environ: Mapping[str, str] | None = None) -> None:
     """Restart ``python -m skelagnostic.cli ARGS`` on the allocator of ``SKELAGNOSTIC_ALLOCATOR``.
 
-    Returns without doing anything when the variable is unset, names the system
-    allocator, or names the one already running. Otherwise prints one line to
-    stderr and replaces this process (``os.execve``; nothing after it runs).
+    Returns without doing anything when the variable is unset or names the allocator
+    already running (``system`` while a preloaded allocator runs restarts without
+    it). Otherwise prints one line to stderr and replaces this process
+    (``os.execve``; nothing after it runs).
 
     Args:
         args: The command's arguments (without the program name).
@@ -276,11 +283,17 @@ def reexec_with_allocator(args: Sequence[str], environ: Mapping[str, str] | None
         AllocatorError: See :func:`preload_environment`.
     """
     environ = os.environ if environ is None else environ
-    env = preload_environment(environ.get(ALLOCATOR_ENV, ""), environ)
+    name = environ.get(ALLOCATOR_ENV, "")
+    env = preload_environment(name, environ)
     if env is None:
         return
+    target = (
+        "the C library's allocator (the preloaded one taken out of LD_PRELOAD)"
+        if name.strip().lower() in SYSTEM
+        else env["LD_PRELOAD"].split(":")[0]
+    )
     print(
-        f"skelagnostic: restarting on {env['LD_PRELOAD'].split(':')[0]} ({ALLOCATOR_ENV})",
+        f"skelagnostic: restarting on {target} ({ALLOCATOR_ENV})",
         file=sys.stderr,
         flush=True,
     )

@@ -95,6 +95,19 @@ def test_switching_allocators_takes_the_preloaded_one_out(tmp_path: Path) -> Non
     assert environ["LD_PRELOAD"].startswith("/usr/lib/libtcmalloc")  # left alone
 
 
+def test_system_takes_an_inherited_preloaded_allocator_out() -> None:
+    environ = {"LD_PRELOAD": "/usr/lib/libtcmalloc_minimal.so.4:/opt/keep.so", "KEEP": "1"}
+    env = preload_environment("system", environ, active="tcmalloc")
+    assert env is not None and env["LD_PRELOAD"] == "/opt/keep.so" and env["KEEP"] == "1"
+    assert environ["LD_PRELOAD"].startswith("/usr/lib/libtcmalloc")  # left alone
+    alone = preload_environment("glibc", {"LD_PRELOAD": "libjemalloc.so.2"}, active="jemalloc")
+    assert alone is not None and "LD_PRELOAD" not in alone
+    # already on the system allocator, or the running one is not preloaded (a restart
+    # could not change it, and must not loop)
+    assert preload_environment("system", environ, active="system") is None
+    assert preload_environment("system", {"LD_PRELOAD": "/opt/keep.so"}, active="tcmalloc") is None
+
+
 def test_jemalloc_gets_options_unless_the_user_set_some(tmp_path: Path) -> None:
     fake_library(tmp_path / "lib", "libjemalloc.so.2")
     environ = {"VIRTUAL_ENV": str(tmp_path)}
@@ -159,6 +172,21 @@ def test_cli_restarts_on_the_allocator(subprocess_env: dict[str, str], tmp_path:
         f"skelagnostic: error: {ALLOCATOR_ENV}='mimalloc': unknown allocator; use one of "
         "tcmalloc, jemalloc, 'system', or the path of a shared library"
     )
+
+
+def test_cli_restarts_without_an_inherited_allocator(
+    subprocess_env: dict[str, str], tmp_path: Path
+) -> None:
+    library = installed("tcmalloc")
+    if library is None:
+        pytest.skip("tcmalloc is not installed")
+    env = {**subprocess_env, ALLOCATOR_ENV: "system", "LD_PRELOAD": library}
+    cmd = [sys.executable, "-m", "skelagnostic.cli", "plugins"]
+    proc = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    # one restart: the restarted process runs on the system allocator and stays
+    assert proc.stderr.count("restarting on the C library's allocator") == 1, proc.stderr
+    assert "example" in proc.stdout
 
 
 def test_cli_in_process_never_restarts(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -85,7 +85,7 @@ def _usage() -> str:
 ENVIRONMENT: dict[str, str] = {
     "SKELAGNOSTIC_DATA": "folder of the corpora presets (data=lafan1: $SKELAGNOSTIC_DATA/lafan1)",
     "SKELAGNOSTIC_CACHE": "window cache folder (default ~/.cache/skelagnostic)",
-    "SKELAGNOSTIC_ALLOCATOR": "tcmalloc | jemalloc: restart on that memory allocator (Linux)",
+    "SKELAGNOSTIC_ALLOCATOR": "tcmalloc | jemalloc | system: run on that memory allocator (Linux)",
     "SKELAGNOSTIC_LOAD_PLUGINS": "comma-separated plugins to load (unset: all)",
     "SKELAGNOSTIC_DEBUG": "1: full tracebacks instead of one-line errors",
 }
