@@ -379,7 +379,42 @@ def load_entry(directory: Path, methods: Sequence[str] = tuple(METHODS)) -> Entr
         parse_target(f"{where}targets[{i}]", text, figures) for i, text in enumerate(run["targets"])
     ]
     run["notes"] = _lines(f"{where}notes", run["notes"]) if run.get("notes") else []
+    load_curves(f"{directory / 'evaluation.json'}: ", report)
     return Entry(directory.name, run, report, figures, targets)
+
+
+def load_curves(where: str, report: Mapping[str, Any]) -> dict[str, dict[str, dict[str, list]]]:
+    """The evaluation's ``extra.curves``: ``series -> curve -> column -> [values]`` (may be empty).
+
+    HuMoT's reconstruction protocol writes its denoising (Fig. 8) and joint-upsampling
+    (Fig. 9) curves there, one series per group of held-out clips of one topology; the
+    page shows them as tables, one per curve.
+
+    Raises:
+        ResultsError: ``extra.curves`` is not that shape, or a curve's columns differ in
+            length; the message names the key.
+    """
+    curves = report.get("extra", {}).get("curves", {}) if isinstance(report, Mapping) else {}
+    if not isinstance(curves, Mapping):
+        raise ResultsError(f"{where}extra.curves: expected a mapping clip -> curve -> columns")
+    out: dict[str, dict[str, dict[str, list]]] = {}
+    for clip, kinds in curves.items():
+        if not isinstance(kinds, Mapping):
+            raise ResultsError(f"{where}extra.curves.{clip}: expected a mapping curve -> columns")
+        for kind, columns in kinds.items():
+            at = f"{where}extra.curves.{clip}.{kind}"
+            if not isinstance(columns, Mapping) or not columns:
+                raise ResultsError(f"{at}: expected a mapping column -> list of numbers")
+            bad = [
+                k for k, v in columns.items() if not (isinstance(v, list) and all(map(_number, v)))
+            ]
+            if bad:
+                raise ResultsError(f"{at}.{bad[0]}: expected a list of numbers")
+            lengths = {len(v) for v in columns.values()}
+            if len(lengths) != 1:
+                raise ResultsError(f"{at}: its columns differ in length ({sorted(lengths)})")
+            out.setdefault(str(clip), {})[str(kind)] = {str(k): v for k, v in columns.items()}
+    return out
 
 
 def quoted_figure(where: str, item: Any, report: Mapping[str, Any]) -> dict[str, float]:
@@ -536,6 +571,28 @@ def _per_clip_table(entry: Entry) -> list[str]:
     return _table(header, rows)
 
 
+def _curve_tables(entry: Entry) -> list[str]:
+    """One table per curve of ``extra.curves``: a row per series and point of its curve."""
+    curves = load_curves("", entry.report)
+    lines: list[str] = []
+    for kind in dict.fromkeys(k for c in curves.values() for k in c):
+        columns = list(dict.fromkeys(col for c in curves.values() for col in c.get(kind, {})))
+        rows = []
+        for clip, mine in curves.items():
+            curve = mine.get(kind, {})
+            for i in range(len(next(iter(curve.values()), []))):
+                cells = [_fmt(curve[c][i]) if c in curve else "-" for c in columns]
+                rows.append([f"`{clip}`", *cells])
+        lines += [
+            f"Curve `{kind}` (the evaluation's `extra.curves`: each series, e.g. a group of "
+            "clips, point by point):",
+            "",
+            *_table(["series", *columns], rows),
+            "",
+        ]
+    return lines
+
+
 def _budget(run: Mapping[str, Any]) -> str:
     budget = run["budget"]
     text = f"{budget['steps']:,} steps, {budget['cpu_time']} CPU time"
@@ -552,6 +609,8 @@ def _entry_section(entry: Entry) -> list[str]:
     report, run = entry.report, entry.run
     data = report["data"]
     clips = ", ".join(f"`{c}`" for c in data["clips"])
+    kinds = dict.fromkeys(k for c in load_curves("", report).values() for k in c)
+    curve_names = f", and the curves {', '.join(f'`{k}`' for k in kinds)}" if kinds else ""
     lines = [
         f"### {run['title']}",
         "",
@@ -569,7 +628,7 @@ def _entry_section(entry: Entry) -> list[str]:
         f"- Date: {run['date']}",
         *(f"- Note: {n}" for n in run["notes"]),
         *(f"- Protocol note: {n}" for n in report.get("notes", [])),
-        f"- Every metric of every clip: [per-clip tables](#{entry.anchor})",
+        f"- Every metric of every clip{curve_names}: [per-clip tables](#{entry.anchor})",
         "",
         "Reproduce:",
         "",
@@ -640,6 +699,7 @@ def render_page(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS
                 "",
                 *(f"- `{k}`: {v}" for k, v in entry.report["metrics"].items()),
                 "",
+                *_curve_tables(entry),
             ]
     return "\n".join(lines).rstrip("\n") + "\n"
 

@@ -315,6 +315,57 @@ def test_a_bad_run_yaml_names_the_file_and_key(
     assert f"{report_file}: missing" in capsys.readouterr().err
 
 
+def test_curves_of_extra_are_tabulated_point_by_point(
+    heldout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """HuMoT's denoising and upsampling curves (``extra.curves``) as tables on the page."""
+    report_file = heldout / "example_smoke" / "evaluation.json"
+    report = json.loads(report_file.read_text())
+    curves = {
+        "biped22 (seen)": {
+            "denoising": {"sigma_cm": [0.0, 2.0, 4.0], "output_mpjpe_cm": [1.5, 1.75, 2.125]},
+            "upsampling": {"fraction": [1.0, 0.5], "mpjpe_cm": [1.5, 3.25]},
+        },
+        "biped31 (unseen)": {"denoising": {"sigma_cm": [0.0, 2.0], "output_mpjpe_cm": [4.0, 5.5]}},
+    }
+    report.setdefault("extra", {})["curves"] = curves
+    report_file.write_text(json.dumps(report))
+    out = tmp_path / "results.md"
+    assert results.main(_args(heldout, out)) == 0
+    page = out.read_text()
+    assert "Every metric of every clip, and the curves `denoising`, `upsampling`:" in page
+    tables = {tuple(t[0]): t for t in _tables(page) if t and "series" in t[0]}
+    denoising = tables["series", "sigma_cm", "output_mpjpe_cm"]
+    expected = [
+        (series, x, y)
+        for series, kinds in curves.items()
+        for x, y in zip(*kinds["denoising"].values(), strict=True)
+    ]
+    got = [
+        (r["series"].strip("`"), float(r["sigma_cm"]), float(r["output_mpjpe_cm"]))
+        for r in denoising
+    ]
+    assert got == expected
+    (upsampling,) = (t for key, t in tables.items() if "fraction" in key)
+    assert [(r["series"], r["fraction"], r["mpjpe_cm"]) for r in upsampling] == [
+        ("`biped22 (seen)`", "1", "1.5"),
+        ("`biped22 (seen)`", "0.5", "3.25"),
+    ]
+    # a malformed curve names the file and key
+    for bad, message in [
+        (
+            {"g": {"denoising": {"sigma_cm": [0.0, 1.0], "output_mpjpe_cm": [1.0]}}},
+            "differ in length",
+        ),
+        ({"g": {"denoising": {"sigma_cm": ["a"]}}}, "extra.curves.g.denoising.sigma_cm: expected"),
+        ([1, 2], "extra.curves: expected a mapping"),
+    ]:
+        report["extra"]["curves"] = bad
+        report_file.write_text(json.dumps(report))
+        assert results.main(_args(heldout, out)) == 2
+        assert f"{report_file}: " in (err := capsys.readouterr().err) and message in err, err
+
+
 def test_targets_compare_the_model_with_a_bound() -> None:
     figures = {"l2p@15": {"model": 0.5, "lerp_slerp": 0.6, "nan_baseline": float("nan")}}
     cases = {
