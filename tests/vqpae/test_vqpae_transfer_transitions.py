@@ -157,3 +157,19 @@ def test_transfer_periods_follow_the_rule(trained: dict) -> None:
         assert lengths == [int(periods[s.start]) for s in result.match.segments[:-1]]
         chosen.append(periods)
     assert not torch.equal(chosen[0], chosen[1])  # the two rules differ on this clip
+
+
+def test_transfer_reuses_a_given_embedding(trained: dict) -> None:
+    model = trained["model"]
+    dogs = [procedural.generate("quadruped", "walk", seconds=3.0, fps=FPS, seed=7)[0]]
+    source, _ = procedural.generate("biped22", "walk", seconds=3.0, fps=FPS, seed=8)
+    db = build_database(model, dogs)
+    fresh = transfer(model, source, db)
+    emb = embed_clip(model, source)
+    reused = transfer(model, source, db, embedding=emb)
+    assert reused.source is emb  # not embedded again
+    assert torch.equal(reused.motion.rotations, fresh.motion.rotations)
+    assert torch.equal(reused.motion.root_positions, fresh.motion.root_positions)
+    # the embedding of another character's clip is refused
+    with pytest.raises(SkelagnosticError, match="embedding is of character"):
+        transfer(model, source, db, embedding=db.embeddings[0])

@@ -1177,7 +1177,11 @@ def transfer_rows(
     rows, outputs = [], {}
     for clip in track(sources, "transfer: held-out clips"):
         source_hz = gait_frequency(clip)
-        options = {"halflife": halflife, "frequency_tolerance": frequency_tolerance}
+        options = {
+            "halflife": halflife,
+            "frequency_tolerance": frequency_tolerance,
+            "embedding": embed_clip(aligner, clip),  # once for the three transfers
+        }
         made = {
             MODEL: transfer(aligner, clip, target, **options).motion,
             UNSCALED: transfer(

@@ -294,6 +294,7 @@ def transfer(
     halflife: float | None = HALFLIFE,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
     frequency: Tensor | None = None,
+    embedding: ClipEmbedding | None = None,
 ) -> TransferResult:
     """Transfer ``source`` onto the target character by frequency-scaled motion matching.
 
@@ -320,15 +321,28 @@ def transfer(
         frequency: Optional known frequencies of the source (Hz, one per frame at
             the model's frame rate; NaN keeps the rule's value), as
             :func:`build_database`'s ``frequencies``.
+        embedding: ``source``'s embedding if it is already computed
+            (:func:`~skelagnostic_vqpae.embed.embed_clip` of the same aligner and clip),
+            to transfer one clip several ways without embedding it each time.
 
     Returns:
         The transferred motion (target skeleton, database frame rate).
 
     Raises:
         SkelagnosticError: The source embedding's frame rate differs from the database's,
-            or ``replay_seconds``, ``halflife`` or ``frequency_tolerance`` is not positive.
+            ``embedding`` belongs to another character than ``source``, or
+            ``replay_seconds``, ``halflife`` or ``frequency_tolerance`` is not positive.
     """
-    emb = embed_clip(aligner, source)
+    if embedding is None:
+        emb = embed_clip(aligner, source)
+    else:
+        own = aligner.dataset_names[aligner.dataset_of(source.skeleton)]
+        if embedding.dataset != own:
+            raise SkelagnosticError(
+                f"transfer: embedding is of character {embedding.dataset!r}, the source "
+                f"clip of {own!r}"
+            )
+        emb = embedding
     if emb.fps != target.database.fps:
         raise SkelagnosticError(
             f"transfer: source embedded at {emb.fps} fps, database at {target.database.fps} fps"
