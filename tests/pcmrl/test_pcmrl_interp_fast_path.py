@@ -71,7 +71,13 @@ def _compare(interm: int, dtype: torch.dtype, rtol: float, atol: float) -> None:
     torch.testing.assert_close(out_fast, out_ref, rtol=rtol, atol=atol)
     assert grads_fast.keys() == grads_ref.keys()
     for name, grad in grads_ref.items():
-        torch.testing.assert_close(grads_fast[name], grad, rtol=rtol, atol=atol, msg=name)
+        # a weight's gradient sums over every window and frame, in another order on each
+        # path (and on each CPU's kernels): its rounding scales with the largest entry,
+        # so the absolute tolerance is relative to it (float64 holds both to 1e-10)
+        scale = max(1.0, float(grad.abs().max()))
+        torch.testing.assert_close(
+            grads_fast[name], grad, rtol=rtol, atol=atol * scale, msg=lambda m, n=name: f"{n}: {m}"
+        )
 
 
 @pytest.mark.parametrize("interm", [0, INTERM], ids=["zero-tokens", "lerp-tokens"])
