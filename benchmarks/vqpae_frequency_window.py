@@ -125,28 +125,25 @@ def main(argv: list[str] | None = None) -> dict:
     model = load_checkpoint(VqpaeAligner, args.checkpoint).eval()
     split = json.loads((args.checkpoint.parent.parent / "split.json").read_text())["clips"]
     human_name, dog_name = model.dataset_names[:2]
-    fps = None
+    motions = {p: read_bvh(p) for p in sorted(split)}  # each clip read once
 
-    def load(path: str) -> Motion:
-        motion = read_bvh(path)
-        return motion if fps is None or motion.fps == fps else motion.resample(fps)
-
-    def character(path: str) -> int | None:
-        motion = read_bvh(path)
+    def character(motion: Motion) -> int | None:
         try:
             return model.dataset_of(motion.skeleton)
         except Exception:  # a clip of neither character
             return None
 
-    paths = sorted(split)
-    owner = {p: character(p) for p in paths}
+    owner = {p: character(m) for p, m in motions.items()}
+    database = [p for p in motions if owner[p] == 1 and split[p] == "train"]
+    held = [p for p in motions if owner[p] in (0, 1) and split[p] in args.splits]
     with torch.no_grad():
-        dogs_raw = [read_bvh(p) for p in paths if owner[p] == 1 and split[p] == "train"]
-        fps = embed_clip(model, dogs_raw[0]).fps
-        dogs = [d if d.fps == fps else d.resample(fps) for d in dogs_raw]
+        fps = embed_clip(model, motions[database[0]]).fps  # the model's: every clip at it
+        used = {p: motions[p] for p in [*database, *held]}
+        motions = {p: m if m.fps == fps else m.resample(fps) for p, m in used.items()}
+        dogs = [motions[p] for p in database]
         target = build_database(model, dogs, [str(d.name) for d in dogs])
-        sources = {p: load(p) for p in paths if owner[p] == 0 and split[p] in args.splits}
-        held_dogs = [load(p) for p in paths if owner[p] == 1 and split[p] in args.splits]
+        sources = {p: motions[p] for p in held if owner[p] == 0}
+        held_dogs = [motions[p] for p in held if owner[p] == 1]
         source_embs = {p: embed_clip(model, m) for p, m in sources.items()}
         dog_embs = [embed_clip(model, m) for m in held_dogs]
         window = {i: int(c.pae.window) for i, c in enumerate(model.characters)}

@@ -54,7 +54,7 @@ import operator
 import re
 import sys
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -158,6 +158,7 @@ class Entry:
         report: The ``evaluation.json``.
         figures: Each quoted figure's ``method -> value`` (:func:`quoted_figure`).
         targets: The parsed targets, in the file's order.
+        curves: The evaluation's ``extra.curves`` (:func:`load_curves`; may be empty).
     """
 
     name: str
@@ -165,6 +166,7 @@ class Entry:
     report: dict[str, Any]
     figures: dict[str, dict[str, float]]
     targets: list[Target]
+    curves: dict[str, dict[str, dict[str, list]]] = field(default_factory=dict)
 
     @property
     def methods(self) -> list[str]:
@@ -379,8 +381,8 @@ def load_entry(directory: Path, methods: Sequence[str] = tuple(METHODS)) -> Entr
         parse_target(f"{where}targets[{i}]", text, figures) for i, text in enumerate(run["targets"])
     ]
     run["notes"] = _lines(f"{where}notes", run["notes"]) if run.get("notes") else []
-    load_curves(f"{directory / 'evaluation.json'}: ", report)
-    return Entry(directory.name, run, report, figures, targets)
+    curves = load_curves(f"{directory / 'evaluation.json'}: ", report)
+    return Entry(directory.name, run, report, figures, targets, curves)
 
 
 def load_curves(where: str, report: Mapping[str, Any]) -> dict[str, dict[str, dict[str, list]]]:
@@ -573,7 +575,7 @@ def _per_clip_table(entry: Entry) -> list[str]:
 
 def _curve_tables(entry: Entry) -> list[str]:
     """One table per curve of ``extra.curves``: a row per series and point of its curve."""
-    curves = load_curves("", entry.report)
+    curves = entry.curves
     lines: list[str] = []
     for kind in dict.fromkeys(k for c in curves.values() for k in c):
         columns = list(dict.fromkeys(col for c in curves.values() for col in c.get(kind, {})))
@@ -609,7 +611,7 @@ def _entry_section(entry: Entry) -> list[str]:
     report, run = entry.report, entry.run
     data = report["data"]
     clips = ", ".join(f"`{c}`" for c in data["clips"])
-    kinds = dict.fromkeys(k for c in load_curves("", report).values() for k in c)
+    kinds = dict.fromkeys(k for c in entry.curves.values() for k in c)
     curve_names = f", and the curves {', '.join(f'`{k}`' for k in kinds)}" if kinds else ""
     lines = [
         f"### {run['title']}",
