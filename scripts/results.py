@@ -28,11 +28,13 @@ An entry is a directory ``benchmarks/results/heldout/<entry>/`` with two files:
       - pose_mpjpe_cm <= 0.5 * mean_pose    # a number, a baseline of the run, or k * baseline
     notes: ["optional sentences"]
 
-The page lists, per method, the quoted mean figures of the model beside every
-baseline of the same run, the paper's figure and the target (met or not met),
-then the held-out clips, the budget, the machine, the date and the commands,
-and the per-clip tables at the end. A method without an entry is listed as
-having no held-out result yet.
+The page opens with the status of every target (one row per target of a method,
+listing each entry that measures it and how many meet it; the README's block is
+that table), then lists, per method, the quoted mean figures of the model beside
+every baseline of the same run, the paper's figure and the target (met or not
+met), then the held-out clips, the budget, the machine, the date and the
+commands, and the per-clip tables at the end. A method without an entry is
+listed as having no held-out result yet.
 
 Usage::
 
@@ -681,6 +683,14 @@ def render_page(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS
         lines += [
             *_table(["method", "entry", "protocol", "date", "budget", "machine"], rows),
             "",
+            "## Targets at a glance",
+            "",
+            "Each target of issue #27, with every entry (run) that measures it; a bound named "
+            "after a baseline is that baseline's figure in the same run. The README shows this "
+            "table.",
+            "",
+            *_status_table(entries, methods),
+            "",
         ]
     for method in methods:
         mine = [e for e in entries if e.run["method"] == method]
@@ -706,35 +716,72 @@ def render_page(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
-def render_readme_block(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS)) -> str:
-    """The README's block between the markers (without them): quoted figures per method."""
+def _target_runs(
+    entries: Sequence[Entry], method: str
+) -> list[tuple[Target, list[tuple[Entry, Target]]]]:
+    """The targets of a method's entries, each with every entry (run) that measures it.
+
+    Entries share a target when they set the same metric, operator and bound (a fixed
+    bound, or the same factor of the same baseline, whose value is each run's own).
+    """
+    groups: dict[tuple[str, str, float, str | None], list[tuple[Entry, Target]]] = {}
+    for entry in (e for e in entries if e.run["method"] == method):
+        for target in entry.targets:
+            key = (target.metric, target.op, target.factor, target.reference)
+            groups.setdefault(key, []).append((entry, target))
+    return [(runs[0][1], runs) for runs in groups.values()]
+
+
+def _run_cell(entry: Entry, target: Target) -> str:
+    figure = entry.figures[target.metric]
+    text = f"`{entry.name}` {_fmt(figure.get(MODEL))}"
+    if target.reference is not None:
+        text += f" ({target.reference} {_fmt(figure.get(target.reference))})"
+    met = target.met(figure)
+    return text + (": no value" if met is None else (": met" if met else ": **not met**"))
+
+
+def _status_table(entries: Sequence[Entry], methods: Sequence[str]) -> list[str]:
+    """One row per target of each method: every run's value and how many runs meet it."""
     rows = []
     for method in methods:
-        mine = [e for e in entries if e.run["method"] == method]
-        if not mine:
+        groups = _target_runs(entries, method)
+        if not any(e.run["method"] == method for e in entries):
             rows.append([_title(method), "no held-out result committed yet", "-", "-", "-", "-"])
-        for entry in mine:
-            for metric in entry.run["quote"]:
-                figure = entry.figures[metric]
-                baselines = ", ".join(f"{m} {_fmt(v)}" for m, v in figure.items() if m != MODEL)
-                paper = entry.run["paper"][metric]
-                rows.append(
-                    [
-                        _title(method),
-                        f"`{metric}`, `{entry.name}` ({entry.run['date']})",
-                        _fmt(figure[MODEL]),
-                        baselines or "-",
-                        "-" if paper["value"] is None else _paper_cell(paper),
-                        _target_cell(entry, metric),
-                    ]
-                )
+        elif not groups:
+            rows.append([_title(method), "no target set", "-", "-", "-", "-"])
+        for target, runs in groups:
+            met = sum(t.met(e.figures[t.metric]) is True for e, t in runs)
+            papers = {
+                _paper_cell(p)
+                for p in (e.run["paper"][t.metric] for e, t in runs)
+                if p["value"] is not None
+            }
+            rows.append(
+                [
+                    _title(method),
+                    f"`{target.metric}`",
+                    f"{target.op} {target.rhs}",
+                    "; ".join(_run_cell(e, t) for e, t in runs),
+                    f"{met} of {len(runs)}",
+                    "; ".join(sorted(papers)) or "-",
+                ]
+            )
+    header = ["method", "held-out figure", "target", "runs (entry: model)", "met by", "paper's"]
+    return _table(header, rows)
+
+
+def render_readme_block(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS)) -> str:
+    """The README's block between the markers (without them): the status of every target."""
     intro = (
-        "Held-out figures (clips the runs never trained on, baselines computed in the same run; "
-        "generated by `scripts/results.py` from `benchmarks/results/heldout/`; clips, budgets "
-        "and commands in [docs/results.md](docs/results.md)):"
+        "Targets of issue #27 on held-out clips (clips the runs never trained on; a bound "
+        "named after a baseline is that baseline's figure on the same clips in the same run). "
+        "One row per target; a target measured by several runs (seeds, machines) lists each. "
+        "Generated by `scripts/results.py` from `benchmarks/results/heldout/`; every quoted "
+        "figure with all its baselines, the clips, budgets and commands are in "
+        "[docs/results.md](docs/results.md)."
     )
-    header = ["method", "metric, entry (date)", "model", "baselines (same run)", "paper", "target"]
-    return "\n".join([intro, "", *_table(header, rows)]) + "\n"
+    return "\n".join([intro, "", *_status_table(entries, methods)]) + "\n"
 
 
 def replace_block(text: str, block: str, where: str) -> str:

@@ -230,22 +230,35 @@ def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
     assert results.main(_args(heldout, out, "--readme", str(readme))) == 0
     assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
     text = readme.read_text()
-    assert text.startswith("# Title\n\nabove\n<!-- results:begin -->\nHeld-out figures")
+    assert text.startswith("# Title\n\nabove\n<!-- results:begin -->\nTargets of issue #27")
     assert text.endswith("<!-- results:end -->\nbelow\n") and "\nold\n" not in text
-    rows = {(r["method"], r["metric, entry (date)"].split(",")[0]): r for r in _tables(text)[0]}
+    # one row per target: the model's mean, the bound's baseline and the verdict, each
+    # recomputed here from the per-clip values
+    rows = {(r["method"], r["held-out figure"], r["target"]): r for r in _tables(text)[0]}
     report = json.loads((heldout / "example_smoke" / "evaluation.json").read_text())
-    for metric in ("mpjpe_cm", "mpjpe_over_height"):
-        row = rows["example", f"`{metric}`"]
-        assert float(row["model"]) == pytest.approx(
-            _independent_mean(report, "model", metric), rel=5e-4
+    model_cm = _independent_mean(report, "model", "mpjpe_cm")
+    for target, baseline, factor in [
+        ("< mean_pose", "mean_pose", 1.0),
+        ("<= 0.5 × mean_pose_on_trajectory", "mean_pose_on_trajectory", 0.5),
+    ]:
+        row = rows["example", "`mpjpe_cm`", target]
+        match = re.fullmatch(
+            rf"`example_smoke` (\S+) \({baseline} (\S+)\): (met|\*\*not met\*\*)",
+            row["runs (entry: model)"],
         )
-        baselines = dict(b.rsplit(" ", 1) for b in row["baselines (same run)"].split(", "))
-        assert set(baselines) == {"mean_pose", "mean_pose_on_trajectory"}
-        for method, value in baselines.items():
-            assert float(value) == pytest.approx(
-                _independent_mean(report, method, metric), rel=5e-4
-            )
-    assert ("HuMoT", "no held-out result committed yet") in rows
+        assert match, row
+        bound = _independent_mean(report, baseline, "mpjpe_cm")
+        assert float(match[1]) == pytest.approx(model_cm, rel=5e-4)
+        assert float(match[2]) == pytest.approx(bound, rel=5e-4)
+        met = model_cm < bound if target.startswith("<") else model_cm <= factor * bound
+        assert match[3] == ("met" if met else "**not met**")
+        assert row["met by"] == f"{int(met)} of 1" and row["paper's"] == "1.19 (Table 1)"
+    height = _independent_mean(report, "model", "mpjpe_over_height")
+    row = rows["example", "`mpjpe_over_height`", "< 1e-09"]
+    assert row["runs (entry: model)"] == f"`example_smoke` {height:.4g}: **not met**"
+    assert row["met by"] == "0 of 1" and row["paper's"] == "-"
+    assert rows["example", "`mpjpe_over_height`", ">= 0"]["met by"] == "1 of 1"
+    assert ("HuMoT", "no held-out result committed yet", "-") in rows
     capsys.readouterr()
     # a stale page (a figure edited by hand) fails with a diff naming the file
     page = out.read_text()
@@ -265,9 +278,61 @@ def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
     # the README outside the block is never looked at; inside it is
     readme.write_text(readme.read_text().replace("below", "elsewhere"))
     assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
-    readme.write_text(readme.read_text().replace("mean_pose ", "mean pose ", 1))
+    readme.write_text(readme.read_text().replace("(mean_pose ", "(mean pose ", 1))
     assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 1
     assert f"{readme} (committed)" in capsys.readouterr().err
+
+
+def test_the_status_table_lists_every_run_of_a_target(heldout: Path, tmp_path: Path) -> None:
+    """Runs of one preset (seeds, machines) share a row per target: each value, met by k of n."""
+    smoke = heldout / "example_smoke"
+    report = json.loads((smoke / "evaluation.json").read_text())
+    # a second run whose model is twice the mean pose's error (fails "< mean_pose")
+    rerun = heldout / "example_rerun"
+    rerun.mkdir()
+    worse = json.loads(json.dumps(report))
+    mean_pose = worse["mean"]["mean_pose"]["mpjpe_cm"]
+    worse["mean"]["model"]["mpjpe_cm"] = 2 * mean_pose
+    (rerun / "evaluation.json").write_text(json.dumps(worse))
+    targets = ["mpjpe_cm < mean_pose", "mpjpe_over_height >= 0", "mpjpe_over_height < 2"]
+    (rerun / "run.yaml").write_text(yaml.safe_dump(_run_yaml(targets=targets)))
+    # an ablation without targets adds no row
+    ablation = heldout / "example_ablation"
+    ablation.mkdir()
+    shutil.copy(smoke / "evaluation.json", ablation / "evaluation.json")
+    (ablation / "run.yaml").write_text(yaml.safe_dump(_run_yaml(targets=[])))
+    out, readme = tmp_path / "results.md", tmp_path / "README.md"
+    readme.write_text(f"{results.BEGIN}\n{results.END}\n")
+    assert results.main(_args(heldout, out, "--readme", str(readme))) == 0
+    (status,) = _tables(readme.read_text())
+    half = _independent_mean(report, "model", "mpjpe_cm") <= 0.5 * _independent_mean(
+        report, "mean_pose_on_trajectory", "mpjpe_cm"
+    )
+    # rows in the order the targets first appear (entries by name)
+    assert [(r["held-out figure"], r["target"], r["met by"]) for r in status[:-1]] == [
+        ("`mpjpe_cm`", "< mean_pose", "1 of 2" if _smoke_met(report) else "0 of 2"),
+        ("`mpjpe_over_height`", ">= 0", "2 of 2"),
+        ("`mpjpe_over_height`", "< 2", "1 of 1"),
+        ("`mpjpe_cm`", "<= 0.5 × mean_pose_on_trajectory", "1 of 1" if half else "0 of 1"),
+        ("`mpjpe_over_height`", "< 1e-09", "0 of 1"),
+    ]
+    runs = status[0]["runs (entry: model)"].split("; ")
+    assert [r.split(" ")[0] for r in runs] == ["`example_rerun`", "`example_smoke`"]
+    assert (
+        runs[0] == f"`example_rerun` {2 * mean_pose:.4g} (mean_pose {mean_pose:.4g}): **not met**"
+    )
+    assert status[3]["runs (entry: model)"].startswith("`example_smoke` ")  # the rerun lacks it
+    assert "example_ablation" not in readme.read_text()
+    assert status[-1]["held-out figure"] == "no held-out result committed yet"
+    # the results page opens with the same table
+    page = out.read_text()
+    assert "## Targets at a glance" in page
+    assert _tables(page)[1] == status
+
+
+def _smoke_met(report: dict[str, Any]) -> bool:
+    model = _independent_mean(report, "model", "mpjpe_cm")
+    return model < _independent_mean(report, "mean_pose", "mpjpe_cm")
 
 
 BAD_RUNS = [
