@@ -7,8 +7,11 @@ independently of :func:`benchmarks.suites.scaling.results`.
 
 from __future__ import annotations
 
+import json
 import os
+import signal
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -204,6 +207,23 @@ def test_ranks_are_collected_together_and_a_failure_stops_the_others() -> None:
     assert time.perf_counter() - start < 60  # the sleeping rank was killed, not awaited
     with pytest.raises(ChildProcessError):
         os.waitpid(sleeper[0], 0)  # already reaped
+    assert not sleeper[1].exists()
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX fork")
+def test_a_child_leaves_no_file_unless_it_finished_and_collecting_removes_it() -> None:
+    """A killed benchmark must not leave empty result files in the temporary directory."""
+    pid, path = scaling.forked(_sleep)
+    assert path.parent == Path(tempfile.gettempdir()) and not path.exists()
+    os.kill(pid, signal.SIGKILL)
+    with pytest.raises(RuntimeError, match="sleeping: the measuring process died without"):
+        scaling.collect((pid, path), "sleeping")
+    assert not list(path.parent.glob(f"{path.name}*"))
+    child = scaling.forked(_allocate, 1)
+    os.waitpid(child[0], 0)
+    assert json.loads(child[1].read_text())["result"] == child[0]  # complete once it exists
+    assert scaling._payload(child[1], "done")[0] == child[0]
+    assert not child[1].exists()
 
 
 @pytest.mark.slow

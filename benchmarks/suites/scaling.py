@@ -56,6 +56,7 @@ import sys
 import tempfile
 import time
 import traceback
+import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -291,20 +292,22 @@ def forked(
     """Start ``fn(*args)`` in a forked process (with ``env`` added to its environment).
 
     The child writes ``{"result": ..., "peak_rss_mib": ...}``, or ``{"error": traceback}``,
-    as JSON to a temporary file. It dies with this process
-    (:func:`~benchmarks.harness.die_with_parent`).
+    as JSON to a file in the temporary directory, which exists only once it is complete
+    (written under another name, then renamed); :func:`collect` deletes it. The child
+    dies with this process (:func:`~benchmarks.harness.die_with_parent`), so a killed
+    benchmark leaves no file behind (unless killed between a child's last write and
+    its collection).
 
     Returns:
         ``(pid, path of that file)``, for :func:`collect`.
     """
-    fd, name = tempfile.mkstemp(prefix="skelagnostic-scaling-", suffix=".json")
-    os.close(fd)
+    parent = os.getpid()
+    name = Path(tempfile.gettempdir()) / f"skelagnostic-scaling-{parent}-{uuid.uuid4().hex}.json"
     sys.stdout.flush()
     sys.stderr.flush()
-    parent = os.getpid()
     pid = os.fork()
     if pid:
-        return pid, Path(name)
+        return pid, name
     die_with_parent(parent)
     code = 1
     try:
@@ -314,7 +317,9 @@ def forked(
     except BaseException:
         payload = {"error": traceback.format_exc()}
     try:
-        Path(name).write_text(json.dumps(payload))
+        partial = name.with_name(f"{name.name}.{os.getpid()}.part")
+        partial.write_text(json.dumps(payload))
+        partial.replace(name)
     finally:
         sys.stdout.flush()
         sys.stderr.flush()
@@ -325,8 +330,12 @@ def _payload(path: Path, what: str) -> tuple[Any, float]:
     """The ``(result, peak RSS)`` a finished child of :func:`forked` wrote to ``path``."""
     try:
         text = path.read_text()
+    except FileNotFoundError:
+        text = ""
     finally:
         path.unlink(missing_ok=True)
+        for partial in path.parent.glob(f"{path.name}.*.part"):  # a child killed mid-write
+            partial.unlink(missing_ok=True)
     if not text:
         raise RuntimeError(f"scaling: {what}: the measuring process died without a result")
     payload = json.loads(text)
