@@ -77,3 +77,41 @@ def test_acceleration_and_derived_figures_equal_an_independent_computation(
     for method in methods:
         accs = [_acceleration(captured[r["clip"]][1 + methods.index(method)])[0] for r in out.rows]
         assert mean[method]["accel_height_per_s2"] == pytest.approx(np.mean(accs), rel=1e-6)
+
+
+def test_the_protocol_embeds_each_source_once_for_its_four_transfers(
+    helpers: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The model, two baselines and the touch-down bound reuse one embedding per source."""
+    from skelagnostic_vqpae import transfer as transfer_module
+
+    model, held = helpers["tiny"](tmp_path, 0.3)
+    calls: list[str] = []
+    embed = evaluation.embed_clip
+
+    def counting(aligner: Any, motion: Any) -> Any:
+        calls.append(str(motion.name))
+        return embed(aligner, motion)
+
+    monkeypatch.setattr(evaluation, "embed_clip", counting)
+    monkeypatch.setattr(transfer_module, "embed_clip", counting)
+    with torch.no_grad():
+        out = evaluation.transfer_protocol(model, held, tmp_path)
+    sources = [row["clip"] for row in out.rows]
+    assert sources and all(calls.count(name) == 1 for name in sources), calls
+    # given embeddings change nothing; a wrong count is refused
+    monkeypatch.undo()
+    clips = [c for c in held.clips if model.dataset_of(c.skeleton) == 0]
+    database = transfer_module.build_database(
+        model, [c for c in held.clips if model.dataset_of(c.skeleton) == 1]
+    )
+    with torch.no_grad():
+        given = evaluation.touchdown_bound(
+            model, clips, database, embeddings=[embed(model, c) for c in clips]
+        )
+        computed = evaluation.touchdown_bound(model, clips, database)
+    assert given["per_clip"].keys() == computed["per_clip"].keys()
+    for clip, figures in given["per_clip"].items():
+        assert figures == pytest.approx(computed["per_clip"][clip], nan_ok=True)
+    with pytest.raises(ValueError, match=f"embeddings: 0 given for {len(clips)} source clips"):
+        evaluation.transfer_rows(model, clips, database, embeddings=[])

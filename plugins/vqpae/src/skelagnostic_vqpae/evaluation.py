@@ -1126,6 +1126,17 @@ def acceleration(motion: Motion) -> tuple[float, float]:
     return float(per_frame.mean()), float(per_frame.max())
 
 
+def _source_embeddings(
+    sources: Sequence[Motion], embeddings: Sequence[ClipEmbedding] | None
+) -> Sequence[ClipEmbedding] | None:
+    """``embeddings``, checked to give one per source."""
+    if embeddings is not None and len(embeddings) != len(sources):
+        raise ValueError(
+            f"embeddings: {len(embeddings)} given for {len(sources)} source clips (one per clip)"
+        )
+    return embeddings
+
+
 def transfer_rows(
     aligner: Any,
     sources: Sequence[Motion],
@@ -1133,6 +1144,7 @@ def transfer_rows(
     replay_seconds: float = 1.0,
     halflife: float | None = HALFLIFE,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
+    embeddings: Sequence[ClipEmbedding] | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, list[Motion]]]:
     """Transfer every source clip onto the database's character, model and baseline.
 
@@ -1157,6 +1169,8 @@ def transfer_rows(
         frequency_tolerance: Period rule
             (:func:`~skelagnostic_vqpae.transfer.matching_frequency`); None: the
             frequency head's estimates.
+        embeddings: The sources' embeddings (:func:`~skelagnostic_vqpae.embed.embed_clip`),
+            one per source, if already computed; else each source is embedded once here.
 
     Returns:
         ``(rows, outputs)``: rows for :class:`Evaluation` with :data:`TRANSFER_METRICS`
@@ -1174,13 +1188,15 @@ def transfer_rows(
         )
     )
     shortest = min(m.duration for m in target.motions)
+    embeddings = _source_embeddings(sources, embeddings)
     rows, outputs = [], {}
-    for clip in track(sources, "transfer: held-out clips"):
+    for i, clip in enumerate(track(sources, "transfer: held-out clips")):
         source_hz = gait_frequency(clip)
         options = {
             "halflife": halflife,
             "frequency_tolerance": frequency_tolerance,
-            "embedding": embed_clip(aligner, clip),  # once for the three transfers
+            # once for the three transfers
+            "embedding": embed_clip(aligner, clip) if embeddings is None else embeddings[i],
         }
         made = {
             MODEL: transfer(aligner, clip, target, **options).motion,
@@ -1232,6 +1248,7 @@ def touchdown_bound(
     target: TransferDatabase,
     halflife: float | None = HALFLIFE,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
+    embeddings: Sequence[ClipEmbedding] | None = None,
 ) -> dict[str, Any]:
     """The transfer with periods from the feet: what exact frequencies would give.
 
@@ -1248,6 +1265,7 @@ def touchdown_bound(
             (its embeddings are reused).
         halflife: Inertialization halflife of the transitions, seconds.
         frequency_tolerance: The period rule where no foot steps.
+        embeddings: The sources' embeddings, one per source, if already computed.
 
     Returns:
         ``per_clip`` (clip id -> :func:`rhythm_figures`), ``mean`` (of each figure
@@ -1259,7 +1277,8 @@ def touchdown_bound(
     fps = target.database.fps
     per_clip: dict[str, dict[str, float]] = {}
     source_frames = source_known = 0
-    for clip in track(sources, "transfer: touch-down periods"):
+    embeddings = _source_embeddings(sources, embeddings)
+    for i, clip in enumerate(track(sources, "transfer: touch-down periods")):
         frequency = touchdown_frequency(clip if clip.fps == fps else clip.resample(fps))
         source_frames += frequency.numel()
         source_known += int(torch.isfinite(frequency).sum())
@@ -1270,6 +1289,7 @@ def touchdown_bound(
             halflife=halflife,
             frequency_tolerance=frequency_tolerance,
             frequency=frequency,
+            embedding=None if embeddings is None else embeddings[i],
         ).motion
         per_clip[str(clip.name)] = rhythm_figures(clip, out)
     mean = mean_rows([{"values": {"bound": f}} for f in per_clip.values()]).get("bound", {})
@@ -1308,8 +1328,9 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
     if not database:
         raise EvaluationError(f"vqpae.transfer: no training clip of {names[1]!r} for the database")
     target = build_database(aligner, database, [str(m.name) for m in database])
-    rows, outputs = transfer_rows(aligner, sources, target)
-    bound = touchdown_bound(aligner, sources, target)
+    embeddings = [embed_clip(aligner, clip) for clip in sources]  # once for all four
+    rows, outputs = transfer_rows(aligner, sources, target, embeddings=embeddings)
+    bound = touchdown_bound(aligner, sources, target, embeddings=embeddings)
 
     def bounded(metric: str) -> float:
         return float(bound["mean"].get(metric, math.nan))
