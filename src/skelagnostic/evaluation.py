@@ -95,15 +95,22 @@ class HeldOut:
     """The clips of a run that the model never trained on.
 
     Attributes:
-        split: ``"test"`` when the run's data has a test split, else ``"val"``.
+        split: ``"test"``, ``"val"`` or ``"heldout"`` (both; see :func:`held_out`).
         clips: The clips, resampled to the data module's fps, named by their clip id.
         datamodule: The run's data module (after ``setup``), for its options
             (``fps``, ``window``, its training datasets for normalisation statistics).
+        description: The split's name in reports, when not the default of ``split``.
     """
 
     split: str
     clips: list[Motion]
     datamodule: Any = None
+    description: str = ""
+
+    @property
+    def name(self) -> str:
+        """What the split is, as the reports write it (``"test split"``, ...)."""
+        return self.description or _SPLIT_NAMES.get(self.split, self.split)
 
     @property
     def names(self) -> list[str]:
@@ -111,8 +118,12 @@ class HeldOut:
         return [str(c.name) for c in self.clips]
 
 
-def held_out(datamodule: Any) -> HeldOut:
-    """The test clips of a data module, else its validation clips.
+#: The values of ``evaluate split=``: which clips the model never trained on are evaluated.
+SPLITS = ("test", "val", "heldout")
+
+
+def held_out(datamodule: Any, split: str | None = None) -> HeldOut:
+    """The held-out clips of a data module: its test clips, else its validation clips.
 
     The data module is set up (``setup("test")``), then every clip its
     ``assigned_splits`` places in the chosen split is loaded again from its
@@ -121,24 +132,48 @@ def held_out(datamodule: Any) -> HeldOut:
     Args:
         datamodule: A :class:`~skelagnostic.data.MotionDataModule` (or any object
             with ``sources``, ``assigned_splits`` and ``fps``).
+        split: ``None``: the test split if the data has one, else the validation
+            split. ``"test"`` or ``"val"``: that split. ``"heldout"``: the validation
+            and the test clips together (every clip the model never trained on;
+            for corpora whose test split is too small to decide a figure). Clips of
+            the validation split are unseen by the weights, but a checkpoint chosen
+            by its validation loss (``best.ckpt``) was selected on them.
 
     Returns:
-        The held-out clips.
+        The held-out clips (validation clips first for ``"heldout"``).
 
     Raises:
-        EvaluationError: Neither split holds a clip.
+        EvaluationError: ``split`` is not one of :data:`SPLITS`, or the chosen
+            split holds no clip.
     """
+    if split is not None and split not in SPLITS:
+        raise EvaluationError(
+            f"split={split!r}: expected one of {', '.join(SPLITS)} (or null: the test split, "
+            "else the validation split)"
+        )
     datamodule.setup("test")
     assigned: Mapping[str, str] = getattr(datamodule, "assigned_splits", {}) or {}
-    split = next((s for s in ("test", "val") if s in assigned.values()), None)
+    present = set(assigned.values())
     if split is None:
+        split = next((s for s in ("test", "val") if s in present), None)
+        if split is None:
+            raise EvaluationError(
+                "evaluate: the data has neither a test nor a validation split "
+                "(data.test_fraction=0 and data.val_fraction=0, and no clip matches a test "
+                "pattern); set data.test_fraction>0 or data.val_fraction>0 so the model is "
+                "evaluated on clips it did not train on"
+            )
+        name = _SPLIT_NAMES[split] if split == "test" else _NO_TEST
+        return HeldOut(split, clips_of_split(datamodule, split), datamodule, name)
+    wanted = ("val", "test") if split == "heldout" else (split,)
+    if not present & set(wanted):
         raise EvaluationError(
-            "evaluate: the data has neither a test nor a validation split (data.test_fraction=0 "
-            "and data.val_fraction=0, and no clip matches a test pattern); set "
-            "data.test_fraction>0 or data.val_fraction>0 so the model is evaluated on clips it "
-            "did not train on"
+            f"split={split}: the data has no {' or '.join(_SPLIT_NAMES[w] for w in wanted)} "
+            f"(its splits: {', '.join(sorted(present)) or 'none'}); set data.test_fraction>0 "
+            "or data.val_fraction>0, or choose another split"
         )
-    return HeldOut(split, clips_of_split(datamodule, split), datamodule)
+    clips = [clip for w in wanted for clip in clips_of_split(datamodule, w)]
+    return HeldOut(split, clips, datamodule)
 
 
 def clips_of_split(datamodule: Any, split: str) -> list[Motion]:
@@ -311,7 +346,13 @@ def markdown(report: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-_SPLIT_NAMES = {"test": "test split", "val": "validation split (the data has no test split)"}
+_SPLIT_NAMES = {
+    "test": "test split",
+    "val": "validation split",
+    "heldout": "validation and test splits",
+}
+#: The split's name when ``evaluate`` falls back to the validation split.
+_NO_TEST = "validation split (the data has no test split)"
 
 
 #: A clip id that is a file path, optionally behind a ``label:`` of a combined source.
@@ -417,7 +458,7 @@ def write_evaluation(
         "data": {
             "source": data.get("source"),
             "split": held.split,
-            "split_name": _SPLIT_NAMES[held.split],
+            "split_name": held.name,
             "clips": [portable[n] for n in held.names],
             "config": dict(data),
         },

@@ -179,6 +179,63 @@ def test_held_out_loads_the_validation_clips_at_the_data_fps(tmp_path: Path) -> 
     assert all(c.fps == 20.0 for c in held.clips)
 
 
+def test_held_out_split_chooses_test_val_or_both(tmp_path: Path) -> None:
+    dm = MotionDataModule(
+        ProceduralSource(kinds=("biped22",), clips_per_gait=4, seconds=2.0),
+        window=16,
+        stride=8,
+        val_fraction=0.25,
+        test_fraction=0.25,
+        cache_dir=tmp_path,
+    )
+    held = {split: held_out(dm, split) for split in (None, "test", "val", "heldout")}
+    by_split = {
+        s: sorted(k for k, v in dm.assigned_splits.items() if v == s) for s in ("val", "test")
+    }
+    assert by_split["val"] and by_split["test"]
+    assert held[None].split == "test" and held[None].names == by_split["test"]
+    assert held["test"].names == by_split["test"] and held["test"].name == "test split"
+    assert held["val"].names == by_split["val"] and held["val"].name == "validation split"
+    assert held["heldout"].names == by_split["val"] + by_split["test"]
+    assert held["heldout"].name == "validation and test splits"
+    assert not set(held["heldout"].names) & {
+        k for k, v in dm.assigned_splits.items() if v == "train"
+    }
+    with pytest.raises(EvaluationError, match=r"split='train': expected one of test, val, heldout"):
+        held_out(dm, "train")
+    no_test = MotionDataModule(
+        ProceduralSource(kinds=("biped22",), clips_per_gait=2, seconds=2.0),
+        window=16,
+        stride=8,
+        val_fraction=0.3,
+        cache_dir=tmp_path,
+    )
+    with pytest.raises(EvaluationError, match="split=test: the data has no test split"):
+        held_out(no_test, "test")
+    assert held_out(no_test, "heldout").names == held_out(no_test).names
+
+
+def test_evaluate_split_heldout_reports_validation_and_test_clips(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    fitted = _fit(tmp_path, monkeypatch, capsys, "data.test_fraction=0.3")
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=heldout"]) == 0, (
+        capsys.readouterr().err
+    )
+    report = json.loads((_evaluation_dir(tmp_path) / "evaluation.json").read_text())
+    split = json.loads((fitted / "split.json").read_text())["clips"]
+    assert report["data"]["split"] == "heldout"
+    assert report["data"]["split_name"] == "validation and test splits"
+    expected = [k for s in ("val", "test") for k, v in sorted(split.items()) if v == s]
+    assert report["data"]["clips"] == expected and len(expected) > 2
+    assert "validation and test splits" in capsys.readouterr().out
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=training"]) == 1
+    assert "split='training': expected one of test, val, heldout" in capsys.readouterr().err
+
+
 def test_mean_rows_skips_missing_and_nan_values() -> None:
     rows = [
         {"clip": "a", "values": {"model": {"x": 1.0, "y": float("nan")}}},

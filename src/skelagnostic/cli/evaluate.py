@@ -1,9 +1,10 @@
 """``skelagnostic evaluate``: a registered protocol on the held-out clips of a run.
 
 ``skelagnostic evaluate ckpt_path=RUN_OR_CKPT [protocol=NAME] [+protocol_options.KEY=VALUE]
-[overrides]`` takes the model and data of the checkpoint's run (as ``validate`` and
-``test`` do), loads the weights, collects the run's test clips (else its validation
-clips), runs the protocol (default: the model's default protocol; ``protocol_options``
+[split=test|val|heldout] [overrides]`` takes the model and data of the checkpoint's run (as
+``validate`` and ``test`` do), loads the weights, collects the run's test clips (else its
+validation clips; ``split=`` chooses, :func:`~skelagnostic.evaluation.held_out`), runs the
+protocol (default: the model's default protocol; ``protocol_options``
 become its keyword arguments) and writes
 ``evaluation.json``, ``evaluation.md`` and plots into its own run directory
 (``runs/<model>/evaluate/<time>``); see :mod:`skelagnostic.evaluation`.
@@ -43,7 +44,8 @@ def evaluate_checkpoint(
 
     Args:
         cfg: The composed config (``model``, ``data``, ``protocol``, ``run_dir``, optional
-            ``protocol_options``: keyword arguments of the protocol function).
+            ``protocol_options``: keyword arguments of the protocol function, optional
+            ``split``: which held-out clips, :func:`~skelagnostic.evaluation.held_out`).
         pm: Where the protocol is looked up.
         module: The aligner class of ``cfg.model.name``.
         datamodule: The data module built from ``cfg.data``.
@@ -67,7 +69,7 @@ def evaluate_checkpoint(
         aligner = load_checkpoint(
             module, ckpt, option="ckpt_path", aligners=pm.aligner_classes()
         ).eval()
-    held = held_out(datamodule)
+    held = held_out(datamodule, cfg.get("split"))
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     with torch.no_grad():
