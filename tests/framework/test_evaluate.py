@@ -152,27 +152,20 @@ def test_evaluate_errors_name_the_way_out(
     )
 
 
+def _procedural(tmp_path: Path, clips_per_gait: int, **options: float) -> MotionDataModule:
+    """biped22 clips of 2 s in a data module (16-frame windows), split by ``options``."""
+    source = ProceduralSource(kinds=("biped22",), clips_per_gait=clips_per_gait, seconds=2.0)
+    return MotionDataModule(source, window=16, stride=8, cache_dir=tmp_path, **options)
+
+
 def test_held_out_refuses_data_without_a_held_out_split(tmp_path: Path) -> None:
-    dm = MotionDataModule(
-        ProceduralSource(kinds=("biped22",), clips_per_gait=1, seconds=2.0),
-        window=16,
-        stride=8,
-        val_fraction=0.0,
-        cache_dir=tmp_path,
-    )
+    dm = _procedural(tmp_path, 1, val_fraction=0.0)
     with pytest.raises(EvaluationError, match="neither a test nor a validation split"):
         held_out(dm)
 
 
 def test_held_out_loads_the_validation_clips_at_the_data_fps(tmp_path: Path) -> None:
-    dm = MotionDataModule(
-        ProceduralSource(kinds=("biped22",), clips_per_gait=2, seconds=2.0),
-        fps=20.0,
-        window=16,
-        stride=8,
-        val_fraction=0.3,
-        cache_dir=tmp_path,
-    )
+    dm = _procedural(tmp_path, 2, fps=20.0, val_fraction=0.3)
     held = held_out(dm)
     assert held.split == "val"
     assert held.names == sorted(k for k, v in dm.assigned_splits.items() if v == "val")
@@ -180,14 +173,7 @@ def test_held_out_loads_the_validation_clips_at_the_data_fps(tmp_path: Path) -> 
 
 
 def test_held_out_split_chooses_test_val_or_both(tmp_path: Path) -> None:
-    dm = MotionDataModule(
-        ProceduralSource(kinds=("biped22",), clips_per_gait=4, seconds=2.0),
-        window=16,
-        stride=8,
-        val_fraction=0.25,
-        test_fraction=0.25,
-        cache_dir=tmp_path,
-    )
+    dm = _procedural(tmp_path, 4, val_fraction=0.25, test_fraction=0.25)
     held = {split: held_out(dm, split) for split in (None, "test", "val", "heldout")}
     by_split = {
         s: sorted(k for k, v in dm.assigned_splits.items() if v == s) for s in ("val", "test")
@@ -203,13 +189,7 @@ def test_held_out_split_chooses_test_val_or_both(tmp_path: Path) -> None:
     }
     with pytest.raises(EvaluationError, match=r"split='train': expected one of test, val, heldout"):
         held_out(dm, "train")
-    no_test = MotionDataModule(
-        ProceduralSource(kinds=("biped22",), clips_per_gait=2, seconds=2.0),
-        window=16,
-        stride=8,
-        val_fraction=0.3,
-        cache_dir=tmp_path,
-    )
+    no_test = _procedural(tmp_path, 2, val_fraction=0.3)
     with pytest.raises(EvaluationError, match="split=test: the data has no test split"):
         held_out(no_test, "test")
     assert held_out(no_test, "heldout").names == held_out(no_test).names
