@@ -273,7 +273,7 @@ def load_report(path: Path) -> dict[str, Any]:
     for key in ("protocol", "model", "data", "methods", "metrics", "mean", "per_clip"):
         if key not in report:
             raise ResultsError(f"{path}: {key}: missing")
-    for key in ("source", "split_name", "clips"):
+    for key in ("source", "split", "split_name", "clips"):
         if key not in report["data"]:
             raise ResultsError(f"{path}: data.{key}: missing")
     if MODEL not in report["mean"]:
@@ -722,12 +722,14 @@ def _target_runs(
     """The targets of a method's entries, each with every entry (run) that measures it.
 
     Entries share a target when they set the same metric, operator and bound (a fixed
-    bound, or the same factor of the same baseline, whose value is each run's own).
+    bound, or the same factor of the same baseline, whose value is each run's own) on
+    the same kind of held-out clips (the evaluation's ``data.split``).
     """
-    groups: dict[tuple[str, str, float, str | None], list[tuple[Entry, Target]]] = {}
+    groups: dict[tuple[str, str, float, str | None, str], list[tuple[Entry, Target]]] = {}
     for entry in (e for e in entries if e.run["method"] == method):
         for target in entry.targets:
-            key = (target.metric, target.op, target.factor, target.reference)
+            split = str(entry.report["data"]["split"])
+            key = (target.metric, target.op, target.factor, target.reference, split)
             groups.setdefault(key, []).append((entry, target))
     return [(runs[0][1], runs) for runs in groups.values()]
 
@@ -747,9 +749,9 @@ def _status_table(entries: Sequence[Entry], methods: Sequence[str]) -> list[str]
     for method in methods:
         groups = _target_runs(entries, method)
         if not any(e.run["method"] == method for e in entries):
-            rows.append([_title(method), "no held-out result committed yet", "-", "-", "-", "-"])
+            rows.append([_title(method), "no held-out result committed yet", *["-"] * 5])
         elif not groups:
-            rows.append([_title(method), "no target set", "-", "-", "-", "-"])
+            rows.append([_title(method), "no target set", *["-"] * 5])
         for target, runs in groups:
             met = sum(t.met(e.figures[t.metric]) is True for e, t in runs)
             papers = {
@@ -761,13 +763,22 @@ def _status_table(entries: Sequence[Entry], methods: Sequence[str]) -> list[str]
                 [
                     _title(method),
                     f"`{target.metric}`",
+                    runs[0][0].report["data"]["split_name"],
                     f"{target.op} {target.rhs}",
                     "; ".join(_run_cell(e, t) for e, t in runs),
                     f"{met} of {len(runs)}",
                     "; ".join(sorted(papers)) or "-",
                 ]
             )
-    header = ["method", "held-out figure", "target", "runs (entry: model)", "met by", "paper's"]
+    header = [
+        "method",
+        "held-out figure",
+        "clips",
+        "target",
+        "runs (entry: model)",
+        "met by",
+        "paper's",
+    ]
     return _table(header, rows)
 
 

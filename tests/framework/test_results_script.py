@@ -259,6 +259,7 @@ def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
     assert row["met by"] == "0 of 1" and row["paper's"] == "-"
     assert rows["example", "`mpjpe_over_height`", ">= 0"]["met by"] == "1 of 1"
     assert ("HuMoT", "no held-out result committed yet", "-") in rows
+    assert all(r["clips"] == "test split" for r in _tables(text)[0][:-1])
     capsys.readouterr()
     # a stale page (a figure edited by hand) fails with a diff naming the file
     page = out.read_text()
@@ -296,6 +297,13 @@ def test_the_status_table_lists_every_run_of_a_target(heldout: Path, tmp_path: P
     (rerun / "evaluation.json").write_text(json.dumps(worse))
     targets = ["mpjpe_cm < mean_pose", "mpjpe_over_height >= 0", "mpjpe_over_height < 2"]
     (rerun / "run.yaml").write_text(yaml.safe_dump(_run_yaml(targets=targets)))
+    # the same run evaluated on other held-out clips is another row
+    wider = heldout / "example_wider"
+    wider.mkdir()
+    other = json.loads(json.dumps(report))
+    other["data"].update(split="heldout", split_name="validation and test splits")
+    (wider / "evaluation.json").write_text(json.dumps(other))
+    (wider / "run.yaml").write_text(yaml.safe_dump(_run_yaml(targets=targets[:1])))
     # an ablation without targets adds no row
     ablation = heldout / "example_ablation"
     ablation.mkdir()
@@ -309,12 +317,15 @@ def test_the_status_table_lists_every_run_of_a_target(heldout: Path, tmp_path: P
         report, "mean_pose_on_trajectory", "mpjpe_cm"
     )
     # rows in the order the targets first appear (entries by name)
-    assert [(r["held-out figure"], r["target"], r["met by"]) for r in status[:-1]] == [
-        ("`mpjpe_cm`", "< mean_pose", "1 of 2" if _smoke_met(report) else "0 of 2"),
-        ("`mpjpe_over_height`", ">= 0", "2 of 2"),
-        ("`mpjpe_over_height`", "< 2", "1 of 1"),
-        ("`mpjpe_cm`", "<= 0.5 × mean_pose_on_trajectory", "1 of 1" if half else "0 of 1"),
-        ("`mpjpe_over_height`", "< 1e-09", "0 of 1"),
+    met = _smoke_met(report)
+    test = "test split"
+    assert [(r["held-out figure"], r["clips"], r["target"], r["met by"]) for r in status[:-1]] == [
+        ("`mpjpe_cm`", test, "< mean_pose", "1 of 2" if met else "0 of 2"),
+        ("`mpjpe_over_height`", test, ">= 0", "2 of 2"),
+        ("`mpjpe_over_height`", test, "< 2", "1 of 1"),
+        ("`mpjpe_cm`", test, "<= 0.5 × mean_pose_on_trajectory", "1 of 1" if half else "0 of 1"),
+        ("`mpjpe_over_height`", test, "< 1e-09", "0 of 1"),
+        ("`mpjpe_cm`", "validation and test splits", "< mean_pose", f"{int(met)} of 1"),
     ]
     runs = status[0]["runs (entry: model)"].split("; ")
     assert [r.split(" ")[0] for r in runs] == ["`example_rerun`", "`example_smoke`"]
@@ -322,6 +333,7 @@ def test_the_status_table_lists_every_run_of_a_target(heldout: Path, tmp_path: P
         runs[0] == f"`example_rerun` {2 * mean_pose:.4g} (mean_pose {mean_pose:.4g}): **not met**"
     )
     assert status[3]["runs (entry: model)"].startswith("`example_smoke` ")  # the rerun lacks it
+    assert status[5]["runs (entry: model)"].startswith("`example_wider` ")
     assert "example_ablation" not in readme.read_text()
     assert status[-1]["held-out figure"] == "no held-out result committed yet"
     # the results page opens with the same table
