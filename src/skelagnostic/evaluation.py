@@ -35,6 +35,7 @@ from skelagnostic.errors import SkelagnosticError
 __all__ = [
     "MODEL",
     "RECONSTRUCTION_METRICS",
+    "SPLITS",
     "Evaluation",
     "EvaluationError",
     "HeldOut",
