@@ -164,8 +164,7 @@ def held_out(datamodule: Any, split: str | None = None) -> HeldOut:
                 "pattern); set data.test_fraction>0 or data.val_fraction>0 so the model is "
                 "evaluated on clips it did not train on"
             )
-        name = _SPLIT_NAMES[split] if split == "test" else _NO_TEST
-        return HeldOut(split, clips_of_split(datamodule, split), datamodule, name)
+    description = _NO_TEST if split == "val" and "test" not in present else ""
     wanted = ("val", "test") if split == "heldout" else (split,)
     if not present & set(wanted):
         raise EvaluationError(
@@ -174,7 +173,7 @@ def held_out(datamodule: Any, split: str | None = None) -> HeldOut:
             "or data.val_fraction>0, or choose another split"
         )
     clips = [clip for w in wanted for clip in clips_of_split(datamodule, w)]
-    return HeldOut(split, clips, datamodule)
+    return HeldOut(split, clips, datamodule, description)
 
 
 def clips_of_split(datamodule: Any, split: str) -> list[Motion]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -67,7 +68,7 @@ def _evaluation_dir(tmp_path: Path) -> Path:
     return run
 
 
-def test_evaluate_writes_the_report_on_the_test_split(
+def test_evaluate_writes_the_report_on_the_test_split_or_every_held_out_clip(
     example_plugin: Path,
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
@@ -103,6 +104,19 @@ def test_evaluate_writes_the_report_on_the_test_split(
     assert "| mpjpe_cm (" in markdown
     assert "example.reconstruction on the test split" in out and "mean_pose" in out
     assert (run / "config.yaml").is_file()
+    # split=heldout: the same run's validation and test clips together
+    shutil.rmtree(run)
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=heldout"]) == 0, (
+        capsys.readouterr().err
+    )
+    report = json.loads((_evaluation_dir(tmp_path) / "evaluation.json").read_text())
+    assert report["data"]["split"] == "heldout"
+    assert report["data"]["split_name"] == "validation and test splits"
+    expected = [k for s in ("val", "test") for k, v in sorted(split.items()) if v == s]
+    assert report["data"]["clips"] == expected and len(expected) > 2
+    assert "validation and test splits" in capsys.readouterr().out
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=training"]) == 1
+    assert "split='training': expected one of test, val, heldout" in capsys.readouterr().err
 
 
 def test_evaluate_falls_back_to_the_validation_split(
@@ -193,27 +207,6 @@ def test_held_out_split_chooses_test_val_or_both(tmp_path: Path) -> None:
     with pytest.raises(EvaluationError, match="split=test: the data has no test split"):
         held_out(no_test, "test")
     assert held_out(no_test, "heldout").names == held_out(no_test).names
-
-
-def test_evaluate_split_heldout_reports_validation_and_test_clips(
-    example_plugin: Path,
-    tmp_path: Path,
-    monkeypatch: pytest.MonkeyPatch,
-    capsys: pytest.CaptureFixture[str],
-) -> None:
-    fitted = _fit(tmp_path, monkeypatch, capsys, "data.test_fraction=0.3")
-    assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=heldout"]) == 0, (
-        capsys.readouterr().err
-    )
-    report = json.loads((_evaluation_dir(tmp_path) / "evaluation.json").read_text())
-    split = json.loads((fitted / "split.json").read_text())["clips"]
-    assert report["data"]["split"] == "heldout"
-    assert report["data"]["split_name"] == "validation and test splits"
-    expected = [k for s in ("val", "test") for k, v in sorted(split.items()) if v == s]
-    assert report["data"]["clips"] == expected and len(expected) > 2
-    assert "validation and test splits" in capsys.readouterr().out
-    assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=training"]) == 1
-    assert "split='training': expected one of test, val, heldout" in capsys.readouterr().err
 
 
 def test_mean_rows_skips_missing_and_nan_values() -> None:

@@ -1127,10 +1127,12 @@ def acceleration(motion: Motion) -> tuple[float, float]:
 
 
 def _source_embeddings(
-    sources: Sequence[Motion], embeddings: Sequence[ClipEmbedding] | None
-) -> Sequence[ClipEmbedding] | None:
-    """``embeddings``, checked to give one per source."""
-    if embeddings is not None and len(embeddings) != len(sources):
+    aligner: Any, sources: Sequence[Motion], embeddings: Sequence[ClipEmbedding] | None
+) -> Sequence[ClipEmbedding]:
+    """One embedding per source: ``embeddings`` (checked), else each source embedded here."""
+    if embeddings is None:
+        return [embed_clip(aligner, clip) for clip in sources]
+    if len(embeddings) != len(sources):
         raise ValueError(
             f"embeddings: {len(embeddings)} given for {len(sources)} source clips (one per clip)"
         )
@@ -1170,7 +1172,7 @@ def transfer_rows(
             (:func:`~skelagnostic_vqpae.transfer.matching_frequency`); None: the
             frequency head's estimates.
         embeddings: The sources' embeddings (:func:`~skelagnostic_vqpae.embed.embed_clip`),
-            one per source, if already computed; else each source is embedded once here.
+            one per source, if already computed; else each source is embedded here.
 
     Returns:
         ``(rows, outputs)``: rows for :class:`Evaluation` with :data:`TRANSFER_METRICS`
@@ -1188,15 +1190,14 @@ def transfer_rows(
         )
     )
     shortest = min(m.duration for m in target.motions)
-    embeddings = _source_embeddings(sources, embeddings)
+    embeddings = _source_embeddings(aligner, sources, embeddings)
     rows, outputs = [], {}
     for i, clip in enumerate(track(sources, "transfer: held-out clips")):
         source_hz = gait_frequency(clip)
         options = {
             "halflife": halflife,
             "frequency_tolerance": frequency_tolerance,
-            # once for the three transfers
-            "embedding": embed_clip(aligner, clip) if embeddings is None else embeddings[i],
+            "embedding": embeddings[i],  # once for the three transfers
         }
         made = {
             MODEL: transfer(aligner, clip, target, **options).motion,
@@ -1265,7 +1266,8 @@ def touchdown_bound(
             (its embeddings are reused).
         halflife: Inertialization halflife of the transitions, seconds.
         frequency_tolerance: The period rule where no foot steps.
-        embeddings: The sources' embeddings, one per source, if already computed.
+        embeddings: The sources' embeddings, one per source, if already computed; else
+            each source is embedded here.
 
     Returns:
         ``per_clip`` (clip id -> :func:`rhythm_figures`), ``mean`` (of each figure
@@ -1277,7 +1279,7 @@ def touchdown_bound(
     fps = target.database.fps
     per_clip: dict[str, dict[str, float]] = {}
     source_frames = source_known = 0
-    embeddings = _source_embeddings(sources, embeddings)
+    embeddings = _source_embeddings(aligner, sources, embeddings)
     for i, clip in enumerate(track(sources, "transfer: touch-down periods")):
         frequency = touchdown_frequency(clip if clip.fps == fps else clip.resample(fps))
         source_frames += frequency.numel()
@@ -1289,7 +1291,7 @@ def touchdown_bound(
             halflife=halflife,
             frequency_tolerance=frequency_tolerance,
             frequency=frequency,
-            embedding=None if embeddings is None else embeddings[i],
+            embedding=embeddings[i],
         ).motion
         per_clip[str(clip.name)] = rhythm_figures(clip, out)
     mean = mean_rows([{"values": {"bound": f}} for f in per_clip.values()]).get("bound", {})
