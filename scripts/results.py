@@ -717,10 +717,8 @@ def render_page(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
-def _target_runs(
-    entries: Sequence[Entry], method: str
-) -> list[tuple[Target, list[tuple[Entry, Target]]]]:
-    """The targets of a method's entries, each with every entry (run) that measures it.
+def _target_runs(entries: Sequence[Entry], method: str) -> list[list[tuple[Entry, Target]]]:
+    """The targets of a method's entries, each as every ``(entry, target)`` that sets it.
 
     Entries share a target when they set the same metric, operator and bound (a fixed
     bound, or the same factor of the same baseline, whose value is each run's own) on
@@ -732,7 +730,7 @@ def _target_runs(
             split = str(entry.report["data"]["split"])
             key = (target.metric, target.op, target.factor, target.reference, split)
             groups.setdefault(key, []).append((entry, target))
-    return [(runs[0][1], runs) for runs in groups.values()]
+    return list(groups.values())
 
 
 def _run_cell(entry: Entry, target: Target) -> str:
@@ -753,7 +751,8 @@ def _status_table(entries: Sequence[Entry], methods: Sequence[str]) -> list[str]
             rows.append([_title(method), "no held-out result committed yet", *["-"] * 5])
         elif not groups:
             rows.append([_title(method), "no target set", *["-"] * 5])
-        for target, runs in groups:
+        for runs in groups:
+            target = runs[0][1]
             met = sum(t.met(e.figures[t.metric]) is True for e, t in runs)
             papers = {
                 _paper_cell(p)
