@@ -160,6 +160,20 @@ class WindowDataset(Dataset):
             yield torch.from_numpy(buf[:filled])
 
 
+def _named_after(entry: CacheEntry, source: ClipSource, clip: ClipRef) -> CacheEntry:
+    """``entry``, written for a clip of the same content, with ``clip``'s own names.
+
+    The windows are shared (they depend on the content only), but the clip id
+    and the skeleton (its ``name`` comes from the file, e.g. a BVH file's stem)
+    are those of ``clip``: the clip is read again for its skeleton, the windows
+    are not rebuilt. The cache files are not changed.
+    """
+    skeleton = source.load(clip).skeleton.to_dict()
+    named = CacheEntry(entry.array, {**entry.meta, "clip": clip.id, "skeleton": skeleton})
+    named.__dict__["layout"] = entry.layout  # the same file: spare a header read
+    return named
+
+
 class _ResumableSampler(DistributedSampler):
     """A :class:`DistributedSampler` (one shard per rank) that can start a pass part-way.
 
@@ -460,7 +474,11 @@ class MotionDataModule(L.LightningDataModule):
         """The clip's cache entry, built with :meth:`_encode` when missing or damaged (a hook).
 
         The entry is keyed by the clip's content key, :meth:`preprocessing` and
-        the source's :meth:`~skelagnostic.data.ClipSource.loading` options. A
+        the source's :meth:`~skelagnostic.data.ClipSource.loading` options, so
+        files of the same bytes share their windows; the names still come from
+        the clip being read: an entry written for another clip id (a copy of the
+        file under another name) is returned with this clip's id and skeleton
+        (whose name is the file's, e.g. a BVH file's stem). A
         clip whose id is a file path keeps one entry per preprocessing: the
         entry of an earlier version of the file is deleted (:meth:`WindowCache.track`).
         Override it to cache something else per clip (PC-MRL's interpolation
@@ -477,6 +495,8 @@ class MotionDataModule(L.LightningDataModule):
         entry = self.cache.get(key)
         if entry is None:
             entry = self.cache.put(key, *self._encode(source, clip))
+        elif entry.meta.get("clip") != clip.id:
+            entry = _named_after(entry, source, clip)
         if os.path.isfile(clip.id):
             self.cache.track(slot_key(os.path.abspath(clip.id), self.preprocessing()), key)
         return entry
