@@ -1,4 +1,4 @@
-"""Window cache, issue 47: names per path (item 3)."""
+"""Window cache, issue 47: names per path (item 3), ``cache clear`` (item 5)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,14 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import skelagnostic as sa
-from skelagnostic.data import BVHSource, MotionDataModule
+from skelagnostic import cli
+from skelagnostic.data import BVHSource, MotionDataModule, ProceduralSource
+
+REPO = Path(__file__).resolve().parents[2]
+TROUBLESHOOTING = REPO / "docs" / "troubleshooting.md"
 
 
 def _module(paths: list[Path], cache: Path) -> MotionDataModule:
@@ -51,3 +56,75 @@ def test_same_bytes_under_another_name_are_named_after_their_own_file(tmp_path: 
     again = _module([a], cache)
     again.setup()
     assert sorted(again.dataset_names) == ["bvh/alpha", "bvh/dog"]
+
+
+def _procedural(cache: Path, clips: int = 2) -> MotionDataModule:
+    source = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=clips, seconds=1.0)
+    return MotionDataModule(source, window=8, stride=8, val_fraction=0.0, cache_dir=cache)
+
+
+def test_cache_clear_deletes_only_what_the_cache_wrote(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cache = tmp_path / "cache"
+    _procedural(cache).prepare_data()
+    arrays = sorted((cache / "windows").glob("*/*.npy"))
+    assert len(arrays) == 2
+    shard = arrays[0].parent
+    key = arrays[0].stem
+    # the user's files among the cache's: a note, a look-alike without the header,
+    # a link to a file elsewhere, a folder, and a file in a folder of their own
+    notes = shard / "notes.txt"
+    notes.write_text("mine")
+    fake = shard / f"{key[:2]}{'0' * 62}.npy"
+    fake.write_bytes(b"not an array")
+    outside = tmp_path / "precious.npy"
+    np.save(outside, np.zeros(3))
+    link = shard / f"{key[:2]}{'1' * 62}.npy"
+    link.symlink_to(outside)
+    (shard / "keep").mkdir()
+    (cache / "windows" / "mine").mkdir()
+    (cache / "windows" / "mine" / "data.npy").write_bytes(outside.read_bytes())
+    # what the cache writes and leaves on a killed write: a temporary file
+    temporary = shard / f".{key}.npy.0123abcd.tmp"
+    temporary.write_bytes(b"\x93NUM")
+    assert cli.main(["cache", "clear", "--cache-dir", str(cache)]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith(f"cache: {cache}: removed 2 entries")
+    left = [notes, fake, link, shard / "keep", cache / "windows" / "mine"]
+    assert err.strip() == (
+        f"skelagnostic cache: left alone {len(left)} path(s) the cache did not write: "
+        + ", ".join(str(p) for p in sorted(left[:4]) + left[4:])
+    )
+    for path in left:
+        assert path.exists() or path.is_symlink(), path
+    assert notes.read_text() == "mine" and outside.exists()
+    assert not temporary.exists()
+    assert list((cache / "windows").glob("*/*.json")) == []
+    assert not (cache / "slots").exists()  # only cache files there: removed, folders too
+    assert sorted(p.name for p in (cache / "windows").iterdir()) == [shard.name, "mine"]
+    assert (
+        "skelagnostic cache: left alone 1 path(s) the cache did not write: "
+        "<cache>/windows/ab/notes.txt" in TROUBLESHOOTING.read_text(encoding="utf-8")
+    )
+    # a second clear removes nothing and names the same files
+    assert cli.main(["cache", "clear", "--cache-dir", str(cache)]) == 0
+    out, err = capsys.readouterr()
+    assert "removed 0 entries" in out and str(notes) in err
+
+
+def test_cache_clear_names_a_file_it_cannot_delete(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    cache = tmp_path / "cache"
+    _procedural(cache, clips=1).prepare_data()
+    assert len(list((cache / "windows").glob("*/*.npy"))) == 1
+
+    def refuse(self: Path, missing_ok: bool = False) -> None:
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "unlink", refuse)
+    assert cli.main(["cache", "clear", "--cache-dir", str(cache)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("skelagnostic cache: error: cache: cannot delete ")
+    assert err.endswith("(Permission denied)") and "\n" not in err
