@@ -1,12 +1,14 @@
-"""Window cache, issue 47: names per path (item 3), ``cache clear`` (item 5)."""
+"""Window cache, issue 47: names per path (item 3), ``cache clear`` (item 5), progress (item 8)."""
 
 from __future__ import annotations
 
+import io
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from rich.console import Console
 
 import skelagnostic as sa
 from skelagnostic import cli
@@ -128,3 +130,49 @@ def test_cache_clear_names_a_file_it_cannot_delete(
     err = capsys.readouterr().err.strip()
     assert err.startswith("skelagnostic cache: error: cache: cannot delete ")
     assert err.endswith("(Permission denied)") and "\n" not in err
+
+
+@pytest.fixture
+def terminal(monkeypatch: pytest.MonkeyPatch) -> io.StringIO:
+    """Progress bars drawn at once on a forced terminal writing to a buffer."""
+    from skelagnostic.data import progress as progress_module
+
+    buffer = io.StringIO()
+    console = Console(file=buffer, force_terminal=True, width=120)
+    monkeypatch.setattr(progress_module, "progress_console", lambda: console)
+    monkeypatch.setattr(progress_module, "DELAY_S", 0.0)
+    return buffer
+
+
+def test_a_cache_build_over_many_clips_shows_progress(
+    tmp_path: Path, terminal: io.StringIO
+) -> None:
+    dm = _procedural(tmp_path / "cache", clips=12)
+    dm.prepare_data()
+    shown = terminal.getvalue()
+    assert "data: caching windows" in shown
+    assert "12/12" in shown  # every clip counted
+    terminal.truncate(0)
+    dm.setup()  # reading the cache back is a pass of its own
+    assert "data: reading the window cache" in terminal.getvalue()
+
+
+def test_progress_stays_quiet_off_a_terminal_and_for_short_passes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from skelagnostic.data import progress as progress_module
+
+    buffer = io.StringIO()
+    consoles = {
+        "pipe": Console(file=buffer, force_terminal=False),
+        "terminal": Console(file=buffer, force_terminal=True, width=120),
+    }
+    monkeypatch.setattr(progress_module, "progress_console", lambda: consoles["pipe"])
+    monkeypatch.setattr(progress_module, "DELAY_S", 0.0)
+    _procedural(tmp_path / "pipe", clips=3).prepare_data()
+    assert buffer.getvalue() == ""  # not a terminal
+    monkeypatch.setattr(progress_module, "progress_console", lambda: consoles["terminal"])
+    monkeypatch.setattr(progress_module, "DELAY_S", 3600.0)
+    _procedural(tmp_path / "short", clips=3).prepare_data()
+    assert buffer.getvalue() == ""  # a pass shorter than the delay
+    assert list(progress_module.track_clips([1, 2, 3], "x", show=False)) == [1, 2, 3]

@@ -15,7 +15,7 @@ import lightning as L
 import numpy as np
 import torch
 from lightning.pytorch.utilities import CombinedLoader
-from lightning.pytorch.utilities.rank_zero import rank_zero_info
+from lightning.pytorch.utilities.rank_zero import rank_zero_info, rank_zero_only
 from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
 
 from skelagnostic.core.paths import expand_path
@@ -28,6 +28,7 @@ from skelagnostic.data.cache import (
     read_exactly,
     slot_key,
 )
+from skelagnostic.data.progress import track_clips
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource, flatten_sources
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation
@@ -531,21 +532,31 @@ class MotionDataModule(L.LightningDataModule):
         return windows, meta
 
     def prepare_data(self) -> None:
-        """Preprocess and cache every clip (runs once per node under DDP)."""
-        for source in self.sources:
-            for clip in source.clips():
-                self.cache_entry(source, clip)
+        """Preprocess and cache every clip (runs once per node under DDP).
+
+        A pass that takes a while shows a progress bar on a terminal
+        (:func:`~skelagnostic.data.progress.track_clips`).
+        """
+        clips = [(source, clip) for source in self.sources for clip in source.clips()]
+        for source, clip in track_clips(clips, "data: caching windows", rank_zero_only.rank == 0):
+            self.cache_entry(source, clip)
 
     # -------------------------------------------------------------------- setup
     def setup(self, stage: str | None = None) -> None:
         """Group clips by topology, split them and fit normalisation (idempotent)."""
         if self.skeletons:
             return
-        for source in self.sources:
+        listed = [(i, clip) for i, source in enumerate(self.sources) for clip in source.clips()]
+        entries = [
+            (i, clip, self.cache_entry(self.sources[i], clip))
+            for i, clip in track_clips(
+                listed, "data: reading the window cache", rank_zero_only.rank == 0
+            )
+        ]
+        for index, source in enumerate(self.sources):
             groups: dict[tuple[Any, ...], list[tuple[ClipRef, CacheEntry]]] = {}
-            for clip in source.clips():
-                entry = self.cache_entry(source, clip)
-                if entry.num_windows == 0:
+            for i, clip, entry in entries:
+                if i != index or entry.num_windows == 0:
                     continue
                 sk = entry.meta["skeleton"]
                 if Skeleton.from_dict(sk).height() <= 0:
