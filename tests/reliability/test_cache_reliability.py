@@ -176,3 +176,13 @@ def test_progress_stays_quiet_off_a_terminal_and_for_short_passes(
     _procedural(tmp_path / "short", clips=3).prepare_data()
     assert buffer.getvalue() == ""  # a pass shorter than the delay
     assert list(progress_module.track_clips([1, 2, 3], "x", show=False)) == [1, 2, 3]
+
+
+def test_progress_inside_another_bar_draws_no_second_one(terminal: io.StringIO) -> None:
+    from rich.progress import Progress
+
+    from skelagnostic.data import progress as progress_module
+
+    with Progress(console=progress_module.progress_console()):  # e.g. a verb's own bar
+        assert list(progress_module.track_clips(range(4), "inner")) == [0, 1, 2, 3]
+    assert "inner" not in terminal.getvalue()

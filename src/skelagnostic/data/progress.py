@@ -34,7 +34,8 @@ def track_clips(items: Sequence[T], description: str, show: bool = True) -> Iter
 
     The bar is advanced after the caller is done with each item (when it asks
     for the next one). It is drawn on :func:`progress_console` only when that is
-    a terminal, ``show`` is true and :data:`DELAY_S` seconds have passed; it is
+    a terminal, ``show`` is true and :data:`DELAY_S` seconds have passed, and
+    not while another Rich live display (a caller's bar) is on screen; it is
     removed when the pass ends.
 
     Args:
@@ -49,6 +50,7 @@ def track_clips(items: Sequence[T], description: str, show: bool = True) -> Iter
     if console is None or not console.is_terminal:
         yield from items
         return
+    from rich.errors import LiveError
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -68,14 +70,18 @@ def track_clips(items: Sequence[T], description: str, show: bool = True) -> Iter
         transient=True,
     )
     task = progress.add_task(description, total=len(items))
-    start, shown = time.monotonic(), False
+    start, due, shown = time.monotonic(), True, False
     try:
         for item in items:
             yield item
             progress.advance(task)
-            if not shown and time.monotonic() - start >= DELAY_S:
-                progress.start()
-                shown = True
+            if due and time.monotonic() - start >= DELAY_S:
+                due = False
+                try:
+                    progress.start()
+                    shown = True
+                except LiveError:  # the caller's own bar is on screen: no second one
+                    pass
     finally:
         if shown:
             progress.stop()
