@@ -49,7 +49,9 @@ def main(argv: list[str]) -> int:
     Returns:
         0 on success, 2 on a usage or export error (one line on stderr).
     """
-    if not argv or any(word in ("-h", "--help", "help") for word in argv):
+    from skelagnostic.cli.render import wants_help
+
+    if not argv or wants_help(argv):
         print(_USAGE)
         return 0 if argv else 2
     try:
