@@ -46,14 +46,17 @@ from skelagnostic.aligners.checkpoints import (
 )
 from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.runs import (
+    LOCK_FILE,
     AdaptiveLogInterval,
     RecordSplit,
+    RunDirectoryRefused,
     checkpoint_of,
     chosen_keys,
     find_run_dir,
     max_steps_overrides,
     quiet_lightning,
     read_split,
+    release_run_directories,
     reuse_run_config,
     run_of_overrides,
     summary_table,
@@ -620,6 +623,7 @@ _BOOKKEEPING = frozenset(
         "app.log",
         "config.yaml",
         "csv/hparams.yaml",
+        LOCK_FILE,
     }
 )
 
@@ -887,6 +891,13 @@ def main(task: str, argv: Sequence[str]) -> int:
             file=sys.stderr,
         )
         return 1
+    except RunDirectoryRefused as exc:  # before Hydra wrote anything: nothing to discard
+        if debug:
+            raise
+        print(f"skelagnostic {task}: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        release_run_directories()
     return 0
 
 
