@@ -463,9 +463,13 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             FinalStepValidation,
             LatestWithoutValidation,
             ResumeFromEpochEnd,
+            ResumeHint,
+            StopOnNonFinite,
         )
 
         callbacks += [
+            StopOnNonFinite(),
+            ResumeHint(),
             LatestWithoutValidation(),
             FinalStepCheckpoint(),
             FinalStepValidation(),
