@@ -1,9 +1,16 @@
-"""A callback that kills its own process after a given training step (resume tests)."""
+"""Signals at chosen moments: callbacks for training steps, a runner for file writes.
+
+``KillAt`` and ``PoisonAt`` are Lightning callbacks (``+callbacks.x._target_=killer.KillAt``).
+``python -m killer PATTERN VERB ARGS...`` runs ``skelagnostic VERB ARGS...`` and sends
+SIGTERM to itself when a file whose path contains ``PATTERN`` is about to be renamed into
+place (the atomic writer's last step: its temporary file exists, complete), once.
+"""
 
 from __future__ import annotations
 
 import os
 import signal
+import sys
 from typing import Any
 
 import lightning as L
@@ -51,3 +58,28 @@ class PoisonAt(L.Callback):
         if trainer.global_step == self.step:
             with torch.no_grad():
                 next(pl_module.parameters()).fill_(float("nan"))
+
+
+def sigterm_at_replace(pattern: str) -> None:
+    """Make ``os.replace`` send SIGTERM to this process before renaming onto ``*pattern*``.
+
+    Fires once. The signal is delivered while the atomic writer's temporary file
+    exists, before the rename.
+    """
+    real = os.replace
+    fired: list[str] = []
+
+    def replace(src: Any, dst: Any, *args: Any, **kwargs: Any) -> None:
+        if not fired and pattern in os.fspath(dst):
+            fired.append(os.fspath(dst))
+            os.kill(os.getpid(), signal.SIGTERM)
+        real(src, dst, *args, **kwargs)
+
+    os.replace = replace
+
+
+if __name__ == "__main__":
+    sigterm_at_replace(sys.argv[1])
+    from skelagnostic.cli import main
+
+    sys.exit(main(sys.argv[2:]))

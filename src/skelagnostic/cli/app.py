@@ -62,6 +62,7 @@ from skelagnostic.cli.runs import (
     summary_table,
     value_of,
 )
+from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.data.datamodule import datamodule_options
 from skelagnostic.errors import SkelagnosticError
@@ -74,8 +75,6 @@ TASKS = ("fit", "validate", "test", "predict", "evaluate")
 CONFIG_MODULE = "skelagnostic.conf"
 #: Set to ``1`` (or pass ``--debug``) for full tracebacks on configuration errors.
 DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
-#: Exit code of a run stopped by SIGTERM (128 + 15, as the shell reports it).
-SIGTERM_EXIT_CODE = 143
 #: ``ckpt_path`` values Lightning resolves itself.
 _CKPT_ALIASES = ("last", "best", "hpc", "registry")
 #: Provider name of the configs this module puts into Hydra's ConfigStore.
@@ -895,6 +894,10 @@ def main(task: str, argv: Sequence[str]) -> int:
             file=sys.stderr,
         )
         return 1
+    except Terminated:  # SIGTERM outside training (e.g. building the window cache)
+        kept = "".join(_discard_failed_run(d) for d in run_dirs)
+        print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
+        return SIGTERM_EXIT_CODE
     except RunDirectoryRefused as exc:  # before Hydra wrote anything: nothing to discard
         if debug:
             raise
