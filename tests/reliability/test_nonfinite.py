@@ -18,8 +18,8 @@ import torch
 from lightning.pytorch.callbacks import ModelCheckpoint
 from torch.utils.data import DataLoader
 
-from skelagnostic.aligners.checkpoints import first_non_finite
 from skelagnostic.callbacks import NonFiniteTrainingError, StopOnNonFinite
+from skelagnostic.core.finite import first_non_finite
 
 #: Small procedural data, one thread.
 SMALL = [

@@ -18,12 +18,13 @@ import contextlib
 import inspect
 import pickle
 import re
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import torch
 
+from skelagnostic.core.finite import first_non_finite
 from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
@@ -34,7 +35,6 @@ __all__ = [
     "CheckpointNotFoundError",
     "architecture_mismatch",
     "check_architecture",
-    "first_non_finite",
     "load_checkpoint",
     "read_checkpoint",
 ]
@@ -149,28 +149,6 @@ def read_checkpoint(
             option,
         )
     return checkpoint
-
-
-def first_non_finite(tensors: Iterable[tuple[str, Any]]) -> str | None:
-    """The name of the first floating-point tensor holding a NaN or an infinity, if any.
-
-    Args:
-        tensors: ``(name, value)`` pairs, e.g. ``state_dict().items()``; values that
-            are not floating-point tensors are skipped.
-
-    Example:
-        >>> import torch
-        >>> first_non_finite([("a", torch.ones(2)), ("b", torch.tensor([1.0, float("nan")]))])
-        'b'
-    """
-    for name, value in tensors:
-        if (
-            isinstance(value, torch.Tensor)
-            and value.is_floating_point()
-            and not bool(torch.isfinite(value).all())
-        ):
-            return name
-    return None
 
 
 def load_checkpoint(

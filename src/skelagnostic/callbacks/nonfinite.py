@@ -26,8 +26,8 @@ from typing import Any
 import lightning as L
 import torch
 
-from skelagnostic.aligners.checkpoints import first_non_finite
 from skelagnostic.callbacks.checkpoint import newest_checkpoint
+from skelagnostic.core.finite import first_non_finite
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = ["NonFiniteTrainingError", "StopOnNonFinite"]
