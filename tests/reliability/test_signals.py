@@ -114,6 +114,7 @@ def test_ctrl_c_during_fit_says_how_to_resume(cli_env: dict[str, str], tmp_path:
     assert state["global_step"] == 4
 
 
+@pytest.mark.slow
 def test_sigterm_while_the_window_cache_is_written(cli_env: dict[str, str], tmp_path: Path) -> None:
     cache = Path(cli_env["SKELAGNOSTIC_CACHE"])
     run_dir = tmp_path / "run"
@@ -135,6 +136,7 @@ def test_sigterm_while_the_window_cache_is_written(cli_env: dict[str, str], tmp_
     assert not run_dir.exists()  # held only what a run writes at start-up: discarded
 
 
+@pytest.mark.slow
 def test_sigterm_while_retarget_writes_its_output(cli_env: dict[str, str], tmp_path: Path) -> None:
     sys.path.insert(0, str(EXAMPLE_SRC))
     try:
