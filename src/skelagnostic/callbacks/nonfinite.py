@@ -120,9 +120,7 @@ class StopOnNonFinite(L.Callback):
         grads = [p.grad for p in pl_module.parameters() if p.grad is not None]
         if not grads:
             return
-        norm = torch.linalg.vector_norm(
-            torch.stack([torch.linalg.vector_norm(g.detach(), dtype=torch.float32) for g in grads])
-        )
+        norm = torch.nn.utils.get_total_norm(grads, error_if_nonfinite=False)
         if bool(torch.isfinite(norm)):
             return
         name = first_non_finite(
