@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
+from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated, sigterm_raises
 from skelagnostic.errors import SkelagnosticError
 
 #: verb -> ("module", "function", one-line help)
@@ -158,7 +159,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     module_name, func_name, _ = VERBS[verb]
     func = getattr(importlib.import_module(module_name), func_name)
     try:
-        return int(func(rest) or 0)
+        with sigterm_raises():  # SIGTERM: clean-up code runs, then one line (not silence)
+            return int(func(rest) or 0)
+    except Terminated:
+        print(
+            f"skelagnostic {verb}: terminated by SIGTERM; files still being written were "
+            "discarded (none is left half-written)",
+            file=sys.stderr,
+        )
+        return SIGTERM_EXIT_CODE
+    except KeyboardInterrupt:  # Ctrl+C outside training (Lightning reports its own)
+        print(f"skelagnostic {verb}: interrupted (Ctrl+C)", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # e.g. `skelagnostic interpolate --help | head`
         # Python flushes stdout again at exit: point it at /dev/null so that stays quiet.
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -46,19 +46,23 @@ from skelagnostic.aligners.checkpoints import (
 )
 from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.runs import (
+    LOCK_FILE,
     AdaptiveLogInterval,
     RecordSplit,
+    RunDirectoryRefused,
     checkpoint_of,
     chosen_keys,
     find_run_dir,
     max_steps_overrides,
     quiet_lightning,
     read_split,
+    release_run_directories,
     reuse_run_config,
     run_of_overrides,
     summary_table,
     value_of,
 )
+from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.data.datamodule import datamodule_options
 from skelagnostic.errors import SkelagnosticError
@@ -71,8 +75,6 @@ TASKS = ("fit", "validate", "test", "predict", "evaluate")
 CONFIG_MODULE = "skelagnostic.conf"
 #: Set to ``1`` (or pass ``--debug``) for full tracebacks on configuration errors.
 DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
-#: Exit code of a run stopped by SIGTERM (128 + 15, as the shell reports it).
-SIGTERM_EXIT_CODE = 143
 #: ``ckpt_path`` values Lightning resolves itself.
 _CKPT_ALIASES = ("last", "best", "hpc", "registry")
 #: Provider name of the configs this module puts into Hydra's ConfigStore.
@@ -460,9 +462,13 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             FinalStepValidation,
             LatestWithoutValidation,
             ResumeFromEpochEnd,
+            ResumeHint,
+            StopOnNonFinite,
         )
 
         callbacks += [
+            StopOnNonFinite(),
+            ResumeHint(),
             LatestWithoutValidation(),
             FinalStepCheckpoint(),
             FinalStepValidation(),
@@ -620,6 +626,7 @@ _BOOKKEEPING = frozenset(
         "app.log",
         "config.yaml",
         "csv/hparams.yaml",
+        LOCK_FILE,
     }
 )
 
@@ -887,6 +894,17 @@ def main(task: str, argv: Sequence[str]) -> int:
             file=sys.stderr,
         )
         return 1
+    except Terminated:  # SIGTERM outside training (e.g. building the window cache)
+        kept = "".join(_discard_failed_run(d) for d in run_dirs)
+        print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
+        return SIGTERM_EXIT_CODE
+    except RunDirectoryRefused as exc:  # before Hydra wrote anything: nothing to discard
+        if debug:
+            raise
+        print(f"skelagnostic {task}: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        release_run_directories()
     return 0
 
 
