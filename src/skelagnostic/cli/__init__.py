@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
 #: verb -> ("module", "function", one-line help)
 VERBS: dict[str, tuple[str, str, str]] = {
@@ -140,7 +140,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             reexec_with_allocator(args)
         except SkelagnosticError as exc:
-            print(f"skelagnostic: error: {exc}", file=sys.stderr)
+            print(error_line("skelagnostic", exc), file=sys.stderr)
             return 2
     if not args or args[0] in {"-h", "--help", "help"}:
         print(_usage())

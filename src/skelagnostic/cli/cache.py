@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from skelagnostic.data.cache import CACHE_ENV, WindowCache, default_cache_dir
+from skelagnostic.errors import error_line
 
 
 def _size(num: float) -> str:
@@ -81,6 +82,6 @@ def main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     cache = WindowCache(args.cache_dir if args.cache_dir is not None else default_cache_dir())
     if cache.root.exists() and not cache.root.is_dir():
-        print(f"skelagnostic cache: error: {cache.root} is not a directory", file=sys.stderr)
+        print(error_line("skelagnostic cache", f"{cache.root} is not a directory"), file=sys.stderr)
         return 1
     return info(cache, args.verbose) if args.action == "info" else clear(cache)
