@@ -9,10 +9,12 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
-from skelagnostic.errors import SkelagnosticError, error_line
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 #: verb -> ("module", "function", one-line help)
 VERBS: dict[str, tuple[str, str, str]] = {
@@ -121,6 +123,37 @@ def _complete(args: list[str]) -> int:
     return app.main(verb, args)
 
 
+@contextmanager
+def _plugin_warnings_on_one_line() -> Iterator[None]:
+    """Show each ``PluginLoadWarning`` as ``skelagnostic: warning: ...``.
+
+    Python's default format adds the warning's file, line and source line; a
+    skipped plugin is one line naming it and why. Other warnings, and warnings
+    recorded rather than shown, are left alone. The plugin module is not
+    imported for this (light verbs stay light).
+    """
+    formatted = warnings.formatwarning
+
+    def format_warning(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        line: str | None = None,
+    ) -> str:
+        manager = sys.modules.get("skelagnostic.plugins.manager")
+        if manager is not None and issubclass(category, manager.PluginLoadWarning):
+            return f"skelagnostic: warning: {printable(message)}\n"
+        return formatted(message, category, filename, lineno, line)
+
+    warnings.formatwarning = format_warning
+    try:
+        yield
+    finally:
+        if warnings.formatwarning is format_warning:
+            warnings.formatwarning = formatted
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``skelagnostic`` console script.
 
@@ -158,7 +191,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     module_name, func_name, _ = VERBS[verb]
     func = getattr(importlib.import_module(module_name), func_name)
     try:
-        return int(func(rest) or 0)
+        with _plugin_warnings_on_one_line():
+            return int(func(rest) or 0)
     except BrokenPipeError:  # e.g. `skelagnostic interpolate --help | head`
         # Python flushes stdout again at exit: point it at /dev/null so that stays quiet.
         devnull = os.open(os.devnull, os.O_WRONLY)
