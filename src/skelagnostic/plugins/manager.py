@@ -62,7 +62,11 @@ CHECKPOINT_SCHEME = re.compile(r"[a-z][a-z0-9_]+")
 
 
 class PluginError(SkelagnosticError):
-    """A plugin problem: a name registered twice, or an unknown aligner/representation/dataset."""
+    """A plugin problem: a name registered twice, or an unknown aligner/representation/dataset.
+
+    Raised by :meth:`PluginManager.register` and the lookups; while plugins load, a
+    name clash is the skipped plugin's ``error`` instead (and a :class:`PluginLoadWarning`).
+    """
 
 
 class PluginLoadWarning(UserWarning):
