@@ -9,11 +9,13 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
 from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated, sigterm_raises
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 #: verb -> ("module", "function", one-line help)
 VERBS: dict[str, tuple[str, str, str]] = {
@@ -122,6 +124,37 @@ def _complete(args: list[str]) -> int:
     return app.main(verb, args)
 
 
+@contextmanager
+def _plugin_warnings_on_one_line() -> Iterator[None]:
+    """Show each ``PluginLoadWarning`` as ``skelagnostic: warning: ...``.
+
+    Python's default format adds the warning's file, line and source line; a
+    skipped plugin is one line naming it and why. Other warnings, and warnings
+    recorded rather than shown, are left alone. The plugin module is not
+    imported for this (light verbs stay light).
+    """
+    formatted = warnings.formatwarning
+
+    def format_warning(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        line: str | None = None,
+    ) -> str:
+        manager = sys.modules.get("skelagnostic.plugins.manager")
+        if manager is not None and issubclass(category, manager.PluginLoadWarning):
+            return f"skelagnostic: warning: {printable(message)}\n"
+        return formatted(message, category, filename, lineno, line)
+
+    warnings.formatwarning = format_warning
+    try:
+        yield
+    finally:
+        if warnings.formatwarning is format_warning:
+            warnings.formatwarning = formatted
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``skelagnostic`` console script.
 
@@ -141,7 +174,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             reexec_with_allocator(args)
         except SkelagnosticError as exc:
-            print(f"skelagnostic: error: {exc}", file=sys.stderr)
+            print(error_line("skelagnostic", exc), file=sys.stderr)
             return 2
     if not args or args[0] in {"-h", "--help", "help"}:
         print(_usage())
@@ -159,7 +192,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     module_name, func_name, _ = VERBS[verb]
     func = getattr(importlib.import_module(module_name), func_name)
     try:
-        with sigterm_raises():  # SIGTERM: clean-up code runs, then one line (not silence)
+        # SIGTERM: clean-up code runs, then one line (not silence)
+        with sigterm_raises(), _plugin_warnings_on_one_line():
             return int(func(rest) or 0)
     except Terminated:
         print(

@@ -65,7 +65,7 @@ from skelagnostic.cli.runs import (
 from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.data.datamodule import datamodule_options
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 from skelagnostic.plugins import PluginManager, get_plugin_manager, target_of
 from skelagnostic.plugins.manager import config_names
 
@@ -773,8 +773,17 @@ def _failed_plugins(pm: PluginManager | None) -> str:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-    text = text.split(" Config search path:")[0]
+    r"""The error as one message: Hydra's lines joined, without its config search path.
+
+    A :class:`SkelagnosticError` is kept whole: a line end in it comes from a
+    name (a file, a joint, a value), and :func:`~skelagnostic.errors.error_line`
+    shows it as ``\n``.
+    """
+    if isinstance(exc, SkelagnosticError):
+        text = str(exc)
+    else:
+        text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+        text = text.split(" Config search path:")[0]
     cause = exc.__cause__
     if isinstance(cause, OmegaConfBaseException) and str(cause).splitlines()[0] not in text:
         text += f" ({str(cause).splitlines()[0]})"
@@ -872,7 +881,7 @@ def main(task: str, argv: Sequence[str]) -> int:
             raise failures[0]
         if terminated:
             kept = "".join(_discard_failed_run(d) for d in run_dirs)
-            print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
+            print(printable(f"skelagnostic {task}: terminated by SIGTERM{kept}"), file=sys.stderr)
             return SIGTERM_EXIT_CODE
         for run_dir, metrics, ckpt in results:  # evaluate printed its own table
             summary_table(task, run_dir, {} if task == "evaluate" else metrics, checkpoint=ckpt)
@@ -889,19 +898,17 @@ def main(task: str, argv: Sequence[str]) -> int:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)
         if debug:
             raise
-        print(
-            f"skelagnostic {task}: error: {_one_line(exc)}{_failed_plugins(pm)}{kept}",
-            file=sys.stderr,
-        )
+        message = f"{_one_line(exc)}{_failed_plugins(pm)}{kept}"
+        print(error_line(f"skelagnostic {task}", message), file=sys.stderr)
         return 1
     except Terminated:  # SIGTERM outside training (e.g. building the window cache)
         kept = "".join(_discard_failed_run(d) for d in run_dirs)
-        print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
+        print(printable(f"skelagnostic {task}: terminated by SIGTERM{kept}"), file=sys.stderr)
         return SIGTERM_EXIT_CODE
     except RunDirectoryRefused as exc:  # before Hydra wrote anything: nothing to discard
         if debug:
             raise
-        print(f"skelagnostic {task}: error: {exc}", file=sys.stderr)
+        print(error_line(f"skelagnostic {task}", exc), file=sys.stderr)
         return 1
     finally:
         release_run_directories()

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from skelagnostic.data.cache import CACHE_ENV, WindowCache, default_cache_dir
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
 
 def _size(num: float) -> str:
@@ -99,10 +99,10 @@ def main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     cache = WindowCache(args.cache_dir if args.cache_dir is not None else default_cache_dir())
     if cache.root.exists() and not cache.root.is_dir():
-        print(f"skelagnostic cache: error: {cache.root} is not a directory", file=sys.stderr)
+        print(error_line("skelagnostic cache", f"{cache.root} is not a directory"), file=sys.stderr)
         return 1
     try:
         return info(cache, args.verbose) if args.action == "info" else clear(cache)
     except SkelagnosticError as exc:
-        print(f"skelagnostic cache: error: {exc}", file=sys.stderr)
+        print(error_line("skelagnostic cache", str(exc)), file=sys.stderr)
         return 1

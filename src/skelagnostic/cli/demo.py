@@ -91,12 +91,12 @@ def main(argv: Sequence[str]) -> int:
     if wants_help(argv):
         print(_usage())
         return 0
-    from skelagnostic.errors import SkelagnosticError
+    from skelagnostic.errors import SkelagnosticError, error_line
 
     try:
         bvh_files, args = _options(argv)
     except SkelagnosticError as exc:
-        print(f"skelagnostic demo: error: {exc}", file=sys.stderr)
+        print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 2
     from rich.console import Console
     from rich.table import Table
@@ -173,7 +173,7 @@ def main(argv: Sequence[str]) -> int:
             json.dumps({"source": source, "motions": summary, "outputs": outputs}, indent=2)
         )
     except sa.SkelagnosticError as exc:
-        print(f"skelagnostic demo: error: {exc}", file=sys.stderr)
+        print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 1
     for kind, path in outputs.items():
         console.print(f"{kind}: {path}")

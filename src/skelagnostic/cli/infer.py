@@ -34,7 +34,7 @@ from skelagnostic.cli.render import (
     render_from_options,
     wants_help,
 )
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
@@ -282,7 +282,7 @@ def _run(
             ):
                 print(path)
     except SkelagnosticError as error:
-        print(f"skelagnostic {verb}: error: {error}", file=sys.stderr)
+        print(error_line(f"skelagnostic {verb}", error), file=sys.stderr)
         return 2
     return 0
 

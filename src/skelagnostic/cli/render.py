@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from skelagnostic.core.paths import expand_path
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
 __all__ = [
     "RENDER_OPTIONS",
@@ -285,7 +285,7 @@ def main(argv: list[str]) -> int:
         for path in render_from_options(motions, options):
             print(path)
     except SkelagnosticError as error:
-        print(f"skelagnostic render: error: {error}", file=sys.stderr)
+        print(error_line("skelagnostic render", error), file=sys.stderr)
         return 2
     return 0
 
