@@ -7,12 +7,20 @@ from skelagnostic.callbacks.checkpoint import (
 )
 from skelagnostic.callbacks.checkpoint_io import AtomicCheckpointIO
 from skelagnostic.callbacks.ema import EMAWeights
-from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
+from skelagnostic.callbacks.fit_summary import (
+    QUICK_BELOW_STEPS,
+    SUMMARY_MODES,
+    FitSummary,
+    SummaryContent,
+    summary_mode,
+)
 from skelagnostic.callbacks.progress import RichProgress
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 from skelagnostic.callbacks.resume import ResumeFromEpochEnd
 
 __all__ = [
+    "QUICK_BELOW_STEPS",
+    "SUMMARY_MODES",
     "AtomicCheckpointIO",
     "EMAWeights",
     "FinalStepCheckpoint",
@@ -24,4 +32,5 @@ __all__ = [
     "ResumeFromEpochEnd",
     "RichProgress",
     "SummaryContent",
+    "summary_mode",
 ]
