@@ -66,3 +66,28 @@ def test_none_writes_no_transfer_artefacts(tiny_fit: dict[str, Any]) -> None:
     assert metrics["summary"]["mode"] == "none"
     assert not {"transfer", "table2", "usage"} & set(metrics)
     assert "no aligner summary" in (run / "summary.md").read_text()
+
+
+def test_table2_summary_on_known_codes() -> None:
+    from types import SimpleNamespace
+
+    import torch
+    from skelagnostic_vqpae.fit_outputs import table2_summary
+
+    def clips(*codes: list[int]) -> list[Any]:
+        return [SimpleNamespace(code=torch.tensor(c)) for c in codes]
+
+    built = SimpleNamespace(num_codes=16)
+    aligner = SimpleNamespace(dataset_names=["human", "dog"], _require_built=lambda: built)
+    train = {"human": clips([1, 1, 2], [3]), "dog": clips([2, 3, 3, 5])}  # shared: 2, 3
+    held = {"human": clips([4, 7, 9, 2]), "dog": clips([10, 10])}
+    figures, text = table2_summary(aligner, held, train)
+    assert figures["codes_shared_training"] == 2 and figures["shared_codes_training"] == [2, 3]
+    assert figures["frame_share_training"] == {"human": 0.5, "dog": 0.75}  # the paper's figure
+    assert figures["frame_share_heldout_on_training_shared"] == {"human": 0.25, "dog": 0.0}
+    assert figures["codes_heldout"] == {"human": [2, 4, 7, 9], "dog": [10]}
+    assert figures["heldout_source_target_shared"] == []
+    assert "| `human` | 50.0 % | 25.0 % | 3 | 2, 4, 7, 9 |" in text
+    assert "they share no code" in text
+    _, without = table2_summary(aligner, {}, train)  # no validation split
+    assert "| `dog` | 75.0 % | n/a | 3 | none |" in without

@@ -108,7 +108,7 @@ class _Stages:
         elapsed = time.perf_counter() - self.start
         self.console.print(
             f"[bold]fit summary ({self.mode})[/bold] {self.done}/{total}: {name} "
-            f"[dim]({elapsed:.0f} s)[/dim]"
+            f"[dim](after {elapsed:.0f} s)[/dim]"
         )
 
     def finish(self) -> None:
@@ -169,7 +169,8 @@ def fit_summary(aligner: VqpaeAligner, trainer: L.Trainer, mode: str = "full") -
     content: SummaryContent = {"metrics": metrics, "notes": []}
     stages("Table 2 (shared codes)")
     if "train" in embeddings and len(aligner.dataset_names) >= 2:
-        table, note = table2_summary(aligner, embeddings[splits[0]], embeddings["train"])
+        held = embeddings.get("val", {})  # without a validation split: no held-out column
+        table, note = table2_summary(aligner, held, embeddings["train"])
         metrics["table2"] = table
         content["notes"].append(note)
     stages(f"transfer: {plan.describe()}")
