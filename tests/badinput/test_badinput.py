@@ -309,6 +309,11 @@ def test_cli_data_dirs(
         ),
         (["ckpt_path={tmp}/none.ckpt"], "ckpt_path: no checkpoint file '{tmp}/none.ckpt'"),
         (["data.window=0"], "data.window must be > 0, got 0"),
+        (
+            ["summary=sometimes"],
+            "callbacks.fit_summary: ValueError: FitSummary: mode (summary=) must be one of "
+            "auto, full, quick, none, got 'sometimes'",
+        ),
     ],
 )
 def test_cli_wrong_config(

@@ -106,7 +106,9 @@ def test_fit_summary_writes_metrics_renders_figures_and_markdown(tmp_path: Path)
 
 def test_fit_summary_without_content_or_name(tmp_path: Path) -> None:
     _fit(_Tiny(), tmp_path / "run", callbacks=[FitSummary()])
-    assert set(json.loads((tmp_path / "run" / "metrics.json").read_text())) == {"train/loss"}
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert set(metrics) == {"train/loss", "summary"}  # the summary it ran, and why
+    assert metrics["summary"]["mode"] == "full"  # _Tiny.fit_summary takes no mode: one summary
     assert "## Pictures" not in (tmp_path / "run" / "summary.md").read_text()
     with pytest.raises(ValueError, match="sheet_frames"):
         FitSummary(sheet_frames=0)
@@ -171,3 +173,62 @@ def test_long_nested_figures_point_to_the_json_instead_of_a_blob(tmp_path: Path)
     assert "| `usage` | 0.5 |" in text and '| `codes` | {"a": 1} |' in text
     assert "| `transfer` | see `transfer` in `m_metrics.json` |" in text
     assert "## Transfer" in text and "79" not in text
+
+
+class _Moded(_Tiny):
+    """A module whose ``fit_summary`` takes the summary mode."""
+
+    def fit_summary(self, trainer: L.Trainer, mode: str = "full") -> dict[str, Any]:
+        self.seen["mode"] = mode
+        return {"metrics": {"computed": mode}, "notes": [f"computed the {mode} summary"]}
+
+
+@pytest.mark.parametrize(
+    ("mode", "quick_below", "expected"),
+    [("auto", 1000, "quick"), ("auto", 6, "full"), ("full", 1000, "full"), ("quick", 3, "quick")],
+)
+def test_fit_summary_mode_reaches_the_aligner_and_is_stated(
+    tmp_path: Path, mode: str, quick_below: int, expected: str
+) -> None:
+    module = _Moded()
+    _fit(module, tmp_path, 6, callbacks=[FitSummary(mode=mode, quick_below=quick_below)])
+    assert module.seen["mode"] == expected  # 6 optimiser steps
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["computed"] == expected and metrics["summary"]["mode"] == expected
+    text = (tmp_path / "summary.md").read_text()
+    assert f"Summary: the aligner's {expected} summary" in text
+    if mode == "auto":
+        assert "summary=auto: 6 optimiser steps" in text
+    assert f"computed the {expected} summary" in text
+
+
+def test_fit_summary_none_skips_the_aligner(tmp_path: Path) -> None:
+    module = _Moded()
+    _fit(module, tmp_path, callbacks=[FitSummary(name="m", mode="none")])
+    assert "mode" not in module.seen
+    assert {p.name for p in tmp_path.iterdir()} == {"m_metrics.json", "summary.md"}
+    metrics = json.loads((tmp_path / "m_metrics.json").read_text())
+    assert metrics["summary"] == {"mode": "none", "reason": "summary=none"}
+    assert "no aligner summary: the logged metrics only" in (tmp_path / "summary.md").read_text()
+
+
+def test_summary_mode_rule_and_bad_values() -> None:
+    from skelagnostic.callbacks import QUICK_BELOW_STEPS, summary_mode
+
+    assert summary_mode("auto", QUICK_BELOW_STEPS - 1)[0] == "quick"
+    assert summary_mode("auto", QUICK_BELOW_STEPS)[0] == "full"
+    assert summary_mode("none", 10**6) == ("none", "summary=none")
+    with pytest.raises(ValueError, match="summary must be one of auto, full, quick, none"):
+        summary_mode("sometimes", 1)
+    with pytest.raises(ValueError, match=r"mode \(summary=\) must be one of"):
+        FitSummary(mode="sometimes")
+
+
+def test_summary_key_configures_the_callback(example_plugin: Path) -> None:
+    from hydra.utils import instantiate
+
+    from skelagnostic.cli.app import compose
+
+    for value, expected in (("", "auto"), ("summary=none", "none"), ("summary=quick", "quick")):
+        args = ["model=example", "run_dir=/tmp/unused", *([value] if value else [])]
+        assert instantiate(compose(args).callbacks.fit_summary).mode == expected

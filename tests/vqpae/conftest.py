@@ -119,3 +119,25 @@ def vqpae_cli(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
     get_plugin_manager.cache_clear()
     yield cli.main
     get_plugin_manager.cache_clear()
+
+
+@pytest.fixture(scope="module")
+def tiny_fit(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """A VQ-PAE fitted 3 steps with the default end-of-fit summary (auto) in ``<root>/auto``.
+
+    Returns ``model``, ``trainer``, ``root`` and the data module ``dm``.
+    """
+    from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+
+    from skelagnostic.callbacks import FitSummary
+
+    root = tmp_path_factory.mktemp("vqpae-summary")
+    L.seed_everything(0, verbose=False)
+    dm = make_datamodule(root / "cache")
+    model = VqpaeAligner(
+        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+    )
+    trainer = make_trainer(root, 3, validate=False)
+    trainer.callbacks.append(FitSummary(name="vqpae", dirpath=root / "auto"))  # as `fit` does
+    trainer.fit(model, datamodule=dm)
+    return {"model": model, "trainer": trainer, "root": root, "dm": dm}

@@ -177,7 +177,7 @@ class Aligner(L.LightningModule, ABC):
         """
         return []
 
-    def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
+    def fit_summary(self, trainer: L.Trainer, mode: str = "full") -> SummaryContent:
         """What this aligner adds to the files written at the end of ``fit``.
 
         :class:`~skelagnostic.callbacks.FitSummary` (on by default for
@@ -192,6 +192,10 @@ class Aligner(L.LightningModule, ABC):
         Args:
             trainer: The trainer that just fitted the aligner (its data module,
                 logged metrics, ...).
+            mode: ``"full"`` or ``"quick"`` (the run's ``summary=``, resolved by
+                :func:`~skelagnostic.callbacks.summary_mode`): a quick summary
+                should take seconds (fewer clips, shorter excerpts). An override
+                without this argument is called without it (one summary).
 
         Returns:
             A :class:`~skelagnostic.callbacks.SummaryContent` mapping (every key optional).

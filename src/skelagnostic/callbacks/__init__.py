@@ -8,7 +8,13 @@ from skelagnostic.callbacks.checkpoint import (
 )
 from skelagnostic.callbacks.checkpoint_io import AtomicCheckpointIO
 from skelagnostic.callbacks.ema import EMAWeights
-from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
+from skelagnostic.callbacks.fit_summary import (
+    QUICK_BELOW_STEPS,
+    SUMMARY_MODES,
+    FitSummary,
+    SummaryContent,
+    summary_mode,
+)
 from skelagnostic.callbacks.interrupt import ResumeHint
 from skelagnostic.callbacks.nonfinite import NonFiniteTrainingError, StopOnNonFinite
 from skelagnostic.callbacks.progress import RichProgress
@@ -16,6 +22,8 @@ from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 from skelagnostic.callbacks.resume import ResumeFromEpochEnd
 
 __all__ = [
+    "QUICK_BELOW_STEPS",
+    "SUMMARY_MODES",
     "AtomicCheckpointIO",
     "EMAWeights",
     "FinalStepCheckpoint",
@@ -31,4 +39,5 @@ __all__ = [
     "StopOnNonFinite",
     "SummaryContent",
     "newest_checkpoint",
+    "summary_mode",
 ]

@@ -13,10 +13,17 @@ At the end of ``fit`` :class:`FitSummary` writes into the run directory:
 Aligners contribute through one method, :meth:`Aligner.fit_summary
 <skelagnostic.aligners.Aligner.fit_summary>`, which returns a
 :class:`SummaryContent` mapping; they write no files themselves.
+
+How much the aligner computes is the run's ``summary=`` key (:data:`SUMMARY_MODES`):
+``full``, ``quick`` (a smoke run's summary: seconds), ``none`` (only the logged
+metrics) or ``auto``: ``quick`` for runs of fewer than :data:`QUICK_BELOW_STEPS`
+optimiser steps, else ``full``. ``summary.md`` and the metrics (``"summary"``) say
+which one ran and why.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -29,7 +36,36 @@ from lightning.pytorch.utilities import rank_zero_only
 
 from skelagnostic.io.markdown import markdown_cell
 
-__all__ = ["FitSummary", "SummaryContent"]
+__all__ = ["QUICK_BELOW_STEPS", "SUMMARY_MODES", "FitSummary", "SummaryContent", "summary_mode"]
+
+#: The values of ``summary=`` (``FitSummary(mode=...)``).
+SUMMARY_MODES = ("auto", "full", "quick", "none")
+
+#: ``summary=auto`` is ``quick`` for runs of fewer optimiser steps than this, else ``full``.
+QUICK_BELOW_STEPS = 1000
+
+
+def summary_mode(mode: str, steps: int, quick_below: int = QUICK_BELOW_STEPS) -> tuple[str, str]:
+    """The summary a run gets, and why: ``(full | quick | none, reason)``.
+
+    Args:
+        mode: ``summary=`` (one of :data:`SUMMARY_MODES`).
+        steps: Optimiser steps the run made.
+        quick_below: ``auto`` picks ``quick`` below this many steps.
+
+    Example:
+        >>> summary_mode("auto", 20)
+        ('quick', 'summary=auto: 20 optimiser steps, fewer than 1000')
+        >>> summary_mode("none", 20)[0]
+        'none'
+    """
+    if mode not in SUMMARY_MODES:
+        raise ValueError(f"summary must be one of {', '.join(SUMMARY_MODES)}, got {mode!r}")
+    if mode != "auto":
+        return mode, f"summary={mode}"
+    if steps < quick_below:
+        return "quick", f"summary=auto: {steps} optimiser steps, fewer than {quick_below}"
+    return "full", f"summary=auto: {steps} optimiser steps, at least {quick_below}"
 
 
 class SummaryContent(TypedDict, total=False):
@@ -43,7 +79,8 @@ class SummaryContent(TypedDict, total=False):
         renders: ``{key: motions}``: each value is what
             :func:`skelagnostic.viz.render_motion` draws (``Motion`` or
             ``StickFigure``, or a list of them), written as ``<name>_<key>.gif``
-            and a contact sheet ``<name>_<key>.png``.
+            and a contact sheet ``<name>_<key>.png`` (the GIF only when
+            ``figures`` has the same key: the figure is that PNG).
         figures: ``{key: matplotlib Figure}``, saved as ``<name>_<key>.png`` (and closed).
         notes: Markdown paragraphs appended to ``summary.md``.
     """
@@ -85,6 +122,12 @@ class FitSummary(pl.Callback):
         dirpath: Output directory (default: ``trainer.default_root_dir``).
         size: Frame size in pixels of the renders.
         sheet_frames: Frames on each render's contact sheet.
+        mode: How much the aligner computes (:data:`SUMMARY_MODES`, the run's
+            ``summary=``): ``full``; ``quick``, a smaller summary that takes
+            seconds; ``none``, no aligner summary (the logged metrics and
+            ``summary.md`` only); ``auto``, :func:`summary_mode`. An aligner whose
+            ``fit_summary`` takes no ``mode`` argument computes its one summary.
+        quick_below: ``auto`` is ``quick`` for runs of fewer optimiser steps.
 
     Example:
         >>> import lightning as L
@@ -97,9 +140,18 @@ class FitSummary(pl.Callback):
         dirpath: str | Path | None = None,
         size: tuple[int, int] | Sequence[int] = (200, 200),
         sheet_frames: int = 4,
+        mode: str = "auto",
+        quick_below: int = QUICK_BELOW_STEPS,
     ) -> None:
         if sheet_frames < 1:
             raise ValueError(f"FitSummary: sheet_frames must be >= 1, got {sheet_frames}")
+        if mode not in SUMMARY_MODES:
+            raise ValueError(
+                f"FitSummary: mode (summary=) must be one of {', '.join(SUMMARY_MODES)}, "
+                f"got {mode!r}"
+            )
+        self.mode = mode
+        self.quick_below = int(quick_below)
         self.name = name
         self.dirpath = Path(dirpath) if dirpath is not None else None
         self.size = (int(size[0]), int(size[1]))
@@ -118,13 +170,21 @@ class FitSummary(pl.Callback):
         content: SummaryContent = {}
         summarise = getattr(pl_module, "fit_summary", None)
         if callable(summarise):
-            was_training = pl_module.training
-            pl_module.eval()
-            try:
-                with torch.no_grad():
-                    content = summarise(trainer) or {}
-            finally:
-                pl_module.train(was_training)
+            mode, reason = summary_mode(self.mode, int(trainer.global_step), self.quick_below)
+            if mode != "none":
+                takes_mode = "mode" in inspect.signature(summarise).parameters
+                if not takes_mode:
+                    mode, reason = "full", f"{reason}; the aligner has one summary"
+                was_training = pl_module.training
+                pl_module.eval()
+                try:
+                    with torch.no_grad():
+                        made = summarise(trainer, mode=mode) if takes_mode else summarise(trainer)
+                finally:
+                    pl_module.train(was_training)
+                content = made or {}
+            chosen = {"summary": {"mode": mode, "reason": reason}}
+            content = {**content, "metrics": {**chosen, **content.get("metrics", {})}}
         self.written = self.write(trainer, content, directory)
 
     def write(self, trainer: pl.Trainer, content: SummaryContent, directory: Path) -> list[Path]:
@@ -141,11 +201,17 @@ class FitSummary(pl.Callback):
         written[0].write_text(json.dumps(metrics, indent=2) + "\n")
         pictures: list[tuple[str, Path]] = []
         if content.get("renders"):
+            from rich.console import Console
+
             from skelagnostic.viz import render_motion
 
+            console = Console(stderr=True, highlight=False)
             for key, motions in content["renders"].items():
-                for suffix in (".gif", ".png"):
+                # a figure of the same key takes the .png: the render is the animation only
+                suffixes = (".gif",) if key in content.get("figures", {}) else (".gif", ".png")
+                for suffix in suffixes:
                     path = self._file(directory, key, suffix)
+                    console.print(f"[bold]fit summary[/bold]: rendering {path.name}")
                     render_motion(motions, path, size=self.size, sheet_frames=self.sheet_frames)
                     written.append(path)
                 pictures.append((key, self._file(directory, key, ".gif")))
@@ -179,6 +245,17 @@ class FitSummary(pl.Callback):
             f"Every figure is in `{metrics_file.name}`.",
             "",
         ]
+        chosen = content.get("metrics", {}).get("summary")
+        if isinstance(chosen, Mapping):
+            what = {
+                "full": "the aligner's full summary",
+                "quick": "the aligner's quick summary (fewer clips, shorter excerpts)",
+                "none": "no aligner summary: the logged metrics only",
+            }.get(str(chosen.get("mode")), str(chosen.get("mode")))
+            lines += [
+                f"Summary: {what} ({chosen.get('reason')}; `summary=full|quick|none` chooses).",
+                "",
+            ]
         if logged:
             lines += ["## Last logged metrics", "", "| metric | value |", "|---|---|"]
             lines += [

@@ -660,11 +660,11 @@ class VqpaeAligner(Aligner):
                 return size, batch
         return steps_per_epoch(trainer), 1
 
-    def fit_summary(self, trainer: L.Trainer) -> SummaryContent:
+    def fit_summary(self, trainer: L.Trainer, mode: str = "full") -> SummaryContent:
         """The manifold overlap and pictures of the fit summary (see :mod:`.fit_outputs`)."""
         from skelagnostic_vqpae.fit_outputs import fit_summary
 
-        return fit_summary(self, trainer)
+        return fit_summary(self, trainer, mode=mode)
 
     @torch.no_grad()
     def embed_datasets(

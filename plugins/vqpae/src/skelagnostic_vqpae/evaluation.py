@@ -86,6 +86,7 @@ __all__ = [
     "contact_onsets",
     "foot_heights",
     "foot_joints",
+    "forward_swings",
     "gait_frequency",
     "gait_phase",
     "locomotion_frames",
@@ -803,6 +804,21 @@ def gait_frequency(motion: Motion, hysteresis: float = 0.25) -> float:
         >>> abs(gait_frequency(clip) / info["frequency"] - 1) < 0.02
         True
     """
+    return _onset_rate(forward_swings(motion, hysteresis), motion.fps)
+
+
+def forward_swings(motion: Motion, hysteresis: float = 0.25) -> list[np.ndarray]:
+    """When each foot swings forward (fractional frames): one event per stride and foot.
+
+    The events :func:`gait_frequency` counts: each foot's (:func:`foot_joints`)
+    root-local horizontal position, projected on its main (fore-aft) direction,
+    crossing its mean upwards, found with hysteresis (below ``-hysteresis`` then
+    above ``+hysteresis`` standard deviations) and timed to a fraction of a frame.
+
+    Returns:
+        One array of crossing times (frames) per foot of :func:`foot_joints`, empty
+        for a foot that does not move.
+    """
     feet = foot_joints(motion)
     up = motion.skeleton.up_index
     flat = [a for a in range(3) if a != up]
@@ -815,6 +831,7 @@ def gait_frequency(motion: Motion, hysteresis: float = 0.25) -> float:
         signal = x @ axes[0]
         std = float(signal.std())
         if std <= 1e-9:
+            swings.append(np.zeros(0))
             continue
         crossings, armed = [], False
         for t in range(1, len(signal)):
@@ -824,7 +841,7 @@ def gait_frequency(motion: Motion, hysteresis: float = 0.25) -> float:
                 crossings.append(t - 1 + signal[t - 1] / (signal[t - 1] - signal[t]))
                 armed = False
         swings.append(np.asarray(crossings))
-    return _onset_rate(swings, motion.fps)
+    return swings
 
 
 #: Contact rule of :func:`contact_onsets`: a foot touches down when its height above its
