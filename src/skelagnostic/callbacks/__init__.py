@@ -11,6 +11,7 @@ from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
 from skelagnostic.callbacks.progress import RichProgress
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 from skelagnostic.callbacks.resume import ResumeFromEpochEnd
+from skelagnostic.callbacks.stopping import StopReason, stop_reason
 
 __all__ = [
     "AtomicCheckpointIO",
@@ -23,5 +24,7 @@ __all__ = [
     "RenderSamples",
     "ResumeFromEpochEnd",
     "RichProgress",
+    "StopReason",
     "SummaryContent",
+    "stop_reason",
 ]

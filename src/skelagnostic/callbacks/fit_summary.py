@@ -169,12 +169,16 @@ class FitSummary(pl.Callback):
         metrics_file: Path,
         pictures: list[tuple[str, Path]],
     ) -> str:
+        from skelagnostic.callbacks.stopping import stop_reason
+
         title = f"Fit summary: {self.name}" if self.name else "Fit summary"
+        stopped = stop_reason(trainer) if isinstance(trainer, pl.Trainer) else None
         lines = [
             f"# {title}",
             "",
-            f"{trainer.current_epoch} epoch(s), {trainer.global_step} optimiser step(s). "
-            f"Every figure is in `{metrics_file.name}`.",
+            f"{trainer.current_epoch} epoch(s), {trainer.global_step} optimiser step(s)"
+            + (f"; stopped: {stopped}" if stopped else "")
+            + f". Every figure is in `{metrics_file.name}`.",
             "",
         ]
         if logged:

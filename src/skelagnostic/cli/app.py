@@ -89,6 +89,18 @@ class ConfigError(SkelagnosticError):
     """A run configuration that cannot work (bad task, unknown options, missing packages)."""
 
 
+class RunMetrics(dict[str, float]):
+    """What :func:`run` returns: the trainer's final metrics, and why a fit ended.
+
+    Attributes:
+        stopped: For ``fit``, the limit or event that ended training (e.g.
+            ``"max_steps 20 reached"``, see :func:`skelagnostic.callbacks.stop_reason`);
+            ``None`` otherwise.
+    """
+
+    stopped: str | None = None
+
+
 # ----------------------------------------------------------------------------- run
 
 
@@ -360,7 +372,7 @@ def _save_predictions(predictions: Any, run_dir: Path) -> None:
     torch.save(predictions, run_dir / "predictions.pt")
 
 
-def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[str, float]:
+def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetrics:
     """Train or evaluate an aligner from a composed config (no Hydra needed).
 
     Steps: set torch's intra-op threads (``cfg.threads``, when not null), seed
@@ -378,7 +390,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             process-wide one).
 
     Returns:
-        The trainer's final ``callback_metrics`` as floats.
+        The trainer's final ``callback_metrics`` as floats (a :class:`RunMetrics`,
+        whose ``stopped`` says why a fit ended).
 
     Raises:
         ConfigError: Unknown task, a model or
@@ -454,14 +467,17 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
     if task == "test":
         _require_test_split(datamodule)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
+    stop = None
     if task == "fit":
         from skelagnostic.callbacks import (
             FinalStepCheckpoint,
             FinalStepValidation,
             LatestWithoutValidation,
             ResumeFromEpochEnd,
+            StopReason,
         )
 
+        stop = StopReason()
         callbacks += [
             LatestWithoutValidation(),
             FinalStepCheckpoint(),
@@ -469,6 +485,7 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             ResumeFromEpochEnd(),
             RecordSplit(run_dir),
             AdaptiveLogInterval(),
+            stop,
         ]
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
@@ -505,7 +522,9 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         if named is None:
             raise
         raise named from exc
-    return {k: float(v) for k, v in trainer.callback_metrics.items()}
+    metrics = RunMetrics({k: float(v) for k, v in trainer.callback_metrics.items()})
+    metrics.stopped = stop.reason if stop is not None else None
+    return metrics
 
 
 # ----------------------------------------------------------------- composition
@@ -868,7 +887,13 @@ def main(task: str, argv: Sequence[str]) -> int:
             print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
             return SIGTERM_EXIT_CODE
         for run_dir, metrics, ckpt in results:  # evaluate printed its own table
-            summary_table(task, run_dir, {} if task == "evaluate" else metrics, checkpoint=ckpt)
+            summary_table(
+                task,
+                run_dir,
+                {} if task == "evaluate" else metrics,
+                checkpoint=ckpt,
+                stopped=getattr(metrics, "stopped", None),
+            )
         if task == "fit":  # this command's CPU time, not the process's (tests, notebooks)
             (user, system), (user0, system0) = _cpu_times(), cpu_start
             if (hint := kernel_time_hint(user - user0, system - system0)) is not None:

@@ -233,6 +233,7 @@ def summary_table(
     metrics: Mapping[str, float],
     checkpoint: Path | None = None,
     limit: int = 16,
+    stopped: str | None = None,
 ) -> None:
     """Print the run directory, the checkpoints and the headline metrics (one Rich table).
 
@@ -242,6 +243,7 @@ def summary_table(
         metrics: The trainer's final metrics.
         checkpoint: The checkpoint evaluated (validate, test, predict).
         limit: Metrics shown at most.
+        stopped: Why a fit ended (``max_steps 20 reached``, ...), shown as a row.
     """
     if rank_zero_only.rank != 0:
         return
@@ -249,6 +251,8 @@ def summary_table(
     from rich.table import Table
 
     rows = [("run directory", str(run_dir))]
+    if stopped:
+        rows.append(("stopped", stopped))
     if checkpoint is not None:
         rows.append(("evaluated checkpoint", str(checkpoint)))
     for name in ("best", "last"):
