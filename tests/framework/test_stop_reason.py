@@ -120,3 +120,8 @@ def test_fit_names_the_limit_in_the_table_and_in_summary_md(
     assert expected in row
     (run,) = (tmp_path / "runs" / "example" / "fit").iterdir()
     assert f"stopped: {expected}" in (run / "summary.md").read_text()
+    # Hydra's job log gets the run's log lines too (it stayed empty: issue 48, item 7)
+    log = (run / "app.log").read_text()
+    for line in ("Seed set to 42", "data: dataset 'procedural/", f"stopped: {expected}"):
+        assert line in log, log
+    assert "final metrics: " in log

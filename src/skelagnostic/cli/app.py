@@ -630,6 +630,41 @@ def _patched(argv: list[str], env: dict[str, str]) -> Iterator[None]:
                 os.environ[k] = v
 
 
+#: Loggers that print by themselves instead of propagating to the root logger (Lightning
+#: sets them up so when it is imported before logging is configured).
+_OWN_HANDLER_LOGGERS = ("lightning.pytorch", "lightning.fabric")
+
+
+@contextlib.contextmanager
+def _job_log() -> Iterator[logging.Logger]:
+    """Copy the run's log lines into Hydra's job log (``<run_dir>/app.log``) within the block.
+
+    Hydra gives the root logger a file handler, but Lightning's loggers (``Seed set to
+    42``, the data sets, the trainer's messages) print through their own handler and do
+    not propagate, so the file stayed empty. Within the block the root's file handlers
+    are also theirs (the console output is unchanged), and the logger yielded writes to
+    the file only (the end of the run, which the console shows as a table).
+    """
+    files = [h for h in logging.getLogger().handlers if isinstance(h, logging.FileHandler)]
+    loggers = [logging.getLogger(name) for name in _OWN_HANDLER_LOGGERS]
+    quiet = logging.getLogger("skelagnostic.run")
+    quiet.propagate = False
+    quiet.setLevel(logging.INFO)
+    added = [
+        (logger, handler)
+        for logger in [*[lg for lg in loggers if not lg.propagate], quiet]
+        for handler in files
+        if handler not in logger.handlers
+    ]
+    for logger, handler in added:
+        logger.addHandler(handler)
+    try:
+        yield quiet
+    finally:
+        for logger, handler in added:
+            logger.removeHandler(handler)
+
+
 #: Files a run directory holds before it produced anything (Hydra's and ours).
 _BOOKKEEPING = frozenset(
     {
@@ -851,9 +886,16 @@ def main(task: str, argv: Sequence[str]) -> int:
             run_dirs.append(Path(cfg.run_dir))
             if saved is not None:
                 reuse_run_config(cfg, saved, overrides)
-            with _patched(outer_argv, {}):  # Lightning's DDP launcher re-executes sys.argv
+            # Lightning's DDP launcher re-executes sys.argv
+            with _patched(outer_argv, {}), _job_log() as job_log:
                 try:
                     metrics = run(cfg, pm)
+                    if getattr(metrics, "stopped", None):
+                        job_log.info("stopped: %s", metrics.stopped)  # type: ignore[attr-defined]
+                    job_log.info(
+                        "final metrics: %s",
+                        ", ".join(f"{k}={v:.5g}" for k, v in sorted(metrics.items())) or "none",
+                    )
                     ckpt = (
                         checkpoint_of(cfg.ckpt_path, _preferred_checkpoint(cfg))
                         if cfg.ckpt_path
