@@ -344,20 +344,31 @@ def _check_options(options: dict[str, Any], cls: type, prefix: str, owner: str) 
             )
 
 
-def _require_test_split(datamodule: L.LightningDataModule) -> None:
+def _require_test_split(datamodule: L.LightningDataModule, run_dir: Path | None = None) -> None:
     """Raise :class:`ConfigError` when the data module has no test clip (``test`` would do nothing).
 
     Only for data modules that expose their splits (``datasets["test"]``).
+
+    Args:
+        datamodule: The data module (set up here).
+        run_dir: The run whose recorded split the data module keeps, if any: its
+            training and validation clips are never test clips.
     """
     if not hasattr(datamodule, "datasets"):
         return
     datamodule.setup("test")
     if any(len(ds) for ds in datamodule.datasets.get("test", {}).values()):
         return
+    if run_dir is not None:
+        raise ConfigError(
+            f"test: the run {run_dir} has no test split (it was fitted with "
+            "data.test_fraction=0 and no test clip; its validation clips chose its "
+            "checkpoint, so they are not held out): use validate, or fit again with "
+            "data.test_fraction=0.2 (or data.test_pattern=REGEX) and test that run"
+        )
     raise ConfigError(
         "test: the test split is empty (data.test_fraction=0 and no clip matches a test "
-        "pattern); set data.test_fraction>0 (test clips then come from clips the run did not "
-        "train on), data.test_pattern=REGEX, or use validate"
+        "pattern); set data.test_fraction>0 or data.test_pattern=REGEX, or use validate"
     )
 
 
@@ -465,7 +476,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
             return evaluate_checkpoint(cfg, pm, spec.module, datamodule, ckpt)
         del checkpoint
     if task == "test":
-        _require_test_split(datamodule)
+        untested = recorded is not None and "test" not in recorded.values()
+        _require_test_split(datamodule, source_run if untested else None)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
     stop = None
     if task == "fit":
