@@ -407,13 +407,22 @@ class AlignerContract:
         """The skeleton to decode onto (default: the clip's own)."""
         return motion.skeleton
 
+    @staticmethod
     @pytest.fixture(scope="class")
-    def contract_run(self, tmp_path_factory: pytest.TempPathFactory) -> ContractRun:
-        """One short training run shared by the tests of the class."""
-        assert self.aligner, f"{type(self).__name__}: set the class attribute 'aligner'"
-        root = tmp_path_factory.mktemp(f"contract-{self.aligner}")
+    def contract_run(
+        request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+    ) -> ContractRun:
+        """One short training run shared by the tests of the class.
+
+        A static method on the test class (``request.cls``): pytest deprecates
+        class-scoped fixtures defined as instance methods (``PytestRemovedIn10Warning``),
+        since the instance they would see is not the tests' one.
+        """
+        cls: type[AlignerContract] = request.cls
+        assert cls.aligner, f"{cls.__name__}: set the class attribute 'aligner'"
+        root = tmp_path_factory.mktemp(f"contract-{cls.aligner}")
         return fit_for_contract(
-            self.aligner, root / "run", self.overrides, self.steps, self.plugin_manager()
+            cls.aligner, root / "run", cls.overrides, cls.steps, cls().plugin_manager()
         )
 
     def test_fit_a_few_steps(self, contract_run: ContractRun) -> None:
