@@ -54,6 +54,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import pytest
 import torch
 
+from skelagnostic._shadow import check_not_shadowed
+
+check_not_shadowed()  # a folder named skelagnostic hiding the package: say so, in one line
+
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
     from skelagnostic.core.motion import Motion

@@ -12,6 +12,7 @@ import os
 import sys
 from collections.abc import Sequence
 
+from skelagnostic._shadow import ShadowedPackageError, check_not_shadowed
 from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
 from skelagnostic.errors import SkelagnosticError
 
@@ -160,6 +161,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str] | None) -> int:
     """:func:`main` without the closed-pipe handling."""
+    try:
+        check_not_shadowed()  # `python -m skelagnostic.cli` beside a checkout named skelagnostic
+    except ShadowedPackageError as exc:
+        print(f"skelagnostic: error: {exc}", file=sys.stderr)
+        return 2
     args = list(sys.argv[1:] if argv is None else argv)
     completing = args[:1] in (["-sc"], ["--shell-completion"])  # answered by this process
     if argv is None and os.environ.get(ALLOCATOR_ENV) and not completing:  # a process start
