@@ -6,7 +6,7 @@ procedural fallback, joint subsampling, both losses, Adam) run outside
 Lightning: forward, backward and optimiser step on the first training batch.
 After ``--warmup`` steps, ``--steps`` steps are timed (median wall and CPU
 time) and one more is recorded by :mod:`torch.profiler`; the operators with
-the largest self CPU time are printed as a Markdown table (docs/performance.md,
+the largest self CPU time are printed as a Markdown table (docs/reports/performance.md,
 "HuMoT training step").
 
 Usage::

@@ -8,7 +8,7 @@ at the 2-CPU-hour presets' model and batch (``--preset cpu2h``), built by
 counts its floating-point operations (:class:`torch.utils.flop_counter.FlopCounterMode`:
 matrix products and attention, forward and backward; element-wise work is not
 counted) and one more is recorded by :mod:`torch.profiler`; the operators with
-the largest self CPU time are printed as a Markdown table (docs/performance.md,
+the largest self CPU time are printed as a Markdown table (docs/reports/performance.md,
 "PC-MRL training step").
 
 The same run times a large single-precision matrix product (``torch.mm`` of

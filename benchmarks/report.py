@@ -1,9 +1,9 @@
-"""Turn benchmark JSON files into a Markdown table (for docs/performance.md).
+"""Turn benchmark JSON files into a Markdown table (for docs/reports/performance.md).
 
 Usage::
 
     python benchmarks/report.py results/*.json                  # print the table
-    python benchmarks/report.py results/*.json --update docs/performance.md
+    python benchmarks/report.py results/*.json --update docs/reports/performance.md
 
 ``--update`` replaces what lies between the ``<!-- benchmarks:start -->`` and
 ``<!-- benchmarks:end -->`` lines of the file; with ``--block NAME``, between

@@ -24,6 +24,8 @@ Example:
 from __future__ import annotations
 
 import os
+import re
+import struct
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -75,6 +77,124 @@ def _search_dirs(environ: Mapping[str, str]) -> list[Path]:
     return dirs
 
 
+#: ``e_type`` of an ELF file -> what it is (for the message); 3 is a shared object.
+_ELF_TYPES = {1: "a relocatable object file", 2: "an executable", 4: "a core dump"}
+#: ``e_machine`` of an ELF file -> the architecture's name (for the message).
+_MACHINES = {3: "x86", 20: "PowerPC", 21: "PowerPC64", 22: "S390", 40: "ARM", 62: "x86-64"}
+_MACHINES |= {183: "AArch64", 243: "RISC-V", 258: "LoongArch"}
+#: What the dynamic linker writes when a preload fails; its reason in parentheses.
+_LD_SO_REFUSAL = re.compile(r"cannot be preloaded \((?P<reason>.*)\): ignored")
+
+
+def _elf_header(path: Path) -> tuple[int, int, int, int] | None:
+    """``(class, byte order, e_type, e_machine)`` of an ELF file, or ``None`` for another file.
+
+    Raises:
+        OSError: The file cannot be read.
+    """
+    with path.open("rb") as fh:
+        head = fh.read(20)
+    if len(head) < 20 or head[:4] != b"\x7fELF" or head[5] not in (1, 2):
+        return None
+    e_type, machine = struct.unpack("<HH" if head[5] == 1 else ">HH", head[16:20])
+    return head[4], head[5], e_type, machine
+
+
+def _describe_elf(header: tuple[int, int, int, int]) -> str:
+    bits = {1: "32-bit", 2: "64-bit"}.get(header[0], f"class {header[0]}")
+    return f"{bits} {_MACHINES.get(header[3], f'machine {header[3]}')}"
+
+
+def _preload_failure(library: str, environ: Mapping[str, str]) -> str | None:
+    """Why the dynamic linker refuses to preload ``library``, or ``None`` if it loads.
+
+    A Python interpreter is started with the library in ``LD_PRELOAD`` (``python
+    -S -c ''``: some tens of milliseconds) and the linker's message is read.
+    """
+    import subprocess
+
+    env = {**environ, "LD_PRELOAD": library}
+    try:
+        done = subprocess.run(
+            [sys.executable, "-S", "-c", ""], env=env, capture_output=True, text=True, timeout=60
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None  # no verdict: the restart itself will tell
+    refused = _LD_SO_REFUSAL.search(done.stderr)
+    if refused:
+        return refused.group("reason")
+    if done.returncode != 0:
+        lines = done.stderr.strip().splitlines()
+        return f"a process started with it exited with {done.returncode}" + (
+            f": {lines[-1]}" if lines else ""
+        )
+    return None
+
+
+def check_library(name: str, environ: Mapping[str, str] | None = None) -> str:
+    """The absolute path of the shared library file ``name``, checked before a restart on it.
+
+    ``LD_PRELOAD`` of a file that is not a loadable shared library only makes the
+    dynamic linker print a warning and go on with the C library's allocator, so
+    the file is checked first: it exists, is a file, is an ELF shared object of
+    this interpreter's class and machine, and the dynamic linker preloads it into
+    a short test process (which catches the rest: a position-independent
+    executable, missing dependencies).
+
+    Args:
+        name: The value of ``SKELAGNOSTIC_ALLOCATOR`` (a path).
+        environ: The environment of the test process (default: this process's).
+
+    Returns:
+        The resolved path.
+
+    Raises:
+        AllocatorError: One line naming the variable, the file and the cause.
+    """
+    environ = os.environ if environ is None else environ
+    where = f"{ALLOCATOR_ENV}={name!r}"
+    path = Path(name)
+    if path.is_dir():
+        raise AllocatorError(f"{where}: a directory, not a shared library file")
+    if not path.is_file():
+        raise AllocatorError(f"{where}: no such shared library file")
+    try:
+        header = _elf_header(path)
+    except OSError as exc:
+        raise AllocatorError(f"{where}: cannot read the file ({exc.strerror or exc})") from exc
+    if header is None:
+        raise AllocatorError(
+            f"{where}: not a shared library (no ELF header); give tcmalloc, jemalloc, "
+            "'system', or the path of a lib*.so file"
+        )
+    if header[2] != 3:
+        what = _ELF_TYPES.get(header[2], f"an ELF file of type {header[2]}")
+        raise AllocatorError(f"{where}: {what}, not a shared library")
+    try:
+        ours = _elf_header(Path(sys.executable).resolve())
+    except OSError:
+        ours = None
+    if ours is not None and (header[0], header[1], header[3]) != (ours[0], ours[1], ours[3]):
+        raise AllocatorError(
+            f"{where}: a shared library for {_describe_elf(header)}; this Python is "
+            f"{_describe_elf(ours)}"
+        )
+    library = str(path.resolve())
+    reason = _preload_failure(library, environ)
+    if reason is not None:
+        raise AllocatorError(f"{where}: the dynamic linker cannot preload it ({reason})")
+    return library
+
+
+def _mapped(library: str) -> bool:
+    """Whether ``library`` is mapped into this process (``True`` where that cannot be read)."""
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return True
+    return any(line.endswith(" " + library) for line in maps.splitlines())
+
+
 def find_allocator(name: str, environ: Mapping[str, str] | None = None) -> str:
     """The shared library to preload for allocator ``name``.
 
@@ -89,14 +209,13 @@ def find_allocator(name: str, environ: Mapping[str, str] | None = None) -> str:
         the dynamic linker finds).
 
     Raises:
-        AllocatorError: Unknown name, a path that is not a file, or the library is
+        AllocatorError: Unknown name, a path that is not a shared library the
+            dynamic linker can preload (:func:`check_library`), or the library is
             not installed (the message says which package provides it).
     """
     environ = os.environ if environ is None else environ
     if "/" in name:
-        if not Path(name).is_file():
-            raise AllocatorError(f"{ALLOCATOR_ENV}={name!r}: no such shared library file")
-        return str(Path(name).resolve())
+        return check_library(name, environ)
     if name not in LIBRARIES:
         raise AllocatorError(
             f"{ALLOCATOR_ENV}={name!r}: unknown allocator; use one of "
@@ -179,10 +298,15 @@ def preload_environment(
             f"{ALLOCATOR_ENV}={name!r}: choosing the allocator is supported on Linux only "
             f"(this is {sys.platform}); unset {ALLOCATOR_ENV}"
         )
+    if "/" in name and str(Path(name).resolve()) in _preloads(environ):  # after the restart
+        if _mapped(str(Path(name).resolve())):  # a custom library: it is what was asked for
+            return None
+        raise AllocatorError(
+            f"{ALLOCATOR_ENV}={name!r}: LD_PRELOAD names it but it is not loaded (the "
+            "dynamic linker refused it; see its message above)"
+        )
     library = find_allocator(name, environ)
     if library in _preloads(environ):
-        if "/" in name:  # a custom library: it is what was asked for
-            return None
         raise AllocatorError(
             f"{ALLOCATOR_ENV}={name!r}: LD_PRELOAD already names {library} but the process "
             f"runs on the {active} allocator (the library failed to load; see the dynamic "

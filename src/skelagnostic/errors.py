@@ -7,7 +7,49 @@ print a one-line message instead of a traceback.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
+
+#: Characters a message never shows raw: C0 controls (newline, tab, ESC ...), DEL, C1
+#: controls (CSI, NEL ...) and the Unicode line and paragraph separators.
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+def printable(text: object) -> str:
+    r"""``str(text)`` with each control character written as its Python escape.
+
+    File names, joint names and configuration values reach error messages; a
+    control character in one could move the cursor, clear the screen or set
+    the terminal's title (``ESC [2J``, ``ESC ]0;...BEL``), or split a one-line
+    error in two. They are shown as :func:`repr` shows them (``\x1b``, ``\n``,
+    ``\x9b``, ``\u2028``); every other character, backslashes included, is
+    kept as it is.
+
+    Args:
+        text: A message, a path or a name.
+
+    Returns:
+        One line without control characters.
+
+    Examples:
+        >>> printable("clip\x1b[2J\nname.bvh")
+        'clip\\x1b[2J\\nname.bvh'
+    """
+    return _CONTROL.sub(lambda match: repr(match.group())[1:-1], str(text))
+
+
+def error_line(prog: str, message: object) -> str:
+    """The one line the command line prints for an error: ``<prog>: error: <message>``.
+
+    Args:
+        prog: The command, e.g. ``"skelagnostic render"``.
+        message: The error (an exception or a text); control characters are
+            escaped (:func:`printable`), so the line stays one line.
+
+    Returns:
+        The line, without a line end.
+    """
+    return f"{prog}: error: {printable(message)}"
 
 
 class SkelagnosticError(Exception):
@@ -37,7 +79,7 @@ class BVHError(SkelagnosticError, ValueError):
         self.path = None if path is None else Path(path)
         self.line = line
         self.reason = reason
-        where = str(self.path) if self.path is not None else "<bvh text>"
+        where = printable(self.path) if self.path is not None else "<bvh text>"
         if line is not None:
             where += f":{line}"
         super().__init__(f"{where}: {reason}")

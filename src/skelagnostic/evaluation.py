@@ -31,6 +31,7 @@ from typing import Any
 from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.io.markdown import markdown_cell
 
 __all__ = [
     "MODEL",
@@ -311,36 +312,43 @@ def _fmt(value: float | None) -> str:
 
 
 def markdown(report: Mapping[str, Any]) -> str:
-    """``evaluation.md``: the header, the mean table (metrics x methods) and per-clip rows."""
+    """``evaluation.md``: the header, the mean table (metrics x methods) and per-clip rows.
+
+    Names (protocol, model, checkpoint, data source, methods, metrics, clips) are
+    written with :func:`~skelagnostic.io.markdown.markdown_cell`, so each shows literally.
+    """
     methods = report["methods"]
+    data = report["data"]
     lines = [
-        f"# Evaluation: {report['protocol']}",
+        f"# Evaluation: {markdown_cell(report['protocol'])}",
         "",
         report.get("description", ""),
         "",
-        f"- model: `{report['model']}`, checkpoint `{report['checkpoint']}`",
-        f"- data: `{report['data']['source']}`, {report['data']['split_name']} "
-        f"({len(report['data']['clips'])} clips)",
+        f"- model: {markdown_cell(report['model'], code=True)}, "
+        f"checkpoint {markdown_cell(report['checkpoint'], code=True)}",
+        f"- data: {markdown_cell(data['source'], code=True)}, "
+        f"{markdown_cell(data['split_name'])} ({len(data['clips'])} clips)",
         "",
         "## Mean over held-out clips",
         "",
-        "| metric | " + " | ".join(methods) + " |",
+        "| metric | " + " | ".join(map(markdown_cell, methods)) + " |",
         "|---" * (len(methods) + 1) + "|",
     ]
     for metric, text in report["metrics"].items():
         cells = [_fmt(report["mean"].get(m, {}).get(metric)) for m in methods]
-        lines.append(f"| {metric} ({text}) | " + " | ".join(cells) + " |")
+        lines.append(f"| {markdown_cell(f'{metric} ({text})')} | " + " | ".join(cells) + " |")
     if report.get("notes"):
         lines += ["", *(f"- {n}" for n in report["notes"])]
     lines += ["", "## Per clip", ""]
     metrics = list(report["metrics"])
-    lines.append("| clip | method | " + " | ".join(metrics) + " |")
+    lines.append("| clip | method | " + " | ".join(map(markdown_cell, metrics)) + " |")
     lines.append("|---" * (len(metrics) + 2) + "|")
     for row in report["per_clip"]:
         for method in methods:
             if method in row["values"]:
                 cells = [_fmt(row["values"][method].get(k)) for k in metrics]
-                lines.append(f"| {row['clip']} | {method} | " + " | ".join(cells) + " |")
+                names = f"| {markdown_cell(row['clip'])} | {markdown_cell(method)} | "
+                lines.append(names + " | ".join(cells) + " |")
     if report.get("plots"):
         lines += ["", "## Plots", "", *(f"![{p}]({p})" for p in report["plots"])]
     return "\n".join(lines) + "\n"

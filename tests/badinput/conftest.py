@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -45,3 +45,29 @@ def broken_plugin(site: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     write_dist(site, "skelagnostic-broken", {"broken": "broken_plugin"})
     monkeypatch.setenv(LOAD_PLUGINS_ENV, "example,broken")
     return site
+
+
+@pytest.fixture
+def add_plugin(site: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[..., None]]:
+    """``add_plugin(name, source, dist=None)``: a one-module plugin next to the example.
+
+    The module ``fake_plugin_<name>`` holds ``source``; the distribution
+    (``skelagnostic-<name>`` unless ``dist`` is given) declares the entry point
+    ``name``, which is added to ``SKELAGNOSTIC_LOAD_PLUGINS``.
+    """
+    loaded = ["example"]
+    modules: list[str] = []
+
+    def add(name: str, source: str, dist: str | None = None) -> None:
+        module = f"fake_plugin_{(dist or name).replace('-', '_')}"
+        (site / f"{module}.py").write_text(source)
+        write_dist(site, dist or f"skelagnostic-{name}", {name: module})
+        sys.modules.pop(module, None)
+        modules.append(module)
+        loaded.append(name)
+        monkeypatch.setenv(LOAD_PLUGINS_ENV, ",".join(loaded))
+        get_plugin_manager.cache_clear()
+
+    yield add
+    for module in modules:
+        sys.modules.pop(module, None)

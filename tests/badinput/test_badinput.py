@@ -339,9 +339,12 @@ def test_failed_run_keeps_a_directory_holding_other_files(
         )
         == 1
     )
-    assert error_line(capsys) == (
-        f"skelagnostic fit: error: data.window must be > 0, got 0 [run directory kept: {run_dir}]"
+    assert error_line(capsys) == (  # refused before anything is written (a run's own dir)
+        f"skelagnostic fit: error: hydra.run.dir={str(run_dir)!r} is not empty (it holds "
+        "notes.txt); a run directory belongs to one run: name a new or empty directory, or "
+        "leave hydra.run.dir out (each run then gets a new one)"
     )
+    assert [p.name for p in run_dir.iterdir()] == ["notes.txt"]
     assert (run_dir / "notes.txt").read_text() == "mine"
 
 

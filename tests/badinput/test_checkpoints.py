@@ -141,6 +141,10 @@ def bad_checkpoint(kind: str, good: Path, tmp_path: Path) -> Path:
         checkpoint = torch.load(good, map_location="cpu", weights_only=True)
         checkpoint["hyper_parameters"]["hidden"] = 16
         torch.save(checkpoint, path)
+    elif kind == "nonfinite":  # a diverged run's weights: one value of one layer is inf
+        checkpoint = torch.load(good, map_location="cpu", weights_only=True)
+        checkpoint["state_dict"]["temporal.weight_hh_l0"][3, 1] = float("inf")
+        torch.save(checkpoint, path)
     elif kind != "missing":
         shutil.copy(good, path)
     return path
@@ -177,6 +181,9 @@ CASES = {
     "skelagnostic loads checkpoints with torch.load(weights_only=True), which allows "
     "tensors and plain data only",
     "other_model": "'{ckpt}' is a checkpoint of model=example, this is model=humot",
+    "nonfinite": "'{ckpt}' holds non-finite weights (temporal.weight_hh_l0 has NaN or infinite "
+    "values): the run that wrote it diverged; use an earlier checkpoint of that run, or train "
+    "again (e.g. with a lower learning rate)",
 }
 
 

@@ -114,18 +114,22 @@ def test_unknown_names_list_the_known_ones(example_plugin) -> None:
         plugins.load_aligner("example", checkpoint="missing.ckpt")
 
 
-def test_name_collision_between_plugins_raises(add_plugin) -> None:
+def test_name_collision_between_plugins_skips_the_second(add_plugin) -> None:
     add_plugin("first", REGISTERING_PLUGIN)
     add_plugin("second", REGISTERING_PLUGIN)
     pm = PluginManager()
-    with pytest.raises(
-        PluginError,
-        match="representation 'mine' is registered by both plugin 'first' and plugin 'second'",
+    with pytest.warns(
+        PluginLoadWarning,
+        match="'second' .* representation 'mine' is registered by both plugin 'first' and "
+        "plugin 'second'",
     ):
-        pm.representations  # noqa: B018
+        representations = pm.representations
+    assert representations["mine"].plugin == "first"
+    infos = {i.name: i for i in pm.plugins()}
+    assert infos["first"].status == "loaded" and infos["second"].status == "failed"
 
 
-def test_collision_with_a_builtin_raises() -> None:
+def test_collision_with_a_builtin_skips_the_plugin() -> None:
     class Clash:
         @hookimpl
         def register_datasets(self, register):
@@ -133,11 +137,12 @@ def test_collision_with_a_builtin_raises() -> None:
 
     pm = PluginManager(load_entrypoints=False)
     pm.register(Clash(), "clash")
-    with pytest.raises(
-        PluginError,
+    with pytest.warns(
+        PluginLoadWarning,
         match="dataset 'procedural' is registered by both plugin 'skelagnostic' and plugin 'clash'",
     ):
-        pm.datasets  # noqa: B018
+        datasets = pm.datasets
+    assert datasets["procedural"].plugin == "skelagnostic"
 
 
 def test_duplicate_plugin_name_raises() -> None:

@@ -1,4 +1,4 @@
-"""scripts/results.py: committed held-out evaluations -> docs/results.md and the README block."""
+"""scripts/results.py: committed held-out evaluations -> docs/results.md."""
 
 from __future__ import annotations
 
@@ -101,6 +101,13 @@ def _tables(markdown: str) -> list[list[dict[str, str]]]:
                 rows.append(dict(zip(header, cells, strict=True)))
             tables.append(rows)
     return tables
+
+
+def _status(page: str) -> list[dict[str, str]]:
+    """The rows of the page's "Targets at a glance" table."""
+    section = page.split("## Targets at a glance\n", 1)[1].split("\n## ", 1)[0]
+    (table,) = _tables(section)
+    return table
 
 
 def _independent_mean(report: dict[str, Any], method: str, metric: str) -> float:
@@ -225,16 +232,12 @@ def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
     heldout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "results.md"
-    readme = tmp_path / "README.md"
-    readme.write_text(f"# Title\n\nabove\n{results.BEGIN}\nold\n{results.END}\nbelow\n")
-    assert results.main(_args(heldout, out, "--readme", str(readme))) == 0
-    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
-    text = readme.read_text()
-    assert text.startswith("# Title\n\nabove\n<!-- results:begin -->\nTargets of issue #27")
-    assert text.endswith("<!-- results:end -->\nbelow\n") and "\nold\n" not in text
+    assert results.main(_args(heldout, out)) == 0
+    assert results.main(_args(heldout, out, "--check")) == 0
+    status = _status(out.read_text())
     # one row per target: the model's mean, the bound's baseline and the verdict, each
     # recomputed here from the per-clip values
-    rows = {(r["method"], r["held-out figure"], r["target"]): r for r in _tables(text)[0]}
+    rows = {(r["method"], r["held-out figure"], r["target"]): r for r in status}
     report = json.loads((heldout / "example_smoke" / "evaluation.json").read_text())
     model_cm = _independent_mean(report, "model", "mpjpe_cm")
     for target, baseline, factor in [
@@ -259,7 +262,7 @@ def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
     assert row["met by"] == "0 of 1" and row["paper's"] == "-"
     assert rows["example", "`mpjpe_over_height`", ">= 0"]["met by"] == "1 of 1"
     assert ("HuMoT", "no held-out result committed yet", "-") in rows
-    assert all(r["clips"] == "test split" for r in _tables(text)[0][:-1])
+    assert all(r["clips"] == "test split" for r in status[:-1])
     capsys.readouterr()
     # a stale page (a figure edited by hand) fails with a diff naming the file
     page = out.read_text()
@@ -272,16 +275,14 @@ def test_check_fails_on_a_stale_page_and_passes_on_a_fresh_one(
     run = yaml.safe_load((heldout / "example_smoke" / "run.yaml").read_text())
     run["budget"]["steps"] = 41
     (heldout / "example_smoke" / "run.yaml").write_text(yaml.safe_dump(run))
-    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 1
+    assert results.main(_args(heldout, out, "--check")) == 1
     assert "+- Budget: 41 steps" in capsys.readouterr().err and out.read_text() == page
-    assert results.main(_args(heldout, out, "--readme", str(readme))) == 0
-    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
-    # the README outside the block is never looked at; inside it is
-    readme.write_text(readme.read_text().replace("below", "elsewhere"))
-    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 0
-    readme.write_text(readme.read_text().replace("(mean_pose ", "(mean pose ", 1))
-    assert results.main(_args(heldout, out, "--readme", str(readme), "--check")) == 1
-    assert f"{readme} (committed)" in capsys.readouterr().err
+    assert results.main(_args(heldout, out)) == 0
+    assert results.main(_args(heldout, out, "--check")) == 0
+    # a hand edit of the status table is stale too
+    out.write_text(out.read_text().replace("(mean_pose ", "(mean pose ", 1))
+    assert results.main(_args(heldout, out, "--check")) == 1
+    assert f"{out} (committed)" in capsys.readouterr().err
 
 
 def test_the_status_table_lists_every_run_of_a_target(heldout: Path, tmp_path: Path) -> None:
@@ -309,10 +310,10 @@ def test_the_status_table_lists_every_run_of_a_target(heldout: Path, tmp_path: P
     ablation.mkdir()
     shutil.copy(smoke / "evaluation.json", ablation / "evaluation.json")
     (ablation / "run.yaml").write_text(yaml.safe_dump(_run_yaml(targets=[])))
-    out, readme = tmp_path / "results.md", tmp_path / "README.md"
-    readme.write_text(f"{results.BEGIN}\n{results.END}\n")
-    assert results.main(_args(heldout, out, "--readme", str(readme))) == 0
-    (status,) = _tables(readme.read_text())
+    out = tmp_path / "results.md"
+    assert results.main(_args(heldout, out)) == 0
+    page = out.read_text()
+    status = _status(page)
     half = _independent_mean(report, "model", "mpjpe_cm") <= 0.5 * _independent_mean(
         report, "mean_pose_on_trajectory", "mpjpe_cm"
     )
@@ -334,11 +335,9 @@ def test_the_status_table_lists_every_run_of_a_target(heldout: Path, tmp_path: P
     )
     assert status[3]["runs (entry: model)"].startswith("`example_smoke` ")  # the rerun lacks it
     assert status[5]["runs (entry: model)"].startswith("`example_wider` ")
-    assert "example_ablation" not in readme.read_text()
+    assert "example_ablation" not in "".join(r["runs (entry: model)"] for r in status)
     assert status[-1]["held-out figure"] == "no held-out result committed yet"
-    # the results page opens with the same table
-    page = out.read_text()
-    assert "## Targets at a glance" in page
+    # the status table comes right after the table of entries, ahead of every method section
     assert _tables(page)[1] == status
 
 
@@ -459,9 +458,9 @@ def test_targets_compare_the_model_with_a_bound() -> None:
     assert results.Target("l2p@15", "<", 1.0, None).met({"lerp_slerp": 0.6}) is None
 
 
-def test_the_committed_results_page_and_readme_block_are_up_to_date() -> None:
+def test_the_committed_results_page_is_up_to_date() -> None:
     done = subprocess.run(
-        [sys.executable, str(REPO / "scripts" / "results.py"), "--check", "--readme", "README.md"],
+        [sys.executable, str(REPO / "scripts" / "results.py"), "--check"],
         cwd=REPO,
         capture_output=True,
         text=True,

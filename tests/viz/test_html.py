@@ -146,3 +146,21 @@ def test_side_by_side_lanes_do_not_overlap(walk, trot):
 def test_bad_arguments_name_the_argument(walk, kwargs, message):
     with pytest.raises(RenderError, match=re.escape(message)):
         to_html(walk, **kwargs)
+
+
+def test_inline_json_holds_no_markup_and_reads_back_every_name():
+    """``<``, ``>``, ``&``, U+2028/2029 are JSON escapes: no name ends or comments out the block."""
+    names = ["<!--<script>", "</script><img src=x onerror=alert(1)>", "a & b", "l\u2028p\u2029"]
+    pose = np.zeros((2, len(names), 3))
+    pose[..., 1] = np.arange(len(names))
+    figures = [StickFigure(pose, parents=[-1, 0, 1, 2], joint_names=names) for _ in range(2)]
+    page = to_html(figures, names=names[:2], units="m")
+    start = page.index('<script type="application/json" id="skelagnostic-data">')
+    block = page[start:].split(">", 1)[1].split("</script>", 1)[0]
+    assert not set(block) & {"<", ">", "&", "\u2028", "\u2029"}
+    data = _data(page)
+    assert [clip["name"] for clip in data["clips"]] == names[:2]
+    assert data["clips"][0]["joints"] == names
+    # the viewer's own script comes after the data block, outside any comment
+    assert page.index("window.skelagnostic = {") > start + len(block)
+    assert page.count("<script") == page.count("</script>")

@@ -7,11 +7,13 @@ missing); the tests skip only when they, or selenium, are not installed.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import skelagnostic as sa
+from skelagnostic import cli
 from skelagnostic.core.motion import UNITS
 from skelagnostic.viz import StickFigure
 from skelagnostic.viz.browser import ViewerBrowser, browser_available
@@ -23,6 +25,22 @@ pytestmark = pytest.mark.skipif(
 )
 
 FRAME = 37
+
+#: Names that break a page writing them unescaped into its HTML or its inline JSON: an
+#: HTML comment opening a nested script, a closing tag with an injected element, entities,
+#: quotes, backslashes and escapes, JavaScript line separators, emoji and right-to-left text.
+HOSTILE = (
+    "<!--<script>",
+    "</script><img src=x onerror=alert(1)>",
+    "<b>bold</b> &amp; &lt;i&gt; ]]> <![CDATA[",
+    "\"double\" 'single' `back`",
+    "back\\slash \\u003c \\n \\",
+    "line\u2028separator\u2029paragraph",
+    "emoji \U0001f9b4\U0001f415\u200d\U0001f9ba",
+    "RTL \u05e2\u05d1\u05e8\u05d9\u05ea \u0627\u0644\u0639\u0631\u0628\u064a\u0629 \u202eevil",
+)
+#: The ones a file name can hold (no "/").
+HOSTILE_FILES = tuple(name for name in HOSTILE if "/" not in name)
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +54,21 @@ def motions() -> list[sa.Motion]:
 def browser():
     with ViewerBrowser(size=(900, 560)) as chromium:
         yield chromium
+
+
+def _texts(browser: ViewerBrowser, selector: str) -> list[str]:
+    """``textContent`` of the page's elements matching a CSS selector, in document order."""
+    return browser.driver.execute_script(
+        "return [...document.querySelectorAll(arguments[0])].map((e) => e.textContent);", selector
+    )
+
+
+def _assert_shows_literally(browser: ViewerBrowser, names: list[str]) -> None:
+    """The page drew, raised no error, injected no element and shows ``names`` as text."""
+    assert browser.console_errors() == []
+    assert browser.driver.execute_script("return document.querySelectorAll('img').length") == 0
+    assert _texts(browser, ".clip-label") == names
+    assert _texts(browser, "#legend label > span:not([class])") == names
 
 
 def _project(points: np.ndarray, camera: dict) -> np.ndarray:
@@ -231,3 +264,58 @@ def test_ten_one_minute_clips_open_and_play_in_real_time(browser, tmp_path):
     assert draws_per_second > 0
     assert advanced >= 40
     assert browser.console_errors() == []
+
+
+def test_hostile_names_are_shown_literally(browser, tmp_path):
+    """Joint names, clip labels and the title: the page works and shows each one as written."""
+    joints = len(HOSTILE)
+    # a 4 x 2 grid of joints facing the camera, 0.25 m apart: every joint apart on screen
+    pose = np.array([[0.25 * (j % 4), 0.6 + 0.4 * (j // 4), 0.0] for j in range(joints)])
+    positions = np.repeat(pose[None], 10, axis=0)
+    figures = [
+        StickFigure(positions, parents=[-1, *range(joints - 1)], joint_names=HOSTILE, name=name)
+        for name in HOSTILE[:2]
+    ]
+    labels = [HOSTILE[0], HOSTILE[1]]
+    title = "<!--<script></title><script>alert(1)</script>"
+    page = tmp_path / "view.html"
+    to_html(figures, names=labels, out=page, units="m", title=title, keyframes=[1, 5])
+    browser.open(page)
+    _assert_shows_literally(browser, labels)
+    assert browser.driver.title == title
+    marks = browser.driver.execute_script(
+        "return [...document.querySelectorAll('#marks .mark')].map((e) => e.title)"
+    )
+    assert marks[0] == f"{HOSTILE[0]}: keyframe at frame 1"
+
+    # hover: each joint's tooltip is its literal name
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    tooltip = browser.driver.find_element("id", "tooltip")
+    for joint, (x, y) in enumerate(np.rint(browser.call("project", 0)).astype(int)):
+        actions = ActionBuilder(browser.driver)
+        actions.pointer_action.move_to_location(int(x), int(y))
+        actions.perform()
+        assert tooltip.is_displayed()
+        assert browser.driver.execute_script("return arguments[0].textContent", tooltip) == (
+            f"{HOSTILE[0]}: {HOSTILE[joint]}"
+        )
+    assert browser.console_errors() == []
+
+
+def test_hostile_file_names_and_labels_through_render(browser, tmp_path, monkeypatch):
+    """``skelagnostic render FILES out=view.html [labels=...]``: file stems and labels literally."""
+    monkeypatch.chdir(tmp_path)  # the file names hold no "/": relative paths name them as they are
+    motion, _ = sa.procedural.generate("biped22", "walk", seconds=0.5, fps=30, seed=0)
+    files = []
+    for name in HOSTILE_FILES:
+        sa.write_bvh(motion, tmp_path / f"{name}.bvh")
+        files.append(f"{name}.bvh")
+    assert cli.main(["render", *files, "out=stems.html"]) == 0
+    browser.open(Path("stems.html"))
+    _assert_shows_literally(browser, list(HOSTILE_FILES))
+
+    labels = list(HOSTILE[:3])
+    assert cli.main(["render", *files[:3], "out=labels.html", f"labels={','.join(labels)}"]) == 0
+    browser.open(Path("labels.html"))
+    _assert_shows_literally(browser, labels)

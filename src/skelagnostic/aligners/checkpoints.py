@@ -7,8 +7,9 @@ goes through :func:`read_checkpoint`, which loads the file with
 ``torch.load(weights_only=True)`` (never unpickling code) and turns every way a
 file can be wrong into a :class:`CheckpointError` naming the file and the
 cause: missing, not a readable checkpoint (truncated or corrupt), holding
-Python objects a safe load refuses, written by another model, or (once the
-weights are loaded, :func:`architecture_mismatch`) of a different architecture.
+Python objects a safe load refuses, written by another model, holding non-finite
+weights (a diverged run), or (once the weights are loaded,
+:func:`architecture_mismatch`) of a different architecture.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import torch
 
+from skelagnostic.core.finite import first_non_finite
 from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
@@ -91,7 +93,8 @@ def read_checkpoint(
         CheckpointError: The file is not a readable checkpoint
             (empty, truncated, corrupt, not a torch file), holds Python objects a
             safe load refuses (such as an ``os.system`` call), is not a Lightning
-            checkpoint, or was written by another model.
+            checkpoint, was written by another model, or holds a NaN or infinite
+            floating-point value in its ``state_dict`` (the error names the first).
     """
     file = Path(path)
     shown = repr(str(file))
@@ -136,6 +139,15 @@ def read_checkpoint(
         )
     if model is not None:
         _check_model(file, checkpoint, model, option, aligners or {})
+    bad = first_non_finite(checkpoint["state_dict"].items())
+    if bad is not None:
+        raise CheckpointError(
+            file,
+            f"{shown} holds non-finite weights ({bad} has NaN or infinite values): the run "
+            "that wrote it diverged; use an earlier checkpoint of that run, or train again "
+            "(e.g. with a lower learning rate)",
+            option,
+        )
     return checkpoint
 
 

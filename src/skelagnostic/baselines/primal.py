@@ -49,7 +49,7 @@ def primal_skeleton(skeleton: Skeleton) -> dict[int, list[int]]:
         >>> from skelagnostic import procedural
         >>> sk = procedural.skeleton("biped22")
         >>> chains = primal_skeleton(sk)
-        >>> all(chains[p][-1] == p for p in chains)
+        >>> all(chain[-1] == p for p, chain in chains.items())
         True
     """
     children = [skeleton.children(j) for j in range(skeleton.num_joints)]

@@ -4,10 +4,13 @@ from skelagnostic.callbacks.checkpoint import (
     FinalStepCheckpoint,
     FinalStepValidation,
     LatestWithoutValidation,
+    newest_checkpoint,
 )
 from skelagnostic.callbacks.checkpoint_io import AtomicCheckpointIO
 from skelagnostic.callbacks.ema import EMAWeights
 from skelagnostic.callbacks.fit_summary import FitSummary, SummaryContent
+from skelagnostic.callbacks.interrupt import ResumeHint
+from skelagnostic.callbacks.nonfinite import NonFiniteTrainingError, StopOnNonFinite
 from skelagnostic.callbacks.progress import RichProgress
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 from skelagnostic.callbacks.resume import ResumeFromEpochEnd
@@ -20,11 +23,15 @@ __all__ = [
     "FinalStepValidation",
     "FitSummary",
     "LatestWithoutValidation",
+    "NonFiniteTrainingError",
     "RenderSampleSource",
     "RenderSamples",
     "ResumeFromEpochEnd",
+    "ResumeHint",
     "RichProgress",
+    "StopOnNonFinite",
     "StopReason",
     "SummaryContent",
+    "newest_checkpoint",
     "stop_reason",
 ]

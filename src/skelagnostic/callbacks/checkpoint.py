@@ -12,10 +12,43 @@ latest epoch" at the start of training.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import lightning as L
 from lightning.pytorch.utilities import rank_zero_info
 
-__all__ = ["FinalStepCheckpoint", "FinalStepValidation", "LatestWithoutValidation"]
+__all__ = [
+    "FinalStepCheckpoint",
+    "FinalStepValidation",
+    "LatestWithoutValidation",
+    "newest_checkpoint",
+]
+
+
+def newest_checkpoint(trainer: L.Trainer) -> tuple[Path, int] | None:
+    """The newest checkpoint file the trainer's checkpoint callbacks wrote, with its step.
+
+    For each callback, its ``last.ckpt`` (else its best checkpoint) if the file exists;
+    of those, the one saved at the latest global step.
+
+    Args:
+        trainer: The trainer of the run.
+
+    Returns:
+        ``(path, global step)``, or ``None`` when no checkpoint file exists yet.
+    """
+    found: list[tuple[int, Path]] = []
+    for callback in trainer.checkpoint_callbacks:
+        step = int(getattr(callback, "_last_global_step_saved", -1))
+        for attr in ("last_model_path", "best_model_path"):
+            path = getattr(callback, attr, "")
+            if path and Path(path).is_file():
+                found.append((step, Path(path)))
+                break
+    if not found:
+        return None
+    step, path = max(found, key=lambda item: item[0])
+    return path, step
 
 
 class LatestWithoutValidation(L.Callback):

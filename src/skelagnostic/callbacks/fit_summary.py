@@ -27,6 +27,8 @@ import lightning.pytorch as pl
 import torch
 from lightning.pytorch.utilities import rank_zero_only
 
+from skelagnostic.io.markdown import markdown_cell
+
 __all__ = ["FitSummary", "SummaryContent"]
 
 
@@ -171,7 +173,7 @@ class FitSummary(pl.Callback):
     ) -> str:
         from skelagnostic.callbacks.stopping import stop_reason
 
-        title = f"Fit summary: {self.name}" if self.name else "Fit summary"
+        title = f"Fit summary: {markdown_cell(self.name)}" if self.name else "Fit summary"
         stopped = stop_reason(trainer) if isinstance(trainer, pl.Trainer) else None
         lines = [
             f"# {title}",
@@ -183,16 +185,20 @@ class FitSummary(pl.Callback):
         ]
         if logged:
             lines += ["## Last logged metrics", "", "| metric | value |", "|---|---|"]
-            lines += [f"| `{k}` | {_cell(v)} |" for k, v in sorted(logged.items())]
+            lines += [
+                f"| {markdown_cell(k, code=True)} | {markdown_cell(_cell(v))} |"
+                for k, v in sorted(logged.items())
+            ]
             lines.append("")
         own = {k: v for k, v in _plain(content.get("metrics", {})).items()}
         if own:
             lines += ["## Summary figures", "", "| figure | value |", "|---|---|"]
             for key, value in own.items():
                 shown = json.dumps(value) if isinstance(value, (dict, list)) else _cell(value)
+                shown = markdown_cell(shown)
                 if len(shown) > 200:  # a nested record: its table is a note, its data the JSON
-                    shown = f"see `{key}` in `{metrics_file.name}`"
-                lines.append(f"| `{key}` | {shown} |")
+                    shown = f"see {markdown_cell(key, code=True)} in `{metrics_file.name}`"
+                lines.append(f"| {markdown_cell(key, code=True)} | {shown} |")
             lines.append("")
         if pictures:
             lines += ["## Pictures", ""]

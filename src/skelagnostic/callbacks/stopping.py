@@ -12,7 +12,6 @@ import datetime
 
 import lightning.pytorch as pl
 from lightning.pytorch.callbacks import EarlyStopping, Timer
-from lightning.pytorch.utilities import rank_zero_info
 
 __all__ = ["StopReason", "stop_reason"]
 
@@ -97,7 +96,8 @@ class StopReason(pl.Callback):
     """Keeps :func:`stop_reason` of the fit it watched in :attr:`reason`.
 
     An interrupted fit (Ctrl-C) does not reach ``on_fit_end``; the reason is then
-    logged at once.
+    recorded from ``on_exception`` (the CLI's :class:`~skelagnostic.callbacks.ResumeHint`
+    prints the line for it).
     """
 
     def __init__(self) -> None:
@@ -111,7 +111,6 @@ class StopReason(pl.Callback):
     def on_exception(
         self, trainer: pl.Trainer, pl_module: pl.LightningModule, exception: BaseException
     ) -> None:
-        """Record (and log) an interruption by Ctrl-C."""
+        """Record an interruption by Ctrl-C."""
         if isinstance(exception, KeyboardInterrupt):
             self.reason = f"interrupted (Ctrl-C) at {_step(trainer)}"
-            rank_zero_info(f"stopped: {self.reason}")

@@ -10,11 +10,14 @@ import contextlib
 import importlib
 import os
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 from skelagnostic._shadow import ShadowedPackageError, check_not_shadowed
 from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated, sigterm_raises
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 #: verb -> ("module", "function", one-line help)
 VERBS: dict[str, tuple[str, str, str]] = {
@@ -131,6 +134,37 @@ def _complete(args: list[str]) -> int:
     return app.main(verb, args)
 
 
+@contextmanager
+def _plugin_warnings_on_one_line() -> Iterator[None]:
+    """Show each ``PluginLoadWarning`` as ``skelagnostic: warning: ...``.
+
+    Python's default format adds the warning's file, line and source line; a
+    skipped plugin is one line naming it and why. Other warnings, and warnings
+    recorded rather than shown, are left alone. The plugin module is not
+    imported for this (light verbs stay light).
+    """
+    formatted = warnings.formatwarning
+
+    def format_warning(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        line: str | None = None,
+    ) -> str:
+        manager = sys.modules.get("skelagnostic.plugins.manager")
+        if manager is not None and issubclass(category, manager.PluginLoadWarning):
+            return f"skelagnostic: warning: {printable(message)}\n"
+        return formatted(message, category, filename, lineno, line)
+
+    warnings.formatwarning = format_warning
+    try:
+        yield
+    finally:
+        if warnings.formatwarning is format_warning:
+            warnings.formatwarning = formatted
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``skelagnostic`` console script.
 
@@ -172,7 +206,7 @@ def _main(argv: Sequence[str] | None) -> int:
         try:
             reexec_with_allocator(args)
         except SkelagnosticError as exc:
-            print(f"skelagnostic: error: {exc}", file=sys.stderr)
+            print(error_line("skelagnostic", exc), file=sys.stderr)
             return 2
     if not args or args[0] in {"-h", "--help", "help"}:
         print(_usage())
@@ -189,7 +223,20 @@ def _main(argv: Sequence[str] | None) -> int:
         return 2
     module_name, func_name, _ = VERBS[verb]
     func = getattr(importlib.import_module(module_name), func_name)
-    return int(func(rest) or 0)
+    try:
+        # SIGTERM: clean-up code runs, then one line (not silence)
+        with sigterm_raises(), _plugin_warnings_on_one_line():
+            return int(func(rest) or 0)
+    except Terminated:
+        print(
+            f"skelagnostic {verb}: terminated by SIGTERM; files still being written were "
+            "discarded (none is left half-written)",
+            file=sys.stderr,
+        )
+        return SIGTERM_EXIT_CODE
+    except KeyboardInterrupt:  # Ctrl+C outside training (Lightning reports its own)
+        print(f"skelagnostic {verb}: interrupted (Ctrl+C)", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

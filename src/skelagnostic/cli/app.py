@@ -46,22 +46,26 @@ from skelagnostic.aligners.checkpoints import (
 )
 from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.runs import (
+    LOCK_FILE,
     AdaptiveLogInterval,
     RecordSplit,
+    RunDirectoryRefused,
     checkpoint_of,
     chosen_keys,
     find_run_dir,
     max_steps_overrides,
     quiet_lightning,
     read_split,
+    release_run_directories,
     reuse_run_config,
     run_of_overrides,
     summary_table,
     value_of,
 )
+from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.data.datamodule import datamodule_options
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 from skelagnostic.plugins import PluginManager, get_plugin_manager, target_of
 from skelagnostic.plugins.manager import config_names
 
@@ -71,8 +75,6 @@ TASKS = ("fit", "validate", "test", "predict", "evaluate")
 CONFIG_MODULE = "skelagnostic.conf"
 #: Set to ``1`` (or pass ``--debug``) for full tracebacks on configuration errors.
 DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
-#: Exit code of a run stopped by SIGTERM (128 + 15, as the shell reports it).
-SIGTERM_EXIT_CODE = 143
 #: ``ckpt_path`` values Lightning resolves itself.
 _CKPT_ALIASES = ("last", "best", "hpc", "registry")
 #: Provider name of the configs this module puts into Hydra's ConfigStore.
@@ -486,11 +488,15 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
             FinalStepValidation,
             LatestWithoutValidation,
             ResumeFromEpochEnd,
+            ResumeHint,
+            StopOnNonFinite,
             StopReason,
         )
 
         stop = StopReason()
         callbacks += [
+            StopOnNonFinite(),
+            ResumeHint(),
             LatestWithoutValidation(),
             FinalStepCheckpoint(),
             FinalStepValidation(),
@@ -686,6 +692,7 @@ _BOOKKEEPING = frozenset(
         "app.log",
         "config.yaml",
         "csv/hparams.yaml",
+        LOCK_FILE,
     }
 )
 
@@ -832,8 +839,17 @@ def _failed_plugins(pm: PluginManager | None) -> str:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-    text = text.split(" Config search path:")[0]
+    r"""The error as one message: Hydra's lines joined, without its config search path.
+
+    A :class:`SkelagnosticError` is kept whole: a line end in it comes from a
+    name (a file, a joint, a value), and :func:`~skelagnostic.errors.error_line`
+    shows it as ``\n``.
+    """
+    if isinstance(exc, SkelagnosticError):
+        text = str(exc)
+    else:
+        text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+        text = text.split(" Config search path:")[0]
     cause = exc.__cause__
     if isinstance(cause, OmegaConfBaseException) and str(cause).splitlines()[0] not in text:
         text += f" ({str(cause).splitlines()[0]})"
@@ -938,7 +954,7 @@ def main(task: str, argv: Sequence[str]) -> int:
             raise failures[0]
         if terminated:
             kept = "".join(_discard_failed_run(d) for d in run_dirs)
-            print(f"skelagnostic {task}: terminated by SIGTERM{kept}", file=sys.stderr)
+            print(printable(f"skelagnostic {task}: terminated by SIGTERM{kept}"), file=sys.stderr)
             return SIGTERM_EXIT_CODE
         for run_dir, metrics, ckpt in results:  # evaluate printed its own table
             summary_table(
@@ -961,11 +977,20 @@ def main(task: str, argv: Sequence[str]) -> int:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)
         if debug:
             raise
-        print(
-            f"skelagnostic {task}: error: {_one_line(exc)}{_failed_plugins(pm)}{kept}",
-            file=sys.stderr,
-        )
+        message = f"{_one_line(exc)}{_failed_plugins(pm)}{kept}"
+        print(error_line(f"skelagnostic {task}", message), file=sys.stderr)
         return 1
+    except Terminated:  # SIGTERM outside training (e.g. building the window cache)
+        kept = "".join(_discard_failed_run(d) for d in run_dirs)
+        print(printable(f"skelagnostic {task}: terminated by SIGTERM{kept}"), file=sys.stderr)
+        return SIGTERM_EXIT_CODE
+    except RunDirectoryRefused as exc:  # before Hydra wrote anything: nothing to discard
+        if debug:
+            raise
+        print(error_line(f"skelagnostic {task}", exc), file=sys.stderr)
+        return 1
+    finally:
+        release_run_directories()
     return 0
 
 

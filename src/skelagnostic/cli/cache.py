@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from skelagnostic.data.cache import CACHE_ENV, WindowCache, default_cache_dir
+from skelagnostic.errors import SkelagnosticError, error_line
 
 
 def _size(num: float) -> str:
@@ -39,11 +40,26 @@ def info(cache: WindowCache, verbose: bool) -> int:
     return 0
 
 
+#: Paths left alone that ``cache clear`` names one by one (the others are counted).
+SHOWN_KEPT = 10
+
+
 def clear(cache: WindowCache) -> int:
-    """Delete every entry and print what was freed."""
-    count = sum(1 for _ in cache.entries())
-    freed = cache.clear()
-    print(f"cache: {cache.root}: removed {count} entries ({_size(freed)})")
+    """Delete every file the cache wrote; print what was freed and what was left alone.
+
+    Files in the cache's folders that it did not write (a note, a link, a folder)
+    are not deleted (:meth:`WindowCache.clear`); one line on stderr names them.
+    """
+    report = cache.clear()
+    print(f"cache: {cache.root}: removed {report.entries} entries ({_size(report.freed)})")
+    if report.kept:
+        shown = ", ".join(str(p) for p in report.kept[:SHOWN_KEPT])
+        more = len(report.kept) - SHOWN_KEPT
+        print(
+            f"skelagnostic cache: left alone {len(report.kept)} path(s) the cache did not "
+            f"write: {shown}{f' and {more} more' if more > 0 else ''}",
+            file=sys.stderr,
+        )
     return 0
 
 
@@ -54,7 +70,8 @@ def main(argv: Sequence[str]) -> int:
         argv: Arguments after the verb.
 
     Returns:
-        The exit code: 0, or 2 for a usage error.
+        The exit code: 0, 1 when the cache cannot be read or a file of it cannot be
+        deleted, or 2 for a usage error.
     """
     parser = argparse.ArgumentParser(
         prog="skelagnostic cache",
@@ -64,7 +81,8 @@ def main(argv: Sequence[str]) -> int:
     parser.add_argument(
         "action",
         choices=("info", "clear"),
-        help="info: directory, entries and size; clear: delete every entry",
+        help="info: directory, entries and size; clear: delete every entry (files the "
+        "cache did not write are left alone and named)",
     )
     parser.add_argument(
         "--cache-dir",
@@ -81,6 +99,10 @@ def main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     cache = WindowCache(args.cache_dir if args.cache_dir is not None else default_cache_dir())
     if cache.root.exists() and not cache.root.is_dir():
-        print(f"skelagnostic cache: error: {cache.root} is not a directory", file=sys.stderr)
+        print(error_line("skelagnostic cache", f"{cache.root} is not a directory"), file=sys.stderr)
         return 1
-    return info(cache, args.verbose) if args.action == "info" else clear(cache)
+    try:
+        return info(cache, args.verbose) if args.action == "info" else clear(cache)
+    except SkelagnosticError as exc:
+        print(error_line("skelagnostic cache", str(exc)), file=sys.stderr)
+        return 1

@@ -43,7 +43,7 @@ from skelagnostic.data.prepare import (
     write_window_cache,
 )
 from skelagnostic.data.sources import DATA_ROOT_ENV, PRESETS
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
 __all__ = ["get", "main", "prepare"]
 
@@ -339,7 +339,7 @@ def main(argv: Sequence[str], opener: Opener | None = None) -> int:
         else:
             result = get(args.preset, args.dest, url=args.url, opener=opener, **options)
     except SkelagnosticError as exc:
-        print(f"skelagnostic data {args.action}: error: {exc}", file=sys.stderr)
+        print(error_line(f"skelagnostic data {args.action}", exc), file=sys.stderr)
         return 1
     print(report(result, args.dest))
     return 0

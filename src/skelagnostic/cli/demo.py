@@ -43,18 +43,18 @@ options:
 
 
 def _usage() -> str:
-    from skelagnostic.cli.render import THREADS_HELP
+    from skelagnostic.cli.render import END_OF_OPTIONS_HELP, THREADS_HELP
 
     lines = [f"  {k:<8} {v}" for k, v in {**OPTIONS, "threads": THREADS_HELP}.items()]
-    return _USAGE.format(options="\n".join(lines))
+    return _USAGE.format(options="\n".join(lines)) + "\n\n" + END_OF_OPTIONS_HELP
 
 
 def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
     """BVH paths and typed options; raises SkelagnosticError naming the bad option."""
-    from skelagnostic.cli.render import apply_threads, parse_arguments
+    from skelagnostic.cli.render import apply_threads, parse_arguments, split_end_of_options
     from skelagnostic.errors import SkelagnosticError
 
-    flags = [w for w in argv if w.startswith("--")]
+    flags = [w for w in split_end_of_options(argv)[0] if w.startswith("--")]
     if flags:
         name = flags[0][2:].split("=", 1)[0].replace("no-gif", "gif")
         raise SkelagnosticError(
@@ -86,15 +86,17 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
 
 def main(argv: Sequence[str]) -> int:
     """Run the demo; returns the exit code."""
-    if any(word in ("-h", "--help", "help") for word in argv):
+    from skelagnostic.cli.render import wants_help
+
+    if wants_help(argv):
         print(_usage())
         return 0
-    from skelagnostic.errors import SkelagnosticError
+    from skelagnostic.errors import SkelagnosticError, error_line
 
     try:
         bvh_files, args = _options(argv)
     except SkelagnosticError as exc:
-        print(f"skelagnostic demo: error: {exc}", file=sys.stderr)
+        print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 2
     from rich.console import Console
     from rich.table import Table
@@ -171,7 +173,7 @@ def main(argv: Sequence[str]) -> int:
             json.dumps({"source": source, "motions": summary, "outputs": outputs}, indent=2)
         )
     except sa.SkelagnosticError as exc:
-        print(f"skelagnostic demo: error: {exc}", file=sys.stderr)
+        print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 1
     for kind, path in outputs.items():
         console.print(f"{kind}: {path}")

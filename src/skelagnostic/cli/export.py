@@ -18,7 +18,7 @@ from __future__ import annotations
 import sys
 
 from skelagnostic.core.paths import expand_path
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
 __all__ = ["main"]
 
@@ -49,7 +49,9 @@ def main(argv: list[str]) -> int:
     Returns:
         0 on success, 2 on a usage or export error (one line on stderr).
     """
-    if not argv or any(word in ("-h", "--help", "help") for word in argv):
+    from skelagnostic.cli.render import wants_help
+
+    if not argv or wants_help(argv):
         print(_USAGE)
         return 0 if argv else 2
     try:
@@ -91,7 +93,7 @@ def main(argv: list[str]) -> int:
         for path in export_aligner(aligner, fmt, out, name):
             print(path)
     except SkelagnosticError as error:
-        print(f"skelagnostic export: error: {error}", file=sys.stderr)
+        print(error_line("skelagnostic export", error), file=sys.stderr)
         return 2
     return 0
 

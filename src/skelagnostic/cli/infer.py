@@ -26,13 +26,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from skelagnostic.cli.render import (
+    END_OF_OPTIONS_HELP,
     RENDER_OPTIONS,
     THREADS_HELP,
     apply_threads,
     parse_arguments,
     render_from_options,
+    wants_help,
 )
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
@@ -84,7 +86,7 @@ def _usage(verb: str) -> str:
     head, extra = _USAGE[verb]
     options = {**_COMMON, **extra, **RENDER_OPTIONS}
     lines = [f"  {key:<11} {text}" for key, text in options.items()]
-    return head + "\n\noptions:\n" + "\n".join(lines)
+    return head + "\n\noptions:\n" + "\n".join(lines) + "\n\n" + END_OF_OPTIONS_HELP
 
 
 def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
@@ -236,7 +238,7 @@ def _run(
     loaded, so bad input files fail fast; it returns what to do with the aligner.
     ``marks`` (filled by that) holds keyframes / transitions for the viewer.
     """
-    if not argv or any(word in ("-h", "--help", "help") for word in argv):
+    if not argv or wants_help(argv):
         print(_usage(verb))
         return 0 if argv else 2
     try:
@@ -280,7 +282,7 @@ def _run(
             ):
                 print(path)
     except SkelagnosticError as error:
-        print(f"skelagnostic {verb}: error: {error}", file=sys.stderr)
+        print(error_line(f"skelagnostic {verb}", error), file=sys.stderr)
         return 2
     return 0
 

@@ -17,6 +17,8 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
+from skelagnostic.errors import error_line
+
 #: Allowed aligner names: what ``model=NAME`` and a Python identifier both accept.
 NAME_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
 
@@ -409,7 +411,7 @@ def main(argv: Sequence[str]) -> int:
     try:
         write(args.name, directory)
     except (ValueError, OSError) as exc:
-        print(f"skelagnostic new-plugin: error: {exc}", file=sys.stderr)
+        print(error_line("skelagnostic new-plugin", exc), file=sys.stderr)
         return 1
     from skelagnostic.plugins import PluginLoadWarning, get_plugin_manager
 

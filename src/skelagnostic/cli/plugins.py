@@ -163,13 +163,16 @@ def main(argv: Sequence[str]) -> int:
     with warnings.catch_warnings():  # failures are shown in the listing instead
         warnings.simplefilter("ignore", PluginLoadWarning)
         pm = get_plugin_manager()
-        infos = {info.name: info for info in pm.plugins()}
+        listed = pm.plugins()
+    infos: dict[str, PluginInfo] = {}
+    for info in listed:  # a name two distributions claim: the one loaded first
+        infos.setdefault(info.name, info)
     console = Console(soft_wrap=True)
     if args.name is None:
         if args.json:
-            print(json.dumps([asdict(info) for info in infos.values()], indent=2))
+            print(json.dumps([asdict(info) for info in listed], indent=2))
             return 0
-        for info in infos.values():
+        for info in listed:
             _print_plugin(console, info)
         return 0
     if args.name in pm.aligners:

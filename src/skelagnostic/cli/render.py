@@ -21,9 +21,17 @@ from pathlib import Path
 from typing import Any
 
 from skelagnostic.core.paths import expand_path
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, error_line
 
-__all__ = ["RENDER_OPTIONS", "apply_threads", "main", "parse_arguments", "render_from_options"]
+__all__ = [
+    "RENDER_OPTIONS",
+    "apply_threads",
+    "main",
+    "parse_arguments",
+    "render_from_options",
+    "split_end_of_options",
+    "wants_help",
+]
 
 #: Rendering options understood by :func:`render_from_options`, with their help.
 RENDER_OPTIONS: dict[str, str] = {
@@ -59,11 +67,44 @@ def _usage() -> str:
     lines = [
         f"  {key:<11} {text}" for key, text in {**RENDER_OPTIONS, "threads": THREADS_HELP}.items()
     ]
-    return _USAGE.format(options="\n".join(lines))
+    return _USAGE.format(options="\n".join(lines)) + "\n\n" + END_OF_OPTIONS_HELP
 
 
 #: Options of the file verbs that name a path (``~`` and ``$VARS`` are expanded).
 PATH_OPTIONS = frozenset({"out", "ckpt", "render", "sheet", "html", "ckpt_path"})
+
+
+#: The word that ends the options of the file verbs: every word after it is an input path.
+END_OF_OPTIONS = "--"
+#: The help line on :data:`END_OF_OPTIONS`, at the end of the file verbs' ``--help``.
+END_OF_OPTIONS_HELP = (
+    "A -- ends the options: the words after it are input files, taken as they are\n"
+    "(e.g. a file named out=x.bvh or --help)."
+)
+#: Words that ask a verb for its help (before :data:`END_OF_OPTIONS`).
+HELP_WORDS = frozenset({"-h", "--help", "help"})
+
+
+def split_end_of_options(argv: Sequence[str]) -> tuple[list[str], list[str]]:
+    """The words before the first ``--`` and those after it (``--`` itself dropped).
+
+    Examples:
+        >>> split_end_of_options(["out=a.gif", "--", "out=x.bvh", "--"])
+        (['out=a.gif'], ['out=x.bvh', '--'])
+    """
+    words = list(argv)
+    if END_OF_OPTIONS not in words:
+        return words, []
+    end = words.index(END_OF_OPTIONS)
+    return words[:end], words[end + 1 :]
+
+
+def wants_help(argv: Sequence[str]) -> bool:
+    """Whether a word before ``--`` asks for help (``-h``, ``--help``, ``help``).
+
+    After ``--`` such a word is a file name: ``render -- help`` draws the file ``help``.
+    """
+    return any(word in HELP_WORDS for word in split_end_of_options(argv)[0])
 
 
 def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
@@ -71,13 +112,17 @@ def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
 
     Positional arguments (input files) and the values of :data:`PATH_OPTIONS`
     get ``~`` and ``$VARS`` expanded (:func:`~skelagnostic.core.paths.expand_path`):
-    a shell does not expand ``~`` after ``out=``.
+    a shell does not expand ``~`` after ``out=``. A ``--`` word ends the
+    options: every word after it is a positional argument taken as it is (no
+    ``key=value``, no expansion), so a file named ``out=x.bvh`` or ``--help``
+    can be given.
 
     Args:
         argv: The words after the verb.
 
     Returns:
-        ``(positional, options)``.
+        ``(positional, options)``: the positional arguments before ``--``, then
+        those after it.
 
     Raises:
         SkelagnosticError: If an option is given twice.
@@ -85,9 +130,12 @@ def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
     Examples:
         >>> parse_arguments(["a.bvh", "out=x.gif", "mode=overlay"])
         (['a.bvh'], {'out': 'x.gif', 'mode': 'overlay'})
+        >>> parse_arguments(["out=x.gif", "--", "out=y.bvh"])
+        (['out=y.bvh'], {'out': 'x.gif'})
     """
+    words, literal = split_end_of_options(argv)
     positional, options = [], {}
-    for word in argv:
+    for word in words:
         key, sep, value = word.partition("=")
         if sep and key.isidentifier():
             if key in options:
@@ -95,7 +143,7 @@ def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
             options[key] = str(expand_path(value)) if key in PATH_OPTIONS and value else value
         else:
             positional.append(str(expand_path(word)))
-    return positional, options
+    return positional + literal, options
 
 
 def render_from_options(
@@ -216,7 +264,7 @@ def main(argv: list[str]) -> int:
     Returns:
         0 on success, 2 on bad arguments or unreadable input.
     """
-    if not argv or any(word in ("-h", "--help", "help") for word in argv):
+    if not argv or wants_help(argv):
         print(_usage())
         return 0 if argv else 2
     try:
@@ -237,7 +285,7 @@ def main(argv: list[str]) -> int:
         for path in render_from_options(motions, options):
             print(path)
     except SkelagnosticError as error:
-        print(f"skelagnostic render: error: {error}", file=sys.stderr)
+        print(error_line("skelagnostic render", error), file=sys.stderr)
         return 2
     return 0
 

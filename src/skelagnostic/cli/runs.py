@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import re
 import sys
 import warnings
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import lightning as L
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.experimental.callback import Callback
 from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf, open_dict
 
@@ -28,11 +30,16 @@ from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = [
+    "LOCK_FILE",
     "RecordSplit",
+    "RunDirectoryGuard",
+    "RunDirectoryLock",
+    "RunDirectoryRefused",
     "checkpoint_of",
     "find_run_dir",
     "quiet_lightning",
     "read_split",
+    "release_run_directories",
     "reuse_run_config",
     "summary_table",
     "value_of",
@@ -44,6 +51,8 @@ CONFIG_FILE = "config.yaml"
 SPLIT_FILE = "split.json"
 #: Config nodes a later verb takes from the run (unless the command line chooses them).
 REUSED = ("model", "data")
+#: The lock file a command holds in its run directory while it runs (deleted at its end).
+LOCK_FILE = ".skelagnostic.lock"
 
 
 def find_run_dir(ckpt: str | Path) -> Path | None:
@@ -340,3 +349,235 @@ def max_steps_overrides(overrides: Sequence[str]) -> list[str]:
         if value is not None and re.fullmatch(r"\d+", value) and int(value) > 0:
             return ["trainer.max_epochs=-1"]
     return []
+
+
+# ------------------------------------------------------------ run directory ownership
+class RunDirectoryRefused(BaseException):
+    """A command may not use the run directory it was given; the message says why.
+
+    A ``BaseException`` on purpose: it is raised by :class:`RunDirectoryGuard`, a
+    Hydra callback, and Hydra turns a callback's ``Exception`` into a warning and
+    goes on to create the directory. The CLI prints it as one error line.
+    """
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+def _pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` runs on this machine (``True`` when that cannot be told)."""
+    if pid <= 0:
+        return False
+    if os.name != "posix":
+        return True  # os.kill(pid, 0) would terminate it on Windows
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, owned by someone else
+        return True
+    return True
+
+
+class RunDirectoryLock:
+    """The lock file ``<run_dir>/.skelagnostic.lock`` of the command writing a run directory.
+
+    The file holds the process id of its holder. On POSIX the holder also keeps an
+    ``fcntl.flock`` on it, which the kernel drops when the process ends, however it
+    ends: a lock file left by a killed process (a stale lock, its PID dead) is taken
+    over. Elsewhere, a lock file whose PID is not running is taken over.
+    :meth:`release` deletes the file.
+
+    Args:
+        run_dir: The run directory (created if missing).
+
+    Example:
+        >>> import tempfile
+        >>> lock = RunDirectoryLock(Path(tempfile.mkdtemp()) / "run")
+        >>> lock.acquire()
+        >>> (lock.path.parent / LOCK_FILE).is_file()
+        True
+        >>> lock.release()
+        >>> lock.path.exists()
+        False
+    """
+
+    def __init__(self, run_dir: str | Path) -> None:
+        self.path = Path(run_dir) / LOCK_FILE
+        self._fd: int | None = None
+
+    def _busy(self, pid: int | None) -> RunDirectoryRefused:
+        holder = f"process {pid}" if pid else "another process"
+        return RunDirectoryRefused(
+            f"hydra.run.dir={str(self.path.parent)!r} is in use by another command "
+            f"({holder} holds {self.path.name}); a run directory belongs to one run: "
+            "name another directory, or leave hydra.run.dir out (each run then gets a new one)"
+        )
+
+    @staticmethod
+    def _read_pid(fd: int) -> int | None:
+        os.lseek(fd, 0, os.SEEK_SET)
+        text = os.read(fd, 64).decode("ascii", "replace").strip()
+        return int(text) if text.isdigit() else None
+
+    def acquire(self) -> None:
+        """Take the lock (creating the directory and the file).
+
+        Raises:
+            RunDirectoryRefused: A running process holds it.
+            OSError: The directory or the file cannot be created.
+        """
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            import fcntl
+        except ImportError:  # not POSIX: the PID in the file decides
+            self._acquire_by_pid()
+            return
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                pid = self._read_pid(fd)
+                os.close(fd)
+                raise self._busy(pid) from None
+            except OSError:  # a file system without flock (some NFS): the PID decides
+                os.close(fd)
+                self._acquire_by_pid()
+                return
+            try:  # the holder may have deleted the file between our open and flock
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.lseek(fd, 0, os.SEEK_SET)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._fd = fd
+
+    def _acquire_by_pid(self) -> None:
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o666)
+            except FileExistsError:
+                with open(self.path, "rb") as fh:
+                    text = fh.read(64).decode("ascii", "replace").strip()
+                pid = int(text) if text.isdigit() else None
+                if pid is not None and _pid_alive(pid):
+                    raise self._busy(pid) from None
+                with contextlib.suppress(FileNotFoundError):
+                    self.path.unlink()  # a stale lock: its process is gone
+                continue
+            os.write(fd, f"{os.getpid()}\n".encode())
+            self._fd = fd
+            return
+        raise self._busy(None)
+
+    def release(self) -> None:
+        """Delete the lock file and drop the lock (nothing happens when it is not held)."""
+        if self._fd is None:
+            return
+        with contextlib.suppress(OSError):  # the run directory may have been discarded
+            self.path.unlink()
+        os.close(self._fd)  # also drops the flock
+        self._fd = None
+
+
+#: Locks of run directories this process holds (released by :func:`release_run_directories`).
+_HELD: list[RunDirectoryLock] = []
+
+
+def release_run_directories() -> None:
+    """Release every run directory lock this process took (the CLI calls it when it ends)."""
+    while _HELD:
+        _HELD.pop().release()
+
+
+def _describe_contents(run_dir: Path, limit: int = 4) -> str:
+    names = sorted(p.name + ("/" if p.is_dir() else "") for p in run_dir.iterdir())
+    return ", ".join(names[:limit]) + (", ..." if len(names) > limit else "")
+
+
+def check_run_directory(run_dir: Path, task: str) -> None:
+    """Refuse ``run_dir`` when it holds files (other than a lock file): they belong to a run.
+
+    Args:
+        run_dir: The run directory about to be used.
+        task: The verb (``fit`` is told how to resume the run found there).
+
+    Raises:
+        RunDirectoryRefused: The directory is not empty, or is not a directory.
+    """
+    if not run_dir.exists() and not run_dir.is_symlink():
+        return
+    if not run_dir.is_dir():
+        raise RunDirectoryRefused(
+            f"hydra.run.dir={str(run_dir)!r} is not a directory; name a new or empty directory"
+        )
+    if not any(p.name != LOCK_FILE for p in run_dir.iterdir()):
+        return
+    hint = ""
+    if task == "fit":
+        ckpt = next(
+            (
+                p
+                for p in (
+                    run_dir / "checkpoints" / "last.ckpt",
+                    run_dir / "checkpoints" / "best.ckpt",
+                )
+                if p.is_file()
+            ),
+            None,
+        )
+        if ckpt is not None:
+            hint = (
+                f"; to continue that run, resume it with ckpt_path={ckpt} "
+                "(the resumed run writes a new directory)"
+            )
+    raise RunDirectoryRefused(
+        f"hydra.run.dir={str(run_dir)!r} is not empty (it holds {_describe_contents(run_dir)}); "
+        "a run directory belongs to one run: name a new or empty directory, or leave "
+        f"hydra.run.dir out (each run then gets a new one){hint}"
+    )
+
+
+class RunDirectoryGuard(Callback):
+    """Hydra callback: a command gets a run directory of its own, or stops before writing.
+
+    At ``on_run_start`` (before Hydra creates the directory and writes ``.hydra/``
+    into it) the directory ``hydra.run.dir`` resolves to must be missing or empty
+    (see :func:`check_run_directory`); then :class:`RunDirectoryLock` is taken, so
+    two commands started at once with the same ``hydra.run.dir`` cannot both use it.
+    The CLI releases the lock when the command ends. Extra DDP ranks (which Lightning
+    starts with ``hydra.run.dir=<rank 0's directory>``) are let through. Sweeps
+    (``-m``) are not checked: each job has its own numbered subdirectory.
+    ``conf/config.yaml`` registers it under ``hydra.callbacks``.
+    """
+
+    def on_run_start(self, config: DictConfig, **kwargs: object) -> None:
+        """Check and lock the run directory of this command (rank 0 only)."""
+        if rank_zero_only.rank != 0:
+            return
+        raw = OmegaConf.select(config, "hydra.run.dir")
+        if raw is None:
+            return
+        run_dir = Path(os.path.abspath(str(raw)))
+        task = str(OmegaConf.select(config, "task", default="fit"))
+        lock = RunDirectoryLock(run_dir)
+        if not lock.path.is_file():  # with a lock file, whether it is held says more
+            check_run_directory(run_dir, task)
+        try:
+            lock.acquire()
+        except OSError as exc:
+            raise RunDirectoryRefused(
+                f"hydra.run.dir={str(run_dir)!r}: cannot create the run directory "
+                f"({exc.strerror or exc})"
+            ) from exc
+        _HELD.append(lock)
+        try:  # a command started at the same moment may have written there first
+            check_run_directory(run_dir, task)
+        except RunDirectoryRefused:
+            release_run_directories()
+            raise

@@ -29,7 +29,7 @@ import hashlib
 import json
 import math
 import os
-import shutil
+import re
 import warnings
 import zlib
 from collections.abc import Iterator
@@ -339,10 +339,128 @@ class WindowCache:
             if p.is_file()
         )
 
-    def clear(self) -> int:
-        """Delete every entry (the ``windows`` and ``slots`` directories); returns bytes freed."""
-        freed = self.size()
+    def clear(self) -> ClearReport:
+        """Delete every file the cache wrote; leave anything else where it is.
+
+        A file is deleted only if its place, name and first bytes are those the
+        cache gives its files (:func:`cache_file_kind`): ``windows/<kk>/<key>.npy``
+        starting with the ``.npy`` magic, ``windows/<kk>/<key>.json`` starting with
+        ``{``, ``slots/<kk>/<slot>`` holding a key, and the temporary files of
+        their atomic writes. Other files, symbolic links and folders are left
+        alone and listed in the report; the cache's folders are removed when
+        they end up empty.
+
+        Returns:
+            What was deleted and what was left alone.
+
+        Raises:
+            SkelagnosticError: A file of the cache cannot be deleted (names it).
+        """
+        entries, freed, kept = 0, 0, []
         for sub in ("windows", "slots"):
-            shutil.rmtree(self.root / sub, ignore_errors=True)
+            top = self.root / sub
+            if top.is_symlink() or not top.is_dir():
+                if top.is_symlink() or top.exists():
+                    kept.append(top)
+                continue
+            for folder in sorted(top.iterdir()):
+                if folder.is_symlink() or not folder.is_dir() or not _SHARD.fullmatch(folder.name):
+                    kept.append(folder)
+                    continue
+                for path in sorted(folder.iterdir()):
+                    kind = cache_file_kind(path, sub)
+                    if kind is None:
+                        kept.append(path)
+                        continue
+                    try:
+                        size = path.stat().st_size
+                        path.unlink()
+                    except FileNotFoundError:  # removed meanwhile (another clear, a rebuild)
+                        continue
+                    except OSError as exc:
+                        raise SkelagnosticError(
+                            f"cache: cannot delete {path} ({exc.strerror or exc})"
+                        ) from exc
+                    freed += size
+                    entries += kind == "array"
+                _remove_if_empty(folder)
+            _remove_if_empty(top)
         _VERIFIED.clear()
-        return freed
+        return ClearReport(entries, freed, tuple(kept))
+
+
+@dataclass(frozen=True)
+class ClearReport:
+    """What :meth:`WindowCache.clear` did.
+
+    Attributes:
+        entries: Entries deleted (their ``.npy`` arrays).
+        freed: Bytes of all files deleted (entries, slots, temporary files).
+        kept: Files, links and folders inside the cache's folders that the cache
+            did not write, left alone.
+    """
+
+    entries: int
+    freed: int
+    kept: tuple[Path, ...]
+
+
+#: A cache key or slot: 64 lowercase hex digits (a SHA-256).
+_KEY = re.compile(r"[0-9a-f]{64}")
+#: A shard folder of ``windows/`` or ``slots/``: the first two hex digits of the key.
+_SHARD = re.compile(r"[0-9a-f]{2}")
+#: What :func:`~skelagnostic.io.atomic.atomic_write` names its temporary files.
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.[0-9a-f]{8}\.tmp")
+#: ``(folder, suffix)`` of each kind of file.
+_KINDS = {("windows", ".npy"): "array", ("windows", ".json"): "meta", ("slots", ""): "slot"}
+#: The first bytes of the entries' files: the ``.npy`` magic, a JSON object.
+_HEADERS = {"array": b"\x93NUMPY", "meta": b"{"}
+#: Hex digits (the start of a slot's key).
+_HEX = re.compile(r"[0-9a-f]*")
+
+
+def cache_file_kind(path: Path, sub: str) -> str | None:
+    """The kind of cache file ``path`` (in ``<root>/<sub>/<kk>/``) is; ``None``: not the cache's.
+
+    Args:
+        path: A path in a shard folder (``<kk>``) of ``windows`` or ``slots``.
+        sub: ``"windows"`` or ``"slots"``.
+
+    Returns:
+        ``"array"``, ``"meta"``, ``"slot"`` or ``"temporary"`` when the name
+        matches the folder (``<kk>`` are the first two digits of the 64-digit
+        key) and the file starts as that kind of file does (a temporary file may
+        be empty or cut short: it is checked against the start of its kind's
+        header); ``None`` for anything else, a symbolic link or a folder.
+    """
+    if path.is_symlink() or not path.is_file():
+        return None
+    temporary = _TEMPORARY.fullmatch(path.name)
+    name = temporary.group("name") if temporary else path.name
+    key, dot, suffix = name.partition(".")
+    if not (_KEY.fullmatch(key) and key[:2] == path.parent.name):
+        return None
+    kind = _KINDS.get((sub, dot + suffix))
+    if kind is None:
+        return None
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(65 if kind == "slot" else len(_HEADERS[kind]))
+    except OSError:
+        return None
+    if kind == "slot":  # a key (a temporary file: the start of one)
+        text = head.decode("ascii", "replace")
+        ok = bool(_KEY.fullmatch(text)) or (temporary is not None and _HEX.fullmatch(text))
+    else:  # the header (a temporary file: its start, or nothing yet)
+        ok = head == _HEADERS[kind] or (temporary is not None and _HEADERS[kind].startswith(head))
+    if not ok:
+        return None
+    return "temporary" if temporary else kind
+
+
+def _remove_if_empty(folder: Path) -> None:
+    """Remove ``folder`` if it is empty (else leave it)."""
+    try:
+        folder.rmdir()
+    except OSError:
+        pass

@@ -15,7 +15,7 @@ import lightning as L
 import numpy as np
 import torch
 from lightning.pytorch.utilities import CombinedLoader
-from lightning.pytorch.utilities.rank_zero import rank_zero_info
+from lightning.pytorch.utilities.rank_zero import rank_zero_info, rank_zero_only
 from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
 
 from skelagnostic.core.paths import expand_path
@@ -28,6 +28,7 @@ from skelagnostic.data.cache import (
     read_exactly,
     slot_key,
 )
+from skelagnostic.data.progress import track_clips
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource, flatten_sources
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation
@@ -158,6 +159,20 @@ class WindowDataset(Dataset):
                         buf, filled = np.empty((rows, *item), np.float32), 0
         if filled:
             yield torch.from_numpy(buf[:filled])
+
+
+def _named_after(entry: CacheEntry, source: ClipSource, clip: ClipRef) -> CacheEntry:
+    """``entry``, written for a clip of the same content, with ``clip``'s own names.
+
+    The windows are shared (they depend on the content only), but the clip id
+    and the skeleton (its ``name`` comes from the file, e.g. a BVH file's stem)
+    are those of ``clip``: the clip is read again for its skeleton, the windows
+    are not rebuilt. The cache files are not changed.
+    """
+    skeleton = source.load(clip).skeleton.to_dict()
+    named = CacheEntry(entry.array, {**entry.meta, "clip": clip.id, "skeleton": skeleton})
+    named.__dict__["layout"] = entry.layout  # the same file: spare a header read
+    return named
 
 
 class _ResumableSampler(DistributedSampler):
@@ -457,7 +472,11 @@ class MotionDataModule(L.LightningDataModule):
         """The clip's cache entry, built with :meth:`_encode` when missing or damaged (a hook).
 
         The entry is keyed by the clip's content key, :meth:`preprocessing` and
-        the source's :meth:`~skelagnostic.data.ClipSource.loading` options. A
+        the source's :meth:`~skelagnostic.data.ClipSource.loading` options, so
+        files of the same bytes share their windows; the names still come from
+        the clip being read: an entry written for another clip id (a copy of the
+        file under another name) is returned with this clip's id and skeleton
+        (whose name is the file's, e.g. a BVH file's stem). A
         clip whose id is a file path keeps one entry per preprocessing: the
         entry of an earlier version of the file is deleted (:meth:`WindowCache.track`).
         Override it to cache something else per clip (PC-MRL's interpolation
@@ -474,6 +493,8 @@ class MotionDataModule(L.LightningDataModule):
         entry = self.cache.get(key)
         if entry is None:
             entry = self.cache.put(key, *self._encode(source, clip))
+        elif entry.meta.get("clip") != clip.id:
+            entry = _named_after(entry, source, clip)
         if os.path.isfile(clip.id):
             self.cache.track(slot_key(os.path.abspath(clip.id), self.preprocessing()), key)
         return entry
@@ -508,21 +529,31 @@ class MotionDataModule(L.LightningDataModule):
         return windows, meta
 
     def prepare_data(self) -> None:
-        """Preprocess and cache every clip (runs once per node under DDP)."""
-        for source in self.sources:
-            for clip in source.clips():
-                self.cache_entry(source, clip)
+        """Preprocess and cache every clip (runs once per node under DDP).
+
+        A pass that takes a while shows a progress bar on a terminal
+        (:func:`~skelagnostic.data.progress.track_clips`).
+        """
+        clips = [(source, clip) for source in self.sources for clip in source.clips()]
+        for source, clip in track_clips(clips, "data: caching windows", rank_zero_only.rank == 0):
+            self.cache_entry(source, clip)
 
     # -------------------------------------------------------------------- setup
     def setup(self, stage: str | None = None) -> None:
         """Group clips by topology, split them and fit normalisation (idempotent)."""
         if self.skeletons:
             return
-        for source in self.sources:
+        listed = [(i, clip) for i, source in enumerate(self.sources) for clip in source.clips()]
+        entries = [
+            (i, clip, self.cache_entry(self.sources[i], clip))
+            for i, clip in track_clips(
+                listed, "data: reading the window cache", rank_zero_only.rank == 0
+            )
+        ]
+        for index, source in enumerate(self.sources):
             groups: dict[tuple[Any, ...], list[tuple[ClipRef, CacheEntry]]] = {}
-            for clip in source.clips():
-                entry = self.cache_entry(source, clip)
-                if entry.num_windows == 0:
+            for i, clip, entry in entries:
+                if i != index or entry.num_windows == 0:
                     continue
                 sk = entry.meta["skeleton"]
                 if Skeleton.from_dict(sk).height() <= 0:

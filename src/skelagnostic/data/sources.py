@@ -116,8 +116,8 @@ class MultiSource(ClipSource):
     Example:
         >>> a = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=1, name="a")
         >>> b = ProceduralSource(kinds=["quadruped"], gaits=["trot"], clips_per_gait=1, name="b")
-        >>> [clip.id for clip in MultiSource([a, b]).clips()]
-        ['a:biped22_walk_0', 'b:quadruped_trot_0']
+        >>> print(*(clip.id for clip in MultiSource([a, b]).clips()))
+        a:biped22_walk_0 b:quadruped_trot_0
     """
 
     parts: Sequence[ClipSource]

@@ -32,7 +32,7 @@ import torch
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.errors import BVHError, SkeletonError
+from skelagnostic.errors import BVHError, SkeletonError, printable
 from skelagnostic.io.atomic import atomic_write
 
 __all__ = ["BVHWarning", "parse_bvh", "read_bvh", "write_bvh"]
@@ -406,7 +406,7 @@ def _warn_if_cut(body: bytes, first_line: int, path: Path | None) -> None:
     start = body.rfind(b"\n", 0, end) + 1
     last = body[start:end].split()[-1].decode("utf-8", errors="replace")
     line = first_line + body.count(b"\n", 0, end)
-    where = f"{path if path is not None else '<bvh text>'}:{line}"
+    where = f"{printable(path) if path is not None else '<bvh text>'}:{line}"
     warnings.warn(
         f"{where}: the last motion line has no line end, so the file may be truncated "
         f"(its last value read as {last!r})",

@@ -4,9 +4,13 @@
 ``skelagnostic``). It registers the built-in plugin, then every entry point of
 the ``skelagnostic`` group, and calls the registration hooks of
 :mod:`skelagnostic.plugins.hookspecs` one plugin at a time so that each
-contribution is attributed to its plugin. A plugin that fails to import, or
+contribution is attributed to its plugin. A plugin that fails to import (an
+exception, ``SystemExit``, or a ``KeyboardInterrupt`` its own code raises), or
 whose hook raises, is skipped with a :class:`PluginLoadWarning` and reported
-as ``failed``; two contributions with the same name raise :class:`PluginError`.
+as ``failed``. So is a plugin that registers a name another plugin (or the
+built-in one) registered before it, or whose entry-point name is taken: the
+first one registered (the built-in plugin, then entry points by name and
+distribution name) keeps the name, and the warning names both.
 """
 
 from __future__ import annotations
@@ -17,8 +21,11 @@ import importlib.util
 import inspect
 import os
 import re
+import signal
+import threading
 import warnings
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from importlib import metadata, resources
 from pathlib import Path
@@ -27,7 +34,7 @@ from typing import Any
 
 import pluggy
 
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import SkelagnosticError, printable
 from skelagnostic.plugins import hookspecs
 
 #: The pluggy project name and the entry-point group plugins register under.
@@ -55,7 +62,11 @@ CHECKPOINT_SCHEME = re.compile(r"[a-z][a-z0-9_]+")
 
 
 class PluginError(SkelagnosticError):
-    """A plugin problem: a name registered twice, or an unknown aligner/representation/dataset."""
+    """A plugin problem: a name registered twice, or an unknown aligner/representation/dataset.
+
+    Raised by :meth:`PluginManager.register` and the lookups; while plugins load, a
+    name clash is the skipped plugin's ``error`` instead (and a :class:`PluginLoadWarning`).
+    """
 
 
 class PluginLoadWarning(UserWarning):
@@ -210,7 +221,49 @@ def _allowed_plugins() -> frozenset[str] | None:
 
 
 def _error_text(exc: BaseException) -> str:
-    return f"{type(exc).__name__}: {exc}"
+    """``"Type: message"`` on one line (control characters escaped, see ``printable``)."""
+    return printable(f"{type(exc).__name__}: {exc}")
+
+
+@contextmanager
+def _user_interrupts() -> Iterator[list[int]]:
+    """Record the Ctrl-C (SIGINT) the user presses while plugin code runs.
+
+    A :class:`KeyboardInterrupt` raised while no SIGINT arrived comes from the
+    plugin's own code (``raise KeyboardInterrupt`` at import): the plugin is
+    broken and is skipped like any other. One that follows a SIGINT is the
+    user's and must stop the command. The handler only records the signal and
+    calls the one installed before (Python's raises ``KeyboardInterrupt``).
+    Outside the main thread, or when SIGINT is ignored or left to the system,
+    no handler is installed: a ``KeyboardInterrupt`` can then only be the plugin's.
+
+    Yields:
+        The list the handler appends the signal numbers to.
+    """
+    seen: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield seen
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if not callable(previous):
+        yield seen
+        return
+
+    def record(signum: int, frame: Any) -> Any:
+        seen.append(signum)
+        return previous(signum, frame)
+
+    signal.signal(signal.SIGINT, record)
+    try:
+        yield seen
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _raise_if_user_interrupt(exc: BaseException, interrupts: list[int]) -> None:
+    """Re-raise a ``KeyboardInterrupt`` that follows the user's Ctrl-C (``_user_interrupts``)."""
+    if isinstance(exc, KeyboardInterrupt) and interrupts:
+        raise exc
 
 
 class PluginManager:
@@ -297,7 +350,9 @@ class PluginManager:
         Args:
             only: Names to load; the others are listed as ``disabled``. ``None`` loads all.
         """
-        for ep in sorted(metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        # by name, then distribution: of two distributions claiming one name, the same one wins
+        found = metadata.entry_points(group=ENTRY_POINT_GROUP)
+        for ep in sorted(found, key=lambda e: (e.name, e.dist.name if e.dist else e.value)):
             dist = ep.dist
             version = dist.version if dist is not None else ""
             source = dist.name if dist is not None else ep.value
@@ -307,19 +362,39 @@ class PluginManager:
                     ep.name, PluginInfo(ep.name, version, source, "disabled", description=summary)
                 )
                 continue
-            try:
-                plugin = ep.load()
-                described = _first_line(getattr(plugin, "__doc__", None)) or summary
-                self.register(
-                    plugin, ep.name, version=version, source=source, description=described
-                )
-                self._require_hooks(plugin, ep.name, ep.value)
-            except PluginError as exc:
-                if not isinstance(exc.__cause__, pluggy.PluginValidationError):
-                    raise  # two plugins under one name: a collision, not a broken plugin
-                self._fail(ep.name, version, source, exc)
-            except Exception as exc:  # a broken third-party plugin must not break the CLI
-                self._fail(ep.name, version, source, exc)
+            taken = self._infos.get(ep.name)
+            if taken is not None:  # another distribution (or the built-in) has the name
+                self._skip_duplicate(ep.name, version, source, taken)
+                continue
+            with _user_interrupts() as interrupts:
+                try:
+                    plugin = ep.load()
+                    described = _first_line(getattr(plugin, "__doc__", None)) or summary
+                    other = self._pm.get_name(plugin)
+                    if other is not None:  # the same module under a second entry-point name
+                        raise PluginError(
+                            f"plugin {ep.name!r} ({source}) is the module {ep.value!r} "
+                            f"already loaded as plugin {other!r} ({self._infos[other].source})"
+                        )
+                    self.register(
+                        plugin, ep.name, version=version, source=source, description=described
+                    )
+                    self._require_hooks(plugin, ep.name, ep.value)
+                except (Exception, SystemExit, KeyboardInterrupt) as exc:
+                    # a broken third-party plugin must not break (or end) the CLI
+                    _raise_if_user_interrupt(exc, interrupts)
+                    self._fail(ep.name, version, source, exc)
+
+    def _skip_duplicate(self, name: str, version: str, source: str, taken: PluginInfo) -> None:
+        """Skip an entry point whose name a plugin loaded before holds; warn naming both.
+
+        The skipped one is listed (status ``failed``) under ``"<name> (<source>)"``.
+        """
+        exc = PluginError(
+            f"plugin name {name!r} is registered by both {taken.source!r} and {source!r} "
+            f"(the first one loaded keeps it)"
+        )
+        self._fail(name, version, source, exc, key=f"{name} ({source})")
 
     def _require_hooks(self, plugin: object, name: str, target: str) -> None:
         """Unregister ``plugin`` and raise when it implements no hook (or forgot ``@hookimpl``).
@@ -341,16 +416,20 @@ class PluginManager:
         cause = pluggy.PluginValidationError(plugin, problem)
         raise PluginError(f"plugin {name!r}: {problem}") from cause
 
-    def _fail(self, name: str, version: str, source: str, exc: BaseException) -> None:
+    def _fail(
+        self, name: str, version: str, source: str, exc: BaseException, key: str | None = None
+    ) -> None:
+        """Warn that plugin ``name`` is skipped; list it as failed under ``key`` (or ``name``)."""
         warnings.warn(
-            f"skelagnostic plugin {name!r} ({source}) skipped: {_error_text(exc)}",
+            printable(f"skelagnostic plugin {name!r} ({source}) skipped: {_error_text(exc)}"),
             PluginLoadWarning,
             stacklevel=3,
         )
-        old = self._infos.get(name)
+        key = name if key is None else key
+        old = self._infos.get(key)
         hooks = old.hooks if old is not None else ()
         description = old.description if old is not None else ""
-        self._infos[name] = PluginInfo(
+        self._infos[key] = PluginInfo(
             name, version, source, "failed", _error_text(exc), hooks, description=description
         )
 
@@ -514,28 +593,19 @@ class PluginManager:
             if info.status != "loaded":
                 continue
             plugin = self._pm.get_plugin(name)
-            try:
-                mine = _call_hooks(self._pm, plugin, name)
-            except Exception as exc:  # a plugin whose registration raises is skipped
-                self._pm.unregister(plugin)
-                self._fail(name, info.version, info.source, exc)
-                continue
-            provides = []
-            for kind, items in (
-                ("aligner", mine.aligners),
-                ("representation", mine.representations),
-                ("dataset", mine.datasets),
-                ("evaluation", mine.evaluations),
-                ("checkpoint reader", mine.checkpoint_readers),
-            ):
-                for item in items:
-                    if (kind, item.name) in owners:
-                        raise PluginError(
-                            f"{kind} {item.name!r} is registered by both plugin "
-                            f"{owners[kind, item.name]!r} and plugin {name!r}"
-                        )
-                    owners[kind, item.name] = name
-                    provides.append(f"{kind}:{item.name}")
+            with _user_interrupts() as interrupts:
+                try:
+                    mine = _call_hooks(self._pm, plugin, name)
+                    names = _registered_names(mine, owners, name)
+                except (Exception, SystemExit, KeyboardInterrupt) as exc:
+                    # a plugin whose registration raises, or that registers a name
+                    # another plugin holds, is skipped (the first one keeps the name)
+                    _raise_if_user_interrupt(exc, interrupts)
+                    self._pm.unregister(plugin)
+                    self._fail(name, info.version, info.source, exc)
+                    continue
+            owners.update(dict.fromkeys(names, name))
+            provides = [f"{kind}:{item}" for kind, item in names]
             provides += [f"config_path:{path}" for path, _ in mine.config_paths]
             total.aligners += mine.aligners
             total.representations += mine.representations
@@ -554,6 +624,36 @@ class PluginManager:
             self._infos[name] = replace(info, error=None, provides=tuple(provides))
         self._collected = total
         return total
+
+
+def _registered_names(
+    mine: _Contributions, owners: Mapping[tuple[str, str], str], plugin_name: str
+) -> list[tuple[str, str]]:
+    """The ``(kind, name)`` pairs a plugin registered, in order.
+
+    Raises:
+        PluginError: A name is registered by a plugin before this one (the
+            message names both) or twice by this one.
+    """
+    names: list[tuple[str, str]] = []
+    for kind, items in (
+        ("aligner", mine.aligners),
+        ("representation", mine.representations),
+        ("dataset", mine.datasets),
+        ("evaluation", mine.evaluations),
+        ("checkpoint reader", mine.checkpoint_readers),
+    ):
+        for item in items:
+            key = (kind, item.name)
+            if key in owners:
+                raise PluginError(
+                    f"{kind} {item.name!r} is registered by both plugin {owners[key]!r} "
+                    f"and plugin {plugin_name!r} (the first one loaded keeps it)"
+                )
+            if key in names:
+                raise PluginError(f"{kind} {item.name!r} is registered twice by {plugin_name!r}")
+            names.append(key)
+    return names
 
 
 def _first_line(doc: str | None) -> str:

@@ -330,6 +330,41 @@ def _asset(name: str) -> str:
     return resources.files("skelagnostic.viz").joinpath(_ASSETS, name).read_text("utf-8")
 
 
+#: What :func:`_script_json` writes instead of each character that could end or change a
+#: ``<script>`` element (``</script>``, ``<!--``), an HTML entity (``&``) or a JavaScript line.
+_SCRIPT_JSON_ESCAPES = str.maketrans(
+    {
+        "<": "\\u003c",
+        ">": "\\u003e",
+        "&": "\\u0026",
+        "\u2028": "\\u2028",
+        "\u2029": "\\u2029",
+    }
+)
+
+
+def _script_json(value: Any) -> str:
+    r"""JSON text of ``value`` that is safe as the content of an HTML ``<script>`` element.
+
+    ``<``, ``>``, ``&``, U+2028 and U+2029 are written as JSON escapes
+    (``\u003c`` ...), so no name (a joint, file or label such as
+    ``<!--<script>`` or ``</script><img src=x onerror=...>``) can close the
+    element, open an HTML comment in it or split a line of script; the text
+    parses back to ``value`` with any JSON reader.
+
+    Args:
+        value: A JSON-serialisable value.
+
+    Returns:
+        Compact ASCII JSON without ``<``, ``>`` or ``&``.
+
+    Examples:
+        >>> _script_json({"name": "</script><!--"})
+        '{"name":"\\u003c/script\\u003e\\u003c!--"}'
+    """
+    return json.dumps(value, separators=(",", ":")).translate(_SCRIPT_JSON_ESCAPES)
+
+
 def _inline(text: str) -> str:
     """Make script text safe inside a ``<script>`` element (no closing tag, no comment)."""
     text = re.sub(r"</(script)", r"<\\/\1", text, flags=re.IGNORECASE)
@@ -413,7 +448,7 @@ def to_html(
         "__STYLE__": _asset("viewer.css"),
         "__THREE__": _inline(_asset("three.min.js")),
         "__ORBIT__": _inline(_asset("OrbitControls.js")),
-        "__DATA__": json.dumps(payload, separators=(",", ":")).replace("</", "<\\/"),
+        "__DATA__": _script_json(payload),
         "__VIEWER__": _inline(_asset("viewer.js")),
     }
     for key, value in parts.items():

@@ -53,6 +53,7 @@ from skelagnostic.evaluation import (
     clips_of_split,
     track,
 )
+from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import end_effector_error, temporal_knn_distance
 from skelagnostic.representations import PointCloud
 from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, position_stats, windows
@@ -188,7 +189,8 @@ def format_table(result: dict[str, Any]) -> str:
     )
     lines = [head, "|" + "---|" * (len(metrics) + 1)]
     for name, values in rows.items():
-        lines.append(f"| {name} | " + " | ".join(f"{values[m]:.4f}" for m in metrics) + " |")
+        cells = " | ".join(f"{values[m]:.4f}" for m in metrics)
+        lines.append(f"| {markdown_cell(name)} | {cells} |")
     return "\n".join(lines)
 
 

@@ -49,6 +49,7 @@ import torch
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import l2p, l2q, npss
 from skelagnostic.metrics.functional.lafan import _npss_sums
 from skelagnostic_pcmrl.interp_data import gap_keys
@@ -332,5 +333,5 @@ def format_table(report: dict[str, Any]) -> str:
     lines = [head + " |", "|---" * (1 + 3 * len(gaps)) + "|"]
     for name, per_gap in report["results"].items():
         cells = [f"{per_gap[str(g)][prefix + m]:.4f}" for m in ("l2p", "l2q", "npss") for g in gaps]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append(f"| {markdown_cell(name)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)

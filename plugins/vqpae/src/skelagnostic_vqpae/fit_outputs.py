@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import torch
 
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import manifold_overlap
 
 if TYPE_CHECKING:
@@ -156,7 +157,8 @@ def transfer_summary(
         for method in (MODEL, UNSCALED, OWN_RATE):
             v = row["values"][method]
             lines.append(
-                f"| {row['clip']} | {row['source_hz']:.3f} | `{method}` | {v['output_hz']:.3f} | "
+                f"| {markdown_cell(row['clip'])} | {row['source_hz']:.3f} | `{method}` | "
+                f"{v['output_hz']:.3f} | "
                 f"{v['frequency_error_pct']:.1f} | {v['accel_height_per_s2']:.2f} | "
                 f"{v['accel_max_height_per_s2']:.1f} |"
             )

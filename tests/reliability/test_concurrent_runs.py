@@ -1,0 +1,55 @@
+"""Two ``fit`` commands started at once into one ``hydra.run.dir`` (issue 47, item 13).
+
+One runs; the other refuses with one line (the lock file, or the files the first
+one wrote), instead of a CSV ``ValueError`` and a run directory mixing both runs.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from test_signals import SMALL
+
+from skelagnostic.cli.runs import LOCK_FILE
+
+
+@pytest.mark.slow
+def test_two_fits_started_at_once_into_one_directory(
+    cli_env: dict[str, str], tmp_path: Path
+) -> None:
+    """Issue 47 item 13: one runs, the other refuses (no CSV ValueError, no mixed files)."""
+    run_dir = tmp_path / "run"
+    cmd = [
+        sys.executable,
+        "-m",
+        "skelagnostic.cli",
+        "fit",
+        *SMALL,
+        "trainer.max_steps=3",
+        f"hydra.run.dir={run_dir}",
+    ]
+    procs = [
+        subprocess.Popen(
+            cmd,
+            env=cli_env,
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for _ in range(2)
+    ]
+    results = [(p.pid, *p.communicate(timeout=300), p.returncode) for p in procs]
+    codes = sorted(code for *_, code in results)
+    assert codes == [0, 1], [err[-2000:] for _, _, err, _ in results]
+    (winner,) = [pid for pid, *_, code in results if code == 0]
+    (refused,) = [err for _, _, err, code in results if code == 1]
+    assert "Traceback" not in refused and "ValueError" not in refused, refused
+    (line,) = [s for s in refused.splitlines() if s.startswith("skelagnostic fit: ")]
+    assert line.startswith(f"skelagnostic fit: error: hydra.run.dir={str(run_dir)!r} is ")
+    assert (f"in use by another command (process {winner} " in line) or ("is not empty" in line)
+    assert not (run_dir / LOCK_FILE).exists()
+    assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["best.ckpt", "last.ckpt"]
