@@ -22,9 +22,9 @@ from __future__ import annotations
 import contextlib
 import inspect
 import json
-import os
+import logging
 import re
-import tempfile
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +34,7 @@ import torch
 from torch import Tensor, nn
 
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.io.atomic import atomic_path
 
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
@@ -286,15 +287,52 @@ def _jit_scripting(module: nn.Module) -> Iterator[None]:
 
 
 def _write_atomic(path: Path, write: Any) -> None:
-    """Call ``write(tmp_path)`` and move the result to ``path``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
+    """Call ``write(tmp_path)`` and move the result to ``path`` (mode as the umask says)."""
+    with atomic_path(path) as tmp:
+        write(tmp)
+
+
+#: Warnings of the ONNX exporter a user cannot act on (messages, as regular expressions).
+_EXPORTER_NOISE = (
+    r"`isinstance\(treespec, LeafSpec\)` is deprecated",
+    r"# The axis name: .* will not be used, since it shares the same shape constraints",
+)
+#: Log records of the exporter a user cannot act on: (logger name, message start).
+_EXPORTER_LOG_NOISE = (
+    ("torch.onnx._internal.exporter._registration", "torchvision is not installed"),
+)
+
+
+class _DropRecords(logging.Filter):
+    def __init__(self, start: str) -> None:
+        super().__init__()
+        self.start = start
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith(self.start)
+
+
+@contextlib.contextmanager
+def _quiet_exporter() -> Iterator[None]:
+    """Within the block: drop the exporter's warnings and log lines in :data:`_EXPORTER_NOISE`.
+
+    ``torchvision is not installed. Skipping torchvision::nms`` (and three more, per
+    graph), a deprecation inside Lightning's pytree helper and notes on dynamic axes
+    that share a size: none of them says anything about the exported file.
+    """
+    filters = [
+        (logging.getLogger(name), _DropRecords(start)) for name, start in _EXPORTER_LOG_NOISE
+    ]
+    for logger, drop in filters:
+        logger.addFilter(drop)
     try:
-        write(Path(tmp))
-        os.replace(tmp, path)
+        with warnings.catch_warnings():
+            for pattern in _EXPORTER_NOISE:
+                warnings.filterwarnings("ignore", message=f".*{pattern}")
+            yield
     finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        for logger, drop in filters:
+            logger.removeFilter(drop)
 
 
 def export_graph(
@@ -328,18 +366,19 @@ def export_graph(
     meta = sidecar(graph, fmt, model_path.name, aligner)
 
     def write_onnx(path: Path) -> None:
-        torch.onnx.export(
-            module,
-            args,
-            str(path),
-            dynamo=True,
-            opset_version=OPSET,
-            input_names=list(graph.input_names),
-            output_names=list(graph.output_names),
-            dynamic_shapes=_dynamic_shapes(graph),
-            external_data=False,
-            verbose=False,
-        )
+        with _quiet_exporter():
+            torch.onnx.export(
+                module,
+                args,
+                str(path),
+                dynamo=True,
+                opset_version=OPSET,
+                input_names=list(graph.input_names),
+                output_names=list(graph.output_names),
+                dynamic_shapes=_dynamic_shapes(graph),
+                external_data=False,
+                verbose=False,
+            )
         _label_dynamic_outputs(path, graph)
 
     def write_torchscript(path: Path) -> None:

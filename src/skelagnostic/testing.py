@@ -54,6 +54,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import pytest
 import torch
 
+from skelagnostic._shadow import check_not_shadowed
+
+check_not_shadowed()  # a folder named skelagnostic hiding the package: say so, in one line
+
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
     from skelagnostic.core.motion import Motion
@@ -407,13 +411,22 @@ class AlignerContract:
         """The skeleton to decode onto (default: the clip's own)."""
         return motion.skeleton
 
+    @staticmethod
     @pytest.fixture(scope="class")
-    def contract_run(self, tmp_path_factory: pytest.TempPathFactory) -> ContractRun:
-        """One short training run shared by the tests of the class."""
-        assert self.aligner, f"{type(self).__name__}: set the class attribute 'aligner'"
-        root = tmp_path_factory.mktemp(f"contract-{self.aligner}")
+    def contract_run(
+        request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+    ) -> ContractRun:
+        """One short training run shared by the tests of the class.
+
+        A static method on the test class (``request.cls``): pytest deprecates
+        class-scoped fixtures defined as instance methods (``PytestRemovedIn10Warning``),
+        since the instance they would see is not the tests' one.
+        """
+        cls: type[AlignerContract] = request.cls
+        assert cls.aligner, f"{cls.__name__}: set the class attribute 'aligner'"
+        root = tmp_path_factory.mktemp(f"contract-{cls.aligner}")
         return fit_for_contract(
-            self.aligner, root / "run", self.overrides, self.steps, self.plugin_manager()
+            cls.aligner, root / "run", cls.overrides, cls.steps, cls().plugin_manager()
         )
 
     def test_fit_a_few_steps(self, contract_run: ContractRun) -> None:

@@ -5,7 +5,7 @@ import stat
 
 import pytest
 
-from skelagnostic.io.atomic import atomic_write
+from skelagnostic.io.atomic import atomic_path, atomic_write
 
 
 def test_new_file_follows_the_umask_and_content_is_complete(tmp_path):
@@ -46,3 +46,38 @@ def test_symbolic_links_are_written_through(tmp_path):
     assert link.is_symlink() and target.read_bytes() == b"new"
     with pytest.raises(FileNotFoundError):
         atomic_write(tmp_path / "missing" / "x.bin", b"x")
+
+
+def test_writers_by_name_get_the_umask_mode_whatever_mode_they_create(tmp_path):
+    # torch.onnx.export / torch.jit.save write by name; export used mkstemp (0o600)
+    def recreate_private(path):
+        path.unlink()
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        os.write(fd, b"model")
+        os.close(fd)
+
+    old = os.umask(0o022)
+    try:
+        with atomic_path(tmp_path / "new.onnx") as tmp:
+            assert tmp.parent == tmp_path and tmp.is_file() and tmp.name != "new.onnx"
+            recreate_private(tmp)
+        with atomic_path(tmp_path / "plain.json") as tmp:
+            tmp.write_text("{}")
+    finally:
+        os.umask(old)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new.onnx", "plain.json"]
+    assert (tmp_path / "new.onnx").read_bytes() == b"model"
+    assert {stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()} == {0o644}
+    # an existing file keeps its mode; a failure leaves it and no temporary file
+    (tmp_path / "new.onnx").chmod(0o640)
+    with atomic_path(tmp_path / "new.onnx") as tmp:
+        recreate_private(tmp)
+    assert stat.S_IMODE((tmp_path / "new.onnx").stat().st_mode) == 0o640
+    with (
+        pytest.raises(RuntimeError, match="exporter failed"),
+        atomic_path(tmp_path / "new.onnx") as tmp,
+    ):
+        tmp.write_bytes(b"half")
+        raise RuntimeError("exporter failed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new.onnx", "plain.json"]
+    assert (tmp_path / "new.onnx").read_bytes() == b"model"

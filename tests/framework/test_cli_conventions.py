@@ -29,9 +29,18 @@ def test_file_verbs_take_threads(
         torch.set_num_threads(before)
 
 
-def test_help_into_a_closed_pipe_is_quiet(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["interpolate", "--help"],
+        ["--help"],  # the dispatcher's own text (issue 48, item 7)
+        ["render", "--help"],
+        ["plugins"],  # a Rich table
+    ],
+)
+def test_output_into_a_closed_pipe_is_quiet(args: list[str], tmp_path: Path) -> None:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "skelagnostic.cli", "interpolate", "--help"],
+        [sys.executable, "-m", "skelagnostic.cli", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         cwd=tmp_path,
@@ -39,7 +48,7 @@ def test_help_into_a_closed_pipe_is_quiet(tmp_path: Path) -> None:
     assert proc.stdout is not None and proc.stderr is not None
     proc.stdout.close()  # like `| head` that already exited
     err = proc.stderr.read().decode()
-    proc.wait(timeout=120)
+    assert proc.wait(timeout=120) == 1  # what Python's recipe returns
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
 
 
@@ -51,3 +60,40 @@ def test_help_lists_no_internal_data_config(
     options = data.removeprefix("data: ").split(", ")
     assert "procedural" in options and "bvh" in options
     assert not [o for o in options if o.startswith("_")]
+
+
+def test_the_verb_list_names_every_output_a_verb_writes(capsys: pytest.CaptureFixture[str]) -> None:
+    # `render` was "a motion to PNG/GIF" but also writes MP4 and the HTML viewer
+    assert cli.main(["--help"]) == 0
+    lines = {
+        line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line[:2] == "  "
+    }
+    for kind in ("GIF", "MP4", "PNG", "HTML"):
+        assert kind in lines["render"], kind
+    assert cli.main(["render", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(suffix in out for suffix in (".gif", ".mp4", ".png", ".html"))
+    for kind in ("BVH", "PNG", "GIF", "html="):
+        assert kind in lines["demo"], kind
+
+
+def test_result_tables_never_cut_a_name(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from skelagnostic.cli.evaluate import print_evaluation
+    from skelagnostic.cli.runs import summary_table
+
+    long_key = "train/phase_rate/procedural/biped22_and_a_long_suffix"
+    run_dir = tmp_path / ("run_" + "x" * 70)
+    summary_table("fit", run_dir, {long_key: 0.5, "val/loss": 0.25}, stopped="max_steps 3 reached")
+    out = capsys.readouterr().out
+    assert "…" not in out
+    assert any(long_key in line and "0.5" in line for line in out.splitlines())
+    assert any(str(run_dir) in line for line in out.splitlines())  # whole, to copy it
+    report = {
+        "protocol": "p",
+        "data": {"split_name": "test split", "clips": ["a"]},
+        "methods": ["model", "a_baseline_with_a_long_name_" + "y" * 40],
+        "metrics": {long_key: "a description of the metric " * 4},
+        "mean": {"model": {long_key: 1.0}},
+    }
+    print_evaluation(report, tmp_path)
+    assert "…" not in capsys.readouterr().out

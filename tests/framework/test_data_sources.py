@@ -151,3 +151,24 @@ def test_cli_routes_base_options_through_kwargs(tmp_path: Path) -> None:
     cfg = app.compose(["model=humot", "run_dir=/tmp/x", "data.test_fraction=abc"])
     with pytest.raises(app.ConfigError, match=r"data\.test_fraction='abc' has the wrong type"):
         app.build_datamodule(cfg, pm)
+
+
+def test_procedural_test_clips_leave_the_other_clips_and_their_split_alone() -> None:
+    # issue 48, item 6: the default data (data=procedural) gets a real test split
+    options = {"kinds": ["biped22", "quadruped"], "clips_per_gait": 2, "seconds": 1.0}
+    plain = ProceduralSource(**options).clips()
+    source = ProceduralSource(**options, test_clips_per_gait=1)
+    clips = source.clips()
+    assert [c for c in clips if c.split is None] == plain  # same ids and content keys
+    tested = [c for c in clips if c.split == "test"]
+    assert len(tested) == 5  # one per kind and gait: biped walk/run, quadruped walk/trot/gallop
+    assert not {c.id for c in tested} & {c.id for c in plain}
+    assert not {c.key for c in tested} & {c.key for c in plain}  # other motions (seeds)
+    before = MotionDataModule(val_fraction=0.2, test_fraction=0.0).split_clips(plain)
+    after = MotionDataModule(val_fraction=0.2, test_fraction=0.0).split_clips(clips)
+    assert after["train"] == before["train"] and after["val"] == before["val"]
+    assert after["test"] == tested and source.load(tested[0]).num_frames > 0
+    with pytest.raises(SkelagnosticError, match=r"data\.test_clips_per_gait=-1"):
+        ProceduralSource(test_clips_per_gait=-1)
+    cfg = app.compose(["model=vqpae", "run_dir=/tmp/x", "data=procedural"])
+    assert cfg.data.test_clips_per_gait == 1 and cfg.data.test_fraction == 0.0

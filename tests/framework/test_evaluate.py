@@ -22,6 +22,7 @@ FIT = [
     "data.clips_per_gait=2",
     "data.window=16",
     "data.stride=8",
+    "data.test_clips_per_gait=0",  # the test split, if any, from data.test_fraction
     "threads=1",
 ]
 

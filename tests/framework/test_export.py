@@ -9,7 +9,11 @@ the aligner's own PyTorch methods within 1e-4.
 from __future__ import annotations
 
 import json
+import logging
+import os
+import stat
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -175,6 +179,53 @@ def test_example_exported_by_the_cli_matches_pytorch(
     assert meta["inputs"][0]["shape"] == ["batch", "time", "joints", 3]
     assert meta["aligner"] == "example"
     check_graph(out, "decoder", fmt, ["z", "template"], ["positions"], decoder, sizes)
+
+
+def test_onnx_export_prints_its_files_only_and_keeps_the_umask(
+    example_plugin: Path, example_run: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    # issue 48, item 8: 8 "torchvision is not installed" lines, a FutureWarning and
+    # UserWarnings around the file names, and files of mode 0600 (others are 0644)
+    ckpt = example_run / "checkpoints" / "last.ckpt"
+    records: list[logging.LogRecord] = []
+    handler = logging.Handler()
+    handler.emit = records.append  # type: ignore[method-assign]
+    torch_log = logging.getLogger("torch.onnx._internal.exporter._registration")
+    torch_log.addHandler(handler)
+    before, old = torch.get_num_threads(), os.umask(0o022)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            args = [
+                "export",
+                f"ckpt_path={ckpt}",
+                "format=onnx",
+                f"out={tmp_path / 'o'}",
+                "threads=1",
+            ]
+            assert cli.main(args) == 0
+    finally:
+        torch_log.removeHandler(handler)
+        os.umask(old)
+        torch.set_num_threads(before)
+    out, err = capfd.readouterr()
+    assert "torchvision" not in err and "Warning" not in err, err
+    assert not [r.getMessage() for r in records if "torchvision" in r.getMessage()]
+    noise = [
+        str(w.message)
+        for w in caught
+        if "LeafSpec" in str(w.message) or "axis name" in str(w.message)
+    ]
+    assert noise == []
+    files = [Path(line) for line in out.split()]
+    assert sorted(p.name for p in files) == [
+        "decoder.json",
+        "decoder.onnx",
+        "encoder.json",
+        "encoder.onnx",
+    ]
+    assert {stat.S_IMODE(p.stat().st_mode) for p in files} == {0o644}
+    assert sorted((tmp_path / "o").iterdir()) == sorted(files)  # no temporary file left
 
 
 def test_export_errors_are_one_line(

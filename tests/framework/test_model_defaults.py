@@ -140,6 +140,25 @@ def test_a_target_naming_another_class_is_refused(pm: PluginManager) -> None:
         assert "wrong" not in other.aligners
 
 
+def test_no_model_yaml_sets_trainer_keys() -> None:
+    # A model's defaults never set the trainer (issue 48, item 4): limits live in experiments.
+    files = sorted(REPO.glob("plugins/*/src/*/conf/model/*.yaml"))
+    assert len(files) >= len(ALIGNERS)
+    for path in files:
+        text = path.read_text()
+        assert "@package" not in text, f"{path}: a model file must stay in the model package"
+        assert "trainer" not in OmegaConf.load(path), f"{path} sets trainer keys"
+
+
+@pytest.mark.parametrize("name", ALIGNERS)
+def test_a_model_alone_sets_no_trainer_limit(pm: PluginManager, name: str, tmp_path: Path) -> None:
+    # `fit model=humot trainer.max_steps=20` stopped after 4 steps on the model's max_time.
+    assert not dict(pm.aligner(name).trainer_options), f"{name}: trainer_options"
+    trainer = app.compose([f"model={name}", f"run_dir={tmp_path}"], plugin_manager=pm).trainer
+    default = OmegaConf.load(REPO / "conf" / "trainer" / "default.yaml")
+    assert OmegaConf.to_container(trainer) == OmegaConf.to_container(default)
+
+
 def test_plugin_experiments_are_named_after_their_method(pm: PluginManager) -> None:
     experiments = {
         info.name: [p.split(":", 1)[1] for p in info.provides if p.startswith("experiment:")]

@@ -23,6 +23,7 @@ def test_files_are_named_after_the_plugin() -> None:
     assert set(layout) == {
         "pyproject.toml",
         "README.md",
+        "constraints.txt",
         "src/skelagnostic_tiny_net/__init__.py",
         "src/skelagnostic_tiny_net/plugin.py",
         "src/skelagnostic_tiny_net/aligner.py",
@@ -39,6 +40,23 @@ def test_files_are_named_after_the_plugin() -> None:
         'distribution_version("skelagnostic-tiny_net")'
         in layout["src/skelagnostic_tiny_net/__init__.py"]
     )
+
+
+def test_the_printed_install_command_keeps_the_installed_torch(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # issue 48, item 9: `pip install -e DIR` alone may pull a CUDA torch
+    from importlib.metadata import version
+
+    target = tmp_path / "pkg"
+    assert new_plugin.main(["tiny", "--dir", str(target)]) == 0
+    out = capsys.readouterr().out
+    assert f"pip install -c {target / 'constraints.txt'} -e {target}" in out
+    pins = [
+        line for line in (target / "constraints.txt").read_text().splitlines() if line[:1] != "#"
+    ]
+    assert pins == [f"torch=={version('torch')}"]
+    assert "pip install -c constraints.txt -e ." in (target / "README.md").read_text()
 
 
 def test_generated_model_yaml_equals_the_generated_constructor_defaults() -> None:
@@ -104,7 +122,7 @@ def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> 
 
     made = run(*command, "new-plugin", "tiny", "--dir", str(tmp_path / "pkg"))
     assert made.returncode == 0, made.stderr
-    assert "pip install -e" in made.stdout
+    assert f"pip install -c {tmp_path / 'pkg' / 'constraints.txt'} -e" in made.stdout
     installed = run(
         sys.executable,
         "-m",

@@ -15,6 +15,7 @@ from skelagnostic.data import MotionDataModule
 from skelagnostic.data.sources import ClipRef
 from skelagnostic.errors import SkelagnosticError
 
+TROUBLESHOOTING = Path(__file__).resolve().parents[2] / "docs" / "troubleshooting.md"
 FIT = [
     "model=example",
     "experiment=smoke",
@@ -163,31 +164,67 @@ def test_a_resumed_fit_continues_from_the_last_checkpoint() -> None:
     assert chosen(task="test", run_checkpoint="last") == "last"
 
 
-def test_test_with_an_empty_split_is_an_error(
-    fitted: Path, capsys: pytest.CaptureFixture[str]
+def test_a_default_fit_has_a_test_split(fitted: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # issue 48, item 6: `test ckpt_path=<run>` after a default fit always failed
+    split = json.loads((fitted / "split.json").read_text())
+    assert split["counts"]["test"] > 0 and split["counts"]["val"] > 0
+    tested = {k for k, v in split["clips"].items() if v == "test"}
+    assert not tested & {k for k, v in split["clips"].items() if v != "test"}
+    assert cli.main(["test", f"ckpt_path={fitted}"]) == 0, capsys.readouterr().err
+    assert "test/loss" in capsys.readouterr().out
+
+
+def test_test_on_a_run_without_a_test_split_says_what_to_do(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
-    assert cli.main(["test", f"ckpt_path={fitted / 'checkpoints' / 'best.ckpt'}"]) == 1
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SKELAGNOSTIC_CACHE", str(tmp_path / "cache"))
+    assert cli.main(["fit", *FIT, "data.test_clips_per_gait=0"]) == 0, capsys.readouterr().err
+    (run,) = (tmp_path / "runs" / "example" / "fit").iterdir()
+    capsys.readouterr()
+    # a test split asked for later used to be the run's validation clips: test == validate
+    for extra in ([], ["data.test_fraction=0.2"]):
+        assert cli.main(["test", f"ckpt_path={run / 'checkpoints' / 'best.ckpt'}", *extra]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"the run {run} has no test split" in err[0]
+        assert "use validate, or fit again with data.test_fraction=0.2" in err[0]
+        assert err[0].replace(str(run), "<run>") in TROUBLESHOOTING.read_text()
+    # without a run to keep, an empty test split says how to get one
+    best = tmp_path / "loose.ckpt"
+    best.write_bytes((run / "checkpoints" / "best.ckpt").read_bytes())
+    args = ["test", *FIT, "data.test_clips_per_gait=0", f"ckpt_path={best}"]
+    assert cli.main(args) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "the test split is empty" in err[0]
-    assert "data.test_fraction>0" in err[0]
+    assert err[0] in TROUBLESHOOTING.read_text()
 
 
-def test_a_later_test_fraction_never_takes_training_clips() -> None:
+def test_a_later_test_fraction_never_takes_training_or_validation_clips() -> None:
     clips = [ClipRef(f"clip{i}", f"k{i}") for i in range(10)]
     dm = MotionDataModule(val_fraction=0.2, test_fraction=0.0, split_seed=3)
     recorded = {c.id: part for part, members in dm.split_clips(clips).items() for c in members}
+    new = [ClipRef(f"new{i}", f"n{i}") for i in range(5)]  # clips the run never saw
     for fraction in (0.1, 0.3, 0.6):
         later = MotionDataModule(val_fraction=0.2, test_fraction=fraction, split_seed=3)
         later.recorded_splits = recorded
         split = later.split_clips(clips)
-        trained = {c.id for c in split["train"]}
-        assert trained == {k for k, v in recorded.items() if v == "train"}
-        assert split["test"] and not trained & {c.id for c in split["test"]}
+        # every recorded clip keeps its split: no test clip (the validation clips chose
+        # the checkpoint, so testing on them would repeat validate)
+        assert {c.id: part for part, members in split.items() for c in members} == recorded
+        assert not split["test"]
         # without the record, the same fraction would have tested on training clips
         fresh = MotionDataModule(val_fraction=0.2, test_fraction=fraction, split_seed=3)
         fresh_test = {c.id for c in fresh.split_clips(clips)["test"]}
         if fraction >= 0.3:
             assert fresh_test & {k for k, v in recorded.items() if v == "train"}
+        # clips the run never saw can be test clips
+        later = MotionDataModule(val_fraction=0.2, test_fraction=fraction, split_seed=3)
+        later.recorded_splits = recorded
+        tested = {c.id for c in later.split_clips([*clips, *new])["test"]}
+        assert tested <= {c.id for c in new}
 
 
 def test_max_steps_is_not_capped_by_max_epochs(

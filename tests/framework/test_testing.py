@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from skelagnostic.testing import ContractRun, LogCall, check_logging
+
+TROUBLESHOOTING = Path(__file__).resolve().parents[2] / "docs" / "troubleshooting.md"
 
 
 class Stub:
@@ -47,3 +51,27 @@ def test_logging_without_batch_size_or_sync_dist_is_flagged() -> None:
 def test_validation_must_log_val_loss() -> None:
     with pytest.raises(AssertionError, match="must log 'val/loss'"):
         check_logging(_run(LogCall("training_step", "train/loss", {"batch_size": 4}, False)))
+
+
+def test_a_checkout_folder_named_skelagnostic_is_reported(tmp_path: Path) -> None:
+    # issue 48, item 9: run beside a checkout named skelagnostic, `import skelagnostic`
+    # is that folder (an empty namespace package), and the errors did not say so
+    (tmp_path / "skelagnostic" / "src").mkdir(parents=True)
+
+    def python(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, *args], cwd=tmp_path, capture_output=True, text=True, timeout=300
+        )
+
+    found = python("-c", "import skelagnostic; print(getattr(skelagnostic, '__file__', None))")
+    if found.stdout.strip() != "None":
+        pytest.skip("the installed package is found before the folder (not an editable install)")
+    expected = f"'import skelagnostic' found the folder {tmp_path / 'skelagnostic'} (no __init__.py"
+    contract = python("-c", "from skelagnostic.testing import AlignerContract")
+    assert contract.returncode != 0
+    assert f"ShadowedPackageError: {expected}" in contract.stderr.splitlines()[-1]
+    cli_run = python("-m", "skelagnostic.cli", "plugins")
+    assert cli_run.returncode == 2
+    (line,) = cli_run.stderr.splitlines()
+    assert line.startswith(f"skelagnostic: error: {expected}")
+    assert line.replace(str(tmp_path), "<tmp>") in TROUBLESHOOTING.read_text()

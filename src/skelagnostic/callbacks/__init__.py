@@ -20,6 +20,7 @@ from skelagnostic.callbacks.nonfinite import NonFiniteTrainingError, StopOnNonFi
 from skelagnostic.callbacks.progress import RichProgress
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 from skelagnostic.callbacks.resume import ResumeFromEpochEnd
+from skelagnostic.callbacks.stopping import StopReason, stop_reason
 
 __all__ = [
     "QUICK_BELOW_STEPS",
@@ -37,7 +38,9 @@ __all__ = [
     "ResumeHint",
     "RichProgress",
     "StopOnNonFinite",
+    "StopReason",
     "SummaryContent",
     "newest_checkpoint",
+    "stop_reason",
     "summary_mode",
 ]

@@ -237,12 +237,16 @@ class FitSummary(pl.Callback):
         metrics_file: Path,
         pictures: list[tuple[str, Path]],
     ) -> str:
+        from skelagnostic.callbacks.stopping import stop_reason
+
         title = f"Fit summary: {markdown_cell(self.name)}" if self.name else "Fit summary"
+        stopped = stop_reason(trainer) if isinstance(trainer, pl.Trainer) else None
         lines = [
             f"# {title}",
             "",
-            f"{trainer.current_epoch} epoch(s), {trainer.global_step} optimiser step(s). "
-            f"Every figure is in `{metrics_file.name}`.",
+            f"{trainer.current_epoch} epoch(s), {trainer.global_step} optimiser step(s)"
+            + (f"; stopped: {stopped}" if stopped else "")
+            + f". Every figure is in `{metrics_file.name}`.",
             "",
         ]
         chosen = content.get("metrics", {}).get("summary")

@@ -6,6 +6,7 @@ Each verb lives in its own module and is imported only when called, so
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import sys
@@ -13,13 +14,18 @@ import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
+from skelagnostic._shadow import ShadowedPackageError, check_not_shadowed
 from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
 from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated, sigterm_raises
 from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 #: verb -> ("module", "function", one-line help)
 VERBS: dict[str, tuple[str, str, str]] = {
-    "demo": ("skelagnostic.cli.demo", "main", "procedural/BVH motion -> FK -> BVH + PNG"),
+    "demo": (
+        "skelagnostic.cli.demo",
+        "main",
+        "procedural/BVH motion -> FK -> BVH + PNG + GIF (html=: 3D viewer page)",
+    ),
     "fit": ("skelagnostic.cli.app", "fit", "train an aligner: model=<name> [data=...] [overrides]"),
     "validate": ("skelagnostic.cli.app", "validate", "evaluate on the validation split"),
     "test": ("skelagnostic.cli.app", "test", "evaluate on the test split"),
@@ -45,7 +51,11 @@ VERBS: dict[str, tuple[str, str, str]] = {
         "main",
         "install a dataset: data prepare PRESET --zip FILE --dest DIR, or data get",
     ),
-    "render": ("skelagnostic.cli.render", "main", "render a motion to PNG/GIF"),
+    "render": (
+        "skelagnostic.cli.render",
+        "main",
+        "draw BVH clips: GIF/MP4 animation, PNG contact sheet or HTML 3D viewer",
+    ),
     "retarget": (
         "skelagnostic.cli.infer",
         "retarget",
@@ -160,7 +170,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     When ``argv`` is ``None`` (a new process) and ``SKELAGNOSTIC_ALLOCATOR`` names a
     memory allocator that is not loaded, the command first restarts itself on it
-    (:func:`skelagnostic.allocator.reexec_with_allocator`).
+    (:func:`skelagnostic.allocator.reexec_with_allocator`). Output into a closed pipe
+    (``skelagnostic --help | head``) ends the command quietly with exit code 1, as
+    Python's documentation recommends (the note on SIGPIPE in :mod:`signal`): the rest
+    of the output goes to ``os.devnull`` instead of a ``BrokenPipeError`` traceback.
 
     Args:
         argv: Arguments without the program name (defaults to ``sys.argv[1:]``).
@@ -168,6 +181,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns:
         The process exit code.
     """
+    try:
+        code = _main(argv)
+        sys.stdout.flush()  # a closed pipe shows here, not in Python's flush at exit
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(AttributeError, OSError, ValueError):
+                os.dup2(devnull, stream.fileno())
+        return 1
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    """:func:`main` without the closed-pipe handling."""
+    try:
+        check_not_shadowed()  # `python -m skelagnostic.cli` beside a checkout named skelagnostic
+    except ShadowedPackageError as exc:
+        print(f"skelagnostic: error: {exc}", file=sys.stderr)
+        return 2
     args = list(sys.argv[1:] if argv is None else argv)
     completing = args[:1] in (["-sc"], ["--shell-completion"])  # answered by this process
     if argv is None and os.environ.get(ALLOCATOR_ENV) and not completing:  # a process start
@@ -205,11 +237,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl+C outside training (Lightning reports its own)
         print(f"skelagnostic {verb}: interrupted (Ctrl+C)", file=sys.stderr)
         return 130
-    except BrokenPipeError:  # e.g. `skelagnostic interpolate --help | head`
-        # Python flushes stdout again at exit: point it at /dev/null so that stays quiet.
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

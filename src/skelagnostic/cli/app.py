@@ -91,6 +91,18 @@ class ConfigError(SkelagnosticError):
     """A run configuration that cannot work (bad task, unknown options, missing packages)."""
 
 
+class RunMetrics(dict[str, float]):
+    """What :func:`run` returns: the trainer's final metrics, and why a fit ended.
+
+    Attributes:
+        stopped: For ``fit``, the limit or event that ended training (e.g.
+            ``"max_steps 20 reached"``, see :func:`skelagnostic.callbacks.stop_reason`);
+            ``None`` otherwise.
+    """
+
+    stopped: str | None = None
+
+
 # ----------------------------------------------------------------------------- run
 
 
@@ -334,20 +346,31 @@ def _check_options(options: dict[str, Any], cls: type, prefix: str, owner: str) 
             )
 
 
-def _require_test_split(datamodule: L.LightningDataModule) -> None:
+def _require_test_split(datamodule: L.LightningDataModule, run_dir: Path | None = None) -> None:
     """Raise :class:`ConfigError` when the data module has no test clip (``test`` would do nothing).
 
     Only for data modules that expose their splits (``datasets["test"]``).
+
+    Args:
+        datamodule: The data module (set up here).
+        run_dir: The run whose recorded split the data module keeps, if any: its
+            training and validation clips are never test clips.
     """
     if not hasattr(datamodule, "datasets"):
         return
     datamodule.setup("test")
     if any(len(ds) for ds in datamodule.datasets.get("test", {}).values()):
         return
+    if run_dir is not None:
+        raise ConfigError(
+            f"test: the run {run_dir} has no test split (it was fitted with "
+            "data.test_fraction=0 and no test clip; its validation clips chose its "
+            "checkpoint, so they are not held out): use validate, or fit again with "
+            "data.test_fraction=0.2 (or data.test_pattern=REGEX) and test that run"
+        )
     raise ConfigError(
         "test: the test split is empty (data.test_fraction=0 and no clip matches a test "
-        "pattern); set data.test_fraction>0 (test clips then come from clips the run did not "
-        "train on), data.test_pattern=REGEX, or use validate"
+        "pattern); set data.test_fraction>0 or data.test_pattern=REGEX, or use validate"
     )
 
 
@@ -362,7 +385,7 @@ def _save_predictions(predictions: Any, run_dir: Path) -> None:
     torch.save(predictions, run_dir / "predictions.pt")
 
 
-def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[str, float]:
+def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetrics:
     """Train or evaluate an aligner from a composed config (no Hydra needed).
 
     Steps: set torch's intra-op threads (``cfg.threads``, when not null), seed
@@ -380,7 +403,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             process-wide one).
 
     Returns:
-        The trainer's final ``callback_metrics`` as floats.
+        The trainer's final ``callback_metrics`` as floats (a :class:`RunMetrics`,
+        whose ``stopped`` says why a fit ended).
 
     Raises:
         ConfigError: Unknown task, a model or
@@ -454,8 +478,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             return evaluate_checkpoint(cfg, pm, spec.module, datamodule, ckpt)
         del checkpoint
     if task == "test":
-        _require_test_split(datamodule)
+        untested = recorded is not None and "test" not in recorded.values()
+        _require_test_split(datamodule, source_run if untested else None)
     callbacks = _instantiate_all(cfg.get("callbacks"), "callbacks")
+    stop = None
     if task == "fit":
         from skelagnostic.callbacks import (
             FinalStepCheckpoint,
@@ -464,8 +490,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             ResumeFromEpochEnd,
             ResumeHint,
             StopOnNonFinite,
+            StopReason,
         )
 
+        stop = StopReason()
         callbacks += [
             StopOnNonFinite(),
             ResumeHint(),
@@ -475,6 +503,7 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
             ResumeFromEpochEnd(),
             RecordSplit(run_dir),
             AdaptiveLogInterval(),
+            stop,
         ]
     loggers = _instantiate_all(cfg.get("logger"), "logger")
     trainer_kwargs: dict[str, Any] = OmegaConf.to_container(cfg.trainer, resolve=True)  # type: ignore[assignment]
@@ -511,7 +540,9 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> dict[st
         if named is None:
             raise
         raise named from exc
-    return {k: float(v) for k, v in trainer.callback_metrics.items()}
+    metrics = RunMetrics({k: float(v) for k, v in trainer.callback_metrics.items()})
+    metrics.stopped = stop.reason if stop is not None else None
+    return metrics
 
 
 # ----------------------------------------------------------------- composition
@@ -615,6 +646,41 @@ def _patched(argv: list[str], env: dict[str, str]) -> Iterator[None]:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+#: Loggers that print by themselves instead of propagating to the root logger (Lightning
+#: sets them up so when it is imported before logging is configured).
+_OWN_HANDLER_LOGGERS = ("lightning.pytorch", "lightning.fabric")
+
+
+@contextlib.contextmanager
+def _job_log() -> Iterator[logging.Logger]:
+    """Copy the run's log lines into Hydra's job log (``<run_dir>/app.log``) within the block.
+
+    Hydra gives the root logger a file handler, but Lightning's loggers (``Seed set to
+    42``, the data sets, the trainer's messages) print through their own handler and do
+    not propagate, so the file stayed empty. Within the block the root's file handlers
+    are also theirs (the console output is unchanged), and the logger yielded writes to
+    the file only (the end of the run, which the console shows as a table).
+    """
+    files = [h for h in logging.getLogger().handlers if isinstance(h, logging.FileHandler)]
+    loggers = [logging.getLogger(name) for name in _OWN_HANDLER_LOGGERS]
+    quiet = logging.getLogger("skelagnostic.run")
+    quiet.propagate = False
+    quiet.setLevel(logging.INFO)
+    added = [
+        (logger, handler)
+        for logger in [*[lg for lg in loggers if not lg.propagate], quiet]
+        for handler in files
+        if handler not in logger.handlers
+    ]
+    for logger, handler in added:
+        logger.addHandler(handler)
+    try:
+        yield quiet
+    finally:
+        for logger, handler in added:
+            logger.removeHandler(handler)
 
 
 #: Files a run directory holds before it produced anything (Hydra's and ours).
@@ -848,9 +914,16 @@ def main(task: str, argv: Sequence[str]) -> int:
             run_dirs.append(Path(cfg.run_dir))
             if saved is not None:
                 reuse_run_config(cfg, saved, overrides)
-            with _patched(outer_argv, {}):  # Lightning's DDP launcher re-executes sys.argv
+            # Lightning's DDP launcher re-executes sys.argv
+            with _patched(outer_argv, {}), _job_log() as job_log:
                 try:
                     metrics = run(cfg, pm)
+                    if getattr(metrics, "stopped", None):
+                        job_log.info("stopped: %s", metrics.stopped)  # type: ignore[attr-defined]
+                    job_log.info(
+                        "final metrics: %s",
+                        ", ".join(f"{k}={v:.5g}" for k, v in sorted(metrics.items())) or "none",
+                    )
                     ckpt = (
                         checkpoint_of(cfg.ckpt_path, _preferred_checkpoint(cfg))
                         if cfg.ckpt_path
@@ -884,7 +957,13 @@ def main(task: str, argv: Sequence[str]) -> int:
             print(printable(f"skelagnostic {task}: terminated by SIGTERM{kept}"), file=sys.stderr)
             return SIGTERM_EXIT_CODE
         for run_dir, metrics, ckpt in results:  # evaluate printed its own table
-            summary_table(task, run_dir, {} if task == "evaluate" else metrics, checkpoint=ckpt)
+            summary_table(
+                task,
+                run_dir,
+                {} if task == "evaluate" else metrics,
+                checkpoint=ckpt,
+                stopped=getattr(metrics, "stopped", None),
+            )
         if task == "fit":  # this command's CPU time, not the process's (tests, notebooks)
             (user, system), (user0, system0) = _cpu_times(), cpu_start
             if (hint := kernel_time_hint(user - user0, system - system0)) is not None:

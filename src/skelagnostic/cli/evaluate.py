@@ -124,9 +124,9 @@ def print_evaluation(report: Mapping[str, Any], run_dir: Path) -> None:
         f"{data['split_name']}, {len(data['clips'])} clips",
         title_justify="left",
     )
-    table.add_column("metric", style="bold")
+    table.add_column("metric", style="bold", overflow="fold")  # wrapped, never cut
     for method in report["methods"]:
-        table.add_column(method, justify="right")
+        table.add_column(method, justify="right", overflow="fold")
     for metric, text in report["metrics"].items():
         cells = [report["mean"].get(m, {}).get(metric) for m in report["methods"]]
         table.add_row(f"{metric} ({text})", *("-" if c is None else f"{c:.4g}" for c in cells))

@@ -242,6 +242,7 @@ def summary_table(
     metrics: Mapping[str, float],
     checkpoint: Path | None = None,
     limit: int = 16,
+    stopped: str | None = None,
 ) -> None:
     """Print the run directory, the checkpoints and the headline metrics (one Rich table).
 
@@ -251,6 +252,7 @@ def summary_table(
         metrics: The trainer's final metrics.
         checkpoint: The checkpoint evaluated (validate, test, predict).
         limit: Metrics shown at most.
+        stopped: Why a fit ended (``max_steps 20 reached``, ...), shown as a row.
     """
     if rank_zero_only.rank != 0:
         return
@@ -258,6 +260,8 @@ def summary_table(
     from rich.table import Table
 
     rows = [("run directory", str(run_dir))]
+    if stopped:
+        rows.append(("stopped", stopped))
     if checkpoint is not None:
         rows.append(("evaluated checkpoint", str(checkpoint)))
     for name in ("best", "last"):
@@ -268,12 +272,13 @@ def summary_table(
     if len(metrics) > limit:
         rows.append(("...", f"{len(metrics) - limit} more in the run's csv/metrics.csv"))
     table = Table(title=f"skelagnostic {task}", show_header=False, title_justify="left")
-    table.add_column(style="bold", no_wrap=True)
-    table.add_column(no_wrap=True)
+    # never cut a name: fold what does not fit (the width below fits every cell)
+    table.add_column(style="bold", overflow="fold")
+    table.add_column(overflow="fold")
     for row in rows:
         table.add_row(*row)
-    # wide enough for whole paths, so they can be copied
-    width = max(80, *(len(a) + len(b) + 8 for a, b in rows))
+    # wide enough for the longest name beside the longest value: whole paths, to copy them
+    width = max(80, max(len(a) for a, _ in rows) + max(len(b) for _, b in rows) + 8)
     Console(file=sys.stdout, width=width).print(table)
 
 

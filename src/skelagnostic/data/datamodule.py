@@ -295,22 +295,19 @@ def _split_clips(
 
 
 def _keep_recorded(
-    split: dict[str, list[ClipRef]], recorded: dict[str, str], test_fraction: float, seed: int
+    split: dict[str, list[ClipRef]], recorded: dict[str, str]
 ) -> dict[str, list[ClipRef]]:
-    """``split`` with the recorded clips moved back to their recorded split."""
+    """``split`` with the recorded clips moved back to their recorded split.
+
+    A test split asked for later takes no recorded clip: the training clips trained the
+    model and the validation clips chose its checkpoint, so neither is held out.
+    """
     out: dict[str, list[ClipRef]] = {part: [] for part in SPLITS}
     for part in SPLITS:
         for clip in split.get(part, []):
             out[recorded.get(clip.id, part) if recorded.get(clip.id) in SPLITS else part].append(
                 clip
             )
-    if test_fraction > 0 and not out["test"] and out["val"]:
-        total = sum(len(v) for v in out.values())
-        n = min(len(out["val"]), max(1, round(test_fraction * total)))
-        ordered = sorted(
-            out["val"], key=lambda c: hashlib.sha256(f"{seed}:test:{c.id}".encode()).hexdigest()
-        )
-        out["test"], out["val"] = ordered[:n], ordered[n:]
     return out
 
 
@@ -599,9 +596,9 @@ class MotionDataModule(L.LightningDataModule):
         test. With :attr:`recorded_splits` (a run's ``split.json``), every clip
         it lists keeps its recorded split, so a later verb never evaluates on a
         clip the model trained on, whatever fractions it is given; a
-        ``test_fraction`` asked for later takes its test clips from the
-        recorded validation clips. Every placement is noted in
-        :attr:`assigned_splits`.
+        ``test_fraction`` asked for later takes only clips the run never saw (a
+        run recorded without test clips has no test split: its validation clips
+        chose its checkpoint). Every placement is noted in :attr:`assigned_splits`.
 
         Args:
             clips: The clips of one dataset.
@@ -611,7 +608,7 @@ class MotionDataModule(L.LightningDataModule):
         """
         split = _split_clips(clips, self.val_fraction, self.test_fraction, self.split_seed)
         if self.recorded_splits:
-            split = _keep_recorded(split, self.recorded_splits, self.test_fraction, self.split_seed)
+            split = _keep_recorded(split, self.recorded_splits)
         for part, members in split.items():
             self.assigned_splits.update((c.id, part) for c in members)
         return split

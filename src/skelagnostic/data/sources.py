@@ -392,6 +392,9 @@ class ProceduralSource(ClipSource):
         seconds: Duration of each clip.
         seed: Base seed.
         name: Label of the source.
+        test_clips_per_gait: Further clips per (kind, gait), with seeds of their own
+            (after those of the other clips), marked as test clips: a test split that
+            leaves the training and validation clips as they are.
     """
 
     kinds: Sequence[str] = ("biped22", "quadruped")
@@ -400,7 +403,15 @@ class ProceduralSource(ClipSource):
     seconds: float = 4.0
     seed: int = 0
     name: str = "procedural"
+    test_clips_per_gait: int = 0
     _motions: dict[str, Motion] = field(default_factory=dict, init=False, repr=False)
+    _test_ids: set[str] = field(default_factory=set, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.test_clips_per_gait, bool) or self.test_clips_per_gait < 0:
+            raise SkelagnosticError(
+                f"data.test_clips_per_gait={self.test_clips_per_gait!r} must be 0 or more"
+            )
 
     def _generate(self) -> dict[str, Motion]:
         from skelagnostic import procedural
@@ -417,18 +428,36 @@ class ProceduralSource(ClipSource):
                     f"data: the procedural kinds {list(self.kinds)} have none of the gaits "
                     f"{list(gaits)}"
                 )
-            for motion, info in clips:
-                self._motions[f"{info['kind']}_{info['gait']}_{info['seed']}"] = motion
+            held_out = (
+                procedural.dataset(
+                    tuple(self.kinds),
+                    tuple(gaits),
+                    self.test_clips_per_gait,
+                    self.seconds,
+                    seed=self.seed + len(clips),  # seeds no other clip of the source has
+                )
+                if self.test_clips_per_gait
+                else []
+            )
+            for (motion, info), test in [
+                *((c, False) for c in clips),
+                *((c, True) for c in held_out),
+            ]:
+                clip_id = f"{info['kind']}_{info['gait']}_{info['seed']}"
+                self._motions[clip_id] = motion
+                if test:
+                    self._test_ids.add(clip_id)
         return self._motions
 
     def clips(self) -> list[ClipRef]:
-        """The generated clips, keyed by a hash of their content."""
+        """The generated clips, keyed by a hash of their content (test clips marked)."""
         out = []
         for clip_id, motion in self._generate().items():
             digest = hashlib.sha256(clip_id.encode())
             for tensor in (motion.skeleton.offsets, motion.rotations, motion.root_positions):
                 digest.update(tensor.detach().to(torch.float64).contiguous().numpy().tobytes())
-            out.append(ClipRef(clip_id, digest.hexdigest()))
+            split = "test" if clip_id in self._test_ids else None
+            out.append(ClipRef(clip_id, digest.hexdigest(), split))
         return out
 
     def load(self, clip: ClipRef) -> Motion:
@@ -438,6 +467,7 @@ class ProceduralSource(ClipSource):
     def __getstate__(self) -> dict[str, object]:
         state = dict(self.__dict__)
         state["_motions"] = {}  # regenerated on demand; keeps pickles small
+        state["_test_ids"] = set()
         return state
 
 

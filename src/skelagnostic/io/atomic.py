@@ -21,6 +21,8 @@ through :func:`atomic_write`, so that all of them behave the same way:
 Checkpoints (:func:`skelagnostic.callbacks.checkpoint_io.atomic_torch_save`) go
 through the same function with a fixed temporary name, so that a save killed
 mid-write leaves one ``<name>.tmp`` that the next save of that name reuses.
+Writers that only take a file name (``torch.onnx.export``, ``torch.jit.save``) write
+into the temporary file :func:`atomic_path` names, with the same guarantees.
 """
 
 from __future__ import annotations
@@ -30,11 +32,11 @@ import errno
 import os
 import secrets
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write", "fsync_directory", "write_target"]
+__all__ = ["atomic_path", "atomic_write", "fsync_directory", "write_target"]
 
 _FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
 
@@ -97,6 +99,70 @@ def _create_temporary(target: Path, temp_suffix: str | None) -> tuple[int, Path]
     raise FileExistsError(errno.EEXIST, "no free temporary file name", str(target.parent))
 
 
+def _existing_mode(target: Path) -> int | None:
+    """The permission bits of ``target`` if it is a regular file, else ``None``."""
+    try:
+        info = os.stat(target)
+    except FileNotFoundError:
+        return None
+    return stat.S_IMODE(info.st_mode) if stat.S_ISREG(info.st_mode) else None
+
+
+@contextlib.contextmanager
+def atomic_path(
+    path: str | Path, *, follow_symlinks: bool = True, sync_directory: bool = False
+) -> Iterator[Path]:
+    """A temporary file next to ``path`` to write by name; it replaces ``path`` at the end.
+
+    For writers that take a file name instead of a file object. The block writes the
+    yielded path (an empty file, which the writer may also delete and create again);
+    when the block ends without an exception the file gets the mode :func:`atomic_write`
+    gives (``path``'s own, else ``0o666`` minus the umask, whatever mode the writer
+    created it with), is flushed to disk and replaces ``path``. On an exception
+    ``path`` is untouched and the temporary file removed.
+
+    Args:
+        path: The file to write (its directory must exist); a symbolic link is
+            followed unless ``follow_symlinks=False``.
+        follow_symlinks: As in :func:`atomic_write`.
+        sync_directory: As in :func:`atomic_write`.
+
+    Yields:
+        The temporary path to write.
+
+    Example:
+        >>> import tempfile
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> with atomic_path(folder / "out.txt") as tmp:
+        ...     _ = tmp.write_text("done")
+        >>> (folder / "out.txt").read_text(), [p.name for p in folder.iterdir()]
+        ('done', ['out.txt'])
+    """
+    target = write_target(path) if follow_symlinks else Path(os.path.abspath(path))
+    keep_mode = _existing_mode(target)
+    fd, tmp = _create_temporary(target, None)
+    try:
+        created = stat.S_IMODE(os.fstat(fd).st_mode)  # 0o666 minus the umask
+    finally:
+        os.close(fd)
+    mode = keep_mode if keep_mode is not None else created
+    try:
+        yield tmp
+        os.chmod(tmp, mode)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    if sync_directory:
+        fsync_directory(target.parent)
+
+
 def atomic_write(
     path: str | Path,
     data: bytes | Callable[[BinaryIO], object],
@@ -129,11 +195,7 @@ def atomic_write(
             is left behind. Exceptions raised by ``data`` propagate the same way.
     """
     target = write_target(path) if follow_symlinks else Path(os.path.abspath(path))
-    try:
-        info = os.stat(target)
-        keep_mode = stat.S_IMODE(info.st_mode) if stat.S_ISREG(info.st_mode) else None
-    except FileNotFoundError:
-        keep_mode = None
+    keep_mode = _existing_mode(target)
     fd, tmp = _create_temporary(target, temp_suffix)
     try:
         with os.fdopen(fd, "wb") as fh:

@@ -49,7 +49,10 @@ def register_aligners(register: Callable[..., Any]) -> None:
     needs whatever the data (e.g. ``{"fps": 30, "window": 30}``): they are
     merged over the selected data config, and command-line ``data.<key>=...``
     overrides still win. ``trainer_options`` (optional) do the same for the
-    trainer config (e.g. ``{"max_time": "00:00:04:30"}`` for a CPU budget).
+    trainer config (e.g. ``{"gradient_clip_val": 1.0}``). They must not set a limit
+    (``max_time``, ``max_steps``, ``max_epochs``, ...): a model's defaults that end
+    a run would override the user's ``trainer.max_steps``; put budgets in an
+    ``experiment/`` config.
 
     Args:
         register: The registration callback.

@@ -119,9 +119,10 @@ class AlignerSpec:
         data_options: Data-module keys (e.g. ``window``, ``fps``) the aligner needs
             whatever the data source; merged over the selected data config, under the
             command line's overrides.
-        trainer_options: Trainer keys the aligner needs by default (e.g. a
-            ``max_time`` budget); merged over the selected trainer config, under
-            the command line's overrides.
+        trainer_options: Trainer keys the aligner needs by default (e.g.
+            ``gradient_clip_val``; never a limit such as ``max_time``: those belong in
+            experiments); merged over the selected trainer config, under the command
+            line's overrides.
     """
 
     name: str

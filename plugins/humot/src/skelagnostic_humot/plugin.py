@@ -35,10 +35,6 @@ DEFAULT_DATA: dict[str, Any] = {
 #: 30 Hz, 1 s chunks overlapping by 24 frames.
 DATA_OPTIONS: dict[str, Any] = {"fps": 30, "window": 30, "stride": 6}
 
-#: The CPU budget of ``skelagnostic fit model=humot``: stop after 4.5 minutes of training
-#: even on a slow or busy machine (``trainer.max_time=null`` lifts it).
-TRAINER_OPTIONS: dict[str, Any] = {"max_time": "00:00:04:30"}
-
 
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
@@ -54,7 +50,6 @@ def register_aligners(register: Callable[..., Any]) -> None:
         description="HuMoT: topology-agnostic XCiT autoencoder for human retargeting",
         data=DEFAULT_DATA,
         data_options=DATA_OPTIONS,
-        trainer_options=TRAINER_OPTIONS,
     )
 
 

@@ -45,11 +45,6 @@ DATA_OPTIONS: dict[str, Any] = {
 }
 
 
-#: The CPU budget of ``skelagnostic fit model=pcmrl|pcmrl_interp`` alone: stop after
-#: 4.5 minutes of training (``trainer.max_time=null`` lifts it).
-TRAINER_OPTIONS: dict[str, Any] = {"max_time": "00:00:04:30"}
-
-
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
     """Register ``model=pcmrl`` (stage 1) and ``model=pcmrl_interp`` (stage 2)."""
@@ -65,7 +60,6 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "skeleton (model=pcmrl_interp: stage 2)",
         data=DEFAULT_DATA,
         data_options=DATA_OPTIONS,
-        trainer_options=TRAINER_OPTIONS,
     )
     from skelagnostic_pcmrl.interp import (
         INTERP_DATA_DEFAULTS,
@@ -82,7 +76,6 @@ def register_aligners(register: Callable[..., Any]) -> None:
         description="PC-MRL stage 2: FOQ keyframe interpolation on the target skeleton",
         data=INTERP_DATA_DEFAULTS,
         data_options=INTERP_DATA_OPTIONS,
-        trainer_options=TRAINER_OPTIONS,
     )
 
 
