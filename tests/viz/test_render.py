@@ -236,8 +236,14 @@ class TestFiles:
         monkeypatch.setitem(matplotlib.rcParams, "animation.ffmpeg_path", os.fspath(fake))
         path = render_motion(walker(frames=12), tmp_path / "a.mp4", size=(33, 20))
         assert path.stat().st_size == 12 * 20 * 34 * 3  # odd width padded to even
-        args = (tmp_path / "a.mp4.args").read_text()
-        assert "-s 34x20" in args and "-r 30" in args and "yuv420p" in args
+        # ffmpeg writes a temporary file next to a.mp4, which then replaces it (atomic write)
+        (arg_file,) = tmp_path.glob("*.args")
+        args = arg_file.read_text()
+        assert "-s 34x20" in args and "-r 30" in args and "yuv420p" in args and "-f mp4" in args
+        assert sorted(p.name for p in tmp_path.iterdir() if p.suffix != ".args") == [
+            "a.mp4",
+            "ffmpeg",
+        ]
 
     def test_mp4_ffmpeg_failure_is_reported(self, walker, tmp_path, monkeypatch):
         fake = tmp_path / "ffmpeg"

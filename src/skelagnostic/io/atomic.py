@@ -18,6 +18,9 @@ through :func:`atomic_write`, so that all of them behave the same way:
   disk too, where the platform allows it (checkpoints ask for it; BVH files and
   rebuildable cache entries skip the extra ``fsync``).
 
+Tools that write by file name (ffmpeg, exporters) use :func:`atomic_path`: they
+write to the temporary path it gives, which replaces the target on success.
+
 Checkpoints (:func:`skelagnostic.callbacks.checkpoint_io.atomic_torch_save`) go
 through the same function with a fixed temporary name, so that a save killed
 mid-write leaves one ``<name>.tmp`` that the next save of that name reuses.
@@ -30,11 +33,11 @@ import errno
 import os
 import secrets
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write", "fsync_directory", "write_target"]
+__all__ = ["atomic_path", "atomic_write", "fsync_directory", "write_target"]
 
 _FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
 
@@ -155,3 +158,40 @@ def atomic_write(
     if sync_directory:
         fsync_directory(target.parent)
     return target
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path next to ``path`` for a tool that writes by file name.
+
+    The body writes the file at the yielded path (it exists, empty, with the
+    permissions :func:`atomic_write` gives); on a normal exit it replaces ``path``
+    (through symbolic links), on an exception it is removed and ``path`` is untouched.
+
+    Args:
+        path: The file to write. Its directory must exist.
+
+    Yields:
+        The temporary path to write (its name ends in ``.tmp``: tools that pick a
+        format from the suffix must be told the format).
+
+    Raises:
+        OSError: As :func:`atomic_write`; exceptions of the body propagate.
+    """
+    target = write_target(path)
+    try:
+        info = os.stat(target)
+        keep_mode = stat.S_IMODE(info.st_mode) if stat.S_ISREG(info.st_mode) else None
+    except FileNotFoundError:
+        keep_mode = None
+    fd, tmp = _create_temporary(target, None)
+    os.close(fd)
+    try:
+        if keep_mode is not None:
+            os.chmod(tmp, keep_mode)
+        yield tmp
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
