@@ -22,9 +22,7 @@ from __future__ import annotations
 import contextlib
 import inspect
 import json
-import os
 import re
-import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +32,7 @@ import torch
 from torch import Tensor, nn
 
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.io.outputs import OutputError, output_path
 
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
@@ -286,15 +285,13 @@ def _jit_scripting(module: nn.Module) -> Iterator[None]:
 
 
 def _write_atomic(path: Path, write: Any) -> None:
-    """Call ``write(tmp_path)`` and move the result to ``path``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    """Call ``write(tmp_path)`` and move the result to ``path`` (umask permissions).
+
+    Raises:
+        OutputError: The file cannot be written (full disk, ...); ``path`` is unchanged.
+    """
+    with output_path(path) as tmp:
+        write(tmp)
 
 
 def export_graph(
@@ -349,7 +346,7 @@ def export_graph(
 
     try:
         _write_atomic(model_path, write_onnx if fmt == "onnx" else write_torchscript)
-    except ExportError:
+    except (ExportError, OutputError):
         raise
     except Exception as error:  # exporter internals: one line naming the graph and the cause
         root: BaseException = error

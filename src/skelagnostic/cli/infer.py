@@ -29,6 +29,7 @@ from skelagnostic.cli.render import (
     RENDER_OPTIONS,
     THREADS_HELP,
     apply_threads,
+    check_render_outputs,
     parse_arguments,
     render_from_options,
 )
@@ -241,6 +242,7 @@ def _run(
         return 0 if argv else 2
     try:
         from skelagnostic import write_bvh
+        from skelagnostic.io.outputs import check_output_file
 
         words, options = parse_arguments(argv)
         apply_threads(options)
@@ -262,6 +264,9 @@ def _run(
                 raise SkelagnosticError(f"missing option {key}=")
         if Path(options["out"]).suffix.lower() != ".bvh":
             raise SkelagnosticError(f"option out={options['out']!r}: must be a .bvh path")
+        # every output is checked before any is written (out= is written first)
+        check_output_file(options["out"], "out")
+        check_render_outputs(options, out_key="render")
         paths = [Path(w) for w in words]
         for path in paths[: 1 if verb == "transfer" else len(paths)]:
             if not path.is_file():
