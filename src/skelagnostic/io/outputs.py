@@ -79,6 +79,7 @@ def check_output_file(path: str | Path, key: str | None = None) -> Path:
         OutputError: ``path`` is a directory, lies under a regular file or a
             dangling link, its directory is not writable, or its links form a loop.
     """
+    _writable_directory(Path(path).parent, key, path)  # as given: a dangling link is refused
     try:
         target = write_target(path)
     except OSError as exc:
