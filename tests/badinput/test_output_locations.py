@@ -21,7 +21,7 @@ from test_badinput import CORPUS, SMOKE, documented
 
 from skelagnostic import cli
 from skelagnostic.cli import app
-from skelagnostic.cli.render import apply_threads, max_threads
+from skelagnostic.cli.render import apply_threads
 from skelagnostic.data import MotionDataModule
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.plugins import PluginManager
@@ -29,6 +29,8 @@ from skelagnostic.plugins import PluginManager
 EXAMPLE_SRC = Path(__file__).resolve().parents[2] / "plugins" / "example-aligner" / "src"
 CLIP = CORPUS / "valid_small.bvh"
 ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
+#: The documented limit of threads=: 4 per CPU core.
+LIMIT = 4 * (os.cpu_count() or 1)
 needs_permissions = pytest.mark.skipif(
     ROOT or sys.platform == "win32",
     reason="root writes into read-only directories (the other cases cover the check as root)",
@@ -304,8 +306,10 @@ def set_threads(monkeypatch: pytest.MonkeyPatch) -> list[int]:
 
 
 def test_threads_above_four_per_core_are_refused(set_threads: list[int]) -> None:
+    from skelagnostic.cli.render import max_threads
+
     limit = max_threads()
-    assert limit == 4 * (os.cpu_count() or 1)
+    assert limit == LIMIT
     for value in ("99999", str(limit + 1), "9" * 40):
         with pytest.raises(SkelagnosticError, match=rf"threads={value}: at most {limit} \(4 per"):
             apply_threads({"threads": value})
@@ -317,7 +321,7 @@ def machine_free(line: str) -> str:
     """``line`` with this machine's thread limit and core count as placeholders."""
     cores = os.cpu_count() or 1
     return line.replace(
-        f"at most {max_threads()} (4 per CPU core; this machine has {cores})",
+        f"at most {LIMIT} (4 per CPU core; this machine has {cores})",
         "at most <4 x cores> (4 per CPU core; this machine has <cores>)",
     )
 
@@ -339,7 +343,7 @@ def test_file_verbs_refuse_threads_99999(
     monkeypatch.chdir(tmp_path)
     assert cli.main([verb, *words, "threads=99999"]) == 2
     line = one_error(capsys, verb)
-    assert f"option threads=99999: at most {max_threads()} (4 per CPU core" in line
+    assert f"option threads=99999: at most {LIMIT} (4 per CPU core" in line
     assert set_threads == []
     documented(machine_free(line), tmp_path)
     assert not list(tmp_path.iterdir())
@@ -350,6 +354,6 @@ def test_fit_refuses_threads_99999(site: Path, tmp_path: Path, capsys, monkeypat
     code = cli.main(["fit", *SMOKE, "threads=99999", f"data.cache_dir={tmp_path / 'cache'}"])
     assert code == 1
     line = one_error(capsys, "fit")
-    assert f"threads=99999: at most {max_threads()} (4 per CPU core" in line
+    assert f"threads=99999: at most {LIMIT} (4 per CPU core" in line
     assert set_threads == []
     documented(machine_free(line), tmp_path)
