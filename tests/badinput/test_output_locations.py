@@ -108,6 +108,25 @@ def test_render_refuses_a_read_only_directory(places, tmp_path, capsys) -> None:
     documented(line, tmp_path)
 
 
+def test_read_only_directory_is_refused_even_as_root(places, tmp_path, capsys, monkeypatch):
+    # Root writes into read-only folders, so the permission answer is simulated here: the
+    # check asks os.access (W_OK | X_OK), which is what a non-root user gets refused by.
+    import skelagnostic.io.outputs as outputs
+
+    readonly = places["readonly"]
+    real = os.access
+    monkeypatch.setattr(
+        outputs.os, "access", lambda p, mode: False if Path(p) == readonly else real(p, mode)
+    )
+    assert cli.main(["render", str(CLIP), f"out={readonly / 'x.gif'}"]) == 2
+    line = one_error(capsys, "render")
+    assert line.endswith(f"out='{readonly / 'x.gif'}': the directory {readonly} is not writable")
+    documented(line, tmp_path)
+    assert cli.main(["demo", f"out={readonly / 'demo'}", "gif=false"]) != 0
+    assert f"the directory {readonly} is not writable" in one_error(capsys, "demo")
+    assert list(readonly.iterdir()) == []
+
+
 # ------------------------------------------------------------- export / demo out=
 def test_export_refuses_an_existing_file_as_its_folder(places, tmp_path, capsys) -> None:
     code = cli.main(
