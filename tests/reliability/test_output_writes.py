@@ -50,7 +50,9 @@ def clip(tmp_path: Path) -> Path:
     return path
 
 
-def run_limited(args: list[str], limit: int, cwd: Path) -> subprocess.CompletedProcess[str]:
+def run_limited(
+    args: list[str], limit: int, cwd: Path, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
     """``skelagnostic ARGS`` in a child whose files cannot grow past ``limit`` bytes.
 
     The modules a render needs are imported before the limit is set, so only the
@@ -67,7 +69,7 @@ def run_limited(args: list[str], limit: int, cwd: Path) -> subprocess.CompletedP
         sys.exit(cli.main(sys.argv[1:]))
         """
     )
-    env = {**os.environ, "PYTHONPATH": str(REPO / "src"), "OMP_NUM_THREADS": "1"}
+    env = env or {**os.environ, "PYTHONPATH": str(REPO / "src"), "OMP_NUM_THREADS": "1"}
     return subprocess.run(
         [sys.executable, "-c", script, *args],
         cwd=cwd,
@@ -114,6 +116,17 @@ def test_demo_on_a_full_disk_is_one_line(tmp_path: Path) -> None:
     (line,) = result.stderr.strip().splitlines()
     assert line.startswith("skelagnostic demo: error: ") and "File too large" in line
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
+
+
+def test_fit_on_a_full_disk_is_one_line(tmp_path: Path, cli_env: dict[str, str]) -> None:
+    # Hydra writes the run folder's .hydra/ files before any skelagnostic code runs
+    args = ["fit", "model=example", "experiment=smoke", "threads=1", f"runs_dir={tmp_path}/r"]
+    result = run_limited(args, 300, tmp_path, env=cli_env)
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    lines = [ln for ln in result.stderr.splitlines() if ln.startswith("skelagnostic fit:")]
+    assert lines == ["skelagnostic fit: error: cannot read or write a file: File too large"]
+    documented(lines[0], tmp_path)
 
 
 class _FullDisk(io.RawIOBase):

@@ -182,6 +182,13 @@ class TestFiles:
         assert sum(durations) == pytest.approx(45 / 30 * 1000, abs=10)
         assert set(durations) <= {30, 40}
 
+    def test_gif_delays_are_capped_at_the_format_limit(self, tmp_path):
+        # a 4000 s clip in 2 frames: each would stay 2000 s, a GIF frame holds at most 655.35 s
+        slow = StickFigure(np.random.default_rng(0).random((2000, 2, 3)), parents=[-1, 0], fps=0.5)
+        path = render_motion(slow, tmp_path / "slow.gif", max_frames=2, size=(32, 32))
+        with Image.open(path) as gif:
+            assert gif.n_frames == 2 and gif.info["duration"] == 655350
+
     def test_gif_refuses_more_than_50_fps(self, walker, tmp_path):
         with pytest.raises(RenderError, match="50"):
             render_motion(walker(fps=60.0), tmp_path / "a.gif", fps=60.0, size=(32, 32))

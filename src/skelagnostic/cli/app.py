@@ -771,6 +771,9 @@ def _failed_plugins(pm: PluginManager | None) -> str:
 
 
 def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and not isinstance(exc, SkelagnosticError):
+        where = f" ({exc.filename})" if exc.filename else ""
+        return f"cannot read or write a file{where}: {exc.strerror or exc}"
     text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
     text = text.split(" Config search path:")[0]
     cause = exc.__cause__
@@ -887,6 +890,7 @@ def main(task: str, argv: Sequence[str]) -> int:
         HydraException,
         OmegaConfBaseException,
         MisconfigurationException,
+        OSError,  # e.g. a full disk while Hydra writes the run folder's .hydra/ files
     ) as exc:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)
         if debug:

@@ -79,6 +79,8 @@ MAX_FRAME_PIXELS = 4096 * 4096
 MAX_FPS = 240.0
 #: Largest contact sheet, in pixels.
 MAX_SHEET_PIXELS = 8192 * 8192
+#: Longest delay a GIF frame can hold, in 1/100 s (a 16-bit field).
+_GIF_MAX_TICKS = 65535
 #: Renders of at least this many frames show a progress bar (when asked and on a terminal).
 PROGRESS_FRAMES = 100
 
@@ -536,7 +538,7 @@ def _write_gif(frames: Iterator[np.ndarray], fps: float, fh: Any, palette: Any) 
     for f, frame in enumerate(frames):
         image = Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE)
         following = round((f + 1) * 100.0 / fps)
-        delay, tick = (following - tick) * 10, following
+        delay, tick = min(following - tick, _GIF_MAX_TICKS) * 10, following
         if previous is None:
             header, _ = GifImagePlugin.getheader(image, None, {"loop": 0, "optimize": False})
             for block in header:
@@ -545,7 +547,7 @@ def _write_gif(frames: Iterator[np.ndarray], fps: float, fh: Any, palette: Any) 
         else:
             box = ImageChops.difference(previous, image).getbbox()
             if box is None and pending is not None:  # unchanged: the last frame stays longer
-                pending = (pending[0], pending[1], pending[2] + delay)
+                pending = (pending[0], pending[1], min(pending[2] + delay, _GIF_MAX_TICKS * 10))
                 continue
             flush()
             box = box or (0, 0, 1, 1)
