@@ -48,7 +48,7 @@ def _failed(key: str | None, path: str | Path, exc: OSError, existed: bool) -> O
 
 def _writable_directory(directory: Path, key: str | None, shown: str | Path) -> None:
     """Check that files can be created in ``directory`` (or in the folders it would need)."""
-    here = directory
+    here = Path(os.path.abspath(directory))  # "out=x.gif" names the working directory
     while not os.path.lexists(here) and here != here.parent:
         here = here.parent
     if os.path.islink(here) and not here.exists():
