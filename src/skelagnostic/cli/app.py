@@ -771,7 +771,8 @@ def _failed_plugins(pm: PluginManager | None) -> str:
 
 
 def _one_line(exc: BaseException) -> str:
-    if isinstance(exc, OSError) and not isinstance(exc, SkelagnosticError):
+    # a system error (errno set); Hydra's MissingConfigException is an OSError without one
+    if isinstance(exc, OSError) and exc.errno is not None:
         where = f" ({exc.filename})" if exc.filename else ""
         return f"cannot read or write a file{where}: {exc.strerror or exc}"
     text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
