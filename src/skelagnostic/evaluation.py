@@ -32,6 +32,7 @@ from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.io.markdown import markdown_cell
+from skelagnostic.io.outputs import write_output
 
 __all__ = [
     "MODEL",
@@ -478,6 +479,6 @@ def write_evaluation(
         "plots": ["evaluation.png", *result.plots],
         "notes": list(result.notes),
     }
-    (out / "evaluation.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    (out / "evaluation.md").write_text(markdown(report), encoding="utf-8")
+    write_output(out / "evaluation.json", json.dumps(report, indent=1) + "\n")
+    write_output(out / "evaluation.md", markdown(report))
     return report

@@ -34,7 +34,7 @@ import torch
 from torch import Tensor, nn
 
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.io.atomic import atomic_path
+from skelagnostic.io.outputs import OutputError, output_path
 
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
@@ -287,8 +287,12 @@ def _jit_scripting(module: nn.Module) -> Iterator[None]:
 
 
 def _write_atomic(path: Path, write: Any) -> None:
-    """Call ``write(tmp_path)`` and move the result to ``path`` (mode as the umask says)."""
-    with atomic_path(path) as tmp:
+    """Call ``write(tmp_path)`` and move the result to ``path`` (umask permissions).
+
+    Raises:
+        OutputError: The file cannot be written (full disk, ...); ``path`` is unchanged.
+    """
+    with output_path(path) as tmp:
         write(tmp)
 
 
@@ -388,7 +392,7 @@ def export_graph(
 
     try:
         _write_atomic(model_path, write_onnx if fmt == "onnx" else write_torchscript)
-    except ExportError:
+    except (ExportError, OutputError):
         raise
     except Exception as error:  # exporter internals: one line naming the graph and the cause
         root: BaseException = error

@@ -170,6 +170,8 @@ def test_options_are_parsed_into_render_arguments(monkeypatch, tmp_path):
         {
             "sheet_frames": 5,
             "columns": 2,
+            "progress": True,
+            "key": "out",
             "mode": "overlay",
             "fps": 12.5,
             "elev": 20.0,

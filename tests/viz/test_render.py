@@ -182,6 +182,13 @@ class TestFiles:
         assert sum(durations) == pytest.approx(45 / 30 * 1000, abs=10)
         assert set(durations) <= {30, 40}
 
+    def test_gif_delays_are_capped_at_the_format_limit(self, tmp_path):
+        # a 4000 s clip in 2 frames: each would stay 2000 s, a GIF frame holds at most 655.35 s
+        slow = StickFigure(np.random.default_rng(0).random((2000, 2, 3)), parents=[-1, 0], fps=0.5)
+        path = render_motion(slow, tmp_path / "slow.gif", max_frames=2, size=(32, 32))
+        with Image.open(path) as gif:
+            assert gif.n_frames == 2 and gif.info["duration"] == 655350
+
     def test_gif_refuses_more_than_50_fps(self, walker, tmp_path):
         with pytest.raises(RenderError, match="50"):
             render_motion(walker(fps=60.0), tmp_path / "a.gif", fps=60.0, size=(32, 32))
@@ -236,8 +243,14 @@ class TestFiles:
         monkeypatch.setitem(matplotlib.rcParams, "animation.ffmpeg_path", os.fspath(fake))
         path = render_motion(walker(frames=12), tmp_path / "a.mp4", size=(33, 20))
         assert path.stat().st_size == 12 * 20 * 34 * 3  # odd width padded to even
-        args = (tmp_path / "a.mp4.args").read_text()
-        assert "-s 34x20" in args and "-r 30" in args and "yuv420p" in args
+        # ffmpeg writes a temporary file next to a.mp4, which then replaces it (atomic write)
+        (arg_file,) = tmp_path.glob("*.args")
+        args = arg_file.read_text()
+        assert "-s 34x20" in args and "-r 30" in args and "yuv420p" in args and "-f mp4" in args
+        assert sorted(p.name for p in tmp_path.iterdir() if p.suffix != ".args") == [
+            "a.mp4",
+            "ffmpeg",
+        ]
 
     def test_mp4_ffmpeg_failure_is_reported(self, walker, tmp_path, monkeypatch):
         fake = tmp_path / "ffmpeg"

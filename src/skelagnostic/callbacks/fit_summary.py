@@ -35,6 +35,7 @@ import torch
 from lightning.pytorch.utilities import rank_zero_only
 
 from skelagnostic.io.markdown import markdown_cell
+from skelagnostic.io.outputs import write_output
 
 __all__ = ["QUICK_BELOW_STEPS", "SUMMARY_MODES", "FitSummary", "SummaryContent", "summary_mode"]
 
@@ -198,7 +199,7 @@ class FitSummary(pl.Callback):
         logged = {k: _plain(v) for k, v in trainer.callback_metrics.items()}
         metrics = {**logged, **_plain(content.get("metrics", {}))}
         written = [self._file(directory, "metrics", ".json")]
-        written[0].write_text(json.dumps(metrics, indent=2) + "\n")
+        write_output(written[0], json.dumps(metrics, indent=2) + "\n")
         pictures: list[tuple[str, Path]] = []
         if content.get("renders"):
             from rich.console import Console
@@ -220,12 +221,12 @@ class FitSummary(pl.Callback):
 
             for key, figure in content["figures"].items():
                 path = self._file(directory, key, ".png")
-                figure.savefig(path)
+                write_output(path, lambda fh, figure=figure: figure.savefig(fh, format="png"))
                 plt.close(figure)
                 written.append(path)
                 pictures.append((key, path))
         summary = directory / "summary.md"
-        summary.write_text(self._markdown(trainer, logged, content, written[0], pictures))
+        write_output(summary, self._markdown(trainer, logged, content, written[0], pictures))
         written.append(summary)
         return written
 

@@ -16,6 +16,7 @@ import torch
 from lightning.pytorch.utilities import rank_zero_warn
 from PIL import Image
 
+from skelagnostic.io.outputs import write_output
 from skelagnostic.viz.html import to_html
 from skelagnostic.viz.render import contact_sheet, render_frames, write_animation
 from skelagnostic.viz.stick import RenderError
@@ -160,7 +161,8 @@ class RenderSamples(pl.Callback):
         gif = write_animation(rendering, directory / f"{stem}.gif")
         sheet = contact_sheet(rendering, frames=self.sheet_frames, columns=self.sheet_frames)
         png = directory / f"{stem}.png"
-        Image.fromarray(sheet).save(png)
+        picture = Image.fromarray(sheet)
+        write_output(png, lambda fh: picture.save(fh, format="PNG"), "renders")
         self.last_paths = (gif, png)
         if self.html:
             self.last_html = directory / f"{stem}.html"

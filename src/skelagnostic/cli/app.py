@@ -376,13 +376,16 @@ def _require_test_split(datamodule: L.LightningDataModule, run_dir: Path | None 
 
 @rank_zero_only
 def _save_config(cfg: DictConfig, run_dir: Path) -> None:
-    run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+    from skelagnostic.io.outputs import write_output
+
+    write_output(run_dir / "config.yaml", OmegaConf.to_yaml(cfg, resolve=True))
 
 
 @rank_zero_only
 def _save_predictions(predictions: Any, run_dir: Path) -> None:
-    torch.save(predictions, run_dir / "predictions.pt")
+    from skelagnostic.io.outputs import write_output
+
+    write_output(run_dir / "predictions.pt", lambda fh: torch.save(predictions, fh))
 
 
 def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetrics:
@@ -448,7 +451,9 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
     if threads is not None:
         if not isinstance(threads, int) or threads < 1:
             raise ConfigError(f"threads must be a positive integer or null, got {threads!r}")
-        torch.set_num_threads(threads)
+        from skelagnostic.cli.render import check_threads
+
+        torch.set_num_threads(check_threads(threads))  # refuses more than 4 per core
     L.seed_everything(cfg.seed, workers=True)
     datamodule = build_datamodule(cfg, pm)
     if external is not None:  # evaluate a model a plugin's reader builds, on cfg.data
@@ -843,8 +848,12 @@ def _one_line(exc: BaseException) -> str:
 
     A :class:`SkelagnosticError` is kept whole: a line end in it comes from a
     name (a file, a joint, a value), and :func:`~skelagnostic.errors.error_line`
-    shows it as ``\n``.
+    shows it as ``\n``. A system error (errno set) names its file and cause.
     """
+    # a system error (errno set); Hydra's MissingConfigException is an OSError without one
+    if isinstance(exc, OSError) and exc.errno is not None:
+        where = f" ({exc.filename})" if exc.filename else ""
+        return f"cannot read or write a file{where}: {exc.strerror or exc}"
     if isinstance(exc, SkelagnosticError):
         text = str(exc)
     else:
@@ -885,6 +894,10 @@ def main(task: str, argv: Sequence[str]) -> int:
         register_model_configs(pm)
         flags, overrides = split_hydra_flags(args)
         overrides = [expand_home_in_override(o) for o in overrides]  # data.paths=[~/mocap]
+        if not _informational(flags):  # Hydra would create an unusable run directory first
+            from skelagnostic.cli.locations import check_run_locations
+
+            check_run_locations(overrides)
         # Hydra's argparse takes its overrides as one run of positional arguments:
         # flags first, then ours and the user's overrides (user's last, so they win).
         # The plugins' config trees come from the search-path plugin in
@@ -973,6 +986,7 @@ def main(task: str, argv: Sequence[str]) -> int:
         HydraException,
         OmegaConfBaseException,
         MisconfigurationException,
+        OSError,  # e.g. a full disk while Hydra writes the run folder's .hydra/ files
     ) as exc:
         kept = "".join(_discard_failed_run(d) for d in run_dirs)
         if debug:

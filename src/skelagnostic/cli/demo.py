@@ -69,7 +69,9 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
             f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
             "see 'skelagnostic demo --help'"
         )
-    options: dict[str, Any] = {"out": Path(raw.get("out", "runs/demo"))}
+    from skelagnostic.io.outputs import check_output_dir
+
+    options: dict[str, Any] = {"out": check_output_dir(raw.get("out", "runs/demo"), "out")}
     for key, kind, default in (("seconds", float, 3.0), ("fps", float, 30.0), ("seed", int, 0)):
         try:
             options[key] = kind(raw.get(key, default))
@@ -81,6 +83,10 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
     options["gif"] = gif == "true"
     html = raw.get("html")
     options["html"] = None if html in (None, "false") else ("demo.html" if html == "true" else html)
+    if options["html"] is not None:
+        from skelagnostic.io.outputs import check_output_file
+
+        check_output_file(options["out"] / options["html"], "html")
     return [Path(w) for w in words], options
 
 
@@ -102,6 +108,7 @@ def main(argv: Sequence[str]) -> int:
     from rich.table import Table
 
     import skelagnostic as sa
+    from skelagnostic.io.outputs import write_output
     from skelagnostic.viz import render_motion, to_html
 
     console = Console(stderr=False)
@@ -157,20 +164,34 @@ def main(argv: Sequence[str]) -> int:
         console.print(table)
         labels = [str(m.name) for m in motions]
         sheet = render_motion(
-            motions, out / "demo.png", labels=labels, sheet_frames=6, columns=3, follow=True
+            motions,
+            out / "demo.png",
+            labels=labels,
+            sheet_frames=6,
+            columns=3,
+            follow=True,
+            key="out",
         )
         outputs = {"contact_sheet": str(sheet)}
         if args["gif"]:
             gif = render_motion(
-                motions, out / "demo.gif", labels=labels, max_frames=90, follow=True
+                motions,
+                out / "demo.gif",
+                labels=labels,
+                max_frames=90,
+                follow=True,
+                progress=True,
+                key="out",
             )
             outputs["animation"] = str(gif)
         if args["html"] is not None:
             page = out / args["html"]
-            to_html(motions, names=labels, out=page)
+            write_output(page, to_html(motions, names=labels), "html")
             outputs["viewer"] = str(page)
-        (out / "summary.json").write_text(
-            json.dumps({"source": source, "motions": summary, "outputs": outputs}, indent=2)
+        write_output(
+            out / "summary.json",
+            json.dumps({"source": source, "motions": summary, "outputs": outputs}, indent=2),
+            "out",
         )
     except sa.SkelagnosticError as exc:
         print(error_line("skelagnostic demo", exc), file=sys.stderr)

@@ -58,6 +58,7 @@ def main(argv: list[str]) -> int:
         from skelagnostic.cli.infer import load_from_checkpoint
         from skelagnostic.cli.render import apply_threads, parse_arguments
         from skelagnostic.export import FORMATS, export_aligner
+        from skelagnostic.io.outputs import check_output_dir
 
         words, options = parse_arguments(argv)
         if words:
@@ -88,6 +89,7 @@ def main(argv: list[str]) -> int:
             if options.get("out")
             else ckpt.parent / f"{ckpt.stem}-{fmt}"
         )
+        check_output_dir(out, "out")  # before the checkpoint is loaded
         aligner = load_from_checkpoint(ckpt, options.get("model"))
         name = options.get("model") or _registered_name(aligner)
         for path in export_aligner(aligner, fmt, out, name):

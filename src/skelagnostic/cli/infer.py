@@ -30,6 +30,7 @@ from skelagnostic.cli.render import (
     RENDER_OPTIONS,
     THREADS_HELP,
     apply_threads,
+    check_render_outputs,
     parse_arguments,
     render_from_options,
     wants_help,
@@ -243,6 +244,7 @@ def _run(
         return 0 if argv else 2
     try:
         from skelagnostic import write_bvh
+        from skelagnostic.io.outputs import check_output_file
 
         words, options = parse_arguments(argv)
         apply_threads(options)
@@ -264,6 +266,9 @@ def _run(
                 raise SkelagnosticError(f"missing option {key}=")
         if Path(options["out"]).suffix.lower() != ".bvh":
             raise SkelagnosticError(f"option out={options['out']!r}: must be a .bvh path")
+        # every output is checked before any is written (out= is written first)
+        check_output_file(options["out"], "out")
+        check_render_outputs(options, out_key="render")
         paths = [Path(w) for w in words]
         for path in paths[: 1 if verb == "transfer" else len(paths)]:
             if not path.is_file():

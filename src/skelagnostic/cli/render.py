@@ -15,6 +15,8 @@ produce motion reuse :func:`render_from_options` so that ``render=out.gif`` /
 
 from __future__ import annotations
 
+import math
+import os
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -26,7 +28,10 @@ from skelagnostic.errors import SkelagnosticError, error_line
 __all__ = [
     "RENDER_OPTIONS",
     "apply_threads",
+    "check_render_outputs",
+    "check_threads",
     "main",
+    "max_threads",
     "parse_arguments",
     "render_from_options",
     "split_end_of_options",
@@ -146,6 +151,41 @@ def parse_arguments(argv: Sequence[str]) -> tuple[list[str], dict[str, str]]:
     return positional + literal, options
 
 
+#: Suffixes of the main render output and of ``sheet=`` / ``html=``.
+_OUT_SUFFIXES = (".gif", ".mp4", ".png", ".html", ".htm")
+
+
+def check_render_outputs(options: Mapping[str, str], out_key: str = "out") -> None:
+    """Check every output the rendering options name, before anything is drawn or written.
+
+    Verbs that write other files first (``retarget out=...``) call this before
+    writing any, so an unusable ``render=`` or ``html=`` path never leaves half
+    of the outputs behind.
+
+    Args:
+        options: The verb's options.
+        out_key: Option holding the main render output.
+
+    Raises:
+        SkelagnosticError: A wrong suffix, or a path that cannot be written (a
+            directory, under a regular file, a read-only directory): one line
+            naming the option and the cause.
+    """
+    from skelagnostic.io.outputs import check_output_file
+
+    wanted = {out_key: _OUT_SUFFIXES, "sheet": (".png",), "html": (".html", ".htm")}
+    for key, suffixes in wanted.items():
+        if key not in options:
+            continue
+        path = Path(options[key])
+        if path.suffix.lower() not in suffixes:
+            raise SkelagnosticError(
+                f"option {key}={options[key]!r}: unsupported format {path.suffix!r}; "
+                f"use {', '.join(suffixes)}"
+            )
+        check_output_file(path, key)
+
+
 def render_from_options(
     motions: Sequence[Any],
     options: Mapping[str, str],
@@ -179,6 +219,7 @@ def render_from_options(
     """
     from skelagnostic.viz import render_contact_sheet, render_motion
 
+    check_render_outputs(options, out_key)
     common: dict[str, Any] = {}
     if "mode" in options:
         common["mode"] = options["mode"]
@@ -215,8 +256,9 @@ def render_from_options(
     ]
     if "html" in options and options["html"] not in html_paths:
         raise SkelagnosticError(f"option html={options['html']!r}: must be an .html path")
-    for path in html_paths:
-        written.append(_write_html(motions, path, common, marks))
+    for key in (out_key, "html"):
+        if key in options and options[key] in html_paths and Path(options[key]) not in written:
+            written.append(_write_html(motions, options[key], common, marks, key))
     if out_key in options and options[out_key] not in html_paths:
         written.append(
             render_motion(
@@ -224,16 +266,56 @@ def render_from_options(
                 options[out_key],
                 sheet_frames=sheet["frames"],
                 columns=sheet["columns"],
+                progress=True,
+                key=out_key,
                 **common,
             )
         )
     if "sheet" in options:
-        written.append(render_contact_sheet(motions, options["sheet"], **sheet, **common))
+        written.append(
+            render_contact_sheet(motions, options["sheet"], **sheet, key="sheet", **common)
+        )
     return written
 
 
 #: Help of the ``threads=`` option every file verb takes.
-THREADS_HELP = "torch intra-op threads (a positive integer); default: torch's (one per core)"
+THREADS_HELP = (
+    "torch intra-op threads (a positive integer, at most 4 per CPU core); "
+    "default: torch's (one per core)"
+)
+
+
+def max_threads() -> int:
+    """The most intra-op threads ``threads=`` may ask for: 4 per CPU core of this machine."""
+    return 4 * (os.cpu_count() or 1)
+
+
+def check_threads(value: object, key: str = "threads") -> int:
+    """Check a ``threads=`` value against this machine, before torch is given it.
+
+    Far more threads than cores only slows torch down, and a huge count makes
+    its thread pool crash the process (``threads=99999`` segfaults), so values
+    above :func:`max_threads` are refused.
+
+    Args:
+        value: The value (an ``int``, or the text of a command-line option).
+        key: The option or config key, for the message.
+
+    Returns:
+        The number of threads.
+
+    Raises:
+        SkelagnosticError: Not a positive integer, or above :func:`max_threads`.
+    """
+    text = str(value)
+    if isinstance(value, bool) or not text.isdigit() or int(text) < 1:
+        raise SkelagnosticError(f"{key}={value!r}: must be a positive integer")
+    if len(text) > 9 or int(text) > max_threads():
+        raise SkelagnosticError(
+            f"{key}={text}: at most {max_threads()} (4 per CPU core; this machine has "
+            f"{os.cpu_count() or 1})"
+        )
+    return int(text)
 
 
 def apply_threads(options: dict[str, str]) -> None:
@@ -243,16 +325,15 @@ def apply_threads(options: dict[str, str]) -> None:
     here, so ``threads=1`` works the same on every verb.
 
     Raises:
-        SkelagnosticError: Not a positive integer.
+        SkelagnosticError: Not a positive integer, or more than :func:`max_threads`.
     """
     value = options.pop("threads", None)
     if value is None:
         return
-    if not value.isdigit() or int(value) < 1:
-        raise SkelagnosticError(f"option threads={value!r}: must be a positive integer")
+    count = check_threads(value, "option threads")
     import torch
 
-    torch.set_num_threads(int(value))
+    torch.set_num_threads(count)
 
 
 def main(argv: list[str]) -> int:
@@ -278,10 +359,11 @@ def main(argv: list[str]) -> int:
             )
         if not paths:
             raise SkelagnosticError("no input: give at least one BVH file")
+        options.setdefault("out", "render.gif")
+        check_render_outputs(options)  # before the (possibly long) clips are read
         from skelagnostic import read_bvh
 
         motions = [read_bvh(path) for path in paths]
-        options.setdefault("out", "render.gif")
         for path in render_from_options(motions, options):
             print(path)
     except SkelagnosticError as error:
@@ -295,20 +377,37 @@ def _write_html(
     path: str,
     common: Mapping[str, Any],
     marks: Mapping[str, dict[int, list[int]]],
+    key: str,
 ) -> Path:
     """Write the viewer page with the options it understands (mode, follow, labels)."""
+    from skelagnostic.io.outputs import write_output
     from skelagnostic.viz import to_html
 
     extra = {key: common[key] for key in ("mode", "follow") if key in common}
-    to_html(motions, names=common.get("labels"), out=path, **marks, **extra)
+    page = to_html(motions, names=common.get("labels"), **marks, **extra)
+    write_output(path, page, key)
     return Path(path)
+
+
+def _seconds(options: Mapping[str, str], key: str, motions: Sequence[Any]) -> float:
+    """``start=`` / ``end=`` in seconds: a finite number, at least 0, at most the longest clip."""
+    value = _number(options, key, float)
+    longest = max((m.duration for m in motions if hasattr(m, "duration")), default=math.inf)
+    if not math.isfinite(value) or value < 0:
+        raise SkelagnosticError(f"option {key}={options[key]}: must be a number of seconds >= 0")
+    if key == "start" and value >= longest:
+        raise SkelagnosticError(
+            f"option start={options[key]}: past the end of every clip "
+            f"(the longest lasts {longest:.2f} s)"
+        )
+    return min(value, longest)
 
 
 def _first_frames(motions: Sequence[Any], options: Mapping[str, str]) -> list[int]:
     """First frame kept of every clip by ``start=`` (0 without it)."""
     if "start" not in options:
         return [0] * len(motions)
-    start = _number(options, "start", float)
+    start = _seconds(options, "start", motions)
     return [max(0, round(start * m.fps)) if hasattr(m, "fps") else 0 for m in motions]
 
 
@@ -357,8 +456,8 @@ def _cut(motions: Sequence[Any], options: Mapping[str, str]) -> list[Any]:
     """Apply ``start=`` / ``end=`` (seconds) to every Motion."""
     if "start" not in options and "end" not in options:
         return list(motions)
-    start = _number(options, "start", float) if "start" in options else 0.0
-    end = _number(options, "end", float) if "end" in options else None
+    start = _seconds(options, "start", motions) if "start" in options else 0.0
+    end = _seconds(options, "end", motions) if "end" in options else None
     if start < 0 or (end is not None and end <= start):
         raise SkelagnosticError(f"options start={start} end={end}: need 0 <= start < end")
     cut = []

@@ -35,6 +35,9 @@ from skelagnostic.representations import GlobalPositions, MotionRepresentation
 
 SPLITS = ("train", "val", "test")
 
+#: Highest ``data.fps``: clips are resampled to it, so a huge rate would not fit in memory.
+MAX_FPS = 1000.0
+
 
 #: Values (frames x elements x channels) per chunk of the normalisation pass. The
 #: pass reads the training windows in chunks of this fixed size, so what it
@@ -414,6 +417,11 @@ class MotionDataModule(L.LightningDataModule):
         ):
             if value <= low:
                 raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
+        if not math.isfinite(fps) or fps > MAX_FPS:  # resampling would allocate without bound
+            raise SkelagnosticError(
+                f"data.fps={fps:g}: must be a number of frames per second of at most "
+                f"{MAX_FPS:g} (the clips are resampled to it)"
+            )
         if not (
             0 <= val_fraction < 1 and 0 <= test_fraction < 1 and val_fraction + test_fraction < 1
         ):

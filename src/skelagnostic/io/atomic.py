@@ -18,6 +18,9 @@ through :func:`atomic_write`, so that all of them behave the same way:
   disk too, where the platform allows it (checkpoints ask for it; BVH files and
   rebuildable cache entries skip the extra ``fsync``).
 
+Tools that write by file name (ffmpeg, exporters) use :func:`atomic_path`: they
+write to the temporary path it gives, which replaces the target on success.
+
 Checkpoints (:func:`skelagnostic.callbacks.checkpoint_io.atomic_torch_save`) go
 through the same function with a fixed temporary name, so that a save killed
 mid-write leaves one ``<name>.tmp`` that the next save of that name reuses.

@@ -419,6 +419,7 @@ def to_html(
 
     Raises:
         RenderError: On bad arguments, or when ``out`` does not end in ``.html``/``.htm``.
+        OutputError: ``out`` cannot be written (full disk, ...); a previous page is unchanged.
 
     Examples:
         >>> import numpy as np
@@ -456,10 +457,10 @@ def to_html(
         if not sep:
             raise RuntimeError(f"viewer.html lacks the {key} slot")  # pragma: no cover
         page = head + value + tail
-    if out is not None:
-        path = Path(out)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(page, encoding="utf-8")
+    if out is not None:  # atomically: a failed write leaves the previous page as it was
+        from skelagnostic.io.outputs import write_output
+
+        write_output(out, page, "out")
     return page
 
 

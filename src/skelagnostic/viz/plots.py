@@ -436,6 +436,8 @@ def _finish(figure: Figure, out: str | Path | None) -> Figure:
         path = Path(out)
         if path.suffix.lower() not in (".png", ".svg", ".pdf"):
             raise RenderError(f"out: unsupported figure format {path.suffix!r}; use .png/.svg/.pdf")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        figure.savefig(path)
+        from skelagnostic.io.outputs import write_output
+
+        fmt = path.suffix.lower()[1:]  # atomically: a failed write keeps the previous figure
+        write_output(path, lambda fh: figure.savefig(fh, format=fmt), "out")
     return figure

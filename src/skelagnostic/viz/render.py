@@ -5,6 +5,12 @@ display) through an orthographic camera, fixed or travelling with the
 characters. Static parts (floor, labels, and with a fixed camera the grid and
 trajectories) are drawn once; per frame only the moving artists are redrawn on
 top of the saved background (blitting).
+
+Files are written frame by frame (:func:`render_motion` streams frames to the GIF or
+MP4 encoder, so memory stays flat in the clip length) and atomically
+(:mod:`skelagnostic.io.outputs`: a failed write leaves the previous file as it was).
+Sizes that cannot fit are refused before anything is drawn (:data:`MAX_PANEL_SIDE`,
+:data:`MAX_FRAME_PIXELS`, :data:`MAX_FPS`, :data:`MAX_SHEET_PIXELS`).
 """
 
 from __future__ import annotations
@@ -12,13 +18,15 @@ from __future__ import annotations
 import math
 import shutil
 import subprocess
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from skelagnostic.io.outputs import output_path, write_output
 from skelagnostic.viz.camera import Camera, auto_azimuth
 from skelagnostic.viz.stick import (
     FigureLike,
@@ -30,6 +38,10 @@ from skelagnostic.viz.stick import (
 
 __all__ = [
     "BODY_GROUP_COLORS",
+    "MAX_FPS",
+    "MAX_FRAME_PIXELS",
+    "MAX_PANEL_SIDE",
+    "MAX_SHEET_PIXELS",
     "Rendering",
     "contact_sheet",
     "render_contact_sheet",
@@ -58,6 +70,19 @@ _OVERLAY_JOINTS = ("#212121", "#6a1b9a", "#00838f", "#c62828", "#2e7d32")
 _OVERLAY_STYLES: tuple[Any, ...] = ("solid", (0, (4, 2)), (0, (1, 1.5)))
 _MODES = ("side", "overlay")
 _MARGIN = 0.08
+
+#: Largest width or height of one panel, in pixels.
+MAX_PANEL_SIDE = 4096
+#: Largest frame (all panels side by side), in pixels.
+MAX_FRAME_PIXELS = 4096 * 4096
+#: Highest output frame rate.
+MAX_FPS = 240.0
+#: Largest contact sheet, in pixels.
+MAX_SHEET_PIXELS = 8192 * 8192
+#: Longest delay a GIF frame can hold, in 1/100 s (a 16-bit field).
+_GIF_MAX_TICKS = 65535
+#: Renders of at least this many frames show a progress bar (when asked and on a terminal).
+PROGRESS_FRAMES = 100
 
 
 @dataclass
@@ -142,12 +167,69 @@ def render_frames(
         >>> out.frames.shape, out.fps
         ((31, 48, 64, 3), 30.0)
     """
+    scene = _prepare(
+        motions,
+        mode=mode,
+        labels=labels,
+        fps=fps,
+        max_frames=max_frames,
+        times=times,
+        size=size,
+        elev=elev,
+        azim=azim,
+        trajectory=trajectory,
+        follow=follow,
+        time_label=time_label,
+    )
+    try:
+        frames, boxes = scene.draw_all()
+    finally:
+        scene.close()
+    return Rendering(
+        frames=frames,
+        times=scene.times,
+        fps=scene.rate,
+        boxes=boxes,
+        panels=scene.panel_rects(),
+        names=[f.name for f in scene.figures],
+    )
+
+
+def _prepare(
+    motions: FigureLike | Sequence[FigureLike],
+    *,
+    mode: str = "side",
+    labels: Sequence[str] | None = None,
+    fps: float | None = None,
+    max_frames: int | None = None,
+    times: Sequence[float] | np.ndarray | None = None,
+    size: tuple[int, int] = (320, 320),
+    elev: float = 15.0,
+    azim: float | None = None,
+    trajectory: bool = False,
+    follow: bool = False,
+    time_label: bool = True,
+) -> _Scene:
+    """Check the arguments of :func:`render_frames` and build the scene (nothing drawn yet)."""
     figures = to_stick_figures(motions, labels)
     if mode not in _MODES:
         raise RenderError(f"mode must be one of {_MODES}, got {mode!r}")
     width, height = (int(v) for v in size)
     if width < 16 or height < 16:
         raise RenderError(f"size must be at least 16x16 pixels, got {size}")
+    if max(width, height) > MAX_PANEL_SIDE:
+        raise RenderError(
+            f"size={width}x{height}: a panel is at most {MAX_PANEL_SIDE} pixels a side"
+        )
+    panels = len(figures) if mode == "side" else 1
+    if width * panels * height > MAX_FRAME_PIXELS:
+        raise RenderError(
+            f"size={width}x{height}: {panels} panels side by side make a frame of "
+            f"{width * panels}x{height} pixels, more than the limit of {MAX_FRAME_PIXELS:,} "
+            "pixels; lower size= or use mode=overlay"
+        )
+    if fps is not None and math.isfinite(fps) and fps > MAX_FPS:
+        raise RenderError(f"fps={fps:g}: at most {MAX_FPS:g} frames per second")
     if not math.isfinite(elev) or not -90.0 <= elev <= 90.0:
         raise RenderError(f"elev must be within [-90, 90] degrees, got {elev}")
     if azim is not None and not math.isfinite(azim):
@@ -168,18 +250,8 @@ def render_frames(
         "time_label": time_label,
     }
     scene = _Scene(figures, groups, clock, (width, height), options)
-    try:
-        frames, boxes = scene.draw_all()
-    finally:
-        scene.close()
-    return Rendering(
-        frames=frames,
-        times=clock,
-        fps=rate,
-        boxes=boxes,
-        panels=scene.panel_rects(),
-        names=[f.name for f in figures],
-    )
+    scene.rate = rate
+    return scene
 
 
 def render_motion(
@@ -188,15 +260,24 @@ def render_motion(
     *,
     sheet_frames: int = 8,
     columns: int = 4,
+    progress: bool = False,
+    key: str = "out",
     **options: Any,
 ) -> Path:
     """Render motions to a file: ``.gif`` / ``.mp4`` animation or ``.png`` contact sheet.
+
+    Frames go to the encoder as they are drawn (memory does not grow with the
+    clip length) and the file is written atomically: on any failure the
+    previous file at ``out`` is left as it was.
 
     Args:
         motions: What to draw (see :func:`render_frames`).
         out: Output path; the suffix picks the format.
         sheet_frames: Number of frames on a ``.png`` contact sheet.
         columns: Columns of a ``.png`` contact sheet.
+        progress: Show a progress bar on stderr for animations of at least
+            :data:`PROGRESS_FRAMES` frames, when stderr is a terminal.
+        key: The option naming ``out``, for error messages.
         **options: Passed to :func:`render_frames` (``mode``, ``labels``,
             ``fps``, ``max_frames``, ``size``, ``elev``, ``azim``, ``trajectory``, ...).
 
@@ -205,6 +286,7 @@ def render_motion(
 
     Raises:
         RenderError: On bad arguments, an unknown suffix, or MP4 without ffmpeg.
+        OutputError: The file cannot be written (full disk, ...); ``out`` is unchanged.
 
     Examples:
         >>> import tempfile, pathlib
@@ -217,12 +299,30 @@ def render_motion(
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix == ".png":
-        return render_contact_sheet(motions, out, frames=sheet_frames, columns=columns, **options)
+        return render_contact_sheet(
+            motions, out, frames=sheet_frames, columns=columns, key=key, **options
+        )
     if suffix not in (".gif", ".mp4"):
-        raise RenderError(f"out: unsupported format {out.suffix!r}; use .gif, .mp4 or .png")
+        raise RenderError(f"{key}: unsupported format {out.suffix!r}; use .gif, .mp4 or .png")
     if suffix == ".mp4":
         _ffmpeg()  # fail before rendering when ffmpeg is missing
-    return write_animation(render_frames(motions, **options), out)
+    scene = _prepare(motions, **options)
+    try:
+        if suffix == ".gif":
+            _check_gif_rate(scene.rate)
+            palette = _gif_palette(scene.draw_frame(i)[0] for i in _sample(len(scene.times)))
+        frames = _with_progress(
+            (frame for frame, _ in scene.iter_frames()), len(scene.times), progress, out.name
+        )
+        if suffix == ".gif":
+            write_output(out, lambda fh: _write_gif(frames, scene.rate, fh, palette), key)
+        else:
+            width, height = scene.canvas.get_width_height()
+            with output_path(out, key) as tmp:
+                _write_mp4(frames, scene.rate, (height, width), tmp, out, key)
+    finally:
+        scene.close()
+    return out
 
 
 def render_contact_sheet(
@@ -231,34 +331,57 @@ def render_contact_sheet(
     *,
     frames: int = 8,
     columns: int = 4,
+    key: str = "out",
     **options: Any,
 ) -> Path:
     """Render a PNG contact sheet: ``frames`` evenly spaced instants in a grid.
 
-    Only the frames on the sheet are drawn, so this is cheap for long clips.
+    Only the frames on the sheet are drawn, each straight into its tile, so this
+    is cheap for long clips. The file is written atomically.
 
     Args:
         motions: What to draw (see :func:`render_frames`).
         out: Output ``.png`` path.
         frames: Number of instants, first and last included.
         columns: Number of columns of the grid.
+        key: The option naming ``out``, for error messages.
         **options: Passed to :func:`render_frames` (``times`` is computed here).
 
     Returns:
         The written path.
 
     Raises:
-        RenderError: On bad arguments.
+        RenderError: On bad arguments, or a sheet larger than :data:`MAX_SHEET_PIXELS`.
+        OutputError: The file cannot be written; ``out`` is unchanged.
     """
-    if frames < 1:
-        raise RenderError(f"frames must be at least 1, got {frames}")
+    if frames < 1 or columns < 1:
+        raise RenderError(f"frames and columns must be at least 1, got {frames} and {columns}")
     if "times" in options:
         raise RenderError("times: a contact sheet picks its own times; pass frames= instead")
+    out = Path(out)
+    if out.suffix.lower() != ".png":
+        raise RenderError(f"{key}: a contact sheet is a .png file, got {out.name!r}")
     figures = to_stick_figures(motions, options.pop("labels", None))
+    width, height = (int(v) for v in options.get("size", (320, 320)))
+    panels = len(figures) if options.get("mode", "side") == "side" else 1
+    columns = min(columns, frames)
+    rows = math.ceil(frames / columns)
+    pixels = (columns * (width * panels + 4)) * (rows * (height + 4))
+    if pixels > MAX_SHEET_PIXELS:
+        raise RenderError(
+            f"frames={frames}: a contact sheet of {columns}x{rows} frames of "
+            f"{width * panels}x{height} pixels is more than the limit of "
+            f"{MAX_SHEET_PIXELS:,} pixels; lower frames= or size="
+        )
     duration = max(f.duration for f in figures)
     times = np.linspace(0.0, duration, frames) if frames > 1 else np.zeros(1)
-    rendering = render_frames(figures, times=times, **options)
-    return write_contact_sheet(rendering, out, frames=frames, columns=columns)
+    scene = _prepare(figures, times=times, **options)
+    try:
+        tiles = (frame for frame, _ in scene.iter_frames())
+        sheet = _tile(tiles, len(times), np.arange(len(times)), columns, 4)
+    finally:
+        scene.close()
+    return _save_png(sheet, out, key)
 
 
 def write_animation(rendering: Rendering, out: str | Path) -> Path:
@@ -281,11 +404,15 @@ def write_animation(rendering: Rendering, out: str | Path) -> Path:
     """
     out = Path(out)
     suffix = out.suffix.lower()
-    out.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".gif":
-        _write_gif(rendering.frames, rendering.fps, out)
+        _check_gif_rate(rendering.fps)
+        frames = rendering.frames
+        palette = _gif_palette(frames[i] for i in _sample(len(frames)))
+        write_output(out, lambda fh: _write_gif(iter(frames), rendering.fps, fh, palette), "out")
     elif suffix == ".mp4":
-        _write_mp4(rendering.frames, rendering.fps, out)
+        _, h, w, _ = rendering.frames.shape
+        with output_path(out, "out") as tmp:
+            _write_mp4(iter(rendering.frames), rendering.fps, (h, w), tmp, out, "out")
     else:
         raise RenderError(f"out: unsupported animation format {out.suffix!r}; use .gif or .mp4")
     return out
@@ -308,14 +435,18 @@ def write_contact_sheet(
     Raises:
         RenderError: If ``frames`` or ``columns`` is not positive or ``out`` is not a PNG.
     """
-    from PIL import Image
-
     out = Path(out)
     if out.suffix.lower() != ".png":
         raise RenderError(f"out: a contact sheet is a .png file, got {out.name!r}")
-    sheet = contact_sheet(rendering, frames=frames, columns=columns)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(sheet).save(out)
+    return _save_png(contact_sheet(rendering, frames=frames, columns=columns), out, "out")
+
+
+def _save_png(image: np.ndarray, out: Path, key: str) -> Path:
+    """Write an RGB image as PNG, atomically."""
+    from PIL import Image
+
+    picture = Image.fromarray(image)
+    write_output(out, lambda fh: picture.save(fh, format="PNG"), key)
     return out
 
 
@@ -341,37 +472,89 @@ def contact_sheet(
     images = rendering.frames
     count = images.shape[0]
     index = np.unique(np.round(np.linspace(0, count - 1, min(frames, count))).astype(int))
-    columns = min(columns, len(index))
-    rows = math.ceil(len(index) / columns)
-    _, h, w, _ = images.shape
-    shape = (rows * h + (rows - 1) * gap, columns * w + (columns - 1) * gap, 3)
-    sheet = np.full(shape, 176, np.uint8)
-    for k, i in enumerate(index):
-        r, c = divmod(k, columns)
-        sheet[r * (h + gap) : r * (h + gap) + h, c * (w + gap) : c * (w + gap) + w] = images[i]
+    return _tile(iter(images[index]), len(index), np.arange(len(index)), columns, gap)
+
+
+def _tile(
+    images: Iterable[np.ndarray], count: int, slots: np.ndarray, columns: int, gap: int
+) -> np.ndarray:
+    """Fill a grid of ``count`` tiles row by row from images arriving one at a time."""
+    columns = min(columns, count)
+    rows = math.ceil(count / columns)
+    sheet: np.ndarray | None = None
+    for k, image in zip(slots, images, strict=False):
+        h, w, _ = image.shape
+        if sheet is None:
+            shape = (rows * h + (rows - 1) * gap, columns * w + (columns - 1) * gap, 3)
+            sheet = np.full(shape, 176, np.uint8)
+        r, c = divmod(int(k), columns)
+        sheet[r * (h + gap) : r * (h + gap) + h, c * (w + gap) : c * (w + gap) + w] = image
+    assert sheet is not None
     return sheet
 
 
-def _write_gif(frames: np.ndarray, fps: float, out: Path) -> None:
-    from PIL import Image
+def _sample(count: int) -> np.ndarray:
+    """Indices of up to eight evenly spaced frames (the GIF palette is fitted on them)."""
+    return np.unique(np.linspace(0, count - 1, min(8, count)).astype(int))
 
+
+def _check_gif_rate(fps: float) -> None:
     if fps > 50.0:
         raise RenderError(
             f"fps: a GIF plays at most 50 frames per second, got {fps:g}; lower fps or write .mp4"
         )
-    sample = frames[np.unique(np.linspace(0, len(frames) - 1, min(8, len(frames))).astype(int))]
-    palette = Image.fromarray(np.concatenate(list(sample), axis=0)).quantize(
+
+
+def _gif_palette(sample: Iterable[np.ndarray]) -> Any:
+    """One 256-colour palette image fitted on a few frames, shared by every frame."""
+    from PIL import Image
+
+    return Image.fromarray(np.concatenate(list(sample), axis=0)).quantize(
         colors=256, method=Image.Quantize.MEDIANCUT
     )
-    images = [
-        Image.fromarray(f).quantize(palette=palette, dither=Image.Dither.NONE) for f in frames
-    ]
-    # Delays in 1/100 s, rounded on the cumulative clock so playback stays real time.
-    ticks = np.round(np.arange(len(frames) + 1) * 100.0 / fps).astype(int)
-    durations = [int(d) * 10 for d in np.diff(ticks)]
-    images[0].save(
-        out, save_all=True, append_images=images[1:], duration=durations, loop=0, optimize=False
-    )
+
+
+def _write_gif(frames: Iterator[np.ndarray], fps: float, fh: Any, palette: Any) -> None:
+    """Encode frames one at a time into an animated GIF (looping, real-time delays).
+
+    Pillow's ``save(save_all=True)`` holds every frame until the end; this writes
+    each frame as it comes with Pillow's GIF block writers (``getheader`` /
+    ``getdata``): the first frame whole, the next ones cropped to what changed
+    (as Pillow does), and an unchanged frame extends the previous one's delay.
+    Only the previous frame is kept in memory.
+    """
+    from PIL import GifImagePlugin, Image, ImageChops
+
+    previous: Any = None
+    pending: tuple[Any, tuple[int, int], int] | None = None  # (image, offset, delay ms)
+    tick = 0  # delays in 1/100 s, rounded on the cumulative clock: playback stays real time
+
+    def flush() -> None:
+        if pending is not None:
+            image, offset, delay = pending
+            for block in GifImagePlugin.getdata(image, offset, duration=delay):
+                fh.write(block)
+
+    for f, frame in enumerate(frames):
+        image = Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE)
+        following = round((f + 1) * 100.0 / fps)
+        delay, tick = min(following - tick, _GIF_MAX_TICKS) * 10, following
+        if previous is None:
+            header, _ = GifImagePlugin.getheader(image, None, {"loop": 0, "optimize": False})
+            for block in header:
+                fh.write(block)
+            pending = (image, (0, 0), delay)
+        else:
+            box = ImageChops.difference(previous, image).getbbox()
+            if box is None and pending is not None:  # unchanged: the last frame stays longer
+                pending = (pending[0], pending[1], min(pending[2] + delay, _GIF_MAX_TICKS * 10))
+                continue
+            flush()
+            box = box or (0, 0, 1, 1)
+            pending = (image.crop(box), box[:2], delay)
+        previous = image
+    flush()
+    fh.write(b";")
 
 
 def _ffmpeg() -> str:
@@ -387,13 +570,46 @@ def _ffmpeg() -> str:
     return exe
 
 
-def _write_mp4(frames: np.ndarray, fps: float, out: Path) -> None:
+def _with_progress(
+    frames: Iterator[np.ndarray], count: int, progress: bool, name: str
+) -> Iterator[np.ndarray]:
+    """``frames``, with a Rich progress bar on stderr for long renders on a terminal."""
+    if not progress or count < PROGRESS_FRAMES:
+        yield from frames
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    console = Console(stderr=True)
+    if not console.is_terminal:
+        yield from frames
+        return
+    columns = (
+        "{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=console, transient=True) as bar:
+        task = bar.add_task(f"render {name}", total=count)
+        for frame in frames:
+            yield frame
+            bar.advance(task)
+
+
+def _write_mp4(
+    frames: Iterator[np.ndarray],
+    fps: float,
+    shape: tuple[int, int],
+    path: Path,
+    out: Path,
+    key: str,
+) -> None:
+    """Pipe frames one at a time to ffmpeg, which writes an MP4 at ``path``."""
     exe = _ffmpeg()
-    _, h, w, _ = frames.shape
+    h, w = shape
     # yuv420p (playable everywhere) needs even dimensions: pad by one white row/column.
     pad_h, pad_w = h % 2, w % 2
-    if pad_h or pad_w:
-        frames = np.pad(frames, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)), constant_values=255)
     command = [
         exe,
         "-y",
@@ -412,14 +628,36 @@ def _write_mp4(frames: np.ndarray, fps: float, out: Path) -> None:
         "-an",
         "-pix_fmt",
         "yuv420p",
-        str(out),
+        "-f",
+        "mp4",
+        str(path),
     ]
-    result = subprocess.run(
-        command, input=np.ascontiguousarray(frames).tobytes(), capture_output=True, check=False
-    )
-    if result.returncode != 0:
-        message = result.stderr.decode(errors="replace").strip()
-        raise RenderError(f"out: ffmpeg failed writing {out} (exit {result.returncode}): {message}")
+    with tempfile.TemporaryFile() as log:
+        process = subprocess.Popen(
+            command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log
+        )
+        assert process.stdin is not None
+        try:
+            for frame in frames:
+                if pad_h or pad_w:
+                    frame = np.pad(frame, ((0, pad_h), (0, pad_w), (0, 0)), constant_values=255)
+                process.stdin.write(np.ascontiguousarray(frame).tobytes())
+        except BrokenPipeError:
+            pass  # ffmpeg stopped: its exit code and message tell why
+        except BaseException:
+            process.kill()
+            process.wait()
+            raise
+        finally:
+            try:
+                process.stdin.close()
+            except BrokenPipeError:
+                pass
+        code = process.wait()
+        if code != 0:
+            log.seek(0)
+            message = " ".join(log.read().decode(errors="replace").split())
+            raise RenderError(f"{key}: ffmpeg failed writing {out} (exit {code}): {message}")
 
 
 def _nice_step(extent: float) -> float:
@@ -461,6 +699,10 @@ class _Scene:
         self.figures = figures
         self.size = size
         self.times = times
+        #: Playback rate of the frames (set by :func:`_prepare`).
+        self.rate = 0.0
+        self.background: Any = None
+        self.projected: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.world = [f.sample(times) for f in figures]  # [F, J, 3] z-up
         width, height = size
         dpi = 100.0
@@ -652,49 +894,61 @@ class _Scene:
 
     def draw_all(self) -> tuple[np.ndarray, np.ndarray]:
         """Draw every frame; returns ``[F, H, W, 3]`` frames and ``[F, C, 4]`` boxes."""
-        self.canvas.draw()
-        background = self.canvas.copy_from_bbox(self.figure.bbox)
+        frames, boxes = [], []
+        for frame, box in self.iter_frames():
+            frames.append(frame)
+            boxes.append(box)
+        return np.stack(frames), np.stack(boxes)
+
+    def iter_frames(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Draw the frames one after the other: ``([H, W, 3]`` image, ``[C, 4]`` boxes)."""
+        for f in range(len(self.times)):
+            yield self.draw_frame(f)
+
+    def draw_frame(self, f: int) -> tuple[np.ndarray, np.ndarray]:
+        """Draw frame ``f``: its ``[H, W, 3]`` image and the ``[C, 4]`` character boxes."""
+        if self.background is None:
+            self.canvas.draw()
+            self.background = self.canvas.copy_from_bbox(self.figure.bbox)
+            for k, world in enumerate(self.world):
+                panel = self.panel_of[k]
+                self.projected[k] = panel.camera.project(world - panel.shift[:, None])
+        projected = self.projected
         total_height = self.canvas.get_width_height()[1]
-        frames = []
-        boxes = np.zeros((len(self.times), len(self.figures), 4))
-        projected = {}
-        for k, world in enumerate(self.world):
-            panel = self.panel_of[k]
-            projected[k] = panel.camera.project(world - panel.shift[:, None])
-        for f, t in enumerate(self.times):
-            self.canvas.restore_region(background)
-            for panel in self.panels:
-                if panel.grid is not None:  # slides by the shift modulo one cell
-                    grid, lines = panel.grid
-                    offset = np.mod(panel.shift[f], panel.grid_step)
-                    grid.set_segments(panel.camera.project(lines - offset)[0])
-                    panel.ax.draw_artist(grid)
-                for path, segments in panel.paths:
-                    path.set_segments(panel.camera.project(segments - panel.shift[f])[0])
-                    panel.ax.draw_artist(path)
-            for k, figure in enumerate(self.figures):
-                uv, depth = projected[k][0][f], projected[k][1][f]
-                ax = self.panel_of[k].ax
-                bones = self.bone_artists[k]
-                if len(figure.bones):
-                    order = np.argsort(depth[figure.bones].mean(axis=1))
-                    bones.set_segments(uv[figure.bones[order]])
-                    bones.set_color(self.bone_colors[k][order])
-                    ax.draw_artist(bones)
-                self.joint_artists[k].set_data(uv[:, 0], uv[:, 1])
-                ax.draw_artist(self.joint_artists[k])
-                pixels = ax.transData.transform(uv)
-                boxes[f, k] = (
-                    pixels[:, 0].min(),
-                    total_height - pixels[:, 1].max(),
-                    pixels[:, 0].max(),
-                    total_height - pixels[:, 1].min(),
-                )
-            if self.clock is not None:
-                self.clock.set_text(f"{t:6.2f} s")
-                self.clock.axes.draw_artist(self.clock)
-            frames.append(np.asarray(self.canvas.buffer_rgba())[..., :3].copy())
-        return np.stack(frames), boxes
+        boxes = np.zeros((len(self.figures), 4))
+        t = self.times[f]
+        self.canvas.restore_region(self.background)
+        for panel in self.panels:
+            if panel.grid is not None:  # slides by the shift modulo one cell
+                grid, lines = panel.grid
+                offset = np.mod(panel.shift[f], panel.grid_step)
+                grid.set_segments(panel.camera.project(lines - offset)[0])
+                panel.ax.draw_artist(grid)
+            for path, segments in panel.paths:
+                path.set_segments(panel.camera.project(segments - panel.shift[f])[0])
+                panel.ax.draw_artist(path)
+        for k, figure in enumerate(self.figures):
+            uv, depth = projected[k][0][f], projected[k][1][f]
+            ax = self.panel_of[k].ax
+            bones = self.bone_artists[k]
+            if len(figure.bones):
+                order = np.argsort(depth[figure.bones].mean(axis=1))
+                bones.set_segments(uv[figure.bones[order]])
+                bones.set_color(self.bone_colors[k][order])
+                ax.draw_artist(bones)
+            self.joint_artists[k].set_data(uv[:, 0], uv[:, 1])
+            ax.draw_artist(self.joint_artists[k])
+            pixels = ax.transData.transform(uv)
+            boxes[k] = (
+                pixels[:, 0].min(),
+                total_height - pixels[:, 1].max(),
+                pixels[:, 0].max(),
+                total_height - pixels[:, 1].min(),
+            )
+        if self.clock is not None:
+            self.clock.set_text(f"{t:6.2f} s")
+            self.clock.axes.draw_artist(self.clock)
+        return np.asarray(self.canvas.buffer_rgba())[..., :3].copy(), boxes
 
     def close(self) -> None:
         """Release the figure."""
