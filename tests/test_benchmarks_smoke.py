@@ -14,7 +14,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Suites checked here (extend when a suite is added to benchmarks/run.py).
 SUITES = [
     "io", "kinematics", "matching", "bigdata", "training", "quality", "inference", "scaling",
-    "allocators",
+    "allocators", "startup",
 ]  # fmt: skip
 RESULT_KEYS = {
     "name", "unit", "value", "baseline", "baseline_value", "speedup", "higher_is_better",
