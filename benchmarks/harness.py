@@ -9,11 +9,18 @@ Every process a benchmark starts dies with the process that started it, so
 killing ``benchmarks/run.py`` (even with ``SIGKILL``) leaves no measurement
 running: start subprocesses with :func:`run_process` (or :func:`run_child`), and
 call :func:`die_with_parent` first thing in a forked child.
+
+A process start that fails on the machine's state (``EAGAIN``: no process slot or
+memory to fork; ``ENOMEM``) is retried a few times with a growing pause
+(:func:`retry_busy`, which :func:`run_process` and the scaling suite's fork use, and
+the tests' ``subprocess.Popen``, see ``tests/conftest.py``); after the last attempt it
+raises :class:`MachineBusyError`, which the tests report as a skip, not a failure.
 """
 
 from __future__ import annotations
 
 import ctypes
+import errno
 import functools
 import gc
 import importlib
@@ -31,7 +38,9 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+T = TypeVar("T")
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SIZES = ("smoke", "default", "large")
@@ -42,6 +51,12 @@ THREADS_ENV = "SKELAGNOSTIC_BENCH_THREADS"
 PARENT_POLL_S = 0.5
 #: ``prctl`` option asking Linux to signal a process when its parent exits (``linux/prctl.h``).
 _PR_SET_PDEATHSIG = 1
+#: ``errno`` of a process start that failed on the machine's state, not on the command.
+BUSY_ERRNOS = frozenset({errno.EAGAIN, errno.ENOMEM})
+#: Attempts of :func:`retry_busy`, and its first pause in seconds (doubled after each
+#: failure: 0.5 + 1 + 2 + 4 = 7.5 s of waiting at most).
+SPAWN_ATTEMPTS = 5
+SPAWN_BACKOFF_S = 0.5
 
 
 @dataclass
@@ -180,6 +195,76 @@ def die_with_parent(parent: int) -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
 
+class MachineBusyError(OSError):
+    """A process could not be started in :data:`SPAWN_ATTEMPTS` attempts: no memory or slot.
+
+    Its ``errno`` is that of the last attempt (``EAGAIN`` or ``ENOMEM``).
+    """
+
+
+_retrying = threading.local()
+
+
+def retry_busy(
+    start: Callable[[], T],
+    what: str = "a process",
+    *,
+    attempts: int | None = None,
+    backoff: float | None = None,
+    sleep: Callable[[float], object] | None = None,
+) -> T:
+    """``start()``, again after a pause while it fails with ``EAGAIN`` or ``ENOMEM``.
+
+    ``start`` starts a process (``subprocess.Popen(...)``, ``os.fork``); on a busy
+    machine the kernel can refuse the fork for lack of memory or process slots
+    (``BlockingIOError: [Errno 11]``), which says nothing about the command. A failed
+    start leaves no child behind, so trying again is safe. Other errors (a missing
+    program, a bad argument) are raised at once. A call inside another's ``start``
+    (a ``Popen`` that retries, called by a helper that retries) makes one attempt:
+    the outer call does the retrying.
+
+    Args:
+        start: Starts the process and returns what stands for it.
+        what: The process, for the message (e.g. the program's name).
+        attempts: How many times to try (default :data:`SPAWN_ATTEMPTS`).
+        backoff: Seconds to wait after the first failure, doubled after each next one
+            (default :data:`SPAWN_BACKOFF_S`).
+        sleep: The pause (default ``time.sleep``).
+
+    Returns:
+        What ``start`` returned.
+
+    Raises:
+        MachineBusyError: Every attempt failed with ``EAGAIN`` or ``ENOMEM``.
+    """
+    attempts = SPAWN_ATTEMPTS if attempts is None else attempts
+    backoff = SPAWN_BACKOFF_S if backoff is None else backoff
+    sleep = time.sleep if sleep is None else sleep
+    if attempts < 1:
+        raise ValueError(f"attempts must be >= 1, not {attempts}")
+    if getattr(_retrying, "active", False):
+        return start()
+    _retrying.active = True
+    try:
+        for attempt in range(attempts):
+            try:
+                return start()
+            except OSError as error:
+                if error.errno not in BUSY_ERRNOS or isinstance(error, MachineBusyError):
+                    raise
+                if attempt + 1 == attempts:
+                    raise MachineBusyError(
+                        error.errno,
+                        f"could not start {what} in {attempts} attempts over "
+                        f"{backoff * (2 ** (attempts - 1) - 1):g} s: {error.strerror} "
+                        "(the machine is out of memory or processes)",
+                    ) from error
+                sleep(backoff * 2**attempt)
+    finally:
+        _retrying.active = False
+    raise AssertionError("unreachable: the last attempt returns or raises")
+
+
 def run_process(
     args: list[str], *, input: str | None = None, **kwargs: Any
 ) -> subprocess.CompletedProcess[str]:
@@ -199,19 +284,26 @@ def run_process(
     Returns:
         The finished process (``returncode``, ``stdout``, ``stderr``); a failure is
         not raised (``check=False``).
+
+    Raises:
+        MachineBusyError: The process could not be started (:func:`retry_busy`).
     """
     if sys.platform.startswith("linux"):
         kwargs["preexec_fn"] = functools.partial(die_with_parent, os.getpid())
     else:
         kwargs["start_new_session"] = True
-    with subprocess.Popen(
-        args,
-        stdin=None if input is None else subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        **kwargs,
-    ) as proc:
+    popen = retry_busy(
+        lambda: subprocess.Popen(
+            args,
+            stdin=None if input is None else subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            **kwargs,
+        ),
+        what=repr(Path(args[0]).name),
+    )
+    with popen as proc:
         try:
             stdout, stderr = proc.communicate(input)
         except BaseException:

@@ -81,6 +81,7 @@ SUITES: dict[str, str] = {
     "inference": "benchmarks.suites.inference",
     "scaling": "benchmarks.suites.scaling",
     "allocators": "benchmarks.suites.allocators",
+    "startup": "benchmarks.suites.startup",
 }
 #: Parts of a suite that also run alone (``--suite training_humot``); ``all`` runs them only
 #: inside their suite.

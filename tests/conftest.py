@@ -4,15 +4,26 @@ The method plugins' packages (``skelagnostic_humot``, ``skelagnostic_pcmrl``,
 ``skelagnostic_vqpae``) ship in the distribution, so the tests import them like
 users do; their shared fixtures (a plugin manager per method, small network
 sizes) live here, once.
+
+A busy machine does not fail tests: every ``subprocess.Popen`` a test starts (also
+through ``subprocess.run``) retries a start the kernel refused for lack of memory or
+process slots (``EAGAIN``/``ENOMEM``, :func:`benchmarks.harness.retry_busy`); a start
+that still fails, and an allocation the machine could give when idle but not now
+(a ``MemoryError`` or torch's "can't allocate memory" for no more than its RAM), skip
+the test with the reason instead of failing it. A request larger than the machine's
+RAM still fails: that is a bug, not the machine's state.
 """
 
 from __future__ import annotations
 
 import importlib
 import os
+import re
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 # Tests run in 2 xdist workers on 2-core machines: one intra-op thread per worker
 # (and per subprocess, through the environment) avoids oversubscription, which
@@ -28,6 +39,97 @@ if TYPE_CHECKING:
 torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))
+try:
+    from benchmarks.harness import MachineBusyError, retry_busy
+finally:
+    sys.path.remove(str(REPO_ROOT))
+
+
+# ------------------------------------------------------------------------ a busy machine
+_Popen = subprocess.Popen
+
+
+class RetryingPopen(_Popen):  # type: ignore[type-arg]
+    """``subprocess.Popen`` whose start is retried on ``EAGAIN``/``ENOMEM`` (``retry_busy``).
+
+    A failed start closes the pipes it opened and leaves no child, so ``__init__``
+    can run again on the same object.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        command = args[0] if args else kwargs.get("args")
+        first = command if isinstance(command, (str, bytes)) else next(iter(command or ()), "")
+        retry_busy(lambda: _Popen.__init__(self, *args, **kwargs), what=repr(os.fspath(first)))
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _retrying_popen() -> Iterator[None]:
+    """Every test's ``subprocess.Popen`` (also under ``run``) is a :class:`RetryingPopen`."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(subprocess, "Popen", RetryingPopen)
+        yield
+
+
+def _ram_bytes() -> int | None:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+#: torch's CPU allocator failure: "... you tried to allocate 123 bytes. Error code 12 ...".
+_TORCH_ALLOC = re.compile(r"can't allocate memory: you tried to allocate (\d+) bytes")
+
+
+def machine_state_reason(error: BaseException) -> str | None:
+    """Why ``error`` is the machine's state rather than the code's, or ``None`` if it is not.
+
+    Args:
+        error: What a test (or its set-up) raised.
+
+    Returns:
+        A skip reason for a process start that failed after the retries
+        (:class:`~benchmarks.harness.MachineBusyError`), or for a ``MemoryError`` /
+        torch allocation failure of at most the machine's RAM (a request of unknown
+        size counts as one); ``None`` for anything else, a larger request included.
+    """
+    if isinstance(error, MachineBusyError):
+        return f"the machine is busy: {error.strerror}"
+    requested: int | None = None
+    if isinstance(error, MemoryError):
+        requested = getattr(error, "_total_size", None)  # numpy's _ArrayMemoryError
+    elif isinstance(error, RuntimeError) and (found := _TORCH_ALLOC.search(str(error))):
+        requested = int(found.group(1))
+    else:
+        return None
+    ram = _ram_bytes()
+    if requested is not None and ram is not None and requested > ram:
+        return None  # more than the machine has: a bug
+    size = "" if requested is None else f" of {requested / 2**20:.0f} MiB"
+    return f"the machine's memory is full: an allocation{size} failed ({type(error).__name__})"
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item: pytest.Item) -> Iterator[None]:
+    """A fixture that could not start a process or allocate for the machine's state: a skip."""
+    try:
+        return (yield)
+    except (OSError, MemoryError, RuntimeError) as error:
+        if (reason := machine_state_reason(error)) is None:
+            raise
+        pytest.skip(reason)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    """A test that could not start a process or allocate for the machine's state: a skip."""
+    try:
+        return (yield)
+    except (OSError, MemoryError, RuntimeError) as error:
+        if (reason := machine_state_reason(error)) is None:
+            raise
+        pytest.skip(reason)
 
 
 def shared_data_dir() -> Path | None:

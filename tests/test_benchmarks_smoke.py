@@ -14,7 +14,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 #: Suites checked here (extend when a suite is added to benchmarks/run.py).
 SUITES = [
     "io", "kinematics", "matching", "bigdata", "training", "quality", "inference", "scaling",
-    "allocators",
+    "allocators", "startup",
 ]  # fmt: skip
 RESULT_KEYS = {
     "name", "unit", "value", "baseline", "baseline_value", "speedup", "higher_is_better",
@@ -65,6 +65,8 @@ def test_suite_smoke_writes_valid_json(suite: str, tmp_path: Path) -> None:
          "--threads", "1", "--json", str(out)],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, check=False,
     )  # fmt: skip
+    if proc.returncode != 0 and "MachineBusyError" in proc.stderr:  # benchmarks.harness
+        pytest.skip(f"the machine is busy: {proc.stderr.strip().splitlines()[-1]}")
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert suite in proc.stdout  # the rich table was printed
     check_report(json.loads(out.read_text()), suite)

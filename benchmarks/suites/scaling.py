@@ -62,7 +62,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from benchmarks.harness import REPO_ROOT, Result, die_with_parent, peak_rss, run_child
+from benchmarks.harness import (
+    REPO_ROOT,
+    Result,
+    die_with_parent,
+    peak_rss,
+    retry_busy,
+    run_child,
+)
 
 #: The methods, in report order.
 METHODS = ("vqpae", "humot", "pcmrl_recon", "pcmrl_interp")
@@ -305,7 +312,7 @@ def forked(
     name = Path(tempfile.gettempdir()) / f"skelagnostic-scaling-{parent}-{uuid.uuid4().hex}.json"
     sys.stdout.flush()
     sys.stderr.flush()
-    pid = os.fork()
+    pid = retry_busy(os.fork, "a measuring process")
     if pid:
         return pid, name
     die_with_parent(parent)
