@@ -51,3 +51,30 @@ def plugin_env(tmp_path: Path, name: str, module: str, src: Path) -> dict[str, s
     env["OMP_NUM_THREADS"] = "1"
     env.pop("SKELAGNOSTIC_DEBUG", None)
     return env
+
+
+#: A small example-aligner fit on procedural data, one thread (Hydra overrides).
+SMALL = [
+    "model=example",
+    "model.hidden=16",
+    "model.latent=4",
+    "data.seconds=2.0",
+    "data.clips_per_gait=1",
+    "data.window=16",
+    "data.stride=4",
+    "data.batch_size=4",
+    "trainer.limit_val_batches=1",
+    "trainer.enable_model_summary=false",
+    "threads=1",
+    "seed=7",
+]
+
+#: Overrides that write last.ckpt after every step (the default waits for an epoch end).
+EVERY_STEP = [
+    "+callbacks.resume._target_=lightning.pytorch.callbacks.ModelCheckpoint",
+    "+callbacks.resume.dirpath=${run_dir}/checkpoints",
+    "+callbacks.resume.save_top_k=0",
+    "+callbacks.resume.save_last=true",
+    "+callbacks.resume.every_n_train_steps=1",
+    "callbacks.model_checkpoint.save_last=false",
+]

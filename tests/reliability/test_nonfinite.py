@@ -16,36 +16,11 @@ import lightning as L
 import pytest
 import torch
 from lightning.pytorch.callbacks import ModelCheckpoint
+from reliability_env import EVERY_STEP, SMALL
 from torch.utils.data import DataLoader
 
 from skelagnostic.callbacks import NonFiniteTrainingError, StopOnNonFinite
 from skelagnostic.core.finite import first_non_finite
-
-#: Small procedural data, one thread.
-SMALL = [
-    "model=example",
-    "model.hidden=16",
-    "model.latent=4",
-    "data.seconds=2.0",
-    "data.clips_per_gait=1",
-    "data.window=16",
-    "data.stride=4",
-    "data.batch_size=4",
-    "trainer.limit_val_batches=1",
-    "trainer.enable_model_summary=false",
-    "threads=1",
-    "seed=7",
-]
-
-#: last.ckpt after every step (the default checkpoint waits for the end of an epoch).
-EVERY_STEP = [
-    "+callbacks.resume._target_=lightning.pytorch.callbacks.ModelCheckpoint",
-    "+callbacks.resume.dirpath=${run_dir}/checkpoints",
-    "+callbacks.resume.save_top_k=0",
-    "+callbacks.resume.save_last=true",
-    "+callbacks.resume.every_n_train_steps=1",
-    "callbacks.model_checkpoint.save_last=false",
-]
 
 
 def fit(env: dict[str, str], cwd: Path, run_dir: Path, *extra: str) -> subprocess.CompletedProcess:

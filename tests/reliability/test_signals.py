@@ -19,33 +19,10 @@ from pathlib import Path
 import lightning as L
 import pytest
 import torch
-from reliability_env import EXAMPLE_SRC, REPO
+from reliability_env import EVERY_STEP, EXAMPLE_SRC, REPO, SMALL
 
 from skelagnostic.cli.runs import LOCK_FILE
 
-SMALL = [
-    "model=example",
-    "model.hidden=16",
-    "model.latent=4",
-    "data.seconds=2.0",
-    "data.clips_per_gait=1",
-    "data.window=16",
-    "data.stride=4",
-    "data.batch_size=4",
-    "trainer.limit_val_batches=1",
-    "trainer.enable_model_summary=false",
-    "threads=1",
-    "seed=7",
-]
-#: last.ckpt after every step.
-EVERY_STEP = [
-    "+callbacks.resume._target_=lightning.pytorch.callbacks.ModelCheckpoint",
-    "+callbacks.resume.dirpath=${run_dir}/checkpoints",
-    "+callbacks.resume.save_top_k=0",
-    "+callbacks.resume.save_last=true",
-    "+callbacks.resume.every_n_train_steps=1",
-    "callbacks.model_checkpoint.save_last=false",
-]
 CLIP = REPO / "tests" / "badinput" / "corpus" / "valid_small.bvh"
 
 
