@@ -24,7 +24,6 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import torch
@@ -45,7 +44,6 @@ __all__ = [
     "fit_summary",
     "overlap_figures",
     "shared_codes_sentence",
-    "summary_of_run",
     "table2_summary",
     "transfer_picture",
     "transfer_summary",
@@ -539,72 +537,3 @@ def overlap_figures(aligner: VqpaeAligner, embeddings: Mapping[str, list[Any]]) 
             n: int(c.unique().numel()) for n, c in zip(aligner.dataset_names, codes, strict=True)
         },
     }
-
-
-def summary_of_run(
-    run_dir: str | Path,
-    out_dir: str | Path | None = None,
-    mode: str = "full",
-    checkpoint: str = "last",
-) -> list[Path]:
-    """The end-of-fit summary of a finished VQ-PAE run, computed again from its checkpoint.
-
-    The run's saved ``config.yaml`` (model and data) and ``split.json`` rebuild its
-    data module with the same clips in each split; ``checkpoints/<checkpoint>.ckpt``
-    (``last``: the weights the fit's own summary saw) gives the aligner. The files
-    are those of the fit summary (``vqpae_metrics.json``, ``summary.md``,
-    ``vqpae_transfer.png``, ...), written into ``out_dir``.
-
-    Args:
-        run_dir: The run directory of a ``skelagnostic fit model=vqpae ...``.
-        out_dir: Where the files go (default: ``<run_dir>/summary_again``).
-        mode: ``"full"`` or ``"quick"`` (:data:`SUMMARY_PLANS`).
-        checkpoint: ``"last"`` or ``"best"``.
-
-    Returns:
-        The written paths.
-
-    Raises:
-        SkelagnosticError: Not a run directory, a checkpoint missing or of another
-            model, or an unknown mode.
-    """
-    from types import SimpleNamespace
-
-    from omegaconf import OmegaConf
-
-    from skelagnostic.aligners.checkpoints import load_checkpoint, read_checkpoint
-    from skelagnostic.callbacks import FitSummary
-    from skelagnostic.cli.app import build_datamodule, compose
-    from skelagnostic.cli.runs import CONFIG_FILE, checkpoint_of, read_split, reuse_run_config
-    from skelagnostic.plugins import get_plugin_manager
-
-    if mode not in SUMMARY_PLANS:
-        raise SkelagnosticError(f"mode: one of {', '.join(SUMMARY_PLANS)}, got {mode!r}")
-    run = Path(run_dir)
-    if not (run / CONFIG_FILE).is_file():
-        raise SkelagnosticError(f"run_dir: {str(run)!r} holds no {CONFIG_FILE} (not a run)")
-    out = Path(out_dir) if out_dir is not None else run / "summary_again"
-    saved = OmegaConf.load(run / CONFIG_FILE)
-    pm = get_plugin_manager()
-    spec = pm.aligner(saved.model.name)
-    cfg = compose([f"model={saved.model.name}", f"run_dir={out}"], plugin_manager=pm)
-    reuse_run_config(cfg, saved, [])
-    datamodule = build_datamodule(cfg, pm)
-    datamodule.recorded_splits = read_split(run)
-    datamodule.setup("fit")
-    ckpt = checkpoint_of(run, checkpoint)
-    aligners = pm.aligner_classes()
-    state = read_checkpoint(ckpt, spec.module, option="run_dir", aligners=aligners)
-    aligner = load_checkpoint(spec.module, ckpt, option="run_dir", aligners=aligners).eval()
-    trainer = SimpleNamespace(
-        datamodule=datamodule,
-        global_step=int(state.get("global_step", 0)),
-        current_epoch=int(state.get("epoch", 0)),
-        callback_metrics={},
-    )
-    with torch.no_grad():
-        content = fit_summary(aligner, trainer, mode=mode)  # type: ignore[arg-type]
-    reason = f"computed again from {ckpt.name} of {run.name}, summary={mode}"
-    content["metrics"] = {"summary": {"mode": mode, "reason": reason}, **content["metrics"]}
-    out.mkdir(parents=True, exist_ok=True)
-    return FitSummary(name=saved.model.name).write(trainer, content, out)  # type: ignore[arg-type]
