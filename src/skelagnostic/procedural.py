@@ -361,7 +361,8 @@ def generate(
         ``synthetic=True``.
 
     Raises:
-        SkelagnosticError: For unknown kinds or gaits, non-positive durations, or an
+        SkelagnosticError: For unknown kinds or gaits, non-positive or non-finite
+            durations or frame rates, or an
             unknown ``root_carrier`` or ``channels``.
 
     Examples:
@@ -378,8 +379,10 @@ def generate(
         raise SkelagnosticError(
             f"unknown gait {gait!r} for a {morph}; known: {', '.join(GAITS[morph])}"
         )
-    if not seconds > 0 or not fps > 0:
-        raise SkelagnosticError(f"seconds and fps must be positive, got {seconds} and {fps}")
+    if not 0 < seconds < math.inf or not 0 < fps < math.inf:
+        raise SkelagnosticError(
+            f"seconds and fps must be positive and finite, got {seconds} and {fps}"
+        )
     if root_carrier not in _ROOT_CARRIERS:
         raise SkelagnosticError(
             f"root_carrier must be one of {', '.join(map(repr, _ROOT_CARRIERS))}, "

@@ -292,6 +292,38 @@ def test_render_refuses_sizes_that_cannot_fit_before_drawing(
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        ("fps=1e6", "option fps='1e6': must be above 0 and at most 240"),
+        ("fps=nan", "option fps='nan': must be above 0 and at most 240"),
+        ("seconds=inf", "option seconds='inf': must be above 0 and at most 600"),
+        ("seconds=1e9", "option seconds='1e9': must be above 0 and at most 600"),
+    ],
+)
+def test_demo_refuses_clip_sizes_before_generating(
+    tmp_path: Path, capsys, monkeypatch, option: str, message: str
+) -> None:
+    import skelagnostic.procedural as procedural
+
+    def never(*args: object, **kwargs: object) -> None:
+        raise AssertionError("generated before the options were checked")
+
+    monkeypatch.setattr(procedural, "generate", never)
+    assert cli.main(["demo", option, f"out={tmp_path / 'demo'}"]) == 2
+    line = one_error(capsys, "demo")
+    assert message in line
+    documented(line, tmp_path)
+    assert not (tmp_path / "demo").exists()
+
+
+def test_procedural_refuses_an_infinite_duration() -> None:
+    import skelagnostic as sa
+
+    with pytest.raises(SkelagnosticError, match="must be positive and finite, got inf"):
+        sa.procedural.generate(seconds=float("inf"))
+
+
 def test_end_far_past_the_clip_is_its_end(tmp_path: Path, capsys) -> None:
     out = tmp_path / "a.gif"
     assert cli.main(["render", str(CLIP), "end=1e308", "size=32", f"out={out}"]) == 0

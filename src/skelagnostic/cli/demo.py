@@ -23,11 +23,14 @@ _DEFAULT_CLIPS = (
 )
 
 
+#: Longest procedural clip ``demo`` generates, in seconds.
+MAX_SECONDS = 600.0
+
 #: Options of ``skelagnostic demo`` with their help.
 OPTIONS: dict[str, str] = {
     "out": "output directory; default runs/demo",
-    "seconds": "procedural clip length in seconds; default 3",
-    "fps": "procedural frame rate; default 30",
+    "seconds": "procedural clip length in seconds, at most 600; default 3",
+    "fps": "procedural frame rate, at most 240; default 30",
     "seed": "procedural seed; default 0",
     "gif": "false to skip the animated GIF; default true",
     "html": "also write the interactive 3D viewer: a file name (in out=) or true for demo.html",
@@ -77,6 +80,14 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
             options[key] = kind(raw.get(key, default))
         except ValueError:
             raise SkelagnosticError(f"option {key}={raw[key]!r}: not a number") from None
+    from skelagnostic.viz.render import MAX_FPS
+
+    # Checked before anything is generated: fps=1e6 would allocate millions of frames.
+    for key, limit in (("seconds", MAX_SECONDS), ("fps", MAX_FPS)):
+        if not 0 < options[key] <= limit:
+            raise SkelagnosticError(
+                f"option {key}={raw.get(key)!r}: must be above 0 and at most {limit:g}"
+            )
     gif = raw.get("gif", "true").lower()
     if gif not in ("true", "false"):
         raise SkelagnosticError(f"option gif={raw['gif']!r}: true or false")
