@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         metavar="NAME",
         help="restart on this memory allocator first: tcmalloc, jemalloc, system, or a "
-        "library path (see SKELAGNOSTIC_ALLOCATOR in docs/performance.md)",
+        "library path (see SKELAGNOSTIC_ALLOCATOR in docs/cli.md)",
     )
     args = parser.parse_args(argv)
     if args.allocator is not None:

@@ -5,7 +5,7 @@ PyTorch's CPU tensors come from ``malloc``. glibc serves every block above its
 kernel on ``free``, so a training step whose activations are large maps and
 zeroes them again at every step: page faults, counted as system time. PC-MRL's
 stage 1 at the paper's batch spends about a third of its step there
-(docs/performance.md, "Memory allocator"). tcmalloc keeps freed blocks for the
+(docs/reports/performance.md, "Suite `allocators`"). tcmalloc keeps freed blocks for the
 next step; PyTorch's own CPU tuning guide recommends it or jemalloc.
 
 An allocator has to be loaded before the process starts (``LD_PRELOAD``), so
@@ -50,7 +50,7 @@ SYSTEM = ("system", "glibc", "default", "")
 #: PyTorch's CPU launcher (``torch.backends.xeon.run_cpu``) plus no decay, so freed
 #: pages stay mapped for the next step as with tcmalloc. With jemalloc's defaults, or
 #: the launcher's options alone, training steps were slower than on glibc here
-#: (docs/performance.md, "Suite allocators").
+#: (docs/reports/performance.md, "Suite `allocators`").
 JEMALLOC_CONF = (
     "oversize_threshold:1,background_thread:true,metadata_thp:auto,"
     "dirty_decay_ms:-1,muzzy_decay_ms:-1"
