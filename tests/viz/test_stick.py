@@ -81,6 +81,7 @@ class TestConversions:
         np.testing.assert_allclose(fig.positions, motion.global_positions().numpy())
         figs = to_stick_figures([motion, fig], labels=["x", "y"])
         assert [f.name for f in figs] == ["x", "y"]
+        assert fig.name == motion.name  # the caller's figure is not renamed
 
     def test_bvh_path(self, tmp_path):
         motion, _ = sa.procedural.generate(kind="biped22", gait="walk", seconds=0.3, fps=30, seed=0)

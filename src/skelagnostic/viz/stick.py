@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Union
 
@@ -225,9 +225,10 @@ def to_stick_figures(
         raise RenderError(f"labels: got {len(labels)} labels for {len(items)} motions")
     figures = []
     for k, item in enumerate(items):
-        figures.append(_to_stick_figure(item, k))
-        if labels is not None:
-            figures[-1].name = str(labels[k])
+        figure = _to_stick_figure(item, k)
+        if labels is not None:  # a copy: the caller's StickFigure keeps its name
+            figure = replace(figure, name=str(labels[k]))
+        figures.append(figure)
     return figures
 
 
