@@ -311,8 +311,7 @@ def test_cli_data_dirs(
         (["data.window=0"], "data.window must be > 0, got 0"),
         (
             ["summary=sometimes"],
-            "callbacks.fit_summary: ValueError: FitSummary: mode (summary=) must be one of "
-            "auto, full, quick, none, got 'sometimes'",
+            "summary='sometimes': must be one of auto, full, quick, none",
         ),
     ],
 )
@@ -324,6 +323,19 @@ def test_cli_wrong_config(
     assert err.startswith(f"skelagnostic fit: error: {message.format(tmp=tmp_path)}")
     assert_no_partial_output(tmp_path)
     documented(err.split("; accepted: ")[0], tmp_path)
+
+
+def test_wrong_summary_is_refused_before_the_data_is_read(
+    site: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
+) -> None:
+    import skelagnostic.cli.app as app
+
+    def never(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the data module was built before summary= was checked")
+
+    monkeypatch.setattr(app, "build_datamodule", never)
+    assert fit(tmp_path, "summary=full-ish") == 1
+    assert "summary='full-ish': must be one of auto, full, quick, none" in error_line(capsys)
 
 
 def test_failed_run_keeps_a_directory_holding_other_files(

@@ -454,6 +454,11 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
         from skelagnostic.cli.render import check_threads
 
         torch.set_num_threads(check_threads(threads))  # refuses more than 4 per core
+    if task == "fit" and cfg.get("summary") is not None:  # before the data is read
+        from skelagnostic.callbacks.fit_summary import SUMMARY_MODES
+
+        if cfg.summary not in SUMMARY_MODES:
+            raise ConfigError(f"summary={cfg.summary!r}: must be one of {', '.join(SUMMARY_MODES)}")
     L.seed_everything(cfg.seed, workers=True)
     datamodule = build_datamodule(cfg, pm)
     if external is not None:  # evaluate a model a plugin's reader builds, on cfg.data
