@@ -23,10 +23,18 @@ An entry is a directory ``benchmarks/results/heldout/<entry>/`` with two files:
       shared_code_share: {value: 0.98, source: "Table 2"}
       pose_mpjpe_cm: {value: null, why: "the paper reports it per character"}
       extra.table1.dog.pose_mpjpe_cm: {value: 1.41, source: "Table 1"}
-    targets:                        # issue #27's targets on quoted figures
+    targets:                        # targets on quoted figures
       - shared_code_share >= 0.98
-      - pose_mpjpe_cm <= 0.5 * mean_pose    # a number, a baseline of the run, or k * baseline
+      - pose_mpjpe_cm < 0.9 * mean_pose     # a number, a baseline of the run, or k * baseline
+    references:                     # optional: methods of the run that are not baselines
+      original: "the source motion itself: the best reachable value, not a method"
     notes: ["optional sentences"]
+
+A target must be one that no non-learned baseline of the same run meets (the
+model beating a bound that a baseline also beats shows nothing): the script
+refuses such an entry, naming the baseline. A method of the run that is not a
+baseline (the input itself, an oracle that knows the answer) is listed under
+``references`` with the reason, and is exempt.
 
 The page opens with the status of every target (one row per target of a method,
 listing each entry that measures it and how many meet it; the README links that
@@ -97,6 +105,7 @@ _RUN_KEYS = {
     "quote": True,
     "paper": True,
     "targets": True,
+    "references": False,
     "notes": False,
 }
 _MACHINE_KEYS = {"cores": True, "load": True, "cpu": False}
@@ -318,6 +327,61 @@ def parse_target(where: str, text: Any, figures: Mapping[str, Mapping[str, float
     return Target(metric, match["op"], factor, method)
 
 
+def _references(where: str, raw: Any, report: Mapping[str, Any]) -> dict[str, str]:
+    """``references``: methods of the run that are not baselines, each with its reason."""
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise ResultsError(f"{where}: expected a mapping method -> why it is not a baseline")
+    methods = [m for m in report.get("methods", []) if m != MODEL]
+    out = {}
+    for method, why in raw.items():
+        if method not in methods:
+            raise ResultsError(
+                f"{where}: {method!r} is not a method of the run (its methods: "
+                f"{', '.join(methods) or 'none'})"
+            )
+        out[str(method)] = _text(f"{where}.{method}", why)
+    return out
+
+
+def refuse_trivial_target(
+    where: str,
+    target: Target,
+    figure: Mapping[str, float],
+    references: Mapping[str, str] | None = None,
+) -> None:
+    """Refuse a target that a non-learned baseline of the same run also meets.
+
+    A target is there to show what the model learned: when a baseline's value
+    (the same metric, the same clips, the same run) meets the bound too, the
+    target says nothing about the model, whatever the model's value.
+
+    Args:
+        where: The file and key, for the message.
+        target: The parsed target.
+        figure: The quoted figure, ``method -> value`` (the model and its baselines).
+        references: Methods of the run that are not baselines (exempt), with the reason.
+
+    Raises:
+        ResultsError: A baseline meets the target; the message names it and its value.
+    """
+    bound = target.bound(figure)
+    if bound is None or not math.isfinite(bound):
+        return
+    for method, value in figure.items():
+        if method == MODEL or method in (references or {}) or value is None:
+            continue
+        if not math.isfinite(float(value)):
+            continue
+        if _OPS[target.op](float(value), bound):
+            raise ResultsError(
+                f"{where}: {target.metric} {target.op} {target.rhs} is also met by the "
+                f"baseline {method} ({_fmt(value)}); a target must be one that no "
+                "non-learned baseline of the run meets"
+            )
+
+
 def load_entry(directory: Path, methods: Sequence[str] = tuple(METHODS)) -> Entry:
     """Read and validate one entry directory.
 
@@ -379,6 +443,11 @@ def load_entry(directory: Path, methods: Sequence[str] = tuple(METHODS)) -> Entr
     targets = [
         parse_target(f"{where}targets[{i}]", text, figures) for i, text in enumerate(run["targets"])
     ]
+    run["references"] = _references(f"{where}references", run.get("references"), report)
+    for i, target in enumerate(targets):
+        refuse_trivial_target(
+            f"{where}targets[{i}]", target, figures[target.metric], run["references"]
+        )
     run["notes"] = _lines(f"{where}notes", run["notes"]) if run.get("notes") else []
     curves = load_curves(f"{directory / 'evaluation.json'}: ", report)
     return Entry(directory.name, run, report, figures, targets, curves)
@@ -627,6 +696,7 @@ def _entry_section(entry: Entry) -> list[str]:
         f"- Budget: {_budget(run)}",
         f"- Machine: {_machine(run)}",
         f"- Date: {run['date']}",
+        *(f"- Reference, not a baseline: `{m}`, {why}" for m, why in run["references"].items()),
         *(f"- Note: {n}" for n in run["notes"]),
         *(f"- Protocol note: {n}" for n in report.get("notes", [])),
         f"- Every metric of every clip{curve_names}: [per-clip tables](#{entry.anchor})",
@@ -656,7 +726,7 @@ def render_page(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS
         "command. The page is generated by `python scripts/results.py` from the files committed "
         "under `benchmarks/results/heldout/<entry>/`: `evaluation.json`, copied from the "
         "evaluate run directory, and `run.yaml`, with the commands, budget, machine, the "
-        "paper's figures and the targets of issue #27 (see "
+        "paper's figures and the targets (see "
         "[Publishing results](evaluate.md#publishing-results)). "
         "`python scripts/results.py --check` fails when the page is stale.",
         "",
@@ -683,9 +753,11 @@ def render_page(entries: Sequence[Entry], methods: Sequence[str] = tuple(METHODS
             "",
             "## Targets at a glance",
             "",
-            "Each target of issue #27, with every entry (run) that measures it; a bound named "
-            "after a baseline is that baseline's figure in the same run. The README links this "
-            "table.",
+            "Each target, with every entry (run) that measures it; a bound named after a "
+            "baseline is that baseline's figure in the same run. No target here is met by a "
+            "non-learned baseline of its run: the generator refuses such a target (a method "
+            "that is not a baseline, such as the input itself, is listed as a reference). "
+            "The README links this table.",
             "",
             *_status_table(entries, methods),
             "",
