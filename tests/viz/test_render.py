@@ -113,6 +113,26 @@ class TestRenderFrames:
         with pytest.raises(RenderError, match="same_scale"):
             render_frames([walker(), walker()], same_scale=value, times=[0.0], size=(48, 48))
 
+    def test_label_stays_above_the_figure(self, walker):
+        from skelagnostic.viz.render import _prepare
+
+        scene = _prepare(walker(name="a label\non two lines"), size=(120, 120), time_label=False)
+        try:
+            scene.canvas.draw()
+            label = scene.panels[0].ax.texts[0].get_window_extent()
+            _, boxes = scene.draw_all()
+        finally:
+            scene.close()
+        assert boxes[:, 0, 1].min() > 120 - label.y0  # below the label's last line
+
+    @pytest.mark.parametrize("follow", [False, True])
+    def test_a_panel_draws_nothing_into_the_next(self, walker, follow):
+        kwargs = {"size": (80, 120), "time_label": False, "follow": follow, "trajectory": True}
+        a, b = walker(frames=31, speed=3.0, name="a"), walker(frames=31, name="b")
+        pair = render_frames([a, b], **kwargs)
+        alone = render_frames(b, **kwargs)
+        np.testing.assert_array_equal(pair.frames[:, :, 80:], alone.frames)
+
     def test_overlay_shares_one_camera(self, walker):
         a, b = walker(name="a"), walker(speed=0.5, name="b")
         out = render_frames([a, b], mode="overlay", size=(160, 120))
@@ -165,7 +185,9 @@ class TestRenderFrames:
 
     def test_up_axis_is_respected(self, walker):
         fig = walker()
-        z_up = StickFigure(fig.positions[..., [2, 0, 1]], fig.parents, fig.groups, up_axis="z")
+        z_up = StickFigure(
+            fig.positions[..., [2, 0, 1]], fig.parents, fig.groups, name=fig.name, up_axis="z"
+        )
         a = render_frames(fig, times=[0.0], size=(64, 64), azim=0.0)
         b = render_frames(z_up, times=[0.0], size=(64, 64), azim=0.0)
         np.testing.assert_allclose(a.boxes, b.boxes, atol=1e-6)

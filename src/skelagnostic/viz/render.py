@@ -717,6 +717,8 @@ class _Panel:
         self.paths: list[tuple[Any, np.ndarray]] = []
         #: ``[N, 2]`` projected points the panel's view must hold (its framing).
         self.framed = np.zeros((0, 2))
+        #: Share of the panel's height kept free at the top (for its label).
+        self.top = 0.0
 
 
 class _Scene:
@@ -820,6 +822,7 @@ class _Scene:
             animated=options["follow"],
         )
         grid.set_clip_path(floor)
+        grid.set_clip_box(ax.bbox)  # the floor may reach past the panel: never into the next
         ax.add_collection(grid)
         if options["follow"]:
             panel.grid, panel.grid_step = (grid, grid_lines), step
@@ -841,6 +844,7 @@ class _Scene:
                     animated=options["follow"],
                 )
                 path.set_clip_path(floor)
+                path.set_clip_box(ax.bbox)
                 ax.add_collection(path)
                 if options["follow"]:
                     panel.paths.append((path, segments))
@@ -886,16 +890,21 @@ class _Scene:
         if overlay:
             ax.legend(handles=handles, loc="upper left", fontsize=8 * self.scale, frameon=False)
         elif self.figures[members[0]].name:
+            name = self.figures[members[0]].name
+            fontsize = 9 * self.scale
             ax.text(
                 0.03,
                 0.97,
-                self.figures[members[0]].name,
+                name,
                 transform=ax.transAxes,
                 ha="left",
                 va="top",
-                fontsize=9 * self.scale,
+                fontsize=fontsize,
                 color="#263238",
             )
+            # the label's lines (points at 100 dpi, with line spacing) stay above the figures
+            lines = name.count("\n") + 1
+            panel.top = min(0.03 + (lines * 1.25 * fontsize * 100 / 72 + 4) / self.size[1], 0.5)
         return panel
 
     def _root_path(self, k: int, ground: float) -> np.ndarray:
@@ -907,32 +916,40 @@ class _Scene:
         root[:, 2] = ground
         return root if len(root) > 1 else np.concatenate([root, root])
 
-    def _framing(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Centre and extent of a view showing every projected point with the panel's aspect."""
+    def _framing(self, panel: _Panel) -> tuple[np.ndarray, np.ndarray]:
+        """Centre and extent of a view of the panel's points with its aspect, under its label.
+
+        The points fill the panel's height but the top ``panel.top``, with a margin;
+        the extent is that of the whole panel (its aspect).
+        """
+        uv = panel.framed
         lo, hi = uv.min(axis=0), uv.max(axis=0)
         centre = (lo + hi) / 2.0
         extent = np.maximum(hi - lo, 1e-6) * (1.0 + 2.0 * _MARGIN)
-        aspect = self.size[0] / self.size[1]
+        aspect = self.size[0] / (self.size[1] * (1.0 - panel.top))
         if extent[0] / extent[1] < aspect:
             extent[0] = extent[1] * aspect
         else:
             extent[1] = extent[0] / aspect
+        extent[1] /= 1.0 - panel.top
         return centre, extent
 
     def _frame_panels(self, shared: list[int]) -> None:
         """Set every panel's fixed limits; the panels of ``shared`` get the largest extent.
 
         Every extent has the panel's aspect, so the element-wise largest one does too:
-        the shared panels show the same length per pixel, each centred on its own figure.
+        the shared panels show the same length per pixel, each figure centred in the
+        part of its panel under its label.
         """
-        views = [self._framing(panel.framed) for panel in self.panels]
+        views = [self._framing(panel) for panel in self.panels]
         if shared:
             largest = np.max([views[k][1] for k in shared], axis=0)
             for k in shared:
                 views[k] = (views[k][0], largest)
         for panel, (centre, extent) in zip(self.panels, views, strict=True):
+            bottom = centre[1] - extent[1] * (1.0 - panel.top) / 2.0
             panel.ax.set_xlim(centre[0] - extent[0] / 2.0, centre[0] + extent[0] / 2.0)
-            panel.ax.set_ylim(centre[1] - extent[1] / 2.0, centre[1] + extent[1] / 2.0)
+            panel.ax.set_ylim(bottom, bottom + extent[1])
             panel.ax.set_aspect("auto")
 
     def panel_scales(self) -> np.ndarray:
