@@ -104,6 +104,22 @@ def test_fit_summary_writes_metrics_renders_figures_and_markdown(tmp_path: Path)
     }
 
 
+def test_render_options_set_one_render_over_the_callback_size(tmp_path: Path) -> None:
+    from PIL import Image
+
+    from skelagnostic.viz import StickFigure
+
+    stick = StickFigure(np.array([[[0.0, 0, 0], [0, 1, 0]]] * 3), parents=[-1, 0])
+    content = {
+        "renders": {"big": [stick, stick], "small": [stick]},
+        "render_options": {"big": {"size": (50, 60), "same_scale": True, "labels": ["a", "b"]}},
+    }
+    _fit(_Tiny(content), tmp_path, callbacks=[FitSummary(name="t", size=(40, 40))])
+    for name, size in (("t_big.gif", (100, 60)), ("t_small.gif", (40, 40))):
+        with Image.open(tmp_path / name) as image:
+            assert image.size == size, name
+
+
 def test_fit_summary_without_content_or_name(tmp_path: Path) -> None:
     _fit(_Tiny(), tmp_path / "run", callbacks=[FitSummary()])
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())

@@ -83,6 +83,56 @@ class TestRenderFrames:
         widths = out.boxes[:, :, 2] - out.boxes[:, :, 0]
         np.testing.assert_allclose(widths[:, 0], widths[:, 1], atol=2.0)
 
+    @pytest.mark.parametrize("follow", [False, True])
+    def test_same_scale_keeps_real_sizes_across_panels(self, walker, follow):
+        small, big = walker(name="small"), walker(scale=2.0, name="twice as tall")
+        kwargs = {"size": (100, 120), "time_label": False, "follow": follow}
+        own = render_frames([small, big], **kwargs)
+        same = render_frames([small, big], same_scale=True, **kwargs)
+        heights = [r.boxes[:, :, 3] - r.boxes[:, :, 1] for r in (own, same)]
+        # each framed on its own, both fill their panels alike; at one scale the taller is 2x
+        np.testing.assert_allclose(heights[0][:, 1] / heights[0][:, 0], 1.0, atol=0.05)
+        np.testing.assert_allclose(heights[1][:, 1] / heights[1][:, 0], 2.0, rtol=0.05)
+        assert same.scales[0] == pytest.approx(same.scales[1])
+        assert own.scales[0] == pytest.approx(2.0 * own.scales[1], rel=0.02)
+        for k in range(2):  # the one needing the most room still fits
+            assert all(_inside(same.boxes[f, k], same.panels[k]) for f in range(len(same.times)))
+
+    def test_same_scale_over_chosen_panels_only(self, walker):
+        figures = [walker(scale=s, name=f"x{s:g}") for s in (10.0, 1.0, 2.0)]
+        out = render_frames(figures, same_scale=[1, 2], times=[0.0], size=(80, 96))
+        assert out.scales[1] == pytest.approx(out.scales[2])
+        # the first, in other units, keeps its own framing: as large as the largest shared one
+        height = out.boxes[0, :, 3] - out.boxes[0, :, 1]
+        assert height[0] == pytest.approx(height[2], rel=0.05) and height[1] < 0.6 * height[2]
+        single = render_frames(figures[0], same_scale=True, times=[0.0], size=(80, 96))
+        assert single.scales[0] == pytest.approx(out.scales[0])
+
+    @pytest.mark.parametrize("value", [[0, 2], [-1], ["a"], "01", 1.5])
+    def test_same_scale_refuses_what_is_not_panel_indices(self, walker, value):
+        with pytest.raises(RenderError, match="same_scale"):
+            render_frames([walker(), walker()], same_scale=value, times=[0.0], size=(48, 48))
+
+    def test_label_stays_above_the_figure(self, walker):
+        from skelagnostic.viz.render import _prepare
+
+        scene = _prepare(walker(name="a label\non two lines"), size=(120, 120), time_label=False)
+        try:
+            scene.canvas.draw()
+            label = scene.panels[0].ax.texts[0].get_window_extent()
+            _, boxes = scene.draw_all()
+        finally:
+            scene.close()
+        assert boxes[:, 0, 1].min() > 120 - label.y0  # below the label's last line
+
+    @pytest.mark.parametrize("follow", [False, True])
+    def test_a_panel_draws_nothing_into_the_next(self, walker, follow):
+        kwargs = {"size": (80, 120), "time_label": False, "follow": follow, "trajectory": True}
+        a, b = walker(frames=31, speed=3.0, name="a"), walker(frames=31, name="b")
+        pair = render_frames([a, b], **kwargs)
+        alone = render_frames(b, **kwargs)
+        np.testing.assert_array_equal(pair.frames[:, :, 80:], alone.frames)
+
     def test_overlay_shares_one_camera(self, walker):
         a, b = walker(name="a"), walker(speed=0.5, name="b")
         out = render_frames([a, b], mode="overlay", size=(160, 120))
@@ -135,7 +185,9 @@ class TestRenderFrames:
 
     def test_up_axis_is_respected(self, walker):
         fig = walker()
-        z_up = StickFigure(fig.positions[..., [2, 0, 1]], fig.parents, fig.groups, up_axis="z")
+        z_up = StickFigure(
+            fig.positions[..., [2, 0, 1]], fig.parents, fig.groups, name=fig.name, up_axis="z"
+        )
         a = render_frames(fig, times=[0.0], size=(64, 64), azim=0.0)
         b = render_frames(z_up, times=[0.0], size=(64, 64), azim=0.0)
         np.testing.assert_allclose(a.boxes, b.boxes, atol=1e-6)

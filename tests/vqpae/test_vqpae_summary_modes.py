@@ -6,6 +6,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pytest
 from skelagnostic_vqpae.fit_outputs import SUMMARY_PLANS
 
 from skelagnostic.callbacks import FitSummary
@@ -45,7 +47,19 @@ def test_a_tiny_run_gets_the_quick_summary(tiny_fit: dict[str, Any]) -> None:
     assert table["codes_shared_training"] == len(table["shared_codes_training"])
 
 
-def test_full_summary_transfers_more_and_animates(tiny_fit: dict[str, Any]) -> None:
+def test_full_summary_transfers_more_and_animates(
+    tiny_fit: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import skelagnostic.viz
+
+    rendered: dict[str, Any] = {}  # what FitSummary asks render_motion to draw, by file name
+    original = skelagnostic.viz.render_motion
+
+    def spy(motions: Any, out: Any, **options: Any) -> Any:
+        rendered[Path(out).name] = (motions, options)
+        return original(motions, out, **options)
+
+    monkeypatch.setattr(skelagnostic.viz, "render_motion", spy)
     run = _summary(tiny_fit, "full")
     metrics = json.loads((run / "vqpae_metrics.json").read_text())
     assert metrics["summary"] == {"mode": "full", "reason": "summary=full"}
@@ -57,6 +71,32 @@ def test_full_summary_transfers_more_and_animates(tiny_fit: dict[str, Any]) -> N
     for name in ("vqpae_transfer.png", "vqpae_transfer.gif", "vqpae_manifold.png"):
         assert (run / name).stat().st_size > 0
     assert "Animation `vqpae_transfer.gif`" in (run / "summary.md").read_text()
+    _check_animation(run / "vqpae_transfer.gif", *rendered["vqpae_transfer.gif"])
+
+
+def _check_animation(gif: Path, motions: list[Any], options: dict[str, Any]) -> None:
+    """The transfer GIF: large panels, named as the picture names them, the dogs at one scale."""
+    from PIL import Image
+    from skelagnostic_vqpae.fit_outputs import RENDER_PANEL
+
+    from skelagnostic.viz import render_frames
+
+    with Image.open(gif) as image:
+        assert image.size == (4 * RENDER_PANEL[0], RENDER_PANEL[1])
+        assert image.size[1] >= 400 and image.n_frames > 1
+    assert gif.stat().st_size < 4 * 2**20  # a few MB at most
+    labels = options["labels"]
+    assert "its own scale" in labels[0]
+    assert [label.split(": ")[1].split("\n")[0] for label in labels[1:]] == [
+        "VQ-PAE",
+        "unscaled matching",
+        "best clip at its own rate",
+    ]
+    drawn = {k: v for k, v in options.items() if k not in ("fps", "sheet_frames")}
+    out = render_frames(motions, times=[0.0], **drawn)
+    dogs = out.scales[1:]  # pixels per metre of the three dog panels
+    assert np.ptp(dogs) < 1e-6 * dogs[0], out.scales
+    assert {m.units for m in motions} == {"m"}
 
 
 def test_none_writes_no_transfer_artefacts(tiny_fit: dict[str, Any]) -> None:

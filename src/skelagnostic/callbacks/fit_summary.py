@@ -82,12 +82,17 @@ class SummaryContent(TypedDict, total=False):
             ``StickFigure``, or a list of them), written as ``<name>_<key>.gif``
             and a contact sheet ``<name>_<key>.png`` (the GIF only when
             ``figures`` has the same key: the figure is that PNG).
+        render_options: ``{key: options}``: keyword arguments of
+            :func:`skelagnostic.viz.render_motion` for the render of that key (for
+            example ``size``, ``labels``, ``fps``, ``follow``, ``same_scale``), over
+            the callback's ``size`` and ``sheet_frames``.
         figures: ``{key: matplotlib Figure}``, saved as ``<name>_<key>.png`` (and closed).
         notes: Markdown paragraphs appended to ``summary.md``.
     """
 
     metrics: dict[str, Any]
     renders: dict[str, Any]
+    render_options: dict[str, dict[str, Any]]
     figures: dict[str, Any]
     notes: list[str]
 
@@ -121,7 +126,7 @@ class FitSummary(pl.Callback):
         name: Prefix of the written files (``humot`` gives ``humot_metrics.json``);
             ``None``: no prefix (``metrics.json``).
         dirpath: Output directory (default: ``trainer.default_root_dir``).
-        size: Frame size in pixels of the renders.
+        size: Panel size in pixels of the renders (a render's ``render_options`` may set its own).
         sheet_frames: Frames on each render's contact sheet.
         mode: How much the aligner computes (:data:`SUMMARY_MODES`, the run's
             ``summary=``): ``full``; ``quick``, a smaller summary that takes
@@ -210,10 +215,15 @@ class FitSummary(pl.Callback):
             for key, motions in content["renders"].items():
                 # a figure of the same key takes the .png: the render is the animation only
                 suffixes = (".gif",) if key in content.get("figures", {}) else (".gif", ".png")
+                options = {
+                    "size": self.size,
+                    "sheet_frames": self.sheet_frames,
+                    **content.get("render_options", {}).get(key, {}),
+                }
                 for suffix in suffixes:
                     path = self._file(directory, key, suffix)
                     console.print(f"[bold]fit summary[/bold]: rendering {path.name}")
-                    render_motion(motions, path, size=self.size, sheet_frames=self.sheet_frames)
+                    render_motion(motions, path, **options)
                     written.append(path)
                 pictures.append((key, self._file(directory, key, ".gif")))
         if content.get("figures"):

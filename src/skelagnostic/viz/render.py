@@ -98,6 +98,8 @@ class Rendering:
         panels: ``[C, 4]`` pixel rectangle ``(x0, y0, x1, y1)`` of the panel each
             character is drawn in (all the same in overlay mode).
         names: Label of each character.
+        scales: ``[C]`` pixels per unit of length (the character's own units) of the
+            panel each character is drawn in: equal for the panels of ``same_scale``.
     """
 
     frames: np.ndarray
@@ -106,6 +108,7 @@ class Rendering:
     boxes: np.ndarray
     panels: np.ndarray
     names: list[str]
+    scales: np.ndarray
 
 
 def render_frames(
@@ -122,6 +125,7 @@ def render_frames(
     trajectory: bool = False,
     follow: bool = False,
     time_label: bool = True,
+    same_scale: bool | Sequence[int] = False,
 ) -> Rendering:
     """Render one or several motions to in-memory frames.
 
@@ -151,9 +155,17 @@ def render_frames(
             under them), instead of a fixed camera framing the whole clip.
             Keeps characters large in long clips that travel far.
         time_label: Draw the clock in the top-right corner.
+        same_scale: In ``"side"`` mode, draw panels at one scale (the same pixels
+            per unit of length) instead of each framed on its own: ``True`` for
+            every panel, or the indices of the motions whose panels share it (the
+            others keep their own framing). The shared panels are all framed as
+            large as the one needing the most room, so sizes compare across them
+            (a dog beside a dog); their motions must be in the same units
+            (:meth:`~skelagnostic.Motion.to_metres`). ``"overlay"`` mode has one
+            camera, hence one scale, anyway.
 
     Returns:
-        The frames with their times, playback rate and character boxes.
+        The frames with their times, playback rate, character boxes and panel scales.
 
     Raises:
         RenderError: On bad arguments (the message names the argument).
@@ -180,9 +192,11 @@ def render_frames(
         trajectory=trajectory,
         follow=follow,
         time_label=time_label,
+        same_scale=same_scale,
     )
     try:
         frames, boxes = scene.draw_all()
+        scales = scene.panel_scales()
     finally:
         scene.close()
     return Rendering(
@@ -192,6 +206,7 @@ def render_frames(
         boxes=boxes,
         panels=scene.panel_rects(),
         names=[f.name for f in scene.figures],
+        scales=scales,
     )
 
 
@@ -209,6 +224,7 @@ def _prepare(
     trajectory: bool = False,
     follow: bool = False,
     time_label: bool = True,
+    same_scale: bool | Sequence[int] = False,
 ) -> _Scene:
     """Check the arguments of :func:`render_frames` and build the scene (nothing drawn yet)."""
     figures = to_stick_figures(motions, labels)
@@ -242,16 +258,34 @@ def _prepare(
             raise RenderError("times must be a non-empty sequence of finite seconds")
         rate = synchronise(figures, fps)[1]
     groups = [[k] for k in range(len(figures))] if mode == "side" else [list(range(len(figures)))]
+    shared = _shared_panels(same_scale, len(figures)) if mode == "side" else []
     options = {
         "elev": elev,
         "azim": azim,
         "trajectory": trajectory,
         "follow": follow,
         "time_label": time_label,
+        "same_scale": shared,
     }
     scene = _Scene(figures, groups, clock, (width, height), options)
     scene.rate = rate
     return scene
+
+
+def _shared_panels(same_scale: Any, count: int) -> list[int]:
+    """The side-mode panels of ``same_scale`` (see :func:`render_frames`), checked."""
+    if isinstance(same_scale, (bool, np.bool_)):
+        return list(range(count)) if same_scale else []
+    if isinstance(same_scale, (str, bytes)) or not isinstance(same_scale, Iterable):
+        raise RenderError(
+            f"same_scale: True, False or motion indices, got {type(same_scale).__name__}"
+        )
+    chosen = list(same_scale)
+    if not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool) for k in chosen):
+        raise RenderError(f"same_scale: motion indices are integers, got {chosen!r}")
+    if any(not 0 <= k < count for k in chosen):
+        raise RenderError(f"same_scale: indices must lie in 0-{count - 1}, got {chosen!r}")
+    return sorted({int(k) for k in chosen})
 
 
 def render_motion(
@@ -279,7 +313,8 @@ def render_motion(
             :data:`PROGRESS_FRAMES` frames, when stderr is a terminal.
         key: The option naming ``out``, for error messages.
         **options: Passed to :func:`render_frames` (``mode``, ``labels``,
-            ``fps``, ``max_frames``, ``size``, ``elev``, ``azim``, ``trajectory``, ...).
+            ``fps``, ``max_frames``, ``size``, ``elev``, ``azim``, ``trajectory``,
+            ``follow``, ``same_scale``, ...).
 
     Returns:
         The written path.
@@ -680,6 +715,10 @@ class _Panel:
         self.grid: tuple[Any, np.ndarray] | None = None
         self.grid_step = 0.0
         self.paths: list[tuple[Any, np.ndarray]] = []
+        #: ``[N, 2]`` projected points the panel's view must hold (its framing).
+        self.framed = np.zeros((0, 2))
+        #: Share of the panel's height kept free at the top (for its label).
+        self.top = 0.0
 
 
 class _Scene:
@@ -721,6 +760,7 @@ class _Scene:
             panel = self._build_panel(ax, members, options)
             self.panels.append(panel)
             self.panel_of.update(dict.fromkeys(members, panel))
+        self._frame_panels(options["same_scale"])
         self.clock = None
         if options["time_label"]:
             ax = self.panels[-1].ax
@@ -753,7 +793,7 @@ class _Scene:
         local = np.concatenate([(p - shift[:, None]).reshape(-1, 3) for p in world])
         paths = {k: self._root_path(k, ground) for k in members} if options["trajectory"] else {}
         framed = [local] if options["follow"] else [local, *paths.values()]
-        self._frame(ax, camera.project(np.concatenate(framed))[0])
+        panel.framed = camera.project(np.concatenate(framed))[0]
 
         # Floor: the horizontal footprint of what is drawn, with a margin.
         reach = max(float(np.ptp(local[:, 2])), 1e-6)
@@ -782,6 +822,7 @@ class _Scene:
             animated=options["follow"],
         )
         grid.set_clip_path(floor)
+        grid.set_clip_box(ax.bbox)  # the floor may reach past the panel: never into the next
         ax.add_collection(grid)
         if options["follow"]:
             panel.grid, panel.grid_step = (grid, grid_lines), step
@@ -803,6 +844,7 @@ class _Scene:
                     animated=options["follow"],
                 )
                 path.set_clip_path(floor)
+                path.set_clip_box(ax.bbox)
                 ax.add_collection(path)
                 if options["follow"]:
                     panel.paths.append((path, segments))
@@ -848,16 +890,21 @@ class _Scene:
         if overlay:
             ax.legend(handles=handles, loc="upper left", fontsize=8 * self.scale, frameon=False)
         elif self.figures[members[0]].name:
+            name = self.figures[members[0]].name
+            fontsize = 9 * self.scale
             ax.text(
                 0.03,
                 0.97,
-                self.figures[members[0]].name,
+                name,
                 transform=ax.transAxes,
                 ha="left",
                 va="top",
-                fontsize=9 * self.scale,
+                fontsize=fontsize,
                 color="#263238",
             )
+            # the label's lines (points at 100 dpi, with line spacing) stay above the figures
+            lines = name.count("\n") + 1
+            panel.top = min(0.03 + (lines * 1.25 * fontsize * 100 / 72 + 4) / self.size[1], 0.5)
         return panel
 
     def _root_path(self, k: int, ground: float) -> np.ndarray:
@@ -869,19 +916,50 @@ class _Scene:
         root[:, 2] = ground
         return root if len(root) > 1 else np.concatenate([root, root])
 
-    def _frame(self, ax: Any, uv: np.ndarray) -> None:
-        """Set fixed limits that show every projected point with the panel's aspect."""
+    def _framing(self, panel: _Panel) -> tuple[np.ndarray, np.ndarray]:
+        """Centre and extent of a view of the panel's points with its aspect, under its label.
+
+        The points fill the panel's height but the top ``panel.top``, with a margin;
+        the extent is that of the whole panel (its aspect).
+        """
+        uv = panel.framed
         lo, hi = uv.min(axis=0), uv.max(axis=0)
         centre = (lo + hi) / 2.0
         extent = np.maximum(hi - lo, 1e-6) * (1.0 + 2.0 * _MARGIN)
-        aspect = self.size[0] / self.size[1]
+        aspect = self.size[0] / (self.size[1] * (1.0 - panel.top))
         if extent[0] / extent[1] < aspect:
             extent[0] = extent[1] * aspect
         else:
             extent[1] = extent[0] / aspect
-        ax.set_xlim(centre[0] - extent[0] / 2.0, centre[0] + extent[0] / 2.0)
-        ax.set_ylim(centre[1] - extent[1] / 2.0, centre[1] + extent[1] / 2.0)
-        ax.set_aspect("auto")
+        extent[1] /= 1.0 - panel.top
+        return centre, extent
+
+    def _frame_panels(self, shared: list[int]) -> None:
+        """Set every panel's fixed limits; the panels of ``shared`` get the largest extent.
+
+        Every extent has the panel's aspect, so the element-wise largest one does too:
+        the shared panels show the same length per pixel, each figure centred in the
+        part of its panel under its label.
+        """
+        views = [self._framing(panel) for panel in self.panels]
+        if shared:
+            largest = np.max([views[k][1] for k in shared], axis=0)
+            for k in shared:
+                views[k] = (views[k][0], largest)
+        for panel, (centre, extent) in zip(self.panels, views, strict=True):
+            bottom = centre[1] - extent[1] * (1.0 - panel.top) / 2.0
+            panel.ax.set_xlim(centre[0] - extent[0] / 2.0, centre[0] + extent[0] / 2.0)
+            panel.ax.set_ylim(bottom, bottom + extent[1])
+            panel.ax.set_aspect("auto")
+
+    def panel_scales(self) -> np.ndarray:
+        """Pixels per unit of length of the panel of each character (vertical = horizontal)."""
+        height = self.size[1]
+        scales = np.zeros(len(self.figures))
+        for panel in self.panels:
+            low, high = panel.ax.get_ylim()
+            scales[panel.members] = height / (high - low)
+        return scales
 
     def panel_rects(self) -> np.ndarray:
         """Pixel rectangle of the panel of each character."""

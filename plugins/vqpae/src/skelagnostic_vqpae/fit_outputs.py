@@ -11,7 +11,8 @@ With two or more characters and held-out clips of the first,
 character (the ``vqpae.transfer`` evaluation on a subset): figures under
 ``"transfer"``, a table in ``summary.md``, the picture ``vqpae_transfer.png``
 (:func:`~skelagnostic_vqpae.picture.plot_transfer`: poses at one scale and the
-feet's touch-downs) and, in the full summary, the animation ``vqpae_transfer.gif``.
+feet's touch-downs) and, in the full summary, the animation ``vqpae_transfer.gif``
+(:func:`transfer_render_options`: large labelled panels, the target's at one scale).
 
 How much is computed is the run's ``summary=`` (:data:`SUMMARY_PLANS`): ``full``
 or ``quick`` (one clip, a shorter excerpt, a smaller database, no animation: a
@@ -45,7 +46,9 @@ __all__ = [
     "overlap_figures",
     "shared_codes_sentence",
     "table2_summary",
+    "transfer_labels",
     "transfer_picture",
+    "transfer_render_options",
     "transfer_summary",
 ]
 
@@ -87,8 +90,12 @@ SUMMARY_PLANS = {
 SUMMARY_TRANSFER_CLIPS = SUMMARY_PLANS["full"].transfer_clips
 #: Longest source excerpt transferred by the full summary (the start of each clip), seconds.
 SUMMARY_TRANSFER_SECONDS = SUMMARY_PLANS["full"].transfer_seconds
-#: Seconds of the transfer animation (the start of the clip; a short path keeps the figures large).
+#: Seconds of the transfer animation (the start of the clip).
 RENDER_SECONDS = 3.0
+#: Size ``(width, height)`` of one panel of the transfer animation, pixels.
+RENDER_PANEL = (380, 420)
+#: Frame rate of the transfer animation (fewer frames: a lighter file, a quicker render).
+RENDER_FPS = 15.0
 
 
 class _Stages:
@@ -184,6 +191,7 @@ def fit_summary(aligner: VqpaeAligner, trainer: L.Trainer, mode: str = "full") -
     if transferred:
         metrics["transfer"] = transferred["metrics"]
         content["renders"] = transferred["renders"]
+        content["render_options"] = transferred.get("render_options", {})
         content["figures"] = transferred.get("figures", {})
         content["notes"] += transferred["notes"]
     shown = {n: embs for n, embs in embeddings[splits[0]].items() if embs}
@@ -347,7 +355,8 @@ def transfer_summary(
         length, per-clip rows and the per-method means), ``figures`` (``transfer``:
         :func:`~skelagnostic_vqpae.picture.plot_transfer` of the first clip),
         ``renders`` (``transfer``, with ``plan.animation``: the first clip, its transfer
-        and the two baselines') and ``notes`` (a Markdown table). When the transfer
+        and the two baselines', in metres), ``render_options``
+        (:func:`transfer_render_options`) and ``notes`` (a Markdown table). When the transfer
         cannot run (for example a model whose frequencies have periods longer than
         every database clip), ``metrics`` is ``{"skipped": reason}``, no picture, and
         the notes say why: the fit still succeeds.
@@ -426,12 +435,20 @@ def transfer_summary(
         f"`{target}` motions made from it at one scale, with the feet's touch-downs over time.",
     ]
     renders: dict[str, Any] = {}
+    options: dict[str, Any] = {}
     if plan.animation:
         stage("animation")
-        renders["transfer"] = [m[: int(RENDER_SECONDS * m.fps) + 1] for m in outputs[first]]
+        renders["transfer"] = [
+            m[: int(RENDER_SECONDS * m.fps) + 1].to_metres() for m in outputs[first]
+        ]
+        options["transfer"] = transfer_render_options(aligner, outputs[first][0])
+        width, height = RENDER_PANEL
         notes.append(
-            f"Animation `vqpae_transfer.gif`: the first {RENDER_SECONDS:g} s of {first} (source, "
-            "model, the two baselines)."
+            f"Animation `vqpae_transfer.gif`: the first {RENDER_SECONDS:g} s of {first} at "
+            f"{RENDER_FPS:g} fps, {len(renders['transfer'])} panels of {width}x{height} pixels "
+            f"(the source, then the `{target}` motions made from it, named as in the picture), "
+            f"a camera travelling with each character; the `{target}` panels share one scale, "
+            "the source has its own."
         )
     return {
         "metrics": {
@@ -447,7 +464,58 @@ def transfer_summary(
         },
         "figures": {"transfer": picture},
         "renders": renders,
+        "render_options": options,
         "notes": notes,
+    }
+
+
+def transfer_labels(aligner: VqpaeAligner, source: Any) -> list[str]:
+    r"""The names of the source and its three transfers (the picture's and the animation's).
+
+    Args:
+        aligner: The trained aligner (its first two dataset names: source, target).
+        source: The source clip (its name, if any, follows the character's).
+
+    Returns:
+        ``[source, model output, unscaled-matching output, own-rate output]`` labels,
+        a newline before the method's kind.
+
+    Example:
+        >>> from types import SimpleNamespace
+        >>> aligner = SimpleNamespace(dataset_names=["procedural/biped22", "dog"])
+        >>> transfer_labels(aligner, SimpleNamespace(name="walk_1"))[:2]
+        ['biped22: walk_1', 'dog: VQ-PAE\n(frequency-scaled matching)']
+    """
+    source_name, target_name = (n.rsplit("/", 1)[-1] for n in aligner.dataset_names[:2])
+    clip = getattr(source, "name", None)
+    return [
+        f"{source_name}: {clip}" if clip else source_name,
+        f"{target_name}: VQ-PAE\n(frequency-scaled matching)",
+        f"{target_name}: unscaled matching\n(baseline)",
+        f"{target_name}: best clip at its own rate\n(baseline)",
+    ]
+
+
+def transfer_render_options(aligner: VqpaeAligner, source: Any) -> dict[str, Any]:
+    """:func:`~skelagnostic.viz.render_motion`'s options for the transfer animation.
+
+    Panels of :data:`RENDER_PANEL` pixels at :data:`RENDER_FPS`, a camera travelling
+    with each character (the figures stay large while they walk), the labels of
+    :func:`transfer_labels` (the source's says it has its own scale) and one scale
+    for the three target panels (``same_scale``), as in the picture.
+
+    Args:
+        aligner: The trained aligner.
+        source: The source clip.
+    """
+    labels = transfer_labels(aligner, source)
+    labels[0] += "\n(source, its own scale)"
+    return {
+        "size": RENDER_PANEL,
+        "fps": RENDER_FPS,
+        "follow": True,
+        "labels": labels,
+        "same_scale": [1, 2, 3],
     }
 
 
@@ -476,12 +544,8 @@ def transfer_picture(
 
     source_name, target_name = aligner.dataset_names[0], aligner.dataset_names[1]
     short = source_name.rsplit("/", 1)[-1], target_name.rsplit("/", 1)[-1]
-    source, model, unscaled, own = motions
-    outputs = {
-        f"{short[1]}: VQ-PAE\n(frequency-scaled matching)": model,
-        f"{short[1]}: unscaled matching\n(baseline)": unscaled,
-        f"{short[1]}: best clip at its own rate\n(baseline)": own,
-    }
+    source = motions[0]
+    outputs = dict(zip(transfer_labels(aligner, source)[1:], motions[1:], strict=True))
     notes = []
     if table is not None:
         share = table.get("frame_share_training", {})
