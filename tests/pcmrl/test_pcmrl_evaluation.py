@@ -72,9 +72,15 @@ def test_baselines_lafan_to_cmu(lafan, shared_data) -> None:
     leg = [n for n in primal if cmu.body_groups[cmu.index(n)] == "left_leg"]
     assert leg and all(src.body_groups[src.index(primal[n])] == "left_leg" for n in leg)
     result = evaluate_clips([lafan], cmu, sigmas=(0.0,), num_points=256)
-    assert set(result["rows"]) == {"original", "name_copy", "primal_copy", "direction_copy"}
+    assert set(result["rows"]) == {
+        "original",
+        "name_copy",
+        "primal_copy",
+        "direction_copy",
+        "direction_copy_unscaled_root",
+    }
     assert result["rows"]["original"]["knn@0"] < result["rows"]["name_copy"]["knn@0"]
-    assert format_table(result).count("\n") == 5
+    assert format_table(result).count("\n") == 6
 
 
 def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
@@ -85,7 +91,14 @@ def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
         out = reconstruction_protocol(model, HeldOut("test", [lafan[:12]]), tmp_path)
     (row,) = out.rows
     assert row["clip"] == "clip" and row["frames"] == 12
-    assert out.methods == ["model", "original", "name_copy", "primal_copy", "direction_copy"]
+    assert out.methods == [
+        "model",
+        "original",
+        "name_copy",
+        "primal_copy",
+        "direction_copy",
+        "direction_copy_unscaled_root",
+    ]
     assert set(row["values"]["model"]) == set(TABLE2_METRICS)
     assert row["values"]["original"]["end"] == 0.0
 

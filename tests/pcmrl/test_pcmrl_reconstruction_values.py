@@ -2,8 +2,8 @@
 
 The protocol runs on two short LaFAN1 clips with an untrained (seeded) stage-1
 model. Each per-clip figure of ``model``, ``original``, ``name_copy``,
-``primal_copy`` and ``direction_copy`` (temporal KNN distance at the five
-offsets, end-effector error, x100 in metres) and their means in
+``primal_copy``, ``direction_copy`` and ``direction_copy_unscaled_root``
+(temporal KNN distance at the five offsets, end-effector error, x100 in metres) and their means in
 ``evaluation.json`` are recomputed here with numpy forward kinematics, a
 brute-force KNN over every pair of point trajectories (PC-MRL Eq. 5) and hand-picked
 end-effector pairs (Eq. 6). Only the seeded draw of the points on the bones
@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import torch
 from scipy.spatial.distance import cdist
-from skelagnostic_pcmrl.evaluation import reconstruction_protocol
+from skelagnostic_pcmrl.evaluation import BASELINES, evaluate_pair, reconstruction_protocol
 from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
 import skelagnostic as sa
@@ -107,6 +107,9 @@ def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_p
                 "name_copy": _figures(name_copy(cut, target), cut, 0),
                 "primal_copy": _figures(primal_copy(cut, target), cut, 0),
                 "direction_copy": _figures(direction_copy(cut, target), cut, 0),
+                "direction_copy_unscaled_root": _figures(
+                    direction_copy(cut, target, root="source"), cut, 0
+                ),
             }
     assert [r["clip"] for r in out.rows] == ["a", "b"]
     assert [r["frames"] for r in out.rows] == [MAX_FRAMES, MAX_FRAMES]
@@ -137,3 +140,31 @@ def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_p
     # sanity of the reference itself: the independent cloud on the source is the closest
     for want in expected.values():
         assert want["original"]["knn@0"] < min(want[m]["knn@0"] for m in want if m != "original")
+
+
+@pytest.mark.parametrize("factor", [0.8, 1.25])
+def test_unscaled_direction_copy_onto_a_scaled_copy_of_its_skeleton(factor: float) -> None:
+    """Closed forms on procedural data: the unscaled-root copy onto ``k x`` its own skeleton.
+
+    Every bone keeps its direction and the root its path, so each joint lands at
+    ``root + k (p - root)``: an effector is off by ``|k - 1| |p - root|``. Eq. 6 sums that
+    over hands, feet and head.
+    """
+    motion = sa.procedural.generate("biped22", "walk", seconds=1.0)[0]
+    target = motion.skeleton.scaled(factor)
+    copy = BASELINES["direction_copy_unscaled_root"](motion, target)
+    # the root path is the source's, exactly
+    np.testing.assert_array_equal(
+        copy.root_positions.double().numpy(), motion.root_positions.double().numpy()
+    )
+    pos = global_pose(motion)[1]  # metres
+    rel = pos - pos[:, :1]
+    index = motion.skeleton.index
+    eq6 = [index(n) for n in ("LeftToe", "RightToe", "Head", "LeftHand", "RightHand")]
+    k = abs(factor - 1.0)
+    want_end = 100.0 * k * float(np.linalg.norm(rel[:, eq6], axis=-1).mean(axis=0).sum())
+    got = evaluate_pair(copy, motion, sigmas=(0.0,))
+    assert got["end"] == pytest.approx(want_end, rel=1e-6)
+    # the same copy with the scaled root rule is further from the source's positions
+    scaled = evaluate_pair(BASELINES["direction_copy"](motion, target), motion, sigmas=(0.0,))
+    assert scaled["end"] > got["end"] and scaled["knn@0"] > got["knn@0"]

@@ -29,13 +29,17 @@ baselines of :mod:`skelagnostic.baselines` (``name_copy``: local rotations
 copied between joints of matching names; ``primal_copy``: global rotations
 copied along matched primal-skeleton chains, the structure of the paper's
 primal-skeleton comparison; ``direction_copy``: every bone pointed along its
-paired primal chain of the source, free of rest-pose conventions) and ``pcmrl``
-(the trained model).
+paired primal chain of the source, free of rest-pose conventions; these three
+move the root by :func:`~skelagnostic.baselines.scaled_root`;
+``direction_copy_unscaled_root``: the direction copy keeping the source's own
+root path, which a comparison with the source's positions favours) and
+``pcmrl`` (the trained model).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -78,6 +82,7 @@ BASELINES = {
     "name_copy": name_copy,
     "primal_copy": primal_copy,
     "direction_copy": direction_copy,
+    "direction_copy_unscaled_root": partial(direction_copy, root="source"),
 }
 
 
