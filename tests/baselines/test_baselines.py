@@ -24,6 +24,7 @@ from skelagnostic.baselines import (
 )
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import MotionError
 
 
 def _rz(angle: float) -> list[float]:
@@ -197,6 +198,41 @@ def test_root_rule_keeps_the_start_and_scales_height_and_displacement(copy) -> N
     # the ratio is taken in metres and the result is in the target's units
     in_m = copy(m, m.skeleton.scaled(0.02), "cm", "m").root_positions.double().numpy()
     np.testing.assert_allclose(in_m, expected / 100.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("copy", [name_copy, primal_copy, direction_copy])
+def test_source_root_keeps_the_source_root_path(copy) -> None:
+    """``root="source"``: the source's root positions unchanged (only converted to units)."""
+    m, _ = procedural.dataset(kinds=("biped22",), gaits=("walk",), clips_per_gait=1, seconds=1.0)[0]
+    src = m.root_positions.double().numpy() + np.array([500.0, 0.0, -300.0])
+    m = Motion(m.skeleton, m.rotations, torch.from_numpy(src).to(m.rotations.dtype), m.fps)
+    src = m.root_positions.double().numpy()
+    out = copy(m, m.skeleton.scaled(2.0), "cm", "cm", root="source")
+    np.testing.assert_array_equal(out.root_positions.double().numpy(), src)
+    in_m = copy(m, m.skeleton.scaled(0.02), "cm", "m", root="source").root_positions
+    np.testing.assert_allclose(in_m.double().numpy(), src / 100.0, rtol=1e-6)
+    # the default is unchanged: the scaled rule
+    scaled = copy(m, m.skeleton.scaled(2.0), "cm", "cm").root_positions.double().numpy()
+    assert not np.allclose(scaled, src)
+
+
+def test_source_root_moves_only_the_root_of_the_copy() -> None:
+    """The unscaled copy is the scaled copy translated, frame by frame, by the root difference."""
+    m, _ = procedural.dataset(kinds=("biped22",), gaits=("run",), clips_per_gait=1, seconds=1.0)[0]
+    target = m.skeleton.scaled(0.8)
+    scaled = direction_copy(m, target, "cm", "cm")
+    source = direction_copy(m, target, "cm", "cm", root="source")
+    torch.testing.assert_close(source.rotations, scaled.rotations)
+    shift = (m.root_positions - scaled.root_positions)[:, None]
+    torch.testing.assert_close(
+        source.global_positions(), scaled.global_positions() + shift, rtol=0, atol=1e-4
+    )
+
+
+def test_unknown_root_rule_is_an_error() -> None:
+    m, _ = procedural.dataset(kinds=("biped22",), gaits=("walk",), clips_per_gait=1, seconds=0.2)[0]
+    with pytest.raises(MotionError, match="root='origin'"):
+        name_copy(m, m.skeleton, "cm", "cm", root="origin")
 
 
 def test_baselines_stay_in_the_core_layer() -> None:

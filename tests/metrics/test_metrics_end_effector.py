@@ -43,6 +43,51 @@ def test_random_two_skeletons(reduction, dtype):
     assert metric.compute().item() == pytest.approx(expected, rel=1e-5)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_mean_abs_is_the_authors_flat_mean(dtype):
+    """``distance="mean_abs", reduction="mean"``: one mean of |difference| over everything.
+
+    The PC-MRL authors' ``train_pointcloud.py`` takes the mean absolute difference over
+    sequences, frames, effectors and coordinates at once (sequences of equal length).
+    """
+    gen = torch.Generator().manual_seed(2)
+    target = torch.randn(3, 7, 6, 3, generator=gen, dtype=dtype)
+    preds = torch.randn(3, 7, 4, 3, generator=gen, dtype=dtype)
+    pairs = [(5, 3), (2, 1), (0, 0), (1, 2)]
+    idx_t, idx_p = [a for a, _ in pairs], [b for _, b in pairs]
+    p, t = preds.double().numpy(), target.double().numpy()
+    expected = float(np.mean(np.abs(p[:, :, idx_p] - t[:, :, idx_t])))
+    value = end_effector_error(
+        preds,
+        target,
+        preds_indices=idx_p,
+        target_indices=idx_t,
+        reduction="mean",
+        distance="mean_abs",
+    )
+    assert value.dtype == dtype
+    assert value.item() == pytest.approx(expected, rel=1e-5 if dtype == torch.float32 else 1e-12)
+    # summed over pairs: the number of pairs times the mean
+    summed = end_effector_error(
+        preds, target, preds_indices=idx_p, target_indices=idx_t, distance="mean_abs"
+    )
+    assert summed.item() == pytest.approx(len(pairs) * expected, rel=1e-5)
+    metric = EndEffectorError(idx_p, idx_t, reduction="mean", distance="mean_abs")
+    metric.update(preds[:1], target[:1])
+    metric.update(preds[1:], target[1:])
+    assert metric.compute().item() == pytest.approx(expected, rel=1e-5)
+
+
+def test_mean_abs_hand_computed():
+    target = torch.zeros(2, 2, 3)
+    preds = torch.zeros(2, 2, 3)
+    preds[0, 1] = torch.tensor([3.0, 4.0, 0.0])  # Euclidean 5, mean |d| 7 / 3
+    euclid = end_effector_error(preds, target, reduction="mean")
+    mean_abs = end_effector_error(preds, target, reduction="mean", distance="mean_abs")
+    assert euclid.item() == pytest.approx(5.0 / 4)  # one of 2 frames x 2 effectors
+    assert mean_abs.item() == pytest.approx(7.0 / 3 / 4)
+
+
 def test_hand_computed():
     target = torch.zeros(2, 5, 3)
     preds = torch.zeros(2, 3, 3)
@@ -76,6 +121,10 @@ def test_gradient():
 
 def test_errors():
     target = torch.zeros(2, 5, 3)
+    with pytest.raises(MotionError, match=r"distance must be one of"):
+        end_effector_error(torch.zeros(2, 5, 3), target, distance="l1")
+    with pytest.raises(MotionError, match=r"distance must be one of"):
+        EndEffectorError(distance="l1")
     with pytest.raises(MotionError, match=r"3 predicted vs 5 target end effectors"):
         end_effector_error(torch.zeros(2, 3, 3), target)
     with pytest.raises(MotionError, match=r"sequence and frame dimensions"):

@@ -10,6 +10,7 @@ from skelagnostic_pcmrl.evaluation import (
     evaluate_clips,
     evaluate_pair,
     format_table,
+    limb_end_pairs,
     reconstruction_protocol,
 )
 from skelagnostic_pcmrl.recon import PcmrlReconAligner
@@ -55,7 +56,27 @@ def test_end_effector_error_is_summed_over_effectors_in_cm(lafan) -> None:
     )
     scores = evaluate_pair(moved, lafan, sigmas=(0.0, 0.1), num_points=256)
     assert scores["end"] == pytest.approx(5 * 10.0, rel=1e-6)  # 5 effectors, 0.1 m, x100
-    assert set(scores) == {"knn@0", "knn@0.1", "end"}
+    # the authors' code: mean |difference| over the 4 limb ends and x, y, z: (10 + 0 + 0) / 3
+    assert scores["end_authors"] == pytest.approx(10.0 / 3, rel=1e-6)
+    assert set(scores) == {"knn@0", "knn@0.1", "end", "end_authors"}
+
+
+def test_limb_ends_are_the_authors_end_joints(lafan, shared_data) -> None:
+    """The wrists and toes: the authors' LeftHand/RightHand/LeftToe[Base]/RightToe[Base].
+
+    Their CMU rig (cgspeed) calls the wrist ``LeftHand``; the shared 3dsMax export
+    calls it ``LeftWrist``, the joint its fingers and thumb branch from.
+    """
+    cmu = sa.read_bvh(shared_data / "human" / "cmu" / "131_01.bvh").skeleton
+    src = lafan.skeleton
+    names = [(src.joint_names[a], cmu.joint_names[b]) for a, b in limb_end_pairs(src, cmu)]
+    assert names == [
+        ("LeftHand", "LeftWrist"),
+        ("RightHand", "RightWrist"),
+        ("LeftToe", "LeftToe"),
+        ("RightToe", "RightToe"),
+    ]
+    assert len(cmu.children(cmu.index("LeftWrist"))) == 2
 
 
 def test_baselines_lafan_to_cmu(lafan, shared_data) -> None:
@@ -72,9 +93,15 @@ def test_baselines_lafan_to_cmu(lafan, shared_data) -> None:
     leg = [n for n in primal if cmu.body_groups[cmu.index(n)] == "left_leg"]
     assert leg and all(src.body_groups[src.index(primal[n])] == "left_leg" for n in leg)
     result = evaluate_clips([lafan], cmu, sigmas=(0.0,), num_points=256)
-    assert set(result["rows"]) == {"original", "name_copy", "primal_copy", "direction_copy"}
+    assert set(result["rows"]) == {
+        "original",
+        "name_copy",
+        "primal_copy",
+        "direction_copy",
+        "direction_copy_unscaled_root",
+    }
     assert result["rows"]["original"]["knn@0"] < result["rows"]["name_copy"]["knn@0"]
-    assert format_table(result).count("\n") == 5
+    assert format_table(result).count("\n") == 6
 
 
 def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
@@ -85,9 +112,16 @@ def test_reconstruction_protocol_rows(lafan, tmp_path) -> None:
         out = reconstruction_protocol(model, HeldOut("test", [lafan[:12]]), tmp_path)
     (row,) = out.rows
     assert row["clip"] == "clip" and row["frames"] == 12
-    assert out.methods == ["model", "original", "name_copy", "primal_copy", "direction_copy"]
+    assert out.methods == [
+        "model",
+        "original",
+        "name_copy",
+        "primal_copy",
+        "direction_copy",
+        "direction_copy_unscaled_root",
+    ]
     assert set(row["values"]["model"]) == set(TABLE2_METRICS)
-    assert row["values"]["original"]["end"] == 0.0
+    assert row["values"]["original"]["end"] == row["values"]["original"]["end_authors"] == 0.0
 
 
 def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:

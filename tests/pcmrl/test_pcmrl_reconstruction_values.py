@@ -2,13 +2,14 @@
 
 The protocol runs on two short LaFAN1 clips with an untrained (seeded) stage-1
 model. Each per-clip figure of ``model``, ``original``, ``name_copy``,
-``primal_copy`` and ``direction_copy`` (temporal KNN distance at the five
-offsets, end-effector error, x100 in metres) and their means in
-``evaluation.json`` are recomputed here with numpy forward kinematics, a
-brute-force KNN over every pair of point trajectories (PC-MRL Eq. 5) and hand-picked
-end-effector pairs (Eq. 6). Only the seeded draw of the points on the bones
-(``PointCloud.sample``) and the methods' own outputs (the retargeted motions)
-come from the library.
+``primal_copy``, ``direction_copy`` and ``direction_copy_unscaled_root``
+(temporal KNN distance at the five offsets, end-effector error under Eq. 6 and
+under the authors' code, x100 in metres) and their means in ``evaluation.json``
+are recomputed here with numpy forward kinematics, a brute-force KNN over every
+pair of point trajectories (PC-MRL Eq. 5) and hand-picked end-effector pairs
+(Eq. 6: hands, feet, head; the authors' ``train_pointcloud.py``: wrists and
+toes). Only the seeded draw of the points on the bones (``PointCloud.sample``)
+and the methods' own outputs (the retargeted motions) come from the library.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 import pytest
 import torch
 from scipy.spatial.distance import cdist
-from skelagnostic_pcmrl.evaluation import reconstruction_protocol
+from skelagnostic_pcmrl.evaluation import BASELINES, evaluate_pair, reconstruction_protocol
 from skelagnostic_pcmrl.recon import PcmrlReconAligner
 
 import skelagnostic as sa
@@ -38,6 +39,15 @@ END_EFFECTORS = {
     "LeftHand": "LeftHandIndex1",
     "RightHand": "RightHandIndex1",
     "Head": "Head",
+    "LeftToe": "LeftToeBase",
+    "RightToe": "RightToeBase",
+}
+
+#: The authors' end joints (``LeftHand``, ``RightHand``, ``LeftToe[Base]``, ``RightToe[Base]``,
+#: no head), LaFAN1 -> biped31, whose hand is the wrist its fingers branch from.
+AUTHORS_END_JOINTS = {
+    "LeftHand": "LeftHand",
+    "RightHand": "RightHand",
     "LeftToe": "LeftToeBase",
     "RightToe": "RightToeBase",
 }
@@ -79,10 +89,22 @@ def _end(result: sa.Motion, source: sa.Motion) -> float:
     )
 
 
+def _end_authors(result: sa.Motion, source: sa.Motion) -> float:
+    """x100: mean of |difference| over frames, the four limb ends and x, y, z, in metres."""
+    pa = global_pose(source)[1][::STRIDE]
+    pb = global_pose(result)[1][::STRIDE]
+    src, res = source.skeleton, result.skeleton
+    a = [src.index(j) for j in AUTHORS_END_JOINTS]
+    b = [res.index(j) for j in AUTHORS_END_JOINTS.values()]
+    return 100.0 * float(np.mean(np.abs(pb[:, b] - pa[:, a])))
+
+
 def _figures(result: sa.Motion, source: sa.Motion, seed: int) -> dict[str, float]:
     out = {f"knn@{s:g}": _knn(result, source, s, seed) for s in SIGMAS}
     # the source against itself: every effector on itself, no error by definition
-    return out | {"end": 0.0 if result is source else _end(result, source)}
+    if result is source:
+        return out | {"end": 0.0, "end_authors": 0.0}
+    return out | {"end": _end(result, source), "end_authors": _end_authors(result, source)}
 
 
 def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_path: Path) -> None:
@@ -97,6 +119,7 @@ def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_p
         out = reconstruction_protocol(model, held, tmp_path, max_frames=MAX_FRAMES, stride=STRIDE)
         target = model.target_skeleton.scaled(1.0 / UNITS[model.target_units])
         assert set(END_EFFECTORS.values()) <= set(target.joint_names)
+        assert set(AUTHORS_END_JOINTS.values()) <= set(target.joint_names)
         expected = {}
         for clip in (a, b):
             cut = clip[:MAX_FRAMES]
@@ -107,6 +130,9 @@ def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_p
                 "name_copy": _figures(name_copy(cut, target), cut, 0),
                 "primal_copy": _figures(primal_copy(cut, target), cut, 0),
                 "direction_copy": _figures(direction_copy(cut, target), cut, 0),
+                "direction_copy_unscaled_root": _figures(
+                    direction_copy(cut, target, root="source"), cut, 0
+                ),
             }
     assert [r["clip"] for r in out.rows] == ["a", "b"]
     assert [r["frames"] for r in out.rows] == [MAX_FRAMES, MAX_FRAMES]
@@ -137,3 +163,35 @@ def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_p
     # sanity of the reference itself: the independent cloud on the source is the closest
     for want in expected.values():
         assert want["original"]["knn@0"] < min(want[m]["knn@0"] for m in want if m != "original")
+
+
+@pytest.mark.parametrize("factor", [0.8, 1.25])
+def test_unscaled_direction_copy_onto_a_scaled_copy_of_its_skeleton(factor: float) -> None:
+    """Closed forms on procedural data: the unscaled-root copy onto ``k x`` its own skeleton.
+
+    Every bone keeps its direction and the root its path, so each joint lands at
+    ``root + k (p - root)``: an effector is off by ``|k - 1| |p - root|``. Eq. 6 sums that
+    over hands, feet and head; the authors' error averages ``|k - 1| |p - root|_1 / 3``
+    over the wrists and toes.
+    """
+    motion = sa.procedural.generate("biped22", "walk", seconds=1.0)[0]
+    target = motion.skeleton.scaled(factor)
+    copy = BASELINES["direction_copy_unscaled_root"](motion, target)
+    # the root path is the source's, exactly
+    np.testing.assert_array_equal(
+        copy.root_positions.double().numpy(), motion.root_positions.double().numpy()
+    )
+    pos = global_pose(motion)[1]  # metres
+    rel = pos - pos[:, :1]
+    index = motion.skeleton.index
+    eq6 = [index(n) for n in ("LeftToe", "RightToe", "Head", "LeftHand", "RightHand")]
+    ends = [index(n) for n in ("LeftHand", "RightHand", "LeftToe", "RightToe")]
+    k = abs(factor - 1.0)
+    want_end = 100.0 * k * float(np.linalg.norm(rel[:, eq6], axis=-1).mean(axis=0).sum())
+    want_authors = 100.0 * k * float(np.abs(rel[:, ends]).mean())
+    got = evaluate_pair(copy, motion, sigmas=(0.0,))
+    assert got["end"] == pytest.approx(want_end, rel=1e-6)
+    assert got["end_authors"] == pytest.approx(want_authors, rel=1e-6)
+    # the same copy with the scaled root rule is further from the source's positions
+    scaled = evaluate_pair(BASELINES["direction_copy"](motion, target), motion, sigmas=(0.0,))
+    assert scaled["end"] > got["end"] and scaled["knn@0"] > got["knn@0"]

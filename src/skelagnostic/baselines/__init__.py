@@ -16,11 +16,12 @@ Core layer: numpy and torch only (no lightning, hydra or pluggy).
 
 from skelagnostic.baselines.directions import direction_copy, direction_match
 from skelagnostic.baselines.keyframes import key_brackets, lerp_keys, lerp_slerp, slerp_keys
-from skelagnostic.baselines.names import joint_key, name_copy, name_match, scaled_root
+from skelagnostic.baselines.names import ROOT_RULES, joint_key, name_copy, name_match, scaled_root
 from skelagnostic.baselines.pose import mean_pose, mean_pose_on_trajectory
 from skelagnostic.baselines.primal import primal_copy, primal_match, primal_skeleton
 
 __all__ = [
+    "ROOT_RULES",
     "direction_copy",
     "direction_match",
     "joint_key",

@@ -20,7 +20,8 @@ observer sees instead, the direction of every bone in world axes:
    shortest-arc rotation for joints with one child, the best rotation of all
    child bones (Kabsch) for joints with several; bones without a partner keep
    their parent's rotation. The root path follows
-   :func:`~skelagnostic.baselines.names.scaled_root`.
+   :func:`~skelagnostic.baselines.names.scaled_root` (or, with ``root="source"``,
+   is the source's own root path).
 
 Only global joint positions of the source are read and only the target's rest
 offsets are used to solve, so the result does not depend on either rig's
@@ -125,6 +126,7 @@ def direction_copy(
     target: Skeleton,
     source_units: str | None = None,
     target_units: str | None = None,
+    root: str = "scaled",
 ) -> Motion:
     """Retarget by pointing every target bone along its paired source chain (module rule).
 
@@ -133,9 +135,15 @@ def direction_copy(
         target: Target skeleton.
         source_units: Units of ``motion`` (default: ``motion.units``, else guessed).
         target_units: Units of ``target`` (default: guessed).
+        root: ``"scaled"`` (:func:`~skelagnostic.baselines.scaled_root`, default) or
+            ``"source"`` (the source's root path unscaled); see
+            :func:`~skelagnostic.baselines.names.copied_motion`.
 
     Returns:
         A motion on ``target`` at the source's fps, in the target's units.
+
+    Raises:
+        MotionError: ``root`` is not ``"scaled"`` or ``"source"``.
 
     Example:
         >>> from skelagnostic import procedural
@@ -152,4 +160,4 @@ def direction_copy(
         known[c] = True
     glob = global_rotations_from_directions(directions, target.offsets, target.parents, known)
     local = local_from_global(glob, target.parents)
-    return copied_motion(motion, target, local, source_units, target_units)
+    return copied_motion(motion, target, local, source_units, target_units, root)

@@ -30,8 +30,13 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton, _side, _words
 from skelagnostic.core.units import infer_units
+from skelagnostic.errors import MotionError
 
-__all__ = ["copied_motion", "joint_key", "name_copy", "name_match", "scaled_root"]
+__all__ = ["ROOT_RULES", "copied_motion", "joint_key", "name_copy", "name_match", "scaled_root"]
+
+#: The root rules of the copy baselines: ``"scaled"`` (:func:`scaled_root`) or ``"source"``
+#: (the source's root path unchanged, only converted to the target's units).
+ROOT_RULES = ("scaled", "source")
 
 
 def joint_key(name: str) -> tuple[int, str]:
@@ -95,6 +100,7 @@ def name_copy(
     source_units: str | None = None,
     target_units: str | None = None,
     cutoff: float = 0.6,
+    root: str = "scaled",
 ) -> Motion:
     """Naive retargeting: copy local rotations by joint name, scale the root trajectory.
 
@@ -102,8 +108,8 @@ def name_copy(
     :func:`name_match` pairs it with (identity without a match). The root
     trajectory follows :func:`scaled_root` (height and displacement from the first
     frame scaled by the ratio of the skeletons' heights in metres, in the target's
-    units). Both rigs are assumed to share their rest-pose convention (identity
-    rotations give the rest pose).
+    units), or with ``root="source"`` keeps the source's root path. Both rigs are
+    assumed to share their rest-pose convention (identity rotations give the rest pose).
 
     Args:
         motion: Source motion.
@@ -112,15 +118,19 @@ def name_copy(
             height by :func:`skelagnostic.core.units.infer_units`).
         target_units: Units of ``target`` (default: guessed).
         cutoff: See :func:`name_match`.
+        root: See :func:`copied_motion`.
 
     Returns:
         A motion on ``target`` at the source's fps, in the target's units.
+
+    Raises:
+        MotionError: ``root`` is not one of :data:`ROOT_RULES`.
     """
     rot = Q.identity(motion.num_frames, target.num_joints, dtype=motion.rotations.dtype)
     for j, i in enumerate(name_match(motion.skeleton, target, cutoff)):
         if i is not None:
             rot[:, j] = motion.rotations[:, i]
-    return copied_motion(motion, target, rot, source_units, target_units)
+    return copied_motion(motion, target, rot, source_units, target_units, root)
 
 
 def copied_motion(
@@ -129,8 +139,9 @@ def copied_motion(
     local: torch.Tensor,
     source_units: str | None = None,
     target_units: str | None = None,
+    root: str = "scaled",
 ) -> Motion:
-    """The motion a copy baseline returns: ``local`` rotations on ``target``, :func:`scaled_root`.
+    """The motion a copy baseline returns: ``local`` rotations on ``target`` and a root path.
 
     Args:
         motion: Source motion (its root path, fps and name are kept).
@@ -139,16 +150,33 @@ def copied_motion(
         source_units: Units of ``motion`` (default: ``motion.units``, else guessed from its
             height by :func:`skelagnostic.core.units.infer_units`).
         target_units: Units of ``target`` (default: guessed).
+        root: ``"scaled"`` (default): :func:`scaled_root`, the source's root height and
+            displacement scaled by the height ratio; ``"source"``: the source's root
+            path itself (the same positions in metres, expressed in the target's units),
+            what a comparison with the source's own positions favours.
 
     Returns:
         A motion on ``target`` at the source's fps, in the target's units.
+
+    Raises:
+        MotionError: ``root`` is not one of :data:`ROOT_RULES`.
     """
+    if root not in ROOT_RULES:
+        raise MotionError(
+            f"copy baseline: root={root!r} is not a root rule; expected one of {ROOT_RULES}"
+        )
     src_unit = infer_units(motion.skeleton, source_units or motion.units)
     dst_unit = infer_units(target, target_units)
+    if root == "scaled":
+        path = scaled_root(motion, target, src_unit, dst_unit)
+    else:
+        path = (motion.root_positions * (UNITS[src_unit] / UNITS[dst_unit])).to(
+            motion.rotations.dtype
+        )
     return Motion(
         target,
         local,
-        scaled_root(motion, target, src_unit, dst_unit),
+        path,
         motion.fps,
         name=motion.name,
         units=dst_unit,

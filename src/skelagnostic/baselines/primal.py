@@ -19,7 +19,8 @@ baseline that needs no joint names:
    along its chain (chains of different lengths are resampled by rank), so a
    chain bends like its source; joints without a match keep their parent's
    global rotation (identity local rotation). The root trajectory follows
-   :func:`~skelagnostic.baselines.names.scaled_root`, as for every copy.
+   :func:`~skelagnostic.baselines.names.scaled_root`, as for every copy (or, with
+   ``root="source"``, is the source's own root path).
 
 Like the name copy it assumes both rigs share their rest-pose convention and
 world axes.
@@ -111,6 +112,7 @@ def primal_copy(
     target: Skeleton,
     source_units: str | None = None,
     target_units: str | None = None,
+    root: str = "scaled",
 ) -> Motion:
     """Retarget by copying global rotations along matched primal chains.
 
@@ -119,9 +121,15 @@ def primal_copy(
         target: Target skeleton.
         source_units: Units of ``motion`` (default: ``motion.units``, else guessed).
         target_units: Units of ``target`` (default: guessed).
+        root: ``"scaled"`` (:func:`~skelagnostic.baselines.scaled_root`, default) or
+            ``"source"`` (the source's root path unscaled); see
+            :func:`~skelagnostic.baselines.names.copied_motion`.
 
     Returns:
         A motion on ``target`` at the source's fps, in the target's units.
+
+    Raises:
+        MotionError: ``root`` is not ``"scaled"`` or ``"source"``.
     """
     src_chains, dst_chains = primal_skeleton(motion.skeleton), primal_skeleton(target)
     donor: dict[int, int] = {}
@@ -140,4 +148,4 @@ def primal_copy(
             local[:, j] = glob[:, j] if p < 0 else Q.mul(Q.inv(glob[:, p]), glob[:, j])
         elif p >= 0:
             glob[:, j] = glob[:, p]
-    return copied_motion(motion, target, local, source_units, target_units)
+    return copied_motion(motion, target, local, source_units, target_units, root)

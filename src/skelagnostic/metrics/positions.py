@@ -17,6 +17,7 @@ from skelagnostic.metrics._checks import (
 )
 from skelagnostic.metrics.functional._utils import REDUCTIONS, _mean_compute
 from skelagnostic.metrics.functional.positions import (
+    END_EFFECTOR_DISTANCES,
     MPJPE_MODES,
     _bone_length_consistency_update,
     _end_effector_update,
@@ -159,6 +160,9 @@ class EndEffectorError(_SumCountMetric):
             e.g. ``target_skeleton.end_effectors()``.
         target_indices: Matching joints of the reference skeleton, same order.
         reduction: ``"sum"`` over pairs (Eq. 6, default) or ``"mean"``.
+        distance: ``"euclidean"`` (Eq. 6, default) or ``"mean_abs"``, the mean absolute
+            coordinate difference; with ``reduction="mean"`` the definition of the PC-MRL
+            authors' code.
         **kwargs: Passed to `torchmetrics.Metric`.
 
     Examples:
@@ -182,18 +186,26 @@ class EndEffectorError(_SumCountMetric):
         target_indices: Sequence[int] | None = None,
         *,
         reduction: str = "sum",
+        distance: str = "euclidean",
         **kwargs: Any,
     ) -> None:
         super().__init__(**kwargs)
         check_choice("EndEffectorError", "reduction", reduction, REDUCTIONS)
+        check_choice("EndEffectorError", "distance", distance, END_EFFECTOR_DISTANCES)
         self.preds_indices = check_indices("EndEffectorError", "preds_indices", preds_indices)
         self.target_indices = check_indices("EndEffectorError", "target_indices", target_indices)
         self.reduction = reduction
+        self.distance = distance
 
     def update(self, preds: Tensor, target: Tensor) -> None:
         """Accumulate sequences ``preds [..., T, J_B, 3]`` and ``target [..., T, J_A, 3]``."""
         self._accumulate(
             *_end_effector_update(
-                preds, target, self.preds_indices, self.target_indices, self.reduction
+                preds,
+                target,
+                self.preds_indices,
+                self.target_indices,
+                self.reduction,
+                self.distance,
             )
         )

@@ -26,6 +26,9 @@ from skelagnostic.metrics.functional._utils import REDUCTIONS, _mean_compute
 __all__ = ["bone_length_consistency", "end_effector_error", "mpjpe"]
 
 MPJPE_MODES = ("plain", "root", "procrustes")
+#: Per-frame distances of :func:`end_effector_error`: the Euclidean norm (PC-MRL Eq. 6) or
+#: the mean absolute coordinate difference (the authors' ``train_pointcloud.py``).
+END_EFFECTOR_DISTANCES = ("euclidean", "mean_abs")
 
 
 # --------------------------------------------------------------------------- MPJPE
@@ -219,10 +222,12 @@ def _end_effector_update(
     preds_indices: Sequence[int] | None = None,
     target_indices: Sequence[int] | None = None,
     reduction: str = "sum",
+    distance: str = "euclidean",
 ) -> tuple[Tensor, Tensor]:
     """Sum of the per-sequence end-effector errors, and the number of sequences."""
     name = "end_effector_error"
     check_choice(name, "reduction", reduction, REDUCTIONS)
+    check_choice(name, "distance", distance, END_EFFECTOR_DISTANCES)
     check_tensor(name, "preds", preds, min_ndim=3, last_dim=3, layout="[..., T, J, 3]")
     check_tensor(name, "target", target, min_ndim=3, last_dim=3, layout="[..., T, J, 3]")
     check_same_frames(name, preds, target)
@@ -242,7 +247,12 @@ def _end_effector_update(
             f"{preds.shape[-2]} predicted vs {target.shape[-2]} target end effectors; "
             "give matching preds_indices and target_indices",
         )
-    per_pair = torch.linalg.vector_norm(preds - target, dim=-1).mean(dim=-2)  # [..., E]
+    diff = preds - target
+    if distance == "euclidean":
+        per_frame = torch.linalg.vector_norm(diff, dim=-1)  # [..., T, E]
+    else:
+        per_frame = diff.abs().mean(dim=-1)
+    per_pair = per_frame.mean(dim=-2)  # [..., E]
     per_sequence = per_pair.sum(dim=-1) if reduction == "sum" else per_pair.mean(dim=-1)
     return per_sequence.sum(), torch.tensor(per_sequence.numel(), device=preds.device)
 
@@ -254,6 +264,7 @@ def end_effector_error(
     preds_indices: Sequence[int] | None = None,
     target_indices: Sequence[int] | None = None,
     reduction: str = "sum",
+    distance: str = "euclidean",
 ) -> Tensor:
     r"""End-effector error between matched joints of two skeletons (PC-MRL Eq. 6).
 
@@ -265,12 +276,21 @@ def end_effector_error(
     ``Skeleton.end_effectors()``), averaged over sequences. ``reduction="sum"``
     (default) sums over pairs as in Eq. 6; ``"mean"`` averages over pairs.
 
+    ``distance="mean_abs"`` replaces the Euclidean norm by the mean absolute
+    difference of the three coordinates, $\frac{1}{3}\lVert \hat p_{b,t} - p_{a,t}
+    \rVert_1$. With ``reduction="mean"`` this is what the PC-MRL authors' code
+    computes (``torch.mean(torch.abs(...))`` over sequences, frames, effectors and
+    coordinates in ``train_pointcloud.py``), the definition of the paper's Table 2
+    figures (see ``docs/metrics.md``).
+
     Args:
         preds: Predicted global positions ``[..., T, J_B, 3]`` (e.g. the retargeted skeleton).
         target: Reference global positions ``[..., T, J_A, 3]``.
         preds_indices: End-effector joints of ``preds``; all joints when ``None``.
         target_indices: The matching joints of ``target``, same order and length.
         reduction: ``"sum"`` or ``"mean"`` over pairs.
+        distance: ``"euclidean"`` (Eq. 6, default) or ``"mean_abs"`` (the mean absolute
+            coordinate difference of the authors' code).
 
     Returns:
         Scalar tensor.
@@ -285,7 +305,12 @@ def end_effector_error(
         >>> preds[1, 2, 1] = 4.0                        # joint 2 is off by 4 in frame 1
         >>> end_effector_error(preds, target, preds_indices=[1, 2], target_indices=[3, 4])
         tensor(2.)
+        >>> preds[1, 2] = torch.tensor([3.0, -3.0, 0.0])  # off by (3, -3, 0): mean |d| = 2
+        >>> end_effector_error(
+        ...     preds, target, preds_indices=[1, 2], target_indices=[3, 4], distance="mean_abs"
+        ... )
+        tensor(1.)
     """
     return _mean_compute(
-        *_end_effector_update(preds, target, preds_indices, target_indices, reduction)
+        *_end_effector_update(preds, target, preds_indices, target_indices, reduction, distance)
     )
