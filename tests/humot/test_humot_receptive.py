@@ -112,6 +112,8 @@ def test_bad_arguments_are_refused(skeleton):
     net = _Mix(torch.ones(22), torch.ones(22))
     with pytest.raises(SkelagnosticError, match="more than 5 frames away"):
         receptive_field(net, skeleton, frames=10)
+    with pytest.raises(SkelagnosticError, match=r"frame 30 is not in 0\.\.29"):
+        receptive_field(net, skeleton, frame=30)
     with pytest.raises(SkelagnosticError, match="positions must have shape"):
         receptive_field(net, skeleton, positions=torch.zeros(20, 22, 3))
     with pytest.raises(SkelagnosticError, match="no callable encoder"):

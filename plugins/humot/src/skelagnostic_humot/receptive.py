@@ -141,7 +141,9 @@ def receptive_field(
     num = skeleton.num_joints
     frame = frames // 2 if frame is None else frame
     far = [g for g in range(frames) if abs(g - frame) > distance]
-    if not 0 <= frame < frames or not far:
+    if not 0 <= frame < frames:
+        raise SkelagnosticError(f"receptive_field: frame {frame} is not in 0..{frames - 1}")
+    if not far:
         raise SkelagnosticError(
             f"receptive_field: frame {frame} of {frames} has no input frame more than "
             f"{distance} frames away"
