@@ -6,7 +6,8 @@ Registered as ``model=humot`` through the ``skelagnostic`` entry-point group
 :mod:`~skelagnostic_humot.template` (templates, major joints, axes),
 :mod:`~skelagnostic_humot.data` (chunks, joint subsampling, data module),
 :mod:`~skelagnostic_humot.aligner` (training and inference),
-:mod:`~skelagnostic_humot.evaluation` (paper evaluations and protocols).
+:mod:`~skelagnostic_humot.evaluation` (paper evaluations and protocols),
+:mod:`~skelagnostic_humot.receptive` (receptive field of the encoder).
 Imports are lazy: ``import skelagnostic_humot`` loads no model code until one of
 the names below is used.
 """
@@ -18,7 +19,7 @@ from typing import TYPE_CHECKING
 from skelagnostic.lazy import lazy_exports
 from skelagnostic.version import distribution_version
 
-__all__ = ["HuMoT", "HumotAligner", "HumotDataModule"]
+__all__ = ["HuMoT", "HumotAligner", "HumotDataModule", "ReceptiveField", "receptive_field"]
 #: Version of the distribution that ships this plugin (built-in: skelagnostic's).
 __version__ = distribution_version("skelagnostic")
 
@@ -28,6 +29,8 @@ __getattr__, __dir__ = lazy_exports(
         "HuMoT": "skelagnostic_humot.model",
         "HumotAligner": "skelagnostic_humot.aligner",
         "HumotDataModule": "skelagnostic_humot.data",
+        "ReceptiveField": "skelagnostic_humot.receptive",
+        "receptive_field": "skelagnostic_humot.receptive",
     },
 )
 
@@ -35,3 +38,4 @@ if TYPE_CHECKING:  # pragma: no cover
     from skelagnostic_humot.aligner import HumotAligner
     from skelagnostic_humot.data import HumotDataModule
     from skelagnostic_humot.model import HuMoT
+    from skelagnostic_humot.receptive import ReceptiveField, receptive_field

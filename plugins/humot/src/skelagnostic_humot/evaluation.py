@@ -23,7 +23,12 @@ Functions:
   trajectory (which leaves only the limb motion to explain).
 * :func:`denoising_curve` (Fig. 8): Gaussian noise of standard deviation
   ``sigma`` added to every coordinate; MPJPE of the noisy input and of its
-  reconstruction, both against the clean chunk.
+  reconstruction, both against the clean chunk. :func:`denoising_figures`
+  turns a curve into the two numbers a target can be set on (issue #45): the
+  share of the levels from 4 cm of noise up where the output error stays below
+  the noisy input's, and the output error's growth over the noise range
+  divided by the input's, for the model and for the identity (output = noisy
+  input: 0 and 1).
 * :func:`upsampling_curve` (Fig. 9): a random share of joints is kept (at
   least two), encoded with the subset template and decoded with the full one;
   MPJPE on all joints, against the share kept and the number removed.
@@ -73,9 +78,11 @@ __all__ = [
     "chunks_of",
     "cycle_error",
     "denoising_curve",
+    "denoising_figures",
     "evaluate_clips",
     "evaluate_procedural",
     "extra_clips",
+    "mean_denoising_curve",
     "paired_by_method",
     "reconstruction",
     "reconstruction_protocol",
@@ -91,6 +98,9 @@ HUMAN_KINDS: tuple[str, ...] = ("biped22", "biped31", "biped17")
 
 #: Base seed of held-out procedural clips: training uses seeds 0 up to the clip count.
 HELD_OUT_SEED = 1000
+
+#: Noise level (sigma, cm) from which a denoised output must stay below its noisy input.
+DENOISING_FROM_CM = 4.0
 
 
 def chunks_of(motion: Motion, chunk: int = 30, units: str | None = None) -> torch.Tensor:
@@ -181,6 +191,84 @@ def denoising_curve(
         "input_mpjpe_cm": noisy_err,
         "output_mpjpe_cm": out_err,
     }
+
+
+def denoising_figures(
+    curve: Mapping[str, Sequence[float]], from_sigma_cm: float = DENOISING_FROM_CM
+) -> dict[str, dict[str, float]]:
+    """Whether a Fig. 8 curve shows denoising, as ``method -> figure -> number``.
+
+    Two figures, for the model (``output_mpjpe_cm``) and for the identity, which
+    returns the noisy input (its error is ``input_mpjpe_cm``):
+
+    * ``below_noise_from_<from_sigma_cm>cm`` (``below_noise_from_4cm`` by default):
+      the share of the noise levels ``sigma_cm >= from_sigma_cm`` where the output
+      error is strictly below the noisy input's; 1.0 when it is at every level, 0.0
+      for the identity.
+    * ``growth_over_noise``: the output error's growth from the lowest to the
+      highest noise level, divided by the input error's growth over the same
+      levels; 1.0 for the identity, about 0 for an output that ignores its input.
+      Issue #45's target is < 1/3.
+
+    Denoising needs both: an output that ignores its input does not grow, but its
+    error stays at the reconstruction error, above small noise.
+
+    Args:
+        curve: A :func:`denoising_curve` (``sigma_cm``, ``input_mpjpe_cm``,
+            ``output_mpjpe_cm``; any order of the levels).
+        from_sigma_cm: The lowest noise level (sigma, cm) of the first figure.
+
+    Returns:
+        ``{"model": {...}, "identity": {...}}``.
+
+    Raises:
+        EvaluationError: The columns differ in length, no level reaches
+            ``from_sigma_cm``, or the input error does not grow over the levels.
+
+    Example:
+        >>> curve = {"sigma_cm": [0, 4, 8], "input_mpjpe_cm": [0, 6, 12],
+        ...          "output_mpjpe_cm": [5, 5.5, 7]}
+        >>> denoising_figures(curve)["model"]
+        {'below_noise_from_4cm': 1.0, 'growth_over_noise': 0.16666666666666666}
+    """
+    sigma, noisy, out = (
+        [float(v) for v in curve[k]] for k in ("sigma_cm", "input_mpjpe_cm", "output_mpjpe_cm")
+    )
+    if not len(sigma) == len(noisy) == len(out):
+        raise EvaluationError("denoising curve: sigma, input and output columns differ in length")
+    order = sorted(range(len(sigma)), key=sigma.__getitem__)
+    from_levels = [i for i in order if sigma[i] >= from_sigma_cm]
+    if not from_levels:
+        raise EvaluationError(f"denoising curve: no noise level reaches {from_sigma_cm:g} cm")
+    lo, hi = order[0], order[-1]
+    noise_growth = noisy[hi] - noisy[lo]
+    if not noise_growth > 0:
+        raise EvaluationError("denoising curve: the input error does not grow over the levels")
+    below = f"below_noise_from_{from_sigma_cm:g}cm"
+    figures = {}
+    for method, err in ((MODEL, out), ("identity", noisy)):
+        figures[method] = {
+            below: sum(err[i] < noisy[i] for i in from_levels) / len(from_levels),
+            "growth_over_noise": (err[hi] - err[lo]) / noise_growth,
+        }
+    return figures
+
+
+def mean_denoising_curve(curves: Sequence[Mapping[str, Sequence[float]]]) -> dict[str, list[float]]:
+    """The mean of :func:`denoising_curve` curves over the same noise levels (Fig. 8's average).
+
+    Raises:
+        EvaluationError: No curve, or curves of other noise levels.
+    """
+    if not curves:
+        raise EvaluationError("mean_denoising_curve: no curve")
+    sigma = [float(v) for v in curves[0]["sigma_cm"]]
+    if any([float(v) for v in c["sigma_cm"]] != sigma for c in curves):
+        raise EvaluationError("mean_denoising_curve: the curves have other noise levels")
+    mean = {"sigma_cm": sigma}
+    for key in ("input_mpjpe_cm", "output_mpjpe_cm"):
+        mean[key] = [sum(float(c[key][i]) for c in curves) / len(curves) for i in range(len(sigma))]
+    return mean
 
 
 def upsampling_curve(
@@ -619,13 +707,27 @@ def reconstruction_protocol(
             "upsampling": upsampling_curve(aligner, chunks, topo, up_axis=sk.up_axis),
         }
     plots = [p.name for p in plot_results(curves, out_dir)] if curves else []
+    extra: dict[str, Any] = {"curves": curves, "by_topology": _by_topology(rows)}
+    if curves:
+        den = [c["denoising"] for c in curves.values()]
+        extra["denoising"] = denoising_figures(mean_denoising_curve(den))
+        extra["denoising_by_group"] = {
+            name: denoising_figures(c["denoising"]) for name, c in curves.items()
+        }
+        notes.append(
+            "extra['denoising']: the denoising curve averaged over the topology groups (as "
+            "the paper's Fig. 8), as the share of noise levels from 4 cm (sigma) where the "
+            "output error is below the noisy input's (below_noise_from_4cm) and the output "
+            "error's growth over the noise range / the input's (growth_over_noise); "
+            "'identity' returns the noisy input; extra['denoising_by_group'] per group"
+        )
     return Evaluation(
         {
             "mpjpe_cm": "MPJPE of 1 s chunks decoded on their own template, cm, lower is better",
             "mpjpe_over_height": "MPJPE / skeleton height, lower is better",
         },
         rows,
-        extra={"curves": curves, "by_topology": _by_topology(rows)},
+        extra=extra,
         plots=plots,
         notes=notes,
     )
