@@ -518,3 +518,18 @@ def test_missing_pygltflib_names_the_extra(tmp_path, monkeypatch):
         sa.write_gltf(motion, tmp_path / "clip.glb")
     with pytest.raises(sa.GLTFError, match=r"skelagnostic\[gltf\]"):
         sa.read_gltf(tmp_path / "clip.glb")
+
+
+def test_motion_files_choose_the_format_by_suffix(tmp_path):
+    from skelagnostic.io import read_motion, write_motion
+
+    motion, _ = sa.procedural.generate("biped17", "walk", seconds=0.3, fps=30)
+    for name in ("m.bvh", "m.GLB", "m.gltf"):
+        write_motion(motion, tmp_path / name)
+        back = read_motion(tmp_path / name)
+        assert torch.allclose(back.global_positions(), motion.global_positions(), atol=1e-4)
+    assert (tmp_path / "m.GLB").read_bytes()[:4] == b"glTF"
+    assert (tmp_path / "m.gltf").read_text().lstrip().startswith("{")
+    with pytest.raises(sa.SkelagnosticError, match=r"m\.fbx: a motion file ends in \.bvh"):
+        write_motion(motion, tmp_path / "m.fbx")
+    assert not (tmp_path / "m.fbx").exists()
