@@ -441,6 +441,13 @@ BAD_DOCUMENTS = {
         "BEZIER",
     ),
     "version": (lambda d: d["asset"].update(version="1.0"), "asset.version", "2.x"),
+    "skeleton not animated": (
+        lambda d: d["animations"][0].update(
+            channels=[{"sampler": 0, "target": {"node": len(d["nodes"]) - 1, "path": "rotation"}}]
+        ),
+        "animations[0]",
+        "moves none of the skeleton's",
+    ),
     "two parents": (
         lambda d: d["nodes"][1].setdefault("children", []).append(2),
         "nodes[1].children",
@@ -465,10 +472,10 @@ def test_not_gltf_truncated_missing_and_directory(tmp_path):
     bvh.write_text("HIERARCHY\nROOT Hips\n")
     with pytest.raises(sa.GLTFError, match="not a glTF file"):
         sa.read_gltf(bvh)
-    array = tmp_path / "array.gltf"
-    array.write_text("[1, 2]")
-    with pytest.raises(sa.GLTFError, match="not a glTF file"):
-        sa.read_gltf(array)
+    for name, text in (("array.gltf", "[1, 2]"), ("empty.gltf", "{}")):
+        (tmp_path / name).write_text(text)
+        with pytest.raises(sa.GLTFError, match="not a glTF file"):
+            sa.read_gltf(tmp_path / name)
     motion, _ = sa.procedural.generate("biped22", "walk", seconds=0.3, fps=30)
     sa.write_gltf(motion, tmp_path / "whole.glb")
     cut = tmp_path / "cut.glb"

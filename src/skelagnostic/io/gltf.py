@@ -59,6 +59,8 @@ _SCALE_TOLERANCE = 1e-5
 #: An evaluation time this close to a keyframe (as a fraction of the key interval)
 #: takes the keyframe's value (float32 key times, float64 frame times).
 _SNAP = 1e-4
+#: Most frames a resampled animation may have (10 hours at 240 fps).
+_MAX_FRAMES = 10 * 3600 * 240
 
 
 def _pygltflib(path: Path) -> ModuleType:
@@ -217,10 +219,10 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
     if suffix not in GLTF_SUFFIXES:
         raise GLTFError(f"a glTF file name ends in .glb or .gltf, not {path.suffix!r}", path)
     pg = _pygltflib(path)
-    m = motion.double()
+    m = motion.to(dtype=torch.float64, device="cpu")
     sk = m.skeleton
     num_joints, num_frames = sk.num_joints, m.num_frames
-    offsets = sk.offsets.double().cpu().numpy()
+    offsets = sk.offsets.detach().double().cpu().numpy()
     parents = sk.parents
     blob = _Blob(pg)
 
@@ -253,7 +255,8 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
     nodes[0].extras = {_EXTRA: meta}
 
     # the animation
-    cpu = m.to(device="cpu")
+    root_positions = m.root_positions.detach().numpy()
+    translations = None if m.translations is None else m.translations.detach().numpy()
     times = (np.arange(num_frames, dtype=np.float64) / m.fps).astype(np.float32)
     time_accessor = blob.add(times, "SCALAR", bounds=True)
     samplers, channels = [], []
@@ -267,18 +270,19 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
             )
         )
 
-    rotations = cpu.rotations.numpy()[..., [1, 2, 3, 0]]  # (w, x, y, z) -> glTF (x, y, z, w)
+    # (w, x, y, z) -> glTF's (x, y, z, w)
+    rotations = m.rotations.detach().numpy()[..., [1, 2, 3, 0]]
     translated = [0]
-    if cpu.translations is not None:
-        moved = np.abs(cpu.translations.numpy() - offsets).max(axis=(0, 2)) > 1e-9
+    if translations is not None:
+        moved = np.abs(translations - offsets).max(axis=(0, 2)) > 1e-9
         translated += [int(j) for j in np.nonzero(moved)[0] if j > 0]
     for j in range(num_joints):
         channel(j, "rotation", rotations[:, j], "VEC4")
         if j == 0:
-            channel(0, "translation", cpu.root_positions.numpy(), "VEC3")
+            channel(0, "translation", root_positions, "VEC3")
         elif j in translated:
-            assert cpu.translations is not None
-            channel(j, "translation", cpu.translations.numpy()[:, j], "VEC3")
+            assert translations is not None
+            channel(j, "translation", translations[:, j], "VEC3")
     animation = pg.Animation(
         name=m.name or "motion",
         samplers=samplers,
@@ -288,8 +292,11 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
 
     scene_nodes = [0]
     skins, meshes, materials = [], [], []
-    if bones:
-        rest = _rest_positions(offsets, parents)
+    rest = _rest_positions(offsets, parents)
+    segments = [(rest[p], rest[j], p) for j, p in enumerate(parents) if p >= 0]
+    segments += [(rest[j], rest[j] + site, j) for j, site in sites]
+    positions, joints, weights, indices = _bone_mesh(segments)
+    if bones and len(indices):  # a skin needs a mesh: a lone joint gets neither
         inverse_bind = np.tile(np.eye(4, dtype=np.float32), (num_joints, 1, 1))
         inverse_bind[:, 3, :3] = -rest  # column-major: the translation is the 4th column
         skins.append(
@@ -299,34 +306,30 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
                 skeleton=0,
             )
         )
-        segments = [(rest[p], rest[j], p) for j, p in enumerate(parents) if p >= 0]
-        segments += [(rest[j], rest[j] + site, j) for j, site in sites]
-        positions, joints, weights, indices = _bone_mesh(segments)
-        if len(indices):
-            attributes = pg.Attributes(
-                POSITION=blob.add(positions, "VEC3", target=pg.ARRAY_BUFFER, bounds=True),
-                JOINTS_0=blob.add(joints, "VEC4", target=pg.ARRAY_BUFFER),
-                WEIGHTS_0=blob.add(weights, "VEC4", target=pg.ARRAY_BUFFER),
+        attributes = pg.Attributes(
+            POSITION=blob.add(positions, "VEC3", target=pg.ARRAY_BUFFER, bounds=True),
+            JOINTS_0=blob.add(joints, "VEC4", target=pg.ARRAY_BUFFER),
+            WEIGHTS_0=blob.add(weights, "VEC4", target=pg.ARRAY_BUFFER),
+        )
+        primitive = pg.Primitive(
+            attributes=attributes,
+            indices=blob.add(indices, "SCALAR", target=pg.ELEMENT_ARRAY_BUFFER),
+            material=0,
+        )
+        materials.append(
+            pg.Material(
+                name="bone",
+                doubleSided=True,
+                pbrMetallicRoughness=pg.PbrMetallicRoughness(
+                    baseColorFactor=[0.85, 0.55, 0.3, 1.0],
+                    metallicFactor=0.0,
+                    roughnessFactor=0.8,
+                ),
             )
-            primitive = pg.Primitive(
-                attributes=attributes,
-                indices=blob.add(indices, "SCALAR", target=pg.ELEMENT_ARRAY_BUFFER),
-                material=0,
-            )
-            materials.append(
-                pg.Material(
-                    name="bone",
-                    doubleSided=True,
-                    pbrMetallicRoughness=pg.PbrMetallicRoughness(
-                        baseColorFactor=[0.85, 0.55, 0.3, 1.0],
-                        metallicFactor=0.0,
-                        roughnessFactor=0.8,
-                    ),
-                )
-            )
-            meshes.append(pg.Mesh(name="bones", primitives=[primitive]))
-            nodes.append(pg.Node(name=_unique("bones", taken), mesh=0, skin=0))
-            scene_nodes.append(len(nodes) - 1)
+        )
+        meshes.append(pg.Mesh(name="bones", primitives=[primitive]))
+        nodes.append(pg.Node(name=_unique("bones", taken), mesh=0, skin=0))
+        scene_nodes.append(len(nodes) - 1)
 
     data = blob.data()
     from skelagnostic.version import distribution_version
@@ -450,8 +453,8 @@ class _Reader:
             else:
                 text = raw.decode("utf-8-sig")
                 document = json.loads(text)
-                if not isinstance(document, dict):
-                    raise ValueError("the JSON document is not an object")
+                if not isinstance(document, dict) or "asset" not in document:
+                    raise ValueError("the JSON document is not an object with an 'asset'")
                 gltf = pg.GLTF2.from_json(text)
         except GLTFError:
             raise
@@ -883,26 +886,39 @@ def read_gltf(
     # frame times
     used = [track for i in joints for track in tracks.get(i, {}).values()]
     meta_fps = _metadata(reader.items("animations")[a]).get("fps")
-    if used:
-        keys = used[0].times
-        same = all(len(t.times) == len(keys) and np.array_equal(t.times, keys) for t in used[1:])
-        densest = max(used, key=lambda t: len(t.times)).times
-        span = float(densest[-1] - densest[0])
-        fps = _snap_fps((len(densest) - 1) / span) if len(densest) > 1 and span > 0 else 30.0
-        if isinstance(meta_fps, (int, float)) and math.isfinite(meta_fps) and meta_fps > 0:
-            fps = float(meta_fps)
-        if same and len(keys) > 1:
-            steps = np.diff(keys)
-            same = bool(np.abs(steps - 1.0 / fps).max() <= 1e-3 / fps)
-        if same:
-            grid = keys
-        else:
-            start = min(float(t.times[0]) for t in used)
-            end = max(float(t.times[-1]) for t in used)
-            grid = start + np.arange(round((end - start) * fps) + 1) / fps
-    else:  # nothing of the skeleton moves: one frame of its rest pose
-        fps = float(meta_fps) if isinstance(meta_fps, (int, float)) and meta_fps > 0 else 30.0
-        grid, same = np.zeros(1), False
+    if not used:
+        raise reader.error(
+            f"moves none of the skeleton's {len(joints)} joints (the nodes from {root} down)",
+            f"animations[{a}]",
+        )
+    keys = used[0].times
+    same = all(len(t.times) == len(keys) and np.array_equal(t.times, keys) for t in used[1:])
+    densest = max(used, key=lambda t: len(t.times)).times
+    span = float(densest[-1] - densest[0])
+    fps = _snap_fps((len(densest) - 1) / span) if len(densest) > 1 and span > 0 else 30.0
+    if (
+        isinstance(meta_fps, (int, float))
+        and not isinstance(meta_fps, bool)
+        and math.isfinite(meta_fps)
+        and meta_fps > 0
+    ):
+        fps = float(meta_fps)
+    if same and len(keys) > 1:
+        steps = np.diff(keys)
+        same = bool(np.abs(steps - 1.0 / fps).max() <= 1e-3 / fps)
+    if same:
+        grid = keys
+    else:
+        start = min(float(t.times[0]) for t in used)
+        end = max(float(t.times[-1]) for t in used)
+        count = round((end - start) * fps) + 1
+        if count > _MAX_FRAMES:
+            raise reader.error(
+                f"keys from {start:g} s to {end:g} s at {fps:g} fps would make {count} frames "
+                f"(at most {_MAX_FRAMES})",
+                f"animations[{a}]",
+            )
+        grid = start + np.arange(count) / fps
     num_frames = len(grid)
 
     def sample(node: int, what: str, rest: np.ndarray) -> np.ndarray:
