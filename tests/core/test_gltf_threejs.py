@@ -60,7 +60,9 @@ window.jointPositions = function (content, binary, jointCount, frames, done) {{
       }}
       out.push(row);
     }}
-    done({{positions: out, revision: THREE.REVISION, tracks: gltf.animations[0].tracks.length}});
+    let skinned = 0;
+    gltf.scene.traverse((object) => {{ if (object.isSkinnedMesh) skinned += 1; }});
+    done({{positions: out, revision: THREE.REVISION, skinned: skinned}});
   }}, (error) => done({{error: String(error)}}));
 }};
 </script>
@@ -95,18 +97,35 @@ def _three_positions(
     )
     assert "error" not in result, result
     assert result["revision"] == "147"
+    assert result["skinned"] == 1  # the bone mesh, bound to the joints
     return np.asarray(result["positions"], dtype=np.float64)
+
+
+#: Joint names three.js rewrites when it binds tracks (spaces, dots, brackets, slashes,
+#: colons) or that collide once rewritten, and non-ASCII text.
+AWKWARD = ("Left Up.Leg[0]", "a/b", "\u00fc name", "x:y", "dup.name", "dup_name")
+
+
+def _awkward_names(motion: sa.Motion) -> sa.Motion:
+    sk = motion.skeleton
+    names = [f"{new} {old}" for new, old in zip(AWKWARD, sk.joint_names, strict=False)]
+    names += sk.joint_names[len(names) :]
+    renamed = sa.Skeleton(
+        names, sk.parents, sk.offsets, end_sites=sk.end_sites, body_groups=sk.body_groups
+    )
+    return sa.Motion(renamed, motion.rotations, motion.root_positions, motion.fps, name="awkward")
 
 
 def _motions(shared_data: Path) -> list[sa.Motion]:
     human, _ = sa.procedural.generate("biped22", "walk", seconds=1.0, fps=30, seed=0)
+    awkward, _ = sa.procedural.generate("biped17", "run", seconds=1.0, fps=24, seed=2)
     dog, _ = sa.procedural.generate("quadruped", "trot", seconds=1.0, fps=30, seed=1)
     clips = [
         sa.read_bvh(shared_data / "human" / "cmu" / "131_03.bvh")[:200],
         sa.read_bvh(shared_data / "human" / "lafan1" / "Lafan1_example.bvh")[:200],
         sa.read_bvh(shared_data / "dog" / "mann" / "D1_001_KAN01_001.bvh")[:200],
     ]
-    return [human, dog, *clips]
+    return [human, dog, _awkward_names(awkward), *clips]
 
 
 def test_threejs_gltfloader_places_every_joint_where_global_positions_does(
