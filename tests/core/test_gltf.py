@@ -540,3 +540,26 @@ def test_motion_files_choose_the_format_by_suffix(tmp_path):
     with pytest.raises(sa.SkelagnosticError, match=r"m\.fbx: a motion file ends in \.bvh"):
         write_motion(motion, tmp_path / "m.fbx")
     assert not (tmp_path / "m.fbx").exists()
+
+
+def test_channels_reduced_to_one_or_two_keys_hold_their_values(tmp_path):
+    """Exporters drop the keys of static channels (Blender keeps two, or one)."""
+    motion, document, blobs = _written(tmp_path)
+    animation = document["animations"][0]
+    times = _read_accessor(document, blobs[0], animation["samplers"][0]["input"])[:, 0]
+    held = {
+        5: [0.0, math.sin(0.4), 0.0, math.cos(0.4)],
+        8: [math.sin(0.1), 0.0, 0.0, math.cos(0.1)],
+    }
+    for node, count in ((5, 2), (8, 1)):
+        sampler = animation["samplers"][_channel(document, node, "rotation")["sampler"]]
+        keys = times[[0, -1]] if count == 2 else times[:1]
+        sampler["input"] = _add_accessor(document, blobs, keys, "SCALAR")
+        sampler["output"] = _add_accessor(document, blobs, np.array([held[node]] * count), "VEC4")
+    back = sa.read_gltf(_save(tmp_path, document))
+    assert back.num_frames == motion.num_frames and back.fps == motion.fps
+    for node, xyzw in held.items():
+        wxyz = torch.tensor([xyzw[3], *xyzw[:3]], dtype=torch.float64)
+        assert torch.allclose(back.rotations[:, node], wxyz.expand(motion.num_frames, 4), atol=1e-6)
+    others = [j for j in range(motion.num_joints) if j not in held]
+    assert torch.allclose(back.rotations[:, others], motion.rotations[:, others], atol=1e-6)
