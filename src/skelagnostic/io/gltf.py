@@ -27,6 +27,7 @@ import base64
 import heapq
 import json
 import math
+import warnings
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -449,7 +450,9 @@ class _Reader:
         binary = raw[:4] == b"glTF"
         try:
             if binary:
-                gltf = pg.GLTF2.load_from_bytes(raw)
+                with warnings.catch_warnings():  # unknown chunks, versions: checked below
+                    warnings.simplefilter("ignore")
+                    gltf = pg.GLTF2.load_from_bytes(raw)
             else:
                 text = raw.decode("utf-8-sig")
                 document = json.loads(text)
