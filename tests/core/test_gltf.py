@@ -563,3 +563,18 @@ def test_channels_reduced_to_one_or_two_keys_hold_their_values(tmp_path):
         assert torch.allclose(back.rotations[:, node], wxyz.expand(motion.num_frames, 4), atol=1e-6)
     others = [j for j in range(motion.num_joints) if j not in held]
     assert torch.allclose(back.rotations[:, others], motion.rotations[:, others], atol=1e-6)
+
+
+def test_render_and_stick_figures_read_gltf_by_suffix(tmp_path, capsys):
+    from skelagnostic.cli.render import main as render
+    from skelagnostic.viz.stick import to_stick_figures
+
+    motion, _ = sa.procedural.generate("quadruped", "walk", seconds=0.5, fps=20)
+    sa.write_gltf(motion, tmp_path / "dog.glb")
+    sa.write_bvh(motion, tmp_path / "dog.txt")  # any other name is still read as BVH
+    for figure in to_stick_figures([tmp_path / "dog.glb", tmp_path / "dog.txt"]):
+        assert figure.name == "dog"
+        assert np.abs(figure.positions - motion.global_positions().numpy()).max() <= 1e-4
+    out = tmp_path / "dog.png"
+    assert render([str(tmp_path / "dog.glb"), f"out={out}", "size=64", "frames=2"]) == 0
+    assert out.is_file() and str(out) in capsys.readouterr().out

@@ -51,7 +51,9 @@ def motion_format(path: str | Path) -> str:
     return "bvh" if suffix == ".bvh" else "gltf"
 
 
-def read_motion(path: str | Path, dtype: torch.dtype | None = None) -> Motion:
+def read_motion(
+    path: str | Path, dtype: torch.dtype | None = None, other: str | None = None
+) -> Motion:
     """Read a ``.bvh``, ``.glb`` or ``.gltf`` file.
 
     :func:`~skelagnostic.read_bvh` or :func:`~skelagnostic.read_gltf` does the work.
@@ -59,6 +61,9 @@ def read_motion(path: str | Path, dtype: torch.dtype | None = None) -> Motion:
     Args:
         path: The file.
         dtype: Float dtype of the tensors (default float64).
+        other: ``"bvh"`` or ``"gltf"``: how to read a file with any other suffix
+            (``None``: such a file is an error). The renderers read any name that
+            is not ``.glb``/``.gltf`` as BVH, as they always have.
 
     Returns:
         The motion.
@@ -70,7 +75,9 @@ def read_motion(path: str | Path, dtype: torch.dtype | None = None) -> Motion:
     import torch
 
     dtype = torch.float64 if dtype is None else dtype
-    if motion_format(path) == "bvh":
+    suffix = Path(path).suffix.lower()
+    kind = other if other is not None and suffix not in MOTION_SUFFIXES else motion_format(path)
+    if kind == "bvh":
         from skelagnostic.io.bvh import read_bvh
 
         return read_bvh(path, dtype=dtype)
