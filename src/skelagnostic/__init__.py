@@ -23,9 +23,12 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "read_bvh": ("skelagnostic.io.bvh", "read_bvh"),
     "write_bvh": ("skelagnostic.io.bvh", "write_bvh"),
     "parse_bvh": ("skelagnostic.io.bvh", "parse_bvh"),
+    "read_gltf": ("skelagnostic.io.gltf", "read_gltf"),
+    "write_gltf": ("skelagnostic.io.gltf", "write_gltf"),
     "forward_kinematics": ("skelagnostic.core.kinematics", "forward_kinematics"),
     "SkelagnosticError": ("skelagnostic.errors", "SkelagnosticError"),
     "BVHError": ("skelagnostic.errors", "BVHError"),
+    "GLTFError": ("skelagnostic.errors", "GLTFError"),
     "SkeletonError": ("skelagnostic.errors", "SkeletonError"),
     "MotionError": ("skelagnostic.errors", "MotionError"),
     "NotInvertibleError": ("skelagnostic.errors", "NotInvertibleError"),
@@ -36,6 +39,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
 
 __all__ = [
     "BVHError",
+    "GLTFError",
     "Motion",
     "MotionError",
     "NotInvertibleError",
@@ -49,7 +53,9 @@ __all__ = [
     "plugins",
     "procedural",
     "read_bvh",
+    "read_gltf",
     "write_bvh",
+    "write_gltf",
 ]
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -59,12 +65,14 @@ if TYPE_CHECKING:  # pragma: no cover
     from skelagnostic.core.skeleton import Skeleton
     from skelagnostic.errors import (
         BVHError,
+        GLTFError,
         MotionError,
         NotInvertibleError,
         SkelagnosticError,
         SkeletonError,
     )
     from skelagnostic.io.bvh import parse_bvh, read_bvh, write_bvh
+    from skelagnostic.io.gltf import read_gltf, write_gltf
     from skelagnostic.plugins import load_aligner
 
     __version__: str

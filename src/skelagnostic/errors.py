@@ -87,3 +87,25 @@ class BVHError(SkelagnosticError, ValueError):
 
 class NotInvertibleError(SkelagnosticError):
     """A motion representation cannot be decoded back to a :class:`~skelagnostic.Motion`."""
+
+
+class GLTFError(SkelagnosticError, ValueError):
+    """A glTF file that cannot be read or written, or a missing ``gltf`` extra.
+
+    The message names the file and, when known, the glTF field at fault
+    (``animations[0].samplers[3].output``).
+
+    Attributes:
+        path: The file being read or written (``None`` when there is none).
+        field: The glTF field at fault, or ``None``.
+        reason: The problem, without the location prefix.
+    """
+
+    def __init__(self, reason: str, path: str | Path | None = None, field: str | None = None):
+        self.path = None if path is None else Path(path)
+        self.field = field
+        self.reason = reason
+        where = printable(self.path) if self.path is not None else "<gltf>"
+        if field is not None:
+            where += f": {printable(field)}"
+        super().__init__(f"{where}: {reason}")

@@ -35,6 +35,22 @@ def test_demo_html_writes_the_viewer(tmp_path):
     assert '"name":"quadruped_trot_3"' in page and "OrbitControls" in page
 
 
+def test_demo_gltf_writes_and_reads_glb(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", f"out={out}", "seconds=0.5", "gif=false", "gltf=true"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for entry in summary["motions"]:
+        assert entry["gltf"] == str(out / "gltf" / f"{entry['name']}.glb")
+        assert sa.read_gltf(entry["gltf"]).num_frames == entry["frames"]
+        assert entry["gltf_round_trip_max_position_error"] < 1e-4
+    # a glTF file is an input too
+    again = tmp_path / "again"
+    first = summary["motions"][0]["gltf"]
+    assert main(["demo", first, f"out={again}", "gif=false"]) == 0
+    summary = json.loads((again / "summary.json").read_text())
+    assert summary["source"] == "gltf" and "gltf" not in summary["motions"][0]
+
+
 @pytest.mark.data
 def test_demo_on_real_bvh(tmp_path, shared_data):
     clip = shared_data / "human" / "xia_cmu" / "angry_13_000.bvh"

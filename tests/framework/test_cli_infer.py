@@ -114,6 +114,26 @@ def test_retarget_writes_a_bvh_of_the_target_rig(
     assert gif.is_file() and str(out) in capsys.readouterr().out
 
 
+def test_retarget_reads_and_writes_gltf_by_suffix(
+    example_plugin: Path, trained: Path, clips, tmp_path: Path, capsys
+) -> None:
+    source_bvh, target = clips("biped22", "walk"), clips("biped31", "run")
+    source = tmp_path / "source.gltf"
+    sa.write_gltf(sa.read_bvh(source_bvh), source)
+    ckpt = trained / "checkpoints" / "last.ckpt"
+    results = {}
+    for name, clip in (("r.glb", source), ("r.bvh", source_bvh)):
+        out = tmp_path / name
+        code = cli.main(["retarget", str(clip), str(target), f"ckpt={ckpt}", f"out={out}"])
+        assert code == 0, capsys.readouterr().err
+        results[name] = sa.io.read_motion(out)
+    glb, bvh = results["r.glb"], results["r.bvh"]
+    assert glb.skeleton.joint_names == sa.read_bvh(target).skeleton.joint_names
+    assert glb.num_frames == bvh.num_frames == sa.read_bvh(source_bvh).num_frames
+    # glTF input and output give the motion the BVH route gives (6-decimal BVH text)
+    assert torch.allclose(glb.global_positions(), bvh.global_positions(), atol=1e-3)
+
+
 def test_interpolate_keeps_keys_and_passes_them(
     keyed_plugin: None, trained: Path, clips, tmp_path: Path, capsys
 ) -> None:
@@ -235,7 +255,10 @@ def test_retarget_html_option(
         ),
         (["retarget", "{clip}", "ckpt={ckpt}", "out={out}"], "expected 2 input path(s), got 1"),
         (["retarget", "{clip}", "{clip}", "ckpt={ckpt}"], "missing option out="),
-        (["retarget", "{clip}", "{clip}", "ckpt={ckpt}", "out=x.gif"], "must be a .bvh path"),
+        (
+            ["retarget", "{clip}", "{clip}", "ckpt={ckpt}", "out=x.gif"],
+            "must be a .bvh, .glb or .gltf path",
+        ),
         (
             ["retarget", "{clip}", "{clip}", "ckpt=nope.ckpt", "out={out}"],
             "ckpt: no checkpoint file 'nope.ckpt'",

@@ -1,9 +1,10 @@
 """``skelagnostic demo``: the core end to end on procedural or real motion.
 
-Generates procedural gaits on four skeletons (or reads the BVH files given),
-runs forward kinematics, writes each motion as BVH, reads it back to check the
-round trip, and renders all characters side by side as a PNG contact sheet and
-an animated GIF (and with ``html=`` the interactive 3D viewer page).
+Generates procedural gaits on four skeletons (or reads the BVH or glTF files
+given), runs forward kinematics, writes each motion as BVH (and with ``gltf=true``
+as glTF 2.0 ``.glb``), reads it back to check the round trip, and renders all
+characters side by side as a PNG contact sheet and an animated GIF (and with
+``html=`` the interactive 3D viewer page).
 Everything lands in one output directory with a ``summary.json``.
 """
 
@@ -34,12 +35,15 @@ OPTIONS: dict[str, str] = {
     "seed": "procedural seed; default 0",
     "gif": "false to skip the animated GIF; default true",
     "html": "also write the interactive 3D viewer: a file name (in out=) or true for demo.html",
+    "gltf": "true to also write each motion as glTF 2.0 (gltf/NAME.glb, needs the gltf "
+    "extra) and check its round trip; default false",
 }
 
-_USAGE = """usage: skelagnostic demo [A.bvh B.bvh ...] [key=value ...]
+_USAGE = """usage: skelagnostic demo [A.bvh B.glb ...] [key=value ...]
 
-Procedural gaits on four skeletons (or the BVH files given) -> forward
-kinematics -> BVH files, a PNG contact sheet, an animated GIF and summary.json.
+Procedural gaits on four skeletons (or the BVH / glTF files given) -> forward
+kinematics -> BVH files (glTF with gltf=true), a PNG contact sheet, an animated
+GIF and summary.json.
 
 options:
 {options}"""
@@ -53,7 +57,7 @@ def _usage() -> str:
 
 
 def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
-    """BVH paths and typed options; raises SkelagnosticError naming the bad option."""
+    """Motion file paths and typed options; raises SkelagnosticError naming the bad option."""
     from skelagnostic.cli.render import apply_threads, parse_arguments, split_end_of_options
     from skelagnostic.errors import SkelagnosticError
 
@@ -88,10 +92,11 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
             raise SkelagnosticError(
                 f"option {key}={raw.get(key)!r}: must be above 0 and at most {limit:g}"
             )
-    gif = raw.get("gif", "true").lower()
-    if gif not in ("true", "false"):
-        raise SkelagnosticError(f"option gif={raw['gif']!r}: true or false")
-    options["gif"] = gif == "true"
+    for key, default in (("gif", "true"), ("gltf", "false")):
+        value = raw.get(key, default).lower()
+        if value not in ("true", "false"):
+            raise SkelagnosticError(f"option {key}={raw[key]!r}: true or false")
+        options[key] = value == "true"
     html = raw.get("html")
     options["html"] = None if html in (None, "false") else ("demo.html" if html == "true" else html)
     if options["html"] is not None:
@@ -119,6 +124,7 @@ def main(argv: Sequence[str]) -> int:
     from rich.table import Table
 
     import skelagnostic as sa
+    from skelagnostic.io.motion_files import motion_format, read_motion
     from skelagnostic.io.outputs import write_output
     from skelagnostic.viz import render_motion, to_html
 
@@ -129,8 +135,8 @@ def main(argv: Sequence[str]) -> int:
         motions = []
         if bvh_files:
             for path in bvh_files:
-                motions.append(sa.read_bvh(path))
-            source = "bvh"
+                motions.append(read_motion(path))
+            source = ", ".join(sorted({motion_format(p) for p in bvh_files}))
         else:
             for i, (kind, gait) in enumerate(_DEFAULT_CLIPS):
                 motion, _ = sa.procedural.generate(
@@ -144,6 +150,10 @@ def main(argv: Sequence[str]) -> int:
         summary = []
         bvh_dir = out / "bvh"
         bvh_dir.mkdir(exist_ok=True)
+        gltf_dir = out / "gltf"
+        if args["gltf"]:
+            table.add_column("glTF round trip")
+            gltf_dir.mkdir(exist_ok=True)
         for m in motions:
             pos = m.global_positions()
             speed = float(m.root_local_velocities()[:, 0, [0, 2]].norm(dim=-1).mean())
@@ -151,7 +161,7 @@ def main(argv: Sequence[str]) -> int:
             sa.write_bvh(m, path)
             back = sa.read_bvh(path)
             err = float((back.global_positions() - pos).abs().max())
-            table.add_row(
+            row = [
                 str(m.name),
                 str(m.num_joints),
                 str(m.num_frames),
@@ -159,19 +169,26 @@ def main(argv: Sequence[str]) -> int:
                 f"{m.skeleton.height():.1f}",
                 f"{speed:.1f}",
                 f"max |dpos| {err:.1e}",
-            )
-            summary.append(
-                {
-                    "name": m.name,
-                    "joints": m.num_joints,
-                    "frames": m.num_frames,
-                    "fps": m.fps,
-                    "height": m.skeleton.height(),
-                    "root_speed": speed,
-                    "bvh": str(path),
-                    "round_trip_max_position_error": err,
-                }
-            )
+            ]
+            entry = {
+                "name": m.name,
+                "joints": m.num_joints,
+                "frames": m.num_frames,
+                "fps": m.fps,
+                "height": m.skeleton.height(),
+                "root_speed": speed,
+                "bvh": str(path),
+                "round_trip_max_position_error": err,
+            }
+            if args["gltf"]:
+                glb = gltf_dir / f"{m.name}.glb"
+                sa.write_gltf(m, glb)
+                gltf_err = float((sa.read_gltf(glb).global_positions() - pos).abs().max())
+                row.append(f"max |dpos| {gltf_err:.1e}")
+                entry["gltf"] = str(glb)
+                entry["gltf_round_trip_max_position_error"] = gltf_err
+            table.add_row(*row)
+            summary.append(entry)
         console.print(table)
         labels = [str(m.name) for m in motions]
         sheet = render_motion(
@@ -209,7 +226,8 @@ def main(argv: Sequence[str]) -> int:
         return 1
     for kind, path in outputs.items():
         console.print(f"{kind}: {path}")
-    console.print(f"BVH files: {bvh_dir}  summary: {out / 'summary.json'}")
+    glb = f"  glTF files: {gltf_dir}" if args["gltf"] else ""
+    console.print(f"BVH files: {bvh_dir}{glb}  summary: {out / 'summary.json'}")
     return 0
 
 

@@ -1,6 +1,7 @@
-"""``skelagnostic retarget|interpolate|transfer``: apply a trained aligner to BVH files.
+"""``skelagnostic retarget|interpolate|transfer``: apply a trained aligner to motion files.
 
-Usage::
+Inputs and ``out=`` are BVH (``.bvh``) or glTF 2.0 (``.glb``, ``.gltf``), chosen by
+suffix (:mod:`skelagnostic.io.motion_files`). Usage::
 
     skelagnostic retarget SOURCE.bvh TARGET.bvh ckpt=PATH [model=NAME] out=OUT.bvh
     skelagnostic interpolate INPUT.bvh ckpt=PATH (every=N | keys=0,15,40) out=OUT.bvh
@@ -47,9 +48,9 @@ _COMMON = {
     "ckpt": "checkpoint written by `skelagnostic fit`, or <scheme>:<path> read by a "
     "plugin's checkpoint reader (e.g. authors:<run dir>) (required)",
     "model": "registered aligner name; default: model.name of the run's config.yaml",
-    "out": "output BVH path (required); written atomically",
+    "out": "output motion path (required): .bvh, or .glb/.gltf for glTF 2.0; written atomically",
     "render": "also draw input and result side by side (.gif, .mp4, .png or .html)",
-    "units": "length unit of the input BVH files (m, cm, mm, inch, ft, cmu); "
+    "units": "length unit of the input motion files (m, cm, mm, inch, ft, cmu); "
     "default: the aligner guesses",
     "threads": THREADS_HELP,
 }
@@ -75,7 +76,7 @@ _USAGE = {
     "transfer": (
         "usage: skelagnostic transfer SOURCE.bvh TARGET.bvh|DIR [...] ckpt=PATH out=OUT.bvh "
         "[key=value ...]\n\n"
-        "Re-enact SOURCE.bvh with the target character's clips (BVH files or\n"
+        "Re-enact SOURCE.bvh with the target character's clips (motion files or\n"
         "directories of them, one skeleton) with a trained aligner that declares\n"
         "'transfer' (for example VQ-PAE's frequency-scaled motion matching).",
         {},
@@ -191,12 +192,12 @@ def keyframes_from_options(num_frames: int, every: str | None, keys: str | None)
 
 
 def _read(path: Path, options: dict[str, str]) -> Motion:
-    """``read_bvh(path)`` without a trajectory carrier, with the ``units=`` option applied."""
-    from skelagnostic import read_bvh
+    """``read_motion(path)`` without a trajectory carrier, with the ``units=`` option applied."""
     from skelagnostic.core.motion import UNITS
     from skelagnostic.data.sources import reroot
+    from skelagnostic.io.motion_files import read_motion
 
-    motion = read_bvh(path)
+    motion = read_motion(path)
     motion = reroot(motion, motion.skeleton.body_root)
     units = options.get("units")
     if units is not None:
@@ -206,14 +207,16 @@ def _read(path: Path, options: dict[str, str]) -> Motion:
     return motion
 
 
-def _bvh_paths(items: Sequence[str]) -> list[Path]:
+def _motion_paths(items: Sequence[str]) -> list[Path]:
+    from skelagnostic.io.motion_files import MOTION_SUFFIXES
+
     paths: list[Path] = []
     for item in items:
         path = Path(item)
         if path.is_dir():
-            found = sorted(p for p in path.rglob("*") if p.suffix.lower() == ".bvh")
+            found = sorted(p for p in path.rglob("*") if p.suffix.lower() in MOTION_SUFFIXES)
             if not found:
-                raise SkelagnosticError(f"{path}: directory holds no .bvh file")
+                raise SkelagnosticError(f"{path}: directory holds no .bvh, .glb or .gltf file")
             paths.extend(found)
         elif path.is_file():
             paths.append(path)
@@ -243,7 +246,7 @@ def _run(
         print(_usage(verb))
         return 0 if argv else 2
     try:
-        from skelagnostic import write_bvh
+        from skelagnostic.io.motion_files import MOTION_SUFFIXES, write_motion
         from skelagnostic.io.outputs import check_output_file
 
         words, options = parse_arguments(argv)
@@ -264,8 +267,10 @@ def _run(
         for key in ("ckpt", "out"):
             if key not in options:
                 raise SkelagnosticError(f"missing option {key}=")
-        if Path(options["out"]).suffix.lower() != ".bvh":
-            raise SkelagnosticError(f"option out={options['out']!r}: must be a .bvh path")
+        if Path(options["out"]).suffix.lower() not in MOTION_SUFFIXES:
+            raise SkelagnosticError(
+                f"option out={options['out']!r}: must be a .bvh, .glb or .gltf path"
+            )
         # every output is checked before any is written (out= is written first)
         check_output_file(options["out"], "out")
         check_render_outputs(options, out_key="render")
@@ -277,7 +282,7 @@ def _run(
         aligner = load_from_checkpoint(options["ckpt"], options.get("model"))
         source, result = apply(aligner)
         Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
-        write_bvh(result, options["out"])
+        write_motion(result, options["out"])
         print(options["out"])
         if "render" in options or "html" in options:
             labels = options.get("labels")
@@ -330,7 +335,7 @@ def transfer(argv: list[str]) -> int:
 
     def prepare(paths: list[Path], options: dict[str, str]) -> Apply:
         source = _read(paths[0], options)
-        targets = [_read(p, options) for p in _bvh_paths([str(p) for p in paths[1:]])]
+        targets = [_read(p, options) for p in _motion_paths([str(p) for p in paths[1:]])]
         skeletons = {tuple(t.skeleton.joint_names) for t in targets}
         if len(skeletons) > 1:
             raise SkelagnosticError(

@@ -57,9 +57,9 @@ RENDER_OPTIONS: dict[str, str] = {
     "labels": "comma-separated labels, one per clip; default: file names",
 }
 
-_USAGE = """usage: skelagnostic render A.bvh [B.bvh ...] [out=render.gif] [key=value ...]
+_USAGE = """usage: skelagnostic render A.bvh [B.glb ...] [out=render.gif] [key=value ...]
 
-Draw BVH clips as stick figures (bones coloured by body group) to an animated
+Draw BVH or glTF (.glb, .gltf) clips as stick figures (bones coloured by body group) to an animated
 GIF (.gif), an MP4 (.mp4, needs ffmpeg), a PNG contact sheet (.png) or an
 interactive 3D viewer page (.html: orbit, scrub, speed, overlay; no network).
 
@@ -358,12 +358,12 @@ def main(argv: list[str]) -> int:
                 "see 'skelagnostic render --help'"
             )
         if not paths:
-            raise SkelagnosticError("no input: give at least one BVH file")
+            raise SkelagnosticError("no input: give at least one BVH or glTF file")
         options.setdefault("out", "render.gif")
         check_render_outputs(options)  # before the (possibly long) clips are read
-        from skelagnostic import read_bvh
+        from skelagnostic.io.motion_files import read_motion
 
-        motions = [read_bvh(path) for path in paths]
+        motions = [read_motion(path, other="bvh") for path in paths]
         for path in render_from_options(motions, options):
             print(path)
     except SkelagnosticError as error:

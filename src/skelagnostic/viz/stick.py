@@ -195,7 +195,8 @@ class StickFigure:
         return positions[lo] * (1.0 - w) + positions[hi] * w
 
 
-#: Anything :func:`to_stick_figures` understands: a Motion, a BVH path or a StickFigure.
+#: Anything :func:`to_stick_figures` understands: a Motion, a BVH or glTF path or a
+#: StickFigure.
 FigureLike = Union["Motion", StickFigure, str, Path]
 
 
@@ -206,7 +207,8 @@ def to_stick_figures(
 
     Args:
         items: One item or a sequence of items. A ``str``/``Path`` is read with
-            :func:`skelagnostic.read_bvh` and labelled with its file stem.
+            :func:`skelagnostic.read_gltf` when it ends in ``.glb``/``.gltf``, else
+            with :func:`skelagnostic.read_bvh`, and labelled with its file stem.
         labels: Optional labels, one per item, overriding the default names.
 
     Returns:
@@ -236,9 +238,9 @@ def _to_stick_figure(item: Any, index: int) -> StickFigure:
     if isinstance(item, StickFigure):
         return item
     if isinstance(item, (str, Path)):
-        from skelagnostic import read_bvh
+        from skelagnostic.io.motion_files import read_motion
 
-        return StickFigure.from_motion(read_bvh(item), name=Path(item).stem)
+        return StickFigure.from_motion(read_motion(item, other="bvh"), name=Path(item).stem)
     if hasattr(item, "skeleton") and hasattr(item, "global_positions"):
         return StickFigure.from_motion(item, name=getattr(item, "name", None) or f"motion {index}")
     raise RenderError(

@@ -1,0 +1,1044 @@
+"""glTF 2.0 reading and writing of skeletal motion (``.glb`` and ``.gltf``).
+
+:func:`write_gltf` writes the skeleton as a node hierarchy (one node per joint,
+``translation`` = the joint's rest offset, no rest rotation), one animation with
+a rotation channel per joint and a translation channel on the root (and on every
+joint whose motion carries animated translations), keyed at ``k / fps`` with
+``LINEAR`` interpolation, and, by default, a skin with a simple bone mesh so that
+a viewer shows a figure. Lengths stay in the motion's own units (glTF viewers
+assume metres: call :meth:`Motion.to_metres <skelagnostic.Motion.to_metres>`
+first for a life-size figure); the axes are the motion's own (glTF is +Y up).
+
+:func:`read_gltf` reads skeletal animation from any glTF 2.0 file: the skeleton
+is the joints of a skin (the skin whose joints the animation moves most), else
+the node tree the animation moves; node rest rotations, static uniform scales and
+the transforms of the nodes above the skeleton are folded into the motion.
+
+pygltflib (the ``gltf`` extra) loads and builds the container (GLB chunks, data
+URIs, the JSON objects); the checks of every field read, accessor decoding,
+keyframe evaluation and the folding of node transforms are this module's own.
+Every problem raises :class:`~skelagnostic.errors.GLTFError` naming the file and
+the glTF field at fault.
+"""
+
+from __future__ import annotations
+
+import base64
+import heapq
+import json
+import math
+import warnings
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+from urllib.parse import unquote
+
+import numpy as np
+import torch
+
+from skelagnostic.core import quaternion as Q
+from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.errors import GLTFError, SkeletonError
+from skelagnostic.io.atomic import atomic_write
+
+__all__ = ["GLTF_SUFFIXES", "read_gltf", "write_gltf"]
+
+#: File suffixes of glTF files: binary (``.glb``) and JSON with embedded buffer (``.gltf``).
+GLTF_SUFFIXES = (".glb", ".gltf")
+
+_EXTRA = "skelagnostic"  # key of this package's data in a node's or animation's extras
+_FLOAT = 5126
+_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32}
+_COMPONENTS[_FLOAT] = np.float32
+_NORMALIZE = {np.int8: 127.0, np.uint8: 255.0, np.int16: 32767.0, np.uint16: 65535.0}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_PATH_WIDTH = {"translation": 3, "rotation": 4, "scale": 3}
+_INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
+#: Relative tolerance under which a node scale counts as uniform and constant.
+_SCALE_TOLERANCE = 1e-5
+#: An evaluation time this close to a keyframe (as a fraction of the key interval)
+#: takes the keyframe's value (float32 key times, float64 frame times).
+_SNAP = 1e-4
+#: Most frames a resampled animation may have (10 hours at 240 fps).
+_MAX_FRAMES = 10 * 3600 * 240
+
+
+def _pygltflib(path: Path) -> ModuleType:
+    """The pygltflib module, or a :class:`GLTFError` naming the extra that installs it."""
+    try:
+        import pygltflib
+    except ImportError:
+        raise GLTFError(
+            "glTF support needs the pygltflib package: pip install 'skelagnostic[gltf]'", path
+        ) from None
+    return pygltflib
+
+
+# ----------------------------------------------------------------------------- writing
+class _Blob:
+    """The binary buffer of a file being written, with its buffer views and accessors."""
+
+    def __init__(self, pg: ModuleType) -> None:
+        self.pg = pg
+        self.parts: list[bytes] = []
+        self.size = 0
+        self.views: list[Any] = []
+        self.accessors: list[Any] = []
+
+    def add(
+        self,
+        array: np.ndarray,
+        kind: str,
+        target: int | None = None,
+        bounds: bool = False,
+    ) -> int:
+        """Append ``array`` (``[count, width]`` or ``[count]``) as one view and accessor.
+
+        Returns:
+            The accessor's index.
+        """
+        data = np.ascontiguousarray(array)
+        raw = data.astype(data.dtype.newbyteorder("<"), copy=False).tobytes()
+        self.views.append(
+            self.pg.BufferView(buffer=0, byteOffset=self.size, byteLength=len(raw), target=target)
+        )
+        padding = -len(raw) % 4
+        self.parts.append(raw + b"\0" * padding)
+        self.size += len(raw) + padding
+        component = {v: k for k, v in _COMPONENTS.items()}[data.dtype.type]
+        flat = data.reshape(len(data), -1)
+        accessor = self.pg.Accessor(
+            bufferView=len(self.views) - 1,
+            componentType=component,
+            count=len(data),
+            type=kind,
+        )
+        if bounds:
+            accessor.min = [float(v) for v in flat.min(axis=0)]
+            accessor.max = [float(v) for v in flat.max(axis=0)]
+        self.accessors.append(accessor)
+        return len(self.accessors) - 1
+
+    def data(self) -> bytes:
+        return b"".join(self.parts)
+
+
+def _rest_positions(offsets: np.ndarray, parents: list[int]) -> np.ndarray:
+    """Joint positions with every rotation the identity (the bind pose of the skin)."""
+    rest = np.zeros_like(offsets)
+    for j, p in enumerate(parents):
+        rest[j] = offsets[j] if p < 0 else rest[p] + offsets[j]
+    return rest
+
+
+def _bone_mesh(segments: list[tuple[np.ndarray, np.ndarray, int]]) -> tuple[np.ndarray, ...]:
+    """An octahedral bone from ``a`` to ``b`` per segment, skinned to joint ``j``.
+
+    Returns:
+        ``(positions [V, 3] float32, joints [V, 4] uint16, weights [V, 4] float32,
+        indices [F * 3] uint32)``.
+    """
+    positions, joints, faces = [], [], []
+    for a, b, j in segments:
+        d = b - a
+        length = float(np.linalg.norm(d))
+        if length < 1e-9:
+            continue
+        u = d / length
+        helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        v = np.cross(u, helper)
+        v /= np.linalg.norm(v)
+        w = np.cross(u, v)
+        mid, r = a + 0.2 * d, 0.1 * length
+        base = len(positions)
+        positions += [a, mid + r * v, mid + r * w, mid - r * v, mid - r * w, b]
+        joints += [j] * 6
+        ring = [1, 2, 3, 4, 1]
+        for k in range(4):
+            faces += [base, base + ring[k + 1], base + ring[k]]
+            faces += [base + 5, base + ring[k], base + ring[k + 1]]
+    count = len(positions)
+    joint_array = np.zeros((count, 4), dtype=np.uint16)
+    joint_array[:, 0] = joints
+    weights = np.zeros((count, 4), dtype=np.float32)
+    weights[:, 0] = 1.0
+    return (
+        np.asarray(positions, dtype=np.float32).reshape(count, 3),
+        joint_array,
+        weights,
+        np.asarray(faces, dtype=np.uint32),
+    )
+
+
+def _unique(name: str, taken: set[str]) -> str:
+    candidate, k = name, 1
+    while candidate in taken:
+        k += 1
+        candidate = f"{name}{k}"
+    taken.add(candidate)
+    return candidate
+
+
+def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
+    """Write a motion as glTF 2.0: ``.glb`` (binary) or ``.gltf`` (JSON, embedded buffer).
+
+    One node per joint, in joint order (nodes ``0 .. J-1``), its ``translation`` the
+    joint's rest offset; one node per BVH End Site under its joint (marked in
+    ``extras``); one animation with a rotation channel (quaternions x, y, z, w) per
+    joint and a translation channel on the root and on every joint with animated
+    translations, keyed at ``k / fps`` seconds with ``LINEAR`` interpolation.
+    Lengths are the motion's own units and the axes its own. With ``bones`` a skin
+    (bind pose: the rest offsets, no rotation) and a mesh of one octahedron per
+    bone, skinned rigidly to the bone's parent joint, are added, so that Blender
+    imports an armature and viewers show a figure.
+
+    The skeleton's up axis, units, BVH channel layout and body root go into the
+    root node's ``extras`` and the frame rate into the animation's, so that
+    :func:`read_gltf` gives them back. The file is written atomically
+    (:func:`~skelagnostic.io.atomic.atomic_write`).
+
+    Args:
+        motion: The motion.
+        path: Target ``.glb`` or ``.gltf`` file.
+        bones: Add the skin and the bone mesh.
+
+    Raises:
+        GLTFError: If the suffix is neither ``.glb`` nor ``.gltf``, pygltflib (the
+            ``gltf`` extra) is missing, or the file cannot be written.
+
+    Examples:
+        >>> import skelagnostic as sa, tempfile, os
+        >>> motion, _ = sa.procedural.generate("biped22", "walk", seconds=0.5, fps=30)
+        >>> path = os.path.join(tempfile.mkdtemp(), "walk.glb")
+        >>> sa.write_gltf(motion, path)
+        >>> sa.read_gltf(path).num_frames
+        16
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in GLTF_SUFFIXES:
+        raise GLTFError(f"a glTF file name ends in .glb or .gltf, not {path.suffix!r}", path)
+    pg = _pygltflib(path)
+    m = motion.to(dtype=torch.float64, device="cpu")
+    sk = m.skeleton
+    num_joints, num_frames = sk.num_joints, m.num_frames
+    offsets = sk.offsets.detach().double().cpu().numpy()
+    parents = sk.parents
+    blob = _Blob(pg)
+
+    # the node hierarchy: joints first, in joint order, then End Sites
+    nodes = [
+        pg.Node(name=name, translation=[float(v) for v in offsets[j]], children=[])
+        for j, name in enumerate(sk.joint_names)
+    ]
+    for j, p in enumerate(parents):
+        if p >= 0:
+            nodes[p].children.append(j)
+    taken = set(sk.joint_names)
+    sites: list[tuple[int, np.ndarray]] = []
+    for j in sorted(sk.end_sites):
+        for site in sk.end_sites[j]:
+            nodes[j].children.append(len(nodes))
+            nodes.append(
+                pg.Node(
+                    name=_unique(f"{sk.joint_names[j]}_end", taken),
+                    translation=[float(v) for v in site],
+                    extras={_EXTRA: {"end_site": True}},
+                )
+            )
+            sites.append((j, np.asarray(site, dtype=np.float64)))
+    meta: dict[str, Any] = {"up_axis": sk.up_axis, "body_root": sk.body_root}
+    if m.units is not None:
+        meta["units"] = m.units
+    if sk.channels is not None:
+        meta["channels"] = sk.channels
+    nodes[0].extras = {_EXTRA: meta}
+
+    # the animation
+    root_positions = m.root_positions.detach().numpy()
+    translations = None if m.translations is None else m.translations.detach().numpy()
+    times = (np.arange(num_frames, dtype=np.float64) / m.fps).astype(np.float32)
+    time_accessor = blob.add(times, "SCALAR", bounds=True)
+    samplers, channels = [], []
+
+    def channel(node: int, target: str, values: np.ndarray, kind: str) -> None:
+        output = blob.add(values.astype(np.float32), kind)
+        samplers.append(pg.AnimationSampler(input=time_accessor, output=output))
+        channels.append(
+            pg.AnimationChannel(
+                sampler=len(samplers) - 1, target=pg.AnimationChannelTarget(node=node, path=target)
+            )
+        )
+
+    # (w, x, y, z) -> glTF's (x, y, z, w)
+    rotations = m.rotations.detach().numpy()[..., [1, 2, 3, 0]]
+    translated = [0]
+    if translations is not None:
+        moved = np.abs(translations - offsets).max(axis=(0, 2)) > 1e-9
+        translated += [int(j) for j in np.nonzero(moved)[0] if j > 0]
+    for j in range(num_joints):
+        channel(j, "rotation", rotations[:, j], "VEC4")
+        if j == 0:
+            channel(0, "translation", root_positions, "VEC3")
+        elif j in translated:
+            assert translations is not None
+            channel(j, "translation", translations[:, j], "VEC3")
+    animation = pg.Animation(
+        name=m.name or "motion",
+        samplers=samplers,
+        channels=channels,
+        extras={_EXTRA: {"fps": m.fps}},
+    )
+
+    scene_nodes = [0]
+    skins, meshes, materials = [], [], []
+    rest = _rest_positions(offsets, parents)
+    segments = [(rest[p], rest[j], p) for j, p in enumerate(parents) if p >= 0]
+    segments += [(rest[j], rest[j] + site, j) for j, site in sites]
+    positions, joints, weights, indices = _bone_mesh(segments)
+    if bones and len(indices):  # a skin needs a mesh: a lone joint gets neither
+        inverse_bind = np.tile(np.eye(4, dtype=np.float32), (num_joints, 1, 1))
+        inverse_bind[:, 3, :3] = -rest  # column-major: the translation is the 4th column
+        skins.append(
+            pg.Skin(
+                inverseBindMatrices=blob.add(inverse_bind.reshape(num_joints, 16), "MAT4"),
+                joints=list(range(num_joints)),
+                skeleton=0,
+            )
+        )
+        attributes = pg.Attributes(
+            POSITION=blob.add(positions, "VEC3", target=pg.ARRAY_BUFFER, bounds=True),
+            JOINTS_0=blob.add(joints, "VEC4", target=pg.ARRAY_BUFFER),
+            WEIGHTS_0=blob.add(weights, "VEC4", target=pg.ARRAY_BUFFER),
+        )
+        primitive = pg.Primitive(
+            attributes=attributes,
+            indices=blob.add(indices, "SCALAR", target=pg.ELEMENT_ARRAY_BUFFER),
+            material=0,
+        )
+        materials.append(
+            pg.Material(
+                name="bone",
+                doubleSided=True,
+                pbrMetallicRoughness=pg.PbrMetallicRoughness(
+                    baseColorFactor=[0.85, 0.55, 0.3, 1.0],
+                    metallicFactor=0.0,
+                    roughnessFactor=0.8,
+                ),
+            )
+        )
+        meshes.append(pg.Mesh(name="bones", primitives=[primitive]))
+        nodes.append(pg.Node(name=_unique("bones", taken), mesh=0, skin=0))
+        scene_nodes.append(len(nodes) - 1)
+
+    data = blob.data()
+    from skelagnostic.version import distribution_version
+
+    generator = f"skelagnostic {distribution_version('skelagnostic')}"
+    gltf = pg.GLTF2(
+        asset=pg.Asset(version="2.0", generator=generator),
+        scene=0,
+        scenes=[pg.Scene(name=m.name or "motion", nodes=scene_nodes)],
+        nodes=nodes,
+        animations=[animation],
+        skins=skins,
+        meshes=meshes,
+        materials=materials,
+        accessors=blob.accessors,
+        bufferViews=blob.views,
+        buffers=[pg.Buffer(byteLength=len(data))],
+    )
+    if suffix == ".glb":
+        gltf.set_binary_blob(data)
+        content = b"".join(gltf.save_to_bytes())
+    else:
+        gltf.buffers[0].uri = "data:application/octet-stream;base64," + base64.b64encode(
+            data
+        ).decode("ascii")
+        content = gltf.to_json(indent=1).encode("utf-8")
+    try:
+        atomic_write(path, content)
+    except OSError as exc:
+        raise GLTFError(f"cannot write: {exc.strerror or exc}", path) from None
+
+
+# ----------------------------------------------------------------------------- reading
+def _is_index(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _uniform_scale(scale: np.ndarray) -> float | None:
+    """The common value of a 3-vector scale, or ``None`` if it is not uniform and positive."""
+    s = float(scale.mean())
+    if s <= 0 or np.abs(scale - s).max() > _SCALE_TOLERANCE * s:
+        return None
+    return s
+
+
+def _snap_fps(fps: float) -> float:
+    nearest = round(fps)
+    return float(nearest) if nearest > 0 and abs(fps - nearest) <= 1e-3 * fps else fps
+
+
+def _slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Shortest-arc spherical interpolation of (x, y, z, w) quaternions ``[N, 4]``."""
+    dot = (a * b).sum(-1, keepdims=True)
+    b = np.where(dot < 0, -b, b)
+    dot = np.abs(dot).clip(max=1.0)
+    theta = np.arccos(dot)
+    sin = np.sin(theta)
+    near = sin < 1e-6
+    safe = np.where(near, 1.0, sin)
+    wa = np.where(near, 1.0 - u, np.sin((1.0 - u) * theta) / safe)
+    wb = np.where(near, u, np.sin(u * theta) / safe)
+    out = wa * a + wb * b
+    return out / np.linalg.norm(out, axis=-1, keepdims=True).clip(min=1e-12)
+
+
+class _Track:
+    """The keyframes of one animation channel."""
+
+    def __init__(
+        self, times: np.ndarray, values: np.ndarray, interpolation: str, field: str
+    ) -> None:
+        self.times, self.values, self.interpolation, self.field = (
+            times,
+            values,
+            interpolation,
+            field,
+        )
+
+    def keyframes(self) -> np.ndarray:
+        """The values at the key times (the middle element of CUBICSPLINE triples)."""
+        return self.values[1::3] if self.interpolation == "CUBICSPLINE" else self.values
+
+    def at(self, t: np.ndarray, rotation: bool) -> np.ndarray:
+        """Values at times ``t`` (clamped to the first and last keyframe)."""
+        keys, values = self.times, self.keyframes()
+        if len(keys) == 1:
+            return np.repeat(values[:1], len(t), axis=0)
+        k = (np.searchsorted(keys, t, side="right") - 1).clip(0, len(keys) - 2)
+        t0, t1 = keys[k], keys[k + 1]
+        u = ((t - t0) / (t1 - t0)).clip(0.0, 1.0)
+        u = np.where(u < _SNAP, 0.0, np.where(u > 1.0 - _SNAP, 1.0, u))[:, None]
+        a, b = values[k], values[k + 1]
+        if self.interpolation == "STEP":
+            out = np.where(u < 1.0, a, b)
+        elif self.interpolation == "LINEAR":
+            out = _slerp(a, b, u) if rotation else (1.0 - u) * a + u * b
+        else:  # CUBICSPLINE: Hermite with the file's tangents, scaled by the interval
+            dt = (t1 - t0)[:, None]
+            out_tangent, in_tangent = self.values[3 * k + 2], self.values[3 * (k + 1)]
+            u2, u3 = u * u, u * u * u
+            out = (
+                (2 * u3 - 3 * u2 + 1) * a
+                + (u3 - 2 * u2 + u) * dt * out_tangent
+                + (-2 * u3 + 3 * u2) * b
+                + (u3 - u2) * dt * in_tangent
+            )
+        if rotation:
+            out = out / np.linalg.norm(out, axis=-1, keepdims=True).clip(min=1e-12)
+        return out
+
+
+class _Reader:
+    """One glTF file being read: checked access to its fields and accessors."""
+
+    def __init__(self, pg: ModuleType, raw: bytes, path: Path) -> None:
+        self.path = path
+        binary = raw[:4] == b"glTF"
+        try:
+            if binary:
+                with warnings.catch_warnings():  # unknown chunks, versions: checked below
+                    warnings.simplefilter("ignore")
+                    gltf = pg.GLTF2.load_from_bytes(raw)
+            else:
+                text = raw.decode("utf-8-sig")
+                document = json.loads(text)
+                if not isinstance(document, dict) or "asset" not in document:
+                    raise ValueError("the JSON document is not an object with an 'asset'")
+                gltf = pg.GLTF2.from_json(text)
+        except GLTFError:
+            raise
+        except Exception as exc:  # pygltflib raises many kinds on damaged input
+            kind = "a glTF binary (.glb) that cannot be read" if binary else "not a glTF file"
+            raise GLTFError(f"{kind}: {exc}", path) from None
+        if gltf is None:
+            raise GLTFError("a glTF binary (.glb) without a JSON chunk", path)
+        version = getattr(gltf.asset, "version", None)
+        if not isinstance(version, str) or not version.startswith("2."):
+            raise GLTFError(
+                f"glTF version {version!r}: only glTF 2.x is read", path, "asset.version"
+            )
+        self.gltf = gltf
+        self.binary = binary
+        self._buffers: dict[int, bytes] = {}
+
+    def error(self, reason: str, field: str | None = None) -> GLTFError:
+        return GLTFError(reason, self.path, field)
+
+    def items(self, name: str) -> list[Any]:
+        value = getattr(self.gltf, name, None) or []
+        if not isinstance(value, list):
+            raise self.error("must be a list", name)
+        return value
+
+    def index(self, value: Any, collection: str, field: str) -> int:
+        """``value`` checked as an index into the top-level list ``collection``."""
+        count = len(self.items(collection))
+        if not _is_index(value) or not 0 <= value < count:
+            raise self.error(
+                f"refers to {collection} {value!r}, the file has {count} {collection}", field
+            )
+        return value
+
+    def buffer(self, index: int) -> bytes:
+        if index in self._buffers:
+            return self._buffers[index]
+        field = f"buffers[{index}]"
+        buffer = self.items("buffers")[index]
+        uri = buffer.uri
+        if uri is None:
+            data = self.gltf.binary_blob() if self.binary and index == 0 else None
+            if data is None:
+                raise self.error("has no uri and the file has no binary chunk", field)
+        elif not isinstance(uri, str):
+            raise self.error(f"uri must be a string, got {uri!r}", field + ".uri")
+        elif uri.startswith("data:"):
+            try:
+                data = base64.b64decode(uri.partition(",")[2], validate=True)
+            except ValueError:
+                raise self.error("the data URI is not valid base64", field + ".uri") from None
+        else:
+            source = self.path.parent / unquote(uri)
+            try:
+                data = source.read_bytes()
+            except OSError as exc:
+                raise self.error(f"cannot read {source}: {exc.strerror}", field + ".uri") from None
+        length = buffer.byteLength
+        if not _is_index(length) or len(data) < length:
+            raise self.error(f"byteLength {length!r} but the data has {len(data)} bytes", field)
+        self._buffers[index] = data
+        return data
+
+    def accessor(self, index: Any, field: str, kinds: tuple[str, ...]) -> np.ndarray:
+        """An accessor's values as float64 ``[count, width]`` (normalized integers scaled)."""
+        index = self.index(index, "accessors", field)
+        where = f"accessors[{index}]"
+        acc = self.items("accessors")[index]
+        if acc.type not in kinds:
+            raise self.error(f"type {acc.type!r} where {' or '.join(kinds)} is needed", where)
+        component = _COMPONENTS.get(acc.componentType)
+        if component is None:
+            raise self.error(f"unknown componentType {acc.componentType!r}", where)
+        if component is not np.float32 and not (acc.normalized and component in _NORMALIZE):
+            raise self.error("animation data must be float or normalized integers", where)
+        if acc.sparse is not None:
+            raise self.error("sparse accessors are not supported", where + ".sparse")
+        count = acc.count
+        if not _is_index(count) or count < 1:
+            raise self.error(f"count must be a positive integer, got {count!r}", where)
+        width = _WIDTH[acc.type]
+        dtype = np.dtype(component).newbyteorder("<")
+        if acc.bufferView is None:
+            return np.zeros((count, width))
+        view_index = self.index(acc.bufferView, "bufferViews", where + ".bufferView")
+        view = self.items("bufferViews")[view_index]
+        vfield = f"bufferViews[{view_index}]"
+        buffer = self.buffer(self.index(view.buffer, "buffers", vfield + ".buffer"))
+        view_offset, length = view.byteOffset or 0, view.byteLength
+        if not _is_index(view_offset) or not _is_index(length) or view_offset < 0:
+            raise self.error("byteOffset and byteLength must be integers", vfield)
+        if view_offset + length > len(buffer):
+            raise self.error(
+                f"bytes {view_offset}..{view_offset + length} lie outside the buffer "
+                f"({len(buffer)} bytes)",
+                vfield,
+            )
+        element = width * dtype.itemsize
+        stride = view.byteStride or element
+        offset = acc.byteOffset or 0
+        if not _is_index(stride) or not _is_index(offset) or stride < element or offset < 0:
+            raise self.error(f"byteOffset {offset!r} / byteStride {stride!r} are invalid", where)
+        if offset + stride * (count - 1) + element > length:
+            raise self.error(
+                f"{count} elements of {element} bytes (stride {stride}) from byte {offset} "
+                f"do not fit in its bufferView ({length} bytes)",
+                where,
+            )
+        values = np.ndarray(
+            (count, width),
+            dtype=dtype,
+            buffer=buffer,
+            offset=view_offset + offset,
+            strides=(stride, dtype.itemsize),
+        ).astype(np.float64)
+        if component is not np.float32:
+            values = np.maximum(values / _NORMALIZE[component], -1.0)
+        if not np.isfinite(values).all():
+            raise self.error("holds a NaN or infinite value", where)
+        return values
+
+    # ----------------------------------------------------------------- hierarchy
+    def parents(self) -> list[int]:
+        """Parent node of every node (``-1`` for none), checked for cycles."""
+        nodes = self.items("nodes")
+        parent = [-1] * len(nodes)
+        for i, node in enumerate(nodes):
+            children = node.children or []
+            if not isinstance(children, list):
+                raise self.error("must be a list of node indices", f"nodes[{i}].children")
+            for c in children:
+                field = f"nodes[{i}].children"
+                c = self.index(c, "nodes", field)
+                if parent[c] >= 0 or c == i:
+                    raise self.error(f"node {c} has more than one parent", field)
+                parent[c] = i
+        for i in range(len(nodes)):
+            seen, k = 0, i
+            while k >= 0:
+                k, seen = parent[k], seen + 1
+                if seen > len(nodes):
+                    raise self.error("the node hierarchy has a cycle", f"nodes[{i}].children")
+        return parent
+
+    def local(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A node's rest ``(translation, rotation (x, y, z, w), scale)``."""
+        node = self.items("nodes")[i]
+        field = f"nodes[{i}]"
+        if node.matrix is not None:
+            matrix = self.floats(node.matrix, 16, field + ".matrix").reshape(4, 4).T
+            linear = matrix[:3, :3]
+            scale = np.linalg.norm(linear, axis=0)
+            if np.linalg.det(linear) <= 0 or scale.min() <= 0:
+                raise self.error("a mirroring or degenerate matrix is not supported", field)
+            quat = Q.from_matrix(torch.from_numpy(linear / scale))
+            return matrix[:3, 3], quat.numpy()[[1, 2, 3, 0]], scale
+        translation = (
+            np.zeros(3)
+            if node.translation is None
+            else self.floats(node.translation, 3, field + ".translation")
+        )
+        rotation = (
+            np.array([0.0, 0.0, 0.0, 1.0])
+            if node.rotation is None
+            else self.floats(node.rotation, 4, field + ".rotation")
+        )
+        norm = float(np.linalg.norm(rotation))
+        if norm < 1e-8:
+            raise self.error("is a zero quaternion", field + ".rotation")
+        scale = np.ones(3) if node.scale is None else self.floats(node.scale, 3, field + ".scale")
+        return translation, rotation / norm, scale
+
+    def floats(self, value: Any, count: int, field: str) -> np.ndarray:
+        try:
+            array = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise self.error(f"must be {count} numbers", field) from None
+        if array.shape != (count,) or not np.isfinite(array).all():
+            raise self.error(f"must be {count} finite numbers", field)
+        return array
+
+    # ----------------------------------------------------------------- animation
+    def tracks(self, a: int) -> dict[int, dict[str, _Track]]:
+        """Every node's animated paths of animation ``a``."""
+        animation = self.items("animations")[a]
+        where = f"animations[{a}]"
+        samplers = animation.samplers or []
+        channels = animation.channels or []
+        if not channels:
+            raise self.error("has no channels", where + ".channels")
+        out: dict[int, dict[str, _Track]] = {}
+        cache: dict[int, _Track] = {}
+        for c, channel in enumerate(channels):
+            field = f"{where}.channels[{c}]"
+            target = channel.target
+            if target is None:
+                raise self.error("has no target", field)
+            if target.path not in (*_PATH_WIDTH, "weights"):
+                raise self.error(f"unknown target path {target.path!r}", field + ".target.path")
+            if target.node is None or target.path == "weights":
+                continue  # an extension's target, or morph weights: not skeletal motion
+            node = self.index(target.node, "nodes", field + ".target.node")
+            s = channel.sampler
+            if not _is_index(s) or not 0 <= s < len(samplers):
+                raise self.error(
+                    f"refers to sampler {s!r}, the animation has {len(samplers)} samplers",
+                    field + ".sampler",
+                )
+            if target.path in out.get(node, {}):
+                raise self.error(
+                    f"node {node} has two {target.path} channels in this animation", field
+                )
+            if s not in cache:
+                cache[s] = self.track(a, s)
+            track = cache[s]
+            width = _PATH_WIDTH[target.path]
+            if track.values.shape[1] != width:
+                raise self.error(
+                    f"{target.path} needs VEC{width} values, sampler {s} has "
+                    f"{track.values.shape[1]} components",
+                    field,
+                )
+            out.setdefault(node, {})[target.path] = track
+        if not out:
+            raise self.error("animates no node's translation, rotation or scale", where)
+        return out
+
+    def track(self, a: int, s: int) -> _Track:
+        field = f"animations[{a}].samplers[{s}]"
+        sampler = self.items("animations")[a].samplers[s]
+        interpolation = sampler.interpolation or "LINEAR"
+        if interpolation not in _INTERPOLATIONS:
+            raise self.error(
+                f"interpolation {interpolation!r} is not one of {', '.join(_INTERPOLATIONS)}",
+                field + ".interpolation",
+            )
+        times = self.accessor(sampler.input, field + ".input", ("SCALAR",))[:, 0]
+        if len(times) > 1 and not (np.diff(times) > 0).all():
+            raise self.error("keyframe times must increase strictly", field + ".input")
+        values = self.accessor(sampler.output, field + ".output", ("VEC3", "VEC4"))
+        expected = len(times) * (3 if interpolation == "CUBICSPLINE" else 1)
+        if len(values) != expected:
+            raise self.error(
+                f"output has {len(values)} values for {len(times)} keyframe times "
+                f"({interpolation} needs {expected})",
+                field + ".output",
+            )
+        return _Track(times, values, interpolation, field)
+
+    def pick_animation(self, animation: int | str) -> int:
+        animations = self.items("animations")
+        if not animations:
+            raise self.error("the file has no animation", "animations")
+        if isinstance(animation, str):
+            names = [a.name for a in animations]
+            if animation not in names:
+                raise self.error(f"no animation named {animation!r} (found {names})", "animations")
+            return names.index(animation)
+        if not 0 <= animation < len(animations):
+            raise self.error(
+                f"animation {animation} requested, the file has {len(animations)}", "animations"
+            )
+        return animation
+
+
+def _is_end_site(node: Any) -> bool:
+    extras = node.extras if isinstance(node.extras, dict) else {}
+    mark = extras.get(_EXTRA)
+    return isinstance(mark, dict) and mark.get("end_site") is True
+
+
+def _skeleton_nodes(
+    reader: _Reader, parent: list[int], animated: set[int]
+) -> tuple[int, list[int], list[int]]:
+    """``(root node, joint nodes in parent-first order, End Site nodes)``."""
+    nodes = reader.items("nodes")
+    skins = reader.items("skins")
+    if skins:
+        best, wanted = -1, set()
+        for k, skin in enumerate(skins):
+            joints = skin.joints or []
+            if not isinstance(joints, list) or not joints:
+                raise reader.error("must be a non-empty list of nodes", f"skins[{k}].joints")
+            chosen = {reader.index(j, "nodes", f"skins[{k}].joints") for j in joints}
+            if best < 0 or len(chosen & animated) > len(wanted & animated):
+                best, wanted = k, chosen
+    else:
+        wanted = set(animated)
+
+    def chain(i: int) -> list[int]:
+        out = []
+        while i >= 0:
+            out.append(i)
+            i = parent[i]
+        return out[::-1]  # top first
+
+    chains = [chain(i) for i in sorted(wanted)]
+    root = -1
+    for depth in range(min(len(c) for c in chains)):
+        if len({c[depth] for c in chains}) != 1:
+            break
+        root = chains[0][depth]
+    if root < 0:
+        raise reader.error(
+            "the animated nodes do not share one root node (more than one character?)",
+            "skins" if skins else "nodes",
+        )
+    children: dict[int, list[int]] = {}
+    for i, p in enumerate(parent):
+        children.setdefault(p, []).append(i)
+    members: set[int] = set()
+    sites: list[int] = []
+    if skins:
+        for c in chains:
+            members.update(c[c.index(root) :])
+        for i in sorted(members):
+            sites += [c for c in children.get(i, []) if _is_end_site(nodes[c])]
+    else:
+        stack = [root]
+        while stack:
+            i = stack.pop()
+            if _is_end_site(nodes[i]) and i != root:
+                sites.append(i)
+                continue
+            if i != root and (nodes[i].mesh is not None or nodes[i].camera is not None):
+                continue
+            members.add(i)
+            stack.extend(children.get(i, []))
+    # parent-first, and in node order where that allows (it is the joint order
+    # of files written by write_gltf)
+    order: list[int] = []
+    heap = [root]
+    while heap:
+        i = heapq.heappop(heap)
+        order.append(i)
+        for c in children.get(i, []):
+            if c in members:
+                heapq.heappush(heap, c)
+    return root, order, sorted(sites)
+
+
+def _metadata(node: Any) -> dict[str, Any]:
+    extras = node.extras if isinstance(node.extras, dict) else {}
+    meta = extras.get(_EXTRA)
+    return meta if isinstance(meta, dict) else {}
+
+
+def read_gltf(
+    path: str | Path, dtype: torch.dtype = torch.float64, animation: int | str = 0
+) -> Motion:
+    """Read skeletal animation from a glTF 2.0 file (``.glb`` or ``.gltf``).
+
+    The skeleton is the joints of the file's skin (when there are several, the one
+    whose joints the animation moves most, with the nodes between its joints),
+    else the node tree below the nodes the animation moves (nodes holding a mesh
+    or camera left out). Joints are ordered parents first, in node order where
+    that allows. A joint's rest offset is its node's translation; its rotation
+    over time is the node's animated rotation, or its rest rotation when not
+    animated. Static uniform scales, and the transform of the nodes above the
+    skeleton, are folded into offsets and root motion; animated or non-uniform
+    scale is an error. Translations animated on non-root joints become
+    :attr:`Motion.translations <skelagnostic.Motion.translations>`.
+
+    Frames: when every channel is keyed at the same evenly spaced times, the
+    frames are those keys; otherwise the channels are sampled (``LINEAR``: lerp
+    and shortest-arc slerp; ``STEP``; ``CUBICSPLINE``: Hermite) on an even grid
+    from the first to the last key at the rate of the channel with the most keys,
+    each channel held at its end values outside its own keys. A file written by
+    :func:`write_gltf` gives back its frame rate, up axis, units, BVH channel
+    layout and body root.
+
+    Args:
+        path: The ``.glb`` or ``.gltf`` file (a ``.gltf`` may refer to ``.bin``
+            files next to it).
+        dtype: Float dtype of the tensors.
+        animation: Index or name of the animation to read.
+
+    Returns:
+        The :class:`~skelagnostic.Motion`, named after the file stem.
+
+    Raises:
+        GLTFError: If pygltflib (the ``gltf`` extra) is missing, or the file is
+            missing, not glTF 2.0, has no animation, or has a field that cannot
+            be used (a channel naming a missing node, a sampler whose output
+            count does not match its keyframe times, ...); the message names the
+            file and the field.
+    """
+    path = Path(path)
+    pg = _pygltflib(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise GLTFError("no such file", path) from None
+    except IsADirectoryError:
+        raise GLTFError("is a directory, not a glTF file", path) from None
+    except OSError as exc:
+        raise GLTFError(f"cannot read: {exc.strerror}", path) from None
+    reader = _Reader(pg, raw, path)
+    a = reader.pick_animation(animation)
+    nodes = reader.items("nodes")
+    parent = reader.parents()
+    tracks = reader.tracks(a)
+    animated = {i for i, paths in tracks.items() if set(paths) & set(_PATH_WIDTH)}
+    root, joints, sites = _skeleton_nodes(reader, parent, animated)
+    index = {node: j for j, node in enumerate(joints)}
+    joint_parents = [-1] + [index[parent[i]] for i in joints[1:]]
+
+    # the transform above the skeleton root: rotation, translation, uniform scale
+    world_r, world_t, world_s = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), 1.0
+    above, k = [], parent[root]
+    while k >= 0:
+        above.append(k)
+        k = parent[k]
+    for k in reversed(above):
+        if k in animated:
+            raise reader.error(
+                "is animated but lies above the skeleton's root; animate the root instead",
+                f"nodes[{k}]",
+            )
+        t, r, s = reader.local(k)
+        uniform = _uniform_scale(s)
+        if uniform is None:
+            raise reader.error("a non-uniform scale is not supported", f"nodes[{k}].scale")
+        world_t = world_t + world_s * _rotate(world_r, t)
+        world_r = _quat_mul(world_r, r)
+        world_s *= uniform
+
+    # frame times
+    used = [track for i in joints for track in tracks.get(i, {}).values()]
+    meta_fps = _metadata(reader.items("animations")[a]).get("fps")
+    if not used:
+        raise reader.error(
+            f"moves none of the skeleton's {len(joints)} joints (the nodes from {root} down)",
+            f"animations[{a}]",
+        )
+    keys = used[0].times
+    same = all(len(t.times) == len(keys) and np.array_equal(t.times, keys) for t in used[1:])
+    densest = max(used, key=lambda t: len(t.times)).times
+    span = float(densest[-1] - densest[0])
+    fps = _snap_fps((len(densest) - 1) / span) if len(densest) > 1 and span > 0 else 30.0
+    if (
+        isinstance(meta_fps, (int, float))
+        and not isinstance(meta_fps, bool)
+        and math.isfinite(meta_fps)
+        and meta_fps > 0
+    ):
+        fps = float(meta_fps)
+    if same and len(keys) > 1:
+        steps = np.diff(keys)
+        same = bool(np.abs(steps - 1.0 / fps).max() <= 1e-3 / fps)
+    if same:
+        grid = keys
+    else:
+        start = min(float(t.times[0]) for t in used)
+        end = max(float(t.times[-1]) for t in used)
+        count = round((end - start) * fps) + 1
+        if count > _MAX_FRAMES:
+            raise reader.error(
+                f"keys from {start:g} s to {end:g} s at {fps:g} fps would make {count} frames "
+                f"(at most {_MAX_FRAMES})",
+                f"animations[{a}]",
+            )
+        grid = start + np.arange(count) / fps
+    num_frames = len(grid)
+
+    def sample(node: int, what: str, rest: np.ndarray) -> np.ndarray:
+        track = tracks.get(node, {}).get(what)
+        if track is None:
+            return np.repeat(rest[None], num_frames, axis=0)
+        if same:
+            return track.keyframes()
+        return track.at(grid, rotation=what == "rotation")
+
+    # per joint: rest transform, animated values, cumulative scale
+    num_joints = len(joints)
+    offsets = np.zeros((num_joints, 3))
+    rotations = np.zeros((num_frames, num_joints, 4))
+    moving: dict[int, np.ndarray] = {}
+    cumulative = np.zeros(num_joints)
+    for j, node in enumerate(joints):
+        t, r, s = reader.local(node)
+        scale_track = tracks.get(node, {}).get("scale")
+        if scale_track is not None:
+            values = scale_track.keyframes()
+            if np.abs(values - values[:1]).max() > _SCALE_TOLERANCE * np.abs(values).max():
+                raise reader.error("animated scale is not supported", scale_track.field)
+            s = values[0]
+        uniform = _uniform_scale(s)
+        if uniform is None:
+            raise reader.error(
+                "a non-uniform or non-positive scale is not supported", f"nodes[{node}].scale"
+            )
+        above_scale = world_s if j == 0 else cumulative[joint_parents[j]]
+        cumulative[j] = above_scale * uniform
+        offsets[j] = above_scale * t
+        rotations[:, j] = sample(node, "rotation", r)
+        if "translation" in tracks.get(node, {}):
+            moving[j] = above_scale * sample(node, "translation", t)
+    norms = np.linalg.norm(rotations, axis=-1)
+    if (norms < 1e-8).any():
+        f, j = (int(v) for v in np.argwhere(norms < 1e-8)[0])
+        track = tracks[joints[j]]["rotation"]
+        raise reader.error(f"a zero quaternion at frame {f}", track.field + ".output")
+    rotations = rotations / norms[..., None]
+    # fold the transform above the root into the root
+    root_rest = offsets[0] / world_s if world_s else offsets[0]
+    offsets[0] = world_t + world_s * _rotate(world_r, root_rest)
+    root_local = moving.get(0, np.repeat(root_rest[None] * world_s, num_frames, axis=0))
+    root_positions = world_t + _rotate(world_r, root_local)
+    rotations[:, 0] = _quat_mul(world_r, rotations[:, 0])
+    translations = None
+    moved = {j: v for j, v in moving.items() if j > 0 and np.abs(v - offsets[j]).max() > 1e-9}
+    if moved:
+        translations = np.repeat(offsets[None], num_frames, axis=0)
+        translations[:, 0] = root_positions
+        for j, v in moved.items():
+            translations[:, j] = v
+    end_sites: dict[int, list[list[float]]] = {}
+    for node in sites:
+        if parent[node] in index:
+            j = index[parent[node]]
+            t = reader.local(node)[0]
+            end_sites.setdefault(j, []).append([float(v) for v in cumulative[j] * t])
+
+    names, taken = [], set()
+    for node in joints:
+        name = nodes[node].name
+        name = name if isinstance(name, str) and name else f"node{node}"
+        names.append(_unique(name, taken))
+    meta = _metadata(nodes[root])
+    up_axis = meta.get("up_axis") if meta.get("up_axis") in ("x", "y", "z") else "y"
+    channels = meta.get("channels")
+    if not (isinstance(channels, list) and len(channels) == num_joints):
+        channels = None
+    body_root = meta.get("body_root")
+    body_root = body_root if _is_index(body_root) and 0 <= body_root < num_joints else None
+    units = meta.get("units") if meta.get("units") in UNITS else None
+    try:
+        skeleton = Skeleton(
+            names,
+            joint_parents,
+            offsets,
+            end_sites=end_sites,
+            up_axis=up_axis,
+            name=path.stem,
+            channels=channels,
+            body_root=body_root,
+        )
+    except SkeletonError as exc:
+        raise GLTFError(str(exc), path, f"nodes[{root}]") from None
+    quats = torch.from_numpy(np.ascontiguousarray(rotations[..., [3, 0, 1, 2]]))
+    return Motion(
+        skeleton,
+        Q.continuity(quats, dim=0),
+        torch.from_numpy(np.ascontiguousarray(root_positions)),
+        fps,
+        translations=None if translations is None else torch.from_numpy(translations),
+        name=path.stem,
+        units=units,
+        dtype=dtype,
+    )
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (x, y, z, w) quaternions (broadcasting)."""
+    ax, ay, az, aw = np.moveaxis(np.broadcast_to(a, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.broadcast_to(b, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
+    return np.stack(
+        (
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ),
+        axis=-1,
+    )
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v`` by an (x, y, z, w) quaternion ``q`` (broadcasting)."""
+    u, w = q[..., :3], q[..., 3:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
