@@ -24,7 +24,9 @@ from the held-out clips, once from the training windows, as the paper's
 per character, codebook usage and overlap (:func:`code_overlap`), per-character
 means, and phase linearity and frequency error on held-out procedural gaits
 (:func:`procedural_gaits`); the plot ``manifold.png`` is the phase manifold
-(Fig. 1) with the held-out frames.
+(Fig. 1) with the held-out frames. The paper measures Table 1 on the training data:
+``evaluate split=train`` runs the protocol on the run's training clips (the report
+says so), where ``extra.table1`` is that figure.
 
 ``vqpae.transfer`` (:func:`transfer_protocol`) re-enacts held-out clips of the
 first character with the second's training clips and times the outputs' feet
@@ -625,7 +627,7 @@ def manifold_protocol(
             else "omitted, the evaluated data has no training split "
             "with a dataset of every character's name"
         ),
-        f"shared codes: {len(shared)} of {num_codes}, over the held-out clips of "
+        f"shared codes: {len(shared)} of {num_codes}, over the evaluated clips of "
         f"{', '.join(by_character)}; chance = shared / K; codes shared / codes used by any "
         f"character: {table['codes_shared']} / {table['codes_used_any']}",
     ]
@@ -1360,7 +1362,7 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
     render_motion(first, out_dir / "transfer.gif", size=(200, 200))
     render_motion(first, out_dir / "transfer_sheet.png", size=(200, 200), sheet_frames=4)
     notes = [
-        f"source: {len(sources)} held-out ({held.split}) clips of {names[0]!r}; database: "
+        f"source: {len(sources)} clips of {names[0]!r} from the {held.name}; database: "
         f"{len(database)} training clips of {names[1]!r}",
         f"baseline `{UNSCALED}`: classical motion matching with the same manifold query and "
         "database, 1 s replays, no period term and no time warping (the target plays at its "
