@@ -339,9 +339,11 @@ def table2(
         codes: ``character -> [F]`` code of every frame of its (held-out) clips.
         training: Optional ``character -> [N]`` codes of its training windows. The
             paper's Table 2 calls a component (code) shared when both datasets' embeddings
-            lie on it; with this argument the codes every character uses on its
-            training clips are that set, and ``frame_share_training_shared`` is the
-            share of each character's held-out frames on one of them.
+            lie on it, and counts the embeddings of the dataset (the training set, as
+            the authors' ``test_vq.py``); with this argument the codes every character
+            uses on its training windows are that set, ``frame_share_training`` is the
+            paper's figure and ``frame_share_heldout_on_training_shared`` the share of
+            the held-out frames on the same codes.
 
     Returns:
         ``characters``; ``codes_used`` (character -> number of distinct codes its
@@ -351,10 +353,16 @@ def table2(
         ``codes_shared / codes_used_any`` (the issue's "codes used that are shared",
         target >= 0.75); ``shared_of_own`` (character -> ``codes_shared`` / its
         ``codes_used``); ``frame_share`` (character -> share of its frames on a
-        shared code, the paper's Table 2 figure); ``frames`` per character. With
-        ``training``: ``codes_shared_training`` (codes every character uses on its
-        training windows) and ``frame_share_training_shared`` (character -> share of
-        its held-out frames on one of those).
+        shared code; it grows with the number of evaluated clips, since more clips
+        share more codes); ``frames`` per character. With ``training``:
+        ``codes_shared_training`` (codes every character uses on its training
+        windows) and ``shared_codes_training`` (their ids), ``frame_share_training``
+        (character -> share of its training windows on one of those: the paper's
+        Table 2) and ``frames_training``, ``frame_share_heldout_on_training_shared``
+        (character -> share of its evaluated frames on one of those: the shared codes
+        are fixed by the training set, so the figure does not grow with the number of
+        evaluated clips) and ``frame_share_training_shared``, the same figure under
+        the name of the entries committed before it was added.
 
     Example:
         >>> out = table2({"human": torch.tensor([0, 0, 1, 2]), "dog": torch.tensor([1, 1, 3])})
@@ -381,12 +389,22 @@ def table2(
         "frames": {name: len(c) for name, c in codes.items()},
     }
     if training is not None:
-        trained = set.intersection(*(set(c.tolist()) for c in training.values()))
-        out["codes_shared_training"] = len(trained)
-        out["frame_share_training_shared"] = {
-            name: float(np.isin(c.numpy(), sorted(trained)).mean()) if len(c) else math.nan
-            for name, c in codes.items()
-        }
+        trained = sorted(set.intersection(*(set(c.tolist()) for c in training.values())))
+
+        def on_trained(c: torch.Tensor) -> float:
+            return float(np.isin(c.numpy(), trained).mean()) if len(c) else math.nan
+
+        held_share = {name: on_trained(c) for name, c in codes.items()}
+        out.update(
+            {
+                "codes_shared_training": len(trained),
+                "shared_codes_training": trained,
+                "frame_share_training": {name: on_trained(c) for name, c in training.items()},
+                "frames_training": {name: len(c) for name, c in training.items()},
+                "frame_share_heldout_on_training_shared": held_share,
+                "frame_share_training_shared": dict(held_share),
+            }
+        )
     return out
 
 
@@ -620,9 +638,13 @@ def manifold_protocol(
     authors = [n for n in aligner.dataset_names if (specs.get(n) or {}).get("pose_features")]
     pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
     notes = [
-        "codes_shared_training / frame_share_training_shared: "
+        f"evaluated clips: the {held.name}; codebook size K = {num_codes} (extra.num_codes)",
+        "Table 2 over the training set (the paper's figure, as the authors' test_vq.py): "
         + (
-            "codes every character uses on the training split of the evaluated data"
+            "codes_shared_training = codes every character uses on its training windows, "
+            "frame_share_training = share of each character's training windows on them, "
+            "frame_share_heldout_on_training_shared = share of the evaluated frames on them "
+            "(frame_share_training_shared: the same, its former name)"
             if trained is not None
             else "omitted, the evaluated data has no training split "
             "with a dataset of every character's name"
@@ -670,6 +692,7 @@ def manifold_protocol(
         "phase_r2": "R^2 of a line through the unwrapped phase, higher is better",
     }
     extra: dict[str, Any] = {
+        "num_codes": num_codes,
         "overlap": overlap,
         "table2": table,
         "per_character": {
