@@ -19,9 +19,10 @@ character and reports, per clip:
 
 ``extra`` holds the paper's Table 2 (:func:`table2`; its shared codes once taken
 from the held-out clips, once from the training windows, as the paper's
-"embeddings in the dataset" are) and Table 1 (:func:`table1`, with the bound of
-:func:`phase_oracle_errors`: the best average pose of a clip's true gait phase)
-per character, codebook usage and overlap (:func:`code_overlap`), per-character
+"embeddings in the dataset" are) and Table 1 (:func:`table1`, beside the reference
+of :func:`phase_oracle_errors`: the average pose of a clip's true gait phase, which
+knows the phase but not the code, so it is no bound) per character, the codebook
+size K (``num_codes``), codebook usage and overlap (:func:`code_overlap`), per-character
 means, and phase linearity and frequency error on held-out procedural gaits
 (:func:`procedural_gaits`); the plot ``manifold.png`` is the phase manifold
 (Fig. 1) with the held-out frames. The paper measures Table 1 on the training data:
@@ -277,7 +278,10 @@ def phase_oracle_errors(
     phase of the clip is then their mean. This oracle takes that mean over the
     evaluated frames themselves (held-out truth a model never sees), one per phase bin
     of the clip: it knows what the mean-pose baseline knows (the clip) plus the true
-    phase, so it shows how far knowing the phase alone can bring an average pose.
+    phase, so it shows how far knowing the phase alone can bring an average pose. It
+    does not know the code (the amplitude: which motion the frame belongs to), which
+    the model's average pose also reads, so it is a reference, not a bound: a model
+    can be below it.
 
     Args:
         pose: ``[F, J, 3]`` joint positions (root frame, root at the origin).
@@ -712,8 +716,9 @@ def manifold_protocol(
         notes.append(
             "Table 1 phase_oracle: per clip, the mean pose of its locomotion frames in each "
             f"1/{ORACLE_PHASE_BINS} cycle of the gait phase measured from the feet "
-            "(touch-down to touch-down); it reads the held-out truth (a bound, not a method): "
-            "what the true phase adds to the clip's mean pose"
+            "(touch-down to touch-down); it reads the evaluated clips' truth (a reference, not "
+            "a method): what the true phase adds to the clip's mean pose; it knows the phase "
+            "but not the code, so it is no bound (a model can be below it)"
         )
         extra["locomotion_rule"] = {
             "min_speed_heights_per_s": LOCOMOTION_SPEED,
