@@ -12,13 +12,14 @@ from collections import Counter
 import numpy as np
 import pytest
 import torch
-from skelagnostic_vqpae.embed import embed_clip
+from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
 from skelagnostic_vqpae.evaluation import (
     LOCOMOTION_SPEED,
     PROCEDURAL_SEED,
     contact_frequency,
     contact_lock,
     contact_onsets,
+    frequency_head_figures,
     gait_frequency,
     gait_phase,
     locomotion_frames,
@@ -383,6 +384,66 @@ def test_locomotion_rhythm_counts_only_the_source_walks(walks) -> None:
     assert math.isnan(nothing["locomotion_rhythm_within_10pct"])
 
 
+# --- the frequency head against the feet -------------------------------------------------------
+
+
+def _constant_head(motion: Motion, hz: float, dataset: str = "dog") -> ClipEmbedding:
+    """An embedding of ``motion`` whose frequency head reads ``hz`` on every frame."""
+    frames = motion.num_frames
+    return ClipEmbedding(
+        phase=torch.zeros(frames),
+        frequency=torch.full((frames,), hz),
+        code=torch.zeros(frames, dtype=torch.long),
+        amplitude=torch.zeros(frames, 2),
+        manifold=torch.zeros(frames, 1),
+        fps=motion.fps,
+        dataset=dataset,
+    )
+
+
+def test_frequency_head_figures_on_procedural_gaits_of_known_frequency() -> None:
+    """Heads at known ratios of the generator's stride frequency, judged by that frequency.
+
+    The reference is the generator's frequency itself (procedural feet are not grounded,
+    so their touch-down rate is not the stride frequency); the idle clip has no
+    locomotion run and is left out. Expected: errors 0, 8, 50 (a sub-harmonic) and
+    25 %, two of four clips within 10 %.
+    """
+    cases = [("walk", 0, 1.0), ("trot", 1, 1.08), ("gallop", 2, 0.5), ("walk", 3, 1.25)]
+    cases.append(("idle", 4, 1.0))
+    clips, embeddings, known = [], [], {}
+    for gait, seed, ratio in cases:
+        motion, info = procedural.generate("quadruped", gait, seconds=6.0, fps=30, seed=seed)
+        motion.name = f"{gait}_{seed}"
+        known[motion.name] = float(info["frequency"])
+        clips.append(motion)
+        embeddings.append(_constant_head(motion, ratio * known[motion.name]))
+
+    def truth(motion: Motion) -> torch.Tensor:
+        return torch.full((motion.num_frames,), known[str(motion.name)])
+
+    out = frequency_head_figures(clips, embeddings, reference=truth)
+    assert out["tolerance_pct"] == pytest.approx(10.0)
+    assert list(out["per_clip"]) == ["walk_0", "trot_1", "gallop_2", "walk_3"]  # no idle
+    for gait, seed, ratio in cases[:4]:
+        row = out["per_clip"][f"{gait}_{seed}"]
+        hz = known[f"{gait}_{seed}"]
+        assert row["touchdown_hz"] == pytest.approx(hz)
+        assert row["head_hz"] == pytest.approx(ratio * hz, rel=1e-6)
+        assert row["error_pct"] == pytest.approx(100 * abs(ratio - 1), abs=1e-4)
+        assert row["within"] is (abs(ratio - 1) <= 0.10)
+    assert out["characters"] == {
+        "dog": {"clips": 4, "within": 2, "without_touchdowns": 0, "share_within": 0.5}
+    }
+    # the default reference, the feet's touch-downs: procedural feet dip more than once
+    # per stride, so a head that reads the true stride frequency is far off there
+    default = frequency_head_figures(clips[:1], embeddings[:1])
+    (row,) = default["per_clip"].values()
+    assert row["touchdown_hz"] > 1.3 * known["walk_0"] and not row["within"]
+    with pytest.raises(ValueError, match="1 given for 2 clips"):
+        frequency_head_figures(clips[:2], embeddings[:1])
+
+
 # --- the protocols on a tiny model -------------------------------------------------------------
 
 
@@ -402,6 +463,11 @@ def test_manifold_protocol_on_the_training_clips_says_so(tiny, tmp_path) -> None
         out = manifold_protocol(model, train, tmp_path, procedural_seeds=0)
     assert [r["clip"] for r in out.rows] == train.names
     assert out.extra["num_codes"] == 8
+    heads = out.extra["frequency_head"]
+    assert set(heads["per_clip"]) <= set(train.names)
+    for name, counts in heads["characters"].items():
+        rows = [r for r in heads["per_clip"].values() if r["character"] == name]
+        assert counts["clips"] == len(rows) and counts["within"] == sum(r["within"] for r in rows)
     assert out.notes[0].startswith(
         "evaluated clips: the training split (clips the model trained on, not held out); "
         "codebook size K = 8"

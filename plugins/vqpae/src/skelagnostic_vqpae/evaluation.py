@@ -22,7 +22,8 @@ from the held-out clips, once from the training windows, as the paper's
 "embeddings in the dataset" are) and Table 1 (:func:`table1`, beside the reference
 of :func:`phase_oracle_errors`: the average pose of a clip's true gait phase, which
 knows the phase but not the code, so it is no bound) per character, the codebook
-size K (``num_codes``), codebook usage and overlap (:func:`code_overlap`), per-character
+size K (``num_codes``), codebook usage and overlap (:func:`code_overlap`), the frequency
+head against the feet's touch-down rate (:func:`frequency_head_figures`), per-character
 means, and phase linearity and frequency error on held-out procedural gaits
 (:func:`procedural_gaits`); the plot ``manifold.png`` is the phase manifold
 (Fig. 1) with the held-out frames. The paper measures Table 1 on the training data:
@@ -39,7 +40,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +91,7 @@ __all__ = [
     "foot_heights",
     "foot_joints",
     "forward_swings",
+    "frequency_head_figures",
     "gait_frequency",
     "gait_phase",
     "locomotion_frames",
@@ -726,6 +728,14 @@ def manifold_protocol(
             "rule": "frames whose root travels at least min_speed_heights_per_s skeleton "
             "heights per second horizontally, over a centred span of span_seconds",
         }
+    extra["frequency_head"] = frequency_head_figures(held.clips, embeddings)
+    notes.append(
+        "frequency_head: per character, the share of its locomotion clips (a run of at least "
+        f"{RHYTHM_RUN_SECONDS:g} s of locomotion frames) whose frequency head (median over the "
+        f"runs) lies within {100 * RHYTHM_TOLERANCE:g} % of the feet's touch-down rate (median, "
+        "touch-downs per second and foot); procedural feet dip more than once per stride, so "
+        "on procedural clips the touch-down rate is not the stride frequency"
+    )
     extra["procedural"] = procedural_gaits(aligner, held, procedural_seeds)
     if extra["procedural"].get("note"):
         notes.append(extra["procedural"]["note"])
@@ -1063,6 +1073,79 @@ def touchdown_frequency(
     out = np.full(frames, np.nan)
     np.divide(total, count, out=out, where=count > 0)
     return torch.from_numpy(out).float()
+
+
+def frequency_head_figures(
+    clips: Sequence[Motion],
+    embeddings: Sequence[ClipEmbedding],
+    reference: Callable[[Motion], torch.Tensor] = touchdown_frequency,
+    tolerance: float = RHYTHM_TOLERANCE,
+) -> dict[str, Any]:
+    """The frequency head against the feet: per character, the share of locomotion clips it reads.
+
+    A clip is a locomotion clip when it has a run of locomotion frames
+    (:func:`locomotion_runs`, at least :data:`RHYTHM_RUN_SECONDS`). Over the frames of
+    its runs where ``reference`` has a value, the head's estimate is the median of the
+    embedding's per-frame frequency and the feet's rate the median of ``reference``
+    (default :func:`touchdown_frequency`: touch-downs per second and foot, one per
+    stride on captured motion); the clip's error is ``|head / feet - 1|``. Procedural
+    feet are not grounded (they dip more than once per stride), so on procedural
+    clips the touch-down rate is not the stride frequency: the default suits
+    captured motion.
+
+    Args:
+        clips: The evaluated clips.
+        embeddings: Their embeddings (:func:`~skelagnostic_vqpae.embed.embed_clip`), one
+            per clip.
+        reference: Per-frame frequency (Hz, NaN where unknown) of a clip at the
+            embedding's frame rate.
+        tolerance: Largest relative error that counts as reading the rate.
+
+    Returns:
+        ``tolerance_pct``; ``characters``: character -> ``{"clips": locomotion clips
+        with a figure, "within": those within the tolerance, "share_within": within /
+        clips (NaN without clips), "without_touchdowns": locomotion clips where the
+        reference has no value}``; ``per_clip``: clip -> ``{"character", "head_hz",
+        "touchdown_hz", "error_pct", "within"}``.
+    """
+    if len(embeddings) != len(clips):
+        raise ValueError(f"embeddings: {len(embeddings)} given for {len(clips)} clips")
+    characters: dict[str, dict[str, Any]] = {}
+    per_clip: dict[str, dict[str, Any]] = {}
+    for clip, emb in zip(clips, embeddings, strict=True):
+        motion = clip if clip.fps == emb.fps else clip.resample(emb.fps)
+        runs = locomotion_runs(motion)
+        if not runs:
+            continue
+        counts = characters.setdefault(
+            emb.dataset, {"clips": 0, "within": 0, "without_touchdowns": 0}
+        )
+        frames = min(len(emb), motion.num_frames)
+        mask = torch.zeros(frames, dtype=torch.bool)
+        for start, end in runs:
+            mask[start : min(end, frames)] = True
+        feet = reference(motion)[:frames].double()
+        mask &= feet.isfinite()
+        if not bool(mask.any()):
+            counts["without_touchdowns"] += 1
+            continue
+        head = float(emb.frequency[:frames].double()[mask].median())
+        rate = float(feet[mask].median())
+        error = abs(head / rate - 1)
+        within = error <= tolerance
+        counts["clips"] += 1
+        counts["within"] += int(within)
+        per_clip[str(clip.name)] = {
+            "character": emb.dataset,
+            "head_hz": head,
+            "touchdown_hz": rate,
+            "error_pct": 100 * error,
+            "within": within,
+        }
+    for counts in characters.values():
+        n = counts["clips"]
+        counts["share_within"] = counts["within"] / n if n else math.nan
+    return {"tolerance_pct": 100 * tolerance, "characters": characters, "per_clip": per_clip}
 
 
 def contact_lock(source_onsets: Sequence[np.ndarray], output_onsets: Sequence[np.ndarray]) -> float:
