@@ -645,7 +645,8 @@ def manifold_protocol(
     pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
     notes = [
         f"evaluated clips: the {held.name}; codebook size K = {num_codes} (extra.num_codes)",
-        "Table 2 over the training set (the paper's figure, as the authors' test_vq.py): "
+        "codes_shared_training / frame_share_training (Table 2 over the training set, the "
+        "paper's figure, as the authors' test_vq.py): "
         + (
             "codes_shared_training = codes every character uses on its training windows, "
             "frame_share_training = share of each character's training windows on them, "
