@@ -679,19 +679,22 @@ def _entry_section(entry: Entry) -> list[str]:
     report, run = entry.report, entry.run
     data = report["data"]
     clips = ", ".join(f"`{c}`" for c in data["clips"])
+    training = data.get("split") == "train"  # evaluate split=train: never called held out
+    clips_kind = "training clips (not held out)" if training else "held-out clips"
+    evaluated = "Evaluated on (not held out)" if training else "Held out"
     kinds = dict.fromkeys(k for c in entry.curves.values() for k in c)
     curve_names = f", and the curves {', '.join(f'`{k}`' for k in kinds)}" if kinds else ""
     lines = [
         f"### {run['title']}",
         "",
         f"Entry `{entry.name}`: protocol `{report['protocol']}`, measured {run['date']}. "
-        "Mean over the held-out clips, the model beside the baselines of the same run:",
+        f"Mean over the {clips_kind}, the model beside the baselines of the same run:",
         "",
         *_quoted_table(entry),
         "",
         *(f"- `{m}`: {entry.description(m)}" for m in run["quote"]),
         "",
-        f"- Held out: the {data['split_name']} of `{data['source']}`, "
+        f"- {evaluated}: the {data['split_name']} of `{data['source']}`, "
         f"{len(data['clips'])} clips: {clips}",
         f"- Budget: {_budget(run)}",
         f"- Machine: {_machine(run)}",

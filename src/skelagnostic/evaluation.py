@@ -95,10 +95,15 @@ class EvaluationError(SkelagnosticError):
 
 @dataclass(frozen=True)
 class HeldOut:
-    """The clips of a run that the model never trained on.
+    """The clips of a run a protocol evaluates: those the model never trained on.
+
+    With ``split="train"`` (``evaluate split=train``) they are the run's training
+    clips instead, for figures a paper measures on its training data; the reports
+    then say so (:attr:`name`, :attr:`is_training`).
 
     Attributes:
-        split: ``"test"``, ``"val"`` or ``"heldout"`` (both; see :func:`held_out`).
+        split: ``"test"``, ``"val"``, ``"heldout"`` (both) or ``"train"`` (the training
+            clips, not held out); see :func:`held_out`.
         clips: The clips, resampled to the data module's fps, named by their clip id.
         datamodule: The run's data module (after ``setup``), for its options
             (``fps``, ``window``, its training datasets for normalisation statistics).
@@ -116,13 +121,19 @@ class HeldOut:
         return self.description or _SPLIT_NAMES.get(self.split, self.split)
 
     @property
+    def is_training(self) -> bool:
+        """Whether the clips are the run's training clips (``split="train"``), not held out."""
+        return self.split == "train"
+
+    @property
     def names(self) -> list[str]:
         """The clip ids, in order."""
         return [str(c.name) for c in self.clips]
 
 
-#: The values of ``evaluate split=``: which clips the model never trained on are evaluated.
-SPLITS = ("test", "val", "heldout")
+#: The values of ``evaluate split=``: which clips the model never trained on are evaluated
+#: (``"train"``: the training clips instead, labelled as such).
+SPLITS = ("test", "val", "heldout", "train")
 
 
 def held_out(datamodule: Any, split: str | None = None) -> HeldOut:
@@ -140,10 +151,13 @@ def held_out(datamodule: Any, split: str | None = None) -> HeldOut:
             and the test clips together (every clip the model never trained on;
             for corpora whose test split is too small to decide a figure). Clips of
             the validation split are unseen by the weights, but a checkpoint chosen
-            by its validation loss (``best.ckpt``) was selected on them.
+            by its validation loss (``best.ckpt``) was selected on them. ``"train"``:
+            the training clips, **not** held out (for a paper's figure measured on its
+            training data); the result's ``name`` says so.
 
     Returns:
-        The held-out clips (validation clips first for ``"heldout"``).
+        The held-out clips (validation clips first for ``"heldout"``), or the
+        training clips for ``"train"``.
 
     Raises:
         EvaluationError: ``split`` is not one of :data:`SPLITS`, or the chosen
@@ -152,7 +166,7 @@ def held_out(datamodule: Any, split: str | None = None) -> HeldOut:
     if split is not None and split not in SPLITS:
         raise EvaluationError(
             f"split={split!r}: expected one of {', '.join(SPLITS)} (or null: the test split, "
-            "else the validation split)"
+            "else the validation split; train: the training clips, not held out)"
         )
     datamodule.setup("test")
     assigned: Mapping[str, str] = getattr(datamodule, "assigned_splits", {}) or {}
@@ -330,7 +344,7 @@ def markdown(report: Mapping[str, Any]) -> str:
         f"- data: {markdown_cell(data['source'], code=True)}, "
         f"{markdown_cell(data['split_name'])} ({len(data['clips'])} clips)",
         "",
-        "## Mean over held-out clips",
+        f"## Mean over {_clips_kind(data.get('split'))}",
         "",
         "| metric | " + " | ".join(map(markdown_cell, methods)) + " |",
         "|---" * (len(methods) + 1) + "|",
@@ -359,7 +373,20 @@ _SPLIT_NAMES = {
     "test": "test split",
     "val": "validation split",
     "heldout": "validation and test splits",
+    "train": "training split (clips the model trained on, not held out)",
 }
+#: The first note of a report on the training clips (``split=train``).
+_TRAINING_NOTE = (
+    "evaluated on the run's training clips (split=train), not on held-out clips: the "
+    "model trained on every clip here; where the protocol says held-out, read training"
+)
+
+
+def _clips_kind(split: str | None) -> str:
+    """What the mean table averages over: held-out clips, or training clips (``split=train``)."""
+    return "training clips (not held out)" if split == "train" else "held-out clips"
+
+
 #: The split's name when ``evaluate`` falls back to the validation split.
 _NO_TEST = "validation split (the data has no test split)"
 
@@ -477,7 +504,7 @@ def write_evaluation(
         "per_clip": rows,
         "extra": extra,
         "plots": ["evaluation.png", *result.plots],
-        "notes": list(result.notes),
+        "notes": [_TRAINING_NOTE, *result.notes] if held.is_training else list(result.notes),
     }
     write_output(out / "evaluation.json", json.dumps(report, indent=1) + "\n")
     write_output(out / "evaluation.md", markdown(report))

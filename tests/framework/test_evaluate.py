@@ -116,8 +116,29 @@ def test_evaluate_writes_the_report_on_the_test_split_or_every_held_out_clip(
     expected = [k for s in ("val", "test") for k, v in sorted(split.items()) if v == s]
     assert report["data"]["clips"] == expected and len(expected) > 2
     assert "validation and test splits" in capsys.readouterr().out
+    # split=train: the run's training clips, never labelled as held out
+    shutil.rmtree(_evaluation_dir(tmp_path))
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=train"]) == 0, (
+        capsys.readouterr().err
+    )
+    run = _evaluation_dir(tmp_path)
+    report = json.loads((run / "evaluation.json").read_text())
+    assert report["data"]["split"] == "train"
+    assert report["data"]["split_name"] == (
+        "training split (clips the model trained on, not held out)"
+    )
+    assert report["data"]["clips"] == sorted(k for k, v in split.items() if v == "train")
+    assert report["notes"][0].startswith("evaluated on the run's training clips (split=train)")
+    markdown = (run / "evaluation.md").read_text()
+    assert "## Mean over training clips (not held out)" in markdown
+    assert "Mean over held-out clips" not in markdown
+    assert "on the training split (clips the model trained on, not held out)" in (
+        capsys.readouterr().out.replace("\n", " ")
+    )
     assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=training"]) == 1
-    assert "split='training': expected one of test, val, heldout" in capsys.readouterr().err
+    assert "split='training': expected one of test, val, heldout, train" in (
+        capsys.readouterr().err
+    )
 
 
 def test_evaluate_falls_back_to_the_validation_split(
@@ -202,8 +223,12 @@ def test_held_out_split_chooses_test_val_or_both(tmp_path: Path) -> None:
     assert not set(held["heldout"].names) & {
         k for k, v in dm.assigned_splits.items() if v == "train"
     }
-    with pytest.raises(EvaluationError, match=r"split='train': expected one of test, val, heldout"):
-        held_out(dm, "train")
+    train = held_out(dm, "train")  # the training clips, named as such
+    assert train.names == sorted(k for k, v in dm.assigned_splits.items() if v == "train")
+    assert train.is_training and not held["heldout"].is_training
+    assert train.name == "training split (clips the model trained on, not held out)"
+    with pytest.raises(EvaluationError, match=r"split='all': expected one of test, val, heldout"):
+        held_out(dm, "all")
     no_test = _procedural(tmp_path, 2, val_fraction=0.3)
     with pytest.raises(EvaluationError, match="split=test: the data has no test split"):
         held_out(no_test, "test")

@@ -537,3 +537,21 @@ def test_the_committed_results_page_is_up_to_date() -> None:
         check=False,
     )
     assert done.returncode == 0, done.stderr
+
+
+def test_an_entry_on_the_training_clips_is_never_called_held_out(
+    heldout: Path, tmp_path: Path
+) -> None:
+    path = heldout / "example_smoke" / "evaluation.json"
+    report = json.loads(path.read_text())
+    report["data"]["split"] = "train"  # as `evaluate split=train` writes it
+    report["data"]["split_name"] = "training split (clips the model trained on, not held out)"
+    path.write_text(json.dumps(report))
+    out = tmp_path / "results.md"
+    assert results.main(_args(heldout, out)) == 0
+    section = out.read_text().split("### Example aligner on procedural clips", 1)[1]
+    assert "Mean over the training clips (not held out), the model beside" in section
+    assert "- Evaluated on (not held out): the training split (clips the model trained on" in (
+        section
+    )
+    assert "- Held out:" not in section and "Mean over the held-out clips" not in section

@@ -12,13 +12,14 @@ from collections import Counter
 import numpy as np
 import pytest
 import torch
-from skelagnostic_vqpae.embed import embed_clip
+from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
 from skelagnostic_vqpae.evaluation import (
     LOCOMOTION_SPEED,
     PROCEDURAL_SEED,
     contact_frequency,
     contact_lock,
     contact_onsets,
+    frequency_head_figures,
     gait_frequency,
     gait_phase,
     locomotion_frames,
@@ -36,7 +37,7 @@ from skelagnostic_vqpae.evaluation import (
 from skelagnostic import procedural
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.evaluation import MODEL
+from skelagnostic.evaluation import MODEL, held_out
 
 # --- Table 2 -------------------------------------------------------------------------------
 
@@ -66,7 +67,64 @@ def test_table2_shared_codes_of_the_training_windows() -> None:
         "dog": pytest.approx(2 / 3),
     }
     assert out["frame_share"] == {"human": pytest.approx(1 / 5), "dog": pytest.approx(2 / 3)}
+    # the paper's figure: training windows on {0, 1}; human 2 of 4, dog 2 of 4
+    assert out["shared_codes_training"] == [0, 1]
+    assert out["frame_share_training"] == {
+        "human": pytest.approx(2 / 4),
+        "dog": pytest.approx(2 / 4),
+    }
+    assert out["frames_training"] == {"human": 4, "dog": 4}
+    assert out["frame_share_heldout_on_training_shared"] == out["frame_share_training_shared"]
     assert "codes_shared_training" not in table2(held)
+    assert "frame_share_training" not in table2(held)
+
+
+def _on(codes: list[int], shared: set[int]) -> float:
+    """Share of ``codes`` in ``shared``, counted one frame at a time."""
+    return sum(1 for c in codes if c in shared) / len(codes)
+
+
+def test_table2_heldout_share_on_training_codes_does_not_grow_with_the_clips() -> None:
+    """Hand-built codes: more held-out clips share more codes, the training codes stay.
+
+    Training windows: the human on codes 0-5, the dog on 3-7, so codes 3, 4, 5 are
+    shared. The human's held-out clips sit on 0 (a code only it uses in training) and
+    on 3; the dog's first clip on 3 and 6, its second clip on 0. With one dog clip
+    the held-out clips share code 3 only; with two also code 0, so ``frame_share``
+    of the human jumps from the frames on 3 to every frame, while the share on the
+    training-shared codes (3, 4, 5) does not move.
+    """
+    trained = {
+        "human": torch.tensor([0, 1, 2, 3, 4, 5, 5, 5]),
+        "dog": torch.tensor([3, 4, 5, 6, 7, 7]),
+    }
+    human = [0, 0, 0, 3]
+    dog_clips = [[3, 3, 6, 6], [0, 0]]
+    both = set(range(6)) & set(range(3, 8))
+    assert both == {3, 4, 5}
+    figures = []
+    for n_dog in (1, 2):
+        dog = [c for clip in dog_clips[:n_dog] for c in clip]
+        out = table2({"human": torch.tensor(human), "dog": torch.tensor(dog)}, trained)
+        figures.append(out)
+        assert out["codes_shared_training"] == 3 and out["shared_codes_training"] == [3, 4, 5]
+        assert out["frame_share_heldout_on_training_shared"] == {
+            "human": pytest.approx(_on(human, both)),
+            "dog": pytest.approx(_on(dog, both)),
+        }
+        assert out["frame_share_training"] == {
+            name: pytest.approx(_on(c.tolist(), both)) for name, c in trained.items()
+        }
+    one, two = figures
+    assert one["frame_share"]["human"] == pytest.approx(1 / 4)  # only code 3 shared
+    assert two["frame_share"]["human"] == pytest.approx(1.0)  # codes 0 and 3 shared
+    held_human = [f["frame_share_heldout_on_training_shared"]["human"] for f in figures]
+    assert held_human == [pytest.approx(1 / 4)] * 2  # unchanged by the second dog clip
+    # the paper's figure: human 5 of 8 windows on {3, 4, 5}, dog 3 of 6
+    assert two["frame_share_training"] == {
+        "human": pytest.approx(5 / 8),
+        "dog": pytest.approx(3 / 6),
+    }
 
 
 def test_table2_against_counting_three_characters() -> None:
@@ -326,6 +384,66 @@ def test_locomotion_rhythm_counts_only_the_source_walks(walks) -> None:
     assert math.isnan(nothing["locomotion_rhythm_within_10pct"])
 
 
+# --- the frequency head against the feet -------------------------------------------------------
+
+
+def _constant_head(motion: Motion, hz: float, dataset: str = "dog") -> ClipEmbedding:
+    """An embedding of ``motion`` whose frequency head reads ``hz`` on every frame."""
+    frames = motion.num_frames
+    return ClipEmbedding(
+        phase=torch.zeros(frames),
+        frequency=torch.full((frames,), hz),
+        code=torch.zeros(frames, dtype=torch.long),
+        amplitude=torch.zeros(frames, 2),
+        manifold=torch.zeros(frames, 1),
+        fps=motion.fps,
+        dataset=dataset,
+    )
+
+
+def test_frequency_head_figures_on_procedural_gaits_of_known_frequency() -> None:
+    """Heads at known ratios of the generator's stride frequency, judged by that frequency.
+
+    The reference is the generator's frequency itself (procedural feet are not grounded,
+    so their touch-down rate is not the stride frequency); the idle clip has no
+    locomotion run and is left out. Expected: errors 0, 8, 50 (a sub-harmonic) and
+    25 %, two of four clips within 10 %.
+    """
+    cases = [("walk", 0, 1.0), ("trot", 1, 1.08), ("gallop", 2, 0.5), ("walk", 3, 1.25)]
+    cases.append(("idle", 4, 1.0))
+    clips, embeddings, known = [], [], {}
+    for gait, seed, ratio in cases:
+        motion, info = procedural.generate("quadruped", gait, seconds=6.0, fps=30, seed=seed)
+        motion.name = f"{gait}_{seed}"
+        known[motion.name] = float(info["frequency"])
+        clips.append(motion)
+        embeddings.append(_constant_head(motion, ratio * known[motion.name]))
+
+    def truth(motion: Motion) -> torch.Tensor:
+        return torch.full((motion.num_frames,), known[str(motion.name)])
+
+    out = frequency_head_figures(clips, embeddings, reference=truth)
+    assert out["tolerance_pct"] == pytest.approx(10.0)
+    assert list(out["per_clip"]) == ["walk_0", "trot_1", "gallop_2", "walk_3"]  # no idle
+    for gait, seed, ratio in cases[:4]:
+        row = out["per_clip"][f"{gait}_{seed}"]
+        hz = known[f"{gait}_{seed}"]
+        assert row["touchdown_hz"] == pytest.approx(hz)
+        assert row["head_hz"] == pytest.approx(ratio * hz, rel=1e-6)
+        assert row["error_pct"] == pytest.approx(100 * abs(ratio - 1), abs=1e-4)
+        assert row["within"] is (abs(ratio - 1) <= 0.10)
+    assert out["characters"] == {
+        "dog": {"clips": 4, "within": 2, "without_touchdowns": 0, "share_within": 0.5}
+    }
+    # the default reference, the feet's touch-downs: procedural feet dip more than once
+    # per stride, so a head that reads the true stride frequency is far off there
+    default = frequency_head_figures(clips[:1], embeddings[:1])
+    (row,) = default["per_clip"].values()
+    assert row["touchdown_hz"] > 1.3 * known["walk_0"] and not row["within"]
+    with pytest.raises(ValueError, match="1 given for 2 clips"):
+        frequency_head_figures(clips[:2], embeddings[:1])
+
+
 # --- the protocols on a tiny model -------------------------------------------------------------
 
 
@@ -333,6 +451,30 @@ def test_locomotion_rhythm_counts_only_the_source_walks(walks) -> None:
 def tiny(helpers, tmp_path):
     """A VQ-PAE trained a few steps on procedural biped + quadruped (no quality expected)."""
     return helpers["tiny"](tmp_path, 0.3)
+
+
+def test_manifold_protocol_on_the_training_clips_says_so(tiny, tmp_path) -> None:
+    """``evaluate split=train``: Table 1 over the training clips, as the paper measures it."""
+    model, held = tiny
+    train = held_out(held.datamodule, "train")
+    names = sorted(k for k, v in held.datamodule.assigned_splits.items() if v == "train")
+    assert train.names == names and not set(names) & set(held.names)
+    with torch.no_grad():
+        out = manifold_protocol(model, train, tmp_path, procedural_seeds=0)
+    assert [r["clip"] for r in out.rows] == train.names
+    assert out.extra["num_codes"] == 8
+    heads = out.extra["frequency_head"]
+    assert set(heads["per_clip"]) <= set(train.names)
+    for name, counts in heads["characters"].items():
+        rows = [r for r in heads["per_clip"].values() if r["character"] == name]
+        assert counts["clips"] == len(rows) and counts["within"] == sum(r["within"] for r in rows)
+    assert out.notes[0].startswith(
+        "evaluated clips: the training split (clips the model trained on, not held out); "
+        "codebook size K = 8"
+    )
+    for name, figures in out.extra["table1"].items():
+        rows = [r for r in out.rows if r["character"] == name]
+        assert figures["all"]["frames"] == sum(r["frames"] for r in rows)
 
 
 def test_manifold_protocol_tables_per_character(tiny, tmp_path) -> None:

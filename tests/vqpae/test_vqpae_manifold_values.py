@@ -98,18 +98,27 @@ def test_code_and_phase_figures_equal_an_independent_computation(
         assert table["frames"][name] == len(frame_codes)
     # shared components of the training data: codes of the training windows, one at a time
     dm = held.datamodule
-    trained: dict[str, set[int]] = {}
+    trained: dict[str, list[int]] = {}
     for name, dataset in dm.datasets["train"].items():
         k = model.dataset_names.index(name)
         for i in range(len(dataset)):
             with torch.no_grad():
                 code = model.forward_dataset(k, dataset[i]["features"][None])[1].code
-            trained.setdefault(name, set()).add(int(code[0]))
-    both = set.intersection(*trained.values())
+            trained.setdefault(name, []).append(int(code[0]))
+    both = set.intersection(*(set(c) for c in trained.values()))
     assert table["codes_shared_training"] == len(both)
+    assert table["shared_codes_training"] == sorted(both)
     for name, frame_codes in codes.items():
         on_trained = sum(c in both for c in frame_codes) / len(frame_codes)
+        assert table["frame_share_heldout_on_training_shared"][name] == pytest.approx(on_trained)
         assert table["frame_share_training_shared"][name] == pytest.approx(on_trained)
+        # the paper's Table 2: the training windows' own share on those codes
+        windows = trained[name]
+        assert table["frame_share_training"][name] == pytest.approx(
+            sum(c in both for c in windows) / len(windows)
+        )
+        assert table["frames_training"][name] == len(windows)
+    assert out.extra["num_codes"] == 8  # K, so a sweep's entries can be compared
     overlap = out.extra["overlap"]
     assert overlap["usage"] == pytest.approx(len(union) / 8)
     assert overlap["overlap"] == pytest.approx(len(shared) / 8)

@@ -1,9 +1,10 @@
 """``skelagnostic evaluate``: a registered protocol on the held-out clips of a run.
 
 ``skelagnostic evaluate ckpt_path=RUN_OR_CKPT [protocol=NAME] [+protocol_options.KEY=VALUE]
-[split=test|val|heldout] [overrides]`` takes the model and data of the checkpoint's run (as
-``validate`` and ``test`` do), loads the weights, collects the run's test clips (else its
-validation clips; ``split=`` chooses, :func:`~skelagnostic.evaluation.held_out`), runs the
+[split=test|val|heldout|train] [overrides]`` takes the model and data of the checkpoint's run
+(as ``validate`` and ``test`` do), loads the weights, collects the run's test clips (else its
+validation clips; ``split=`` chooses, :func:`~skelagnostic.evaluation.held_out`; ``train``:
+the training clips, labelled as not held out), runs the
 protocol (default: the model's default protocol; ``protocol_options``
 become its keyword arguments) and writes
 ``evaluation.json``, ``evaluation.md`` and plots into its own run directory

@@ -19,12 +19,16 @@ character and reports, per clip:
 
 ``extra`` holds the paper's Table 2 (:func:`table2`; its shared codes once taken
 from the held-out clips, once from the training windows, as the paper's
-"embeddings in the dataset" are) and Table 1 (:func:`table1`, with the bound of
-:func:`phase_oracle_errors`: the best average pose of a clip's true gait phase)
-per character, codebook usage and overlap (:func:`code_overlap`), per-character
+"embeddings in the dataset" are) and Table 1 (:func:`table1`, beside the reference
+of :func:`phase_oracle_errors`: the average pose of a clip's true gait phase, which
+knows the phase but not the code, so it is no bound) per character, the codebook
+size K (``num_codes``), codebook usage and overlap (:func:`code_overlap`), the frequency
+head against the feet's touch-down rate (:func:`frequency_head_figures`), per-character
 means, and phase linearity and frequency error on held-out procedural gaits
 (:func:`procedural_gaits`); the plot ``manifold.png`` is the phase manifold
-(Fig. 1) with the held-out frames.
+(Fig. 1) with the held-out frames. The paper measures Table 1 on the training data:
+``evaluate split=train`` runs the protocol on the run's training clips (the report
+says so), where ``extra.table1`` is that figure.
 
 ``vqpae.transfer`` (:func:`transfer_protocol`) re-enacts held-out clips of the
 first character with the second's training clips and times the outputs' feet
@@ -36,7 +40,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -87,6 +91,7 @@ __all__ = [
     "foot_heights",
     "foot_joints",
     "forward_swings",
+    "frequency_head_figures",
     "gait_frequency",
     "gait_phase",
     "locomotion_frames",
@@ -275,7 +280,10 @@ def phase_oracle_errors(
     phase of the clip is then their mean. This oracle takes that mean over the
     evaluated frames themselves (held-out truth a model never sees), one per phase bin
     of the clip: it knows what the mean-pose baseline knows (the clip) plus the true
-    phase, so it shows how far knowing the phase alone can bring an average pose.
+    phase, so it shows how far knowing the phase alone can bring an average pose. It
+    does not know the code (the amplitude: which motion the frame belongs to), which
+    the model's average pose also reads, so it is a reference, not a bound: a model
+    can be below it.
 
     Args:
         pose: ``[F, J, 3]`` joint positions (root frame, root at the origin).
@@ -337,9 +345,11 @@ def table2(
         codes: ``character -> [F]`` code of every frame of its (held-out) clips.
         training: Optional ``character -> [N]`` codes of its training windows. The
             paper's Table 2 calls a component (code) shared when both datasets' embeddings
-            lie on it; with this argument the codes every character uses on its
-            training clips are that set, and ``frame_share_training_shared`` is the
-            share of each character's held-out frames on one of them.
+            lie on it, and counts the embeddings of the dataset (the training set, as
+            the authors' ``test_vq.py``); with this argument the codes every character
+            uses on its training windows are that set, ``frame_share_training`` is the
+            paper's figure and ``frame_share_heldout_on_training_shared`` the share of
+            the held-out frames on the same codes.
 
     Returns:
         ``characters``; ``codes_used`` (character -> number of distinct codes its
@@ -349,10 +359,16 @@ def table2(
         ``codes_shared / codes_used_any`` (the issue's "codes used that are shared",
         target >= 0.75); ``shared_of_own`` (character -> ``codes_shared`` / its
         ``codes_used``); ``frame_share`` (character -> share of its frames on a
-        shared code, the paper's Table 2 figure); ``frames`` per character. With
-        ``training``: ``codes_shared_training`` (codes every character uses on its
-        training windows) and ``frame_share_training_shared`` (character -> share of
-        its held-out frames on one of those).
+        shared code; it grows with the number of evaluated clips, since more clips
+        share more codes); ``frames`` per character. With ``training``:
+        ``codes_shared_training`` (codes every character uses on its training
+        windows) and ``shared_codes_training`` (their ids), ``frame_share_training``
+        (character -> share of its training windows on one of those: the paper's
+        Table 2) and ``frames_training``, ``frame_share_heldout_on_training_shared``
+        (character -> share of its evaluated frames on one of those: the shared codes
+        are fixed by the training set, so the figure does not grow with the number of
+        evaluated clips) and ``frame_share_training_shared``, the same figure under
+        the name of the entries committed before it was added.
 
     Example:
         >>> out = table2({"human": torch.tensor([0, 0, 1, 2]), "dog": torch.tensor([1, 1, 3])})
@@ -379,12 +395,22 @@ def table2(
         "frames": {name: len(c) for name, c in codes.items()},
     }
     if training is not None:
-        trained = set.intersection(*(set(c.tolist()) for c in training.values()))
-        out["codes_shared_training"] = len(trained)
-        out["frame_share_training_shared"] = {
-            name: float(np.isin(c.numpy(), sorted(trained)).mean()) if len(c) else math.nan
-            for name, c in codes.items()
-        }
+        trained = sorted(set.intersection(*(set(c.tolist()) for c in training.values())))
+
+        def on_trained(c: torch.Tensor) -> float:
+            return float(np.isin(c.numpy(), trained).mean()) if len(c) else math.nan
+
+        held_share = {name: on_trained(c) for name, c in codes.items()}
+        out.update(
+            {
+                "codes_shared_training": len(trained),
+                "shared_codes_training": trained,
+                "frame_share_training": {name: on_trained(c) for name, c in training.items()},
+                "frames_training": {name: len(c) for name, c in training.items()},
+                "frame_share_heldout_on_training_shared": held_share,
+                "frame_share_training_shared": dict(held_share),
+            }
+        )
     return out
 
 
@@ -618,14 +644,19 @@ def manifold_protocol(
     authors = [n for n in aligner.dataset_names if (specs.get(n) or {}).get("pose_features")]
     pose_ready = not authors and all(bool(c.pose_fitted) for c in aligner.characters)
     notes = [
-        "codes_shared_training / frame_share_training_shared: "
+        f"evaluated clips: the {held.name}; codebook size K = {num_codes} (extra.num_codes)",
+        "codes_shared_training / frame_share_training (Table 2 over the training set, the "
+        "paper's figure, as the authors' test_vq.py): "
         + (
-            "codes every character uses on the training split of the evaluated data"
+            "codes_shared_training = codes every character uses on its training windows, "
+            "frame_share_training = share of each character's training windows on them, "
+            "frame_share_heldout_on_training_shared = share of the evaluated frames on them "
+            "(frame_share_training_shared: the same, its former name)"
             if trained is not None
             else "omitted, the evaluated data has no training split "
             "with a dataset of every character's name"
         ),
-        f"shared codes: {len(shared)} of {num_codes}, over the held-out clips of "
+        f"shared codes: {len(shared)} of {num_codes}, over the evaluated clips of "
         f"{', '.join(by_character)}; chance = shared / K; codes shared / codes used by any "
         f"character: {table['codes_shared']} / {table['codes_used_any']}",
     ]
@@ -668,6 +699,7 @@ def manifold_protocol(
         "phase_r2": "R^2 of a line through the unwrapped phase, higher is better",
     }
     extra: dict[str, Any] = {
+        "num_codes": num_codes,
         "overlap": overlap,
         "table2": table,
         "per_character": {
@@ -687,8 +719,9 @@ def manifold_protocol(
         notes.append(
             "Table 1 phase_oracle: per clip, the mean pose of its locomotion frames in each "
             f"1/{ORACLE_PHASE_BINS} cycle of the gait phase measured from the feet "
-            "(touch-down to touch-down); it reads the held-out truth (a bound, not a method): "
-            "what the true phase adds to the clip's mean pose"
+            "(touch-down to touch-down); it reads the evaluated clips' truth (a reference, not "
+            "a method): what the true phase adds to the clip's mean pose; it knows the phase "
+            "but not the code, so it is no bound (a model can be below it)"
         )
         extra["locomotion_rule"] = {
             "min_speed_heights_per_s": LOCOMOTION_SPEED,
@@ -696,6 +729,14 @@ def manifold_protocol(
             "rule": "frames whose root travels at least min_speed_heights_per_s skeleton "
             "heights per second horizontally, over a centred span of span_seconds",
         }
+    extra["frequency_head"] = frequency_head_figures(held.clips, embeddings)
+    notes.append(
+        "frequency_head: per character, the share of its locomotion clips (a run of at least "
+        f"{RHYTHM_RUN_SECONDS:g} s of locomotion frames) whose frequency head (median over the "
+        f"runs) lies within {100 * RHYTHM_TOLERANCE:g} % of the feet's touch-down rate (median, "
+        "touch-downs per second and foot); procedural feet dip more than once per stride, so "
+        "on procedural clips the touch-down rate is not the stride frequency"
+    )
     extra["procedural"] = procedural_gaits(aligner, held, procedural_seeds)
     if extra["procedural"].get("note"):
         notes.append(extra["procedural"]["note"])
@@ -1035,6 +1076,79 @@ def touchdown_frequency(
     return torch.from_numpy(out).float()
 
 
+def frequency_head_figures(
+    clips: Sequence[Motion],
+    embeddings: Sequence[ClipEmbedding],
+    reference: Callable[[Motion], torch.Tensor] = touchdown_frequency,
+    tolerance: float = RHYTHM_TOLERANCE,
+) -> dict[str, Any]:
+    """The frequency head against the feet: per character, the share of locomotion clips it reads.
+
+    A clip is a locomotion clip when it has a run of locomotion frames
+    (:func:`locomotion_runs`, at least :data:`RHYTHM_RUN_SECONDS`). Over the frames of
+    its runs where ``reference`` has a value, the head's estimate is the median of the
+    embedding's per-frame frequency and the feet's rate the median of ``reference``
+    (default :func:`touchdown_frequency`: touch-downs per second and foot, one per
+    stride on captured motion); the clip's error is ``|head / feet - 1|``. Procedural
+    feet are not grounded (they dip more than once per stride), so on procedural
+    clips the touch-down rate is not the stride frequency: the default suits
+    captured motion.
+
+    Args:
+        clips: The evaluated clips.
+        embeddings: Their embeddings (:func:`~skelagnostic_vqpae.embed.embed_clip`), one
+            per clip.
+        reference: Per-frame frequency (Hz, NaN where unknown) of a clip at the
+            embedding's frame rate.
+        tolerance: Largest relative error that counts as reading the rate.
+
+    Returns:
+        ``tolerance_pct``; ``characters``: character -> ``{"clips": locomotion clips
+        with a figure, "within": those within the tolerance, "share_within": within /
+        clips (NaN without clips), "without_touchdowns": locomotion clips where the
+        reference has no value}``; ``per_clip``: clip -> ``{"character", "head_hz",
+        "touchdown_hz", "error_pct", "within"}``.
+    """
+    if len(embeddings) != len(clips):
+        raise ValueError(f"embeddings: {len(embeddings)} given for {len(clips)} clips")
+    characters: dict[str, dict[str, Any]] = {}
+    per_clip: dict[str, dict[str, Any]] = {}
+    for clip, emb in zip(clips, embeddings, strict=True):
+        motion = clip if clip.fps == emb.fps else clip.resample(emb.fps)
+        runs = locomotion_runs(motion)
+        if not runs:
+            continue
+        counts = characters.setdefault(
+            emb.dataset, {"clips": 0, "within": 0, "without_touchdowns": 0}
+        )
+        frames = min(len(emb), motion.num_frames)
+        mask = torch.zeros(frames, dtype=torch.bool)
+        for start, end in runs:
+            mask[start : min(end, frames)] = True
+        feet = reference(motion)[:frames].double()
+        mask &= feet.isfinite()
+        if not bool(mask.any()):
+            counts["without_touchdowns"] += 1
+            continue
+        head = float(emb.frequency[:frames].double()[mask].median())
+        rate = float(feet[mask].median())
+        error = abs(head / rate - 1)
+        within = error <= tolerance
+        counts["clips"] += 1
+        counts["within"] += int(within)
+        per_clip[str(clip.name)] = {
+            "character": emb.dataset,
+            "head_hz": head,
+            "touchdown_hz": rate,
+            "error_pct": 100 * error,
+            "within": within,
+        }
+    for counts in characters.values():
+        n = counts["clips"]
+        counts["share_within"] = counts["within"] / n if n else math.nan
+    return {"tolerance_pct": 100 * tolerance, "characters": characters, "per_clip": per_clip}
+
+
 def contact_lock(source_onsets: Sequence[np.ndarray], output_onsets: Sequence[np.ndarray]) -> float:
     """How steadily the output's touch-downs keep their place in the source's stride cycle.
 
@@ -1360,7 +1474,7 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
     render_motion(first, out_dir / "transfer.gif", size=(200, 200))
     render_motion(first, out_dir / "transfer_sheet.png", size=(200, 200), sheet_frames=4)
     notes = [
-        f"source: {len(sources)} held-out ({held.split}) clips of {names[0]!r}; database: "
+        f"source: {len(sources)} clips of {names[0]!r} from the {held.name}; database: "
         f"{len(database)} training clips of {names[1]!r}",
         f"baseline `{UNSCALED}`: classical motion matching with the same manifold query and "
         "database, 1 s replays, no period term and no time warping (the target plays at its "

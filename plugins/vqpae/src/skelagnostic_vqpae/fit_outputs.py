@@ -268,7 +268,9 @@ def table2_summary(
         "codes_shared_training": len(shared),
         "shared_codes_training": shared,
         "frame_share_training": share_train,
-        "frame_share_heldout_on_training_shared": held_table.get("frame_share_training_shared", {}),
+        "frame_share_heldout_on_training_shared": held_table.get(
+            "frame_share_heldout_on_training_shared", {}
+        ),
         "codes_heldout": codes_heldout,
         "heldout_source_target_shared": both,
     }
