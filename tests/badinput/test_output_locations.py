@@ -299,6 +299,7 @@ def test_render_refuses_sizes_that_cannot_fit_before_drawing(
         ("fps=nan", "option fps='nan': must be above 0 and at most 240"),
         ("seconds=inf", "option seconds='inf': must be above 0 and at most 600"),
         ("seconds=1e9", "option seconds='1e9': must be above 0 and at most 600"),
+        ("seed=-1", "option seed='-1': must be a whole number >= 0"),
     ],
 )
 def test_demo_refuses_clip_sizes_before_generating(

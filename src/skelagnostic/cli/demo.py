@@ -75,11 +75,15 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
     from skelagnostic.io.outputs import check_output_dir
 
     options: dict[str, Any] = {"out": check_output_dir(raw.get("out", "runs/demo"), "out")}
-    for key, kind, default in (("seconds", float, 3.0), ("fps", float, 30.0), ("seed", int, 0)):
+    for key, kind, default in (("seconds", float, 3.0), ("fps", float, 30.0)):
         try:
             options[key] = kind(raw.get(key, default))
         except ValueError:
             raise SkelagnosticError(f"option {key}={raw[key]!r}: not a number") from None
+    seed = raw.get("seed", "0")
+    if not seed.isdecimal():  # NumPy's generators take no negative seed
+        raise SkelagnosticError(f"option seed={seed!r}: must be a whole number >= 0")
+    options["seed"] = int(seed)
     from skelagnostic.viz.render import MAX_FPS
 
     # Checked before anything is generated: fps=1e6 would allocate millions of frames.
