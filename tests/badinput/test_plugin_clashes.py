@@ -148,6 +148,7 @@ def test_an_entry_point_name_two_distributions_claim(
         ("raise SystemExit(3)", "SystemExit: 3"),
         ("import sys; sys.exit('bye')", "SystemExit: bye"),
         ("raise KeyboardInterrupt", "KeyboardInterrupt: "),
+        ("class Odd(BaseException): pass\nraise Odd('odd')", "Odd: odd"),
     ],
 )
 def test_a_plugin_exiting_or_interrupting_at_import_is_skipped_and_named(

@@ -5,7 +5,8 @@
 the ``skelagnostic`` group, and calls the registration hooks of
 :mod:`skelagnostic.plugins.hookspecs` one plugin at a time so that each
 contribution is attributed to its plugin. A plugin that fails to import (an
-exception, ``SystemExit``, or a ``KeyboardInterrupt`` its own code raises), or
+exception, ``SystemExit``, a ``KeyboardInterrupt`` its own code raises, or any
+other ``BaseException``), or
 whose hook raises, is skipped with a :class:`PluginLoadWarning` and reported
 as ``failed``. So is a plugin that registers a name another plugin (or the
 built-in one) registered before it, or whose entry-point name is taken: the
@@ -380,7 +381,7 @@ class PluginManager:
                         plugin, ep.name, version=version, source=source, description=described
                     )
                     self._require_hooks(plugin, ep.name, ep.value)
-                except (Exception, SystemExit, KeyboardInterrupt) as exc:
+                except BaseException as exc:
                     # a broken third-party plugin must not break (or end) the CLI
                     _raise_if_user_interrupt(exc, interrupts)
                     self._fail(ep.name, version, source, exc)
@@ -597,7 +598,7 @@ class PluginManager:
                 try:
                     mine = _call_hooks(self._pm, plugin, name)
                     names = _registered_names(mine, owners, name)
-                except (Exception, SystemExit, KeyboardInterrupt) as exc:
+                except BaseException as exc:
                     # a plugin whose registration raises, or that registers a name
                     # another plugin holds, is skipped (the first one keeps the name)
                     _raise_if_user_interrupt(exc, interrupts)
