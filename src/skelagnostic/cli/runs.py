@@ -22,6 +22,7 @@ from pathlib import Path
 
 import lightning as L
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
 from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf, open_dict
@@ -129,7 +130,13 @@ def value_of(overrides: Sequence[str], key: str) -> str | None:
     for override in overrides:
         name, sep, _ = override.partition("=")
         if sep and name.lstrip("+") == key:
-            parsed = OverridesParser.create().parse_override(override).value()
+            try:
+                parsed = OverridesParser.create().parse_override(override).value()
+            except HydraException as exc:  # e.g. a backtick: Hydra names only the token
+                raise SkelagnosticError(
+                    f"{override}: Hydra cannot parse this override ({exc}); "
+                    f"quote the value: {name}='...'"
+                ) from None
             return None if parsed is None else str(parsed)
     return None
 
