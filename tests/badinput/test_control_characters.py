@@ -88,6 +88,17 @@ def test_render_error_is_one_line_without_escapes(
     assert line.replace(str(tmp_path), "<tmp>") in TROUBLESHOOTING.read_text(encoding="utf-8")
 
 
+def test_bidirectional_controls_are_escaped(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bidi = "".join(map(chr, [0x200E, 0x200F, *range(0x202A, 0x202F), *range(0x2066, 0x206A)]))
+    assert printable(bidi) == repr(bidi)[1:-1]
+    missing = tmp_path / "clip\u202egpj.bvh"  # shown reversed: "clipsvb.jpg"
+    assert cli.main(["render", str(missing)]) == 2
+    line = only_line(capsys.readouterr().err, "skelagnostic render")
+    assert line == f"skelagnostic render: error: {tmp_path}/clip\\u202egpj.bvh: no such file"
+
+
 def test_render_option_value_and_missing_input_are_escaped(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
