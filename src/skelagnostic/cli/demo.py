@@ -112,7 +112,7 @@ def main(argv: Sequence[str]) -> int:
     if wants_help(argv):
         print(_usage())
         return 0
-    from skelagnostic.errors import SkelagnosticError, error_line
+    from skelagnostic.errors import SkelagnosticError, error_line, printable
 
     try:
         bvh_files, args = _options(argv)
@@ -212,8 +212,12 @@ def main(argv: Sequence[str]) -> int:
         print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 1
     for kind, path in outputs.items():
-        console.print(f"{kind}: {path}")
-    console.print(f"BVH files: {bvh_dir}  summary: {out / 'summary.json'}")
+        console.print(printable(f"{kind}: {path}"), markup=False, highlight=False)
+    console.print(
+        printable(f"BVH files: {bvh_dir}  summary: {out / 'summary.json'}"),
+        markup=False,
+        highlight=False,
+    )
     return 0
 
 

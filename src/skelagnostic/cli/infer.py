@@ -35,7 +35,7 @@ from skelagnostic.cli.render import (
     render_from_options,
     wants_help,
 )
-from skelagnostic.errors import SkelagnosticError, error_line
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
@@ -278,14 +278,14 @@ def _run(
         source, result = apply(aligner)
         Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
         write_bvh(result, options["out"])
-        print(options["out"])
+        print(printable(options["out"]))
         if "render" in options or "html" in options:
             labels = options.get("labels")
             render_options = {**options, "labels": labels or f"input,{verb}"}
             for path in render_from_options(
                 [source, result], render_options, out_key="render", **(marks or {})
             ):
-                print(path)
+                print(printable(path))
     except SkelagnosticError as error:
         print(error_line(f"skelagnostic {verb}", error), file=sys.stderr)
         return 2

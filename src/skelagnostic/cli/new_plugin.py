@@ -18,7 +18,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from skelagnostic.errors import error_line
+from skelagnostic.errors import error_line, printable
 from skelagnostic.io.atomic import atomic_write
 from skelagnostic.io.outputs import OutputError, check_output_dir
 
@@ -441,10 +441,11 @@ def main(argv: Sequence[str]) -> int:
         if taken
         else ""
     )
-    print(
+    text = (
         f"wrote {directory}/ (aligner model={args.name}, package skelagnostic_{args.name})\n"
         f"next:\n  pip install -c {directory / 'constraints.txt'} -e {directory}\n"
         f"  skelagnostic fit model={args.name}\n"
         f"  pytest {directory / 'tests'}{note}"
     )
+    print("\n".join(printable(line) for line in text.split("\n")))  # --dir may hold ESC
     return 0
