@@ -112,17 +112,36 @@ def main(argv: Sequence[str]) -> int:
     if wants_help(argv):
         print(_usage())
         return 0
-    from skelagnostic.errors import SkelagnosticError, error_line, printable
+    from skelagnostic.errors import SkelagnosticError, error_line
 
     try:
         bvh_files, args = _options(argv)
     except SkelagnosticError as exc:
         print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 2
+    from skelagnostic.cli.runs import RunDirectoryLock, RunDirectoryRefused
+
+    lock = RunDirectoryLock(args["out"], key="out")  # two demos never mix their files
+    try:
+        lock.acquire()
+    except (RunDirectoryRefused, OSError) as exc:
+        if isinstance(exc, OSError):
+            exc = f"out={str(args['out'])!r}: cannot write there ({exc.strerror or exc})"
+        print(error_line("skelagnostic demo", exc), file=sys.stderr)
+        return 1
+    try:
+        return _demo(bvh_files, args)
+    finally:
+        lock.release()
+
+
+def _demo(bvh_files: list[Path], args: dict[str, Any]) -> int:
+    """Generate or read the clips, write the outputs into ``args["out"]``; the exit code."""
     from rich.console import Console
     from rich.table import Table
 
     import skelagnostic as sa
+    from skelagnostic.errors import error_line, printable
     from skelagnostic.io.outputs import write_output
     from skelagnostic.viz import render_motion, to_html
 

@@ -397,6 +397,7 @@ class RunDirectoryLock:
 
     Args:
         run_dir: The run directory (created if missing).
+        key: The option naming it, for the message (``demo`` locks its ``out``).
 
     Example:
         >>> import tempfile
@@ -409,16 +410,22 @@ class RunDirectoryLock:
         False
     """
 
-    def __init__(self, run_dir: str | Path) -> None:
+    def __init__(self, run_dir: str | Path, key: str = "hydra.run.dir") -> None:
         self.path = Path(run_dir) / LOCK_FILE
+        self.key = key
         self._fd: int | None = None
 
     def _busy(self, pid: int | None) -> RunDirectoryRefused:
         holder = f"process {pid}" if pid else "another process"
+        advice = (
+            "a run directory belongs to one run: name another directory, or leave "
+            "hydra.run.dir out (each run then gets a new one)"
+            if self.key == "hydra.run.dir"
+            else f"name another {self.key}= or wait until it ends"
+        )
         return RunDirectoryRefused(
-            f"hydra.run.dir={str(self.path.parent)!r} is in use by another command "
-            f"({holder} holds {self.path.name}); a run directory belongs to one run: "
-            "name another directory, or leave hydra.run.dir out (each run then gets a new one)"
+            f"{self.key}={str(self.path.parent)!r} is in use by another command "
+            f"({holder} holds {self.path.name}); {advice}"
         )
 
     @staticmethod
