@@ -77,3 +77,19 @@ def test_a_demo_into_an_out_another_command_writes_is_refused(tmp_path: Path, ca
     assert sorted(p.name for p in out.iterdir()) == []
     line = err.replace(str(tmp_path), "<tmp>").replace(str(os.getpid()), "<pid>")
     assert line in (Path(__file__).parents[2] / "docs" / "troubleshooting.md").read_text()
+
+
+def test_a_lock_that_cannot_be_written_leaves_nothing(tmp_path: Path, monkeypatch) -> None:
+    """A full disk while the lock file is written: no stale lock file, no empty run folder."""
+    import errno
+    import os
+
+    from skelagnostic.cli.runs import RunDirectoryLock
+
+    def full(fd: int, length: int) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "ftruncate", full)
+    with pytest.raises(OSError, match="No space left"):
+        RunDirectoryLock(tmp_path / "run").acquire()
+    assert list(tmp_path.iterdir()) == []

@@ -441,7 +441,23 @@ class RunDirectoryLock:
             RunDirectoryRefused: A running process holds it.
             OSError: The directory or the file cannot be created.
         """
+        created = not self.path.parent.exists()
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        existed = os.path.lexists(self.path)
+        try:
+            self._acquire()
+        except OSError:  # e.g. a full disk: leave no lock file, nor the folder made for it
+            if self._fd is not None:
+                os.close(self._fd)
+                self._fd = None
+            with contextlib.suppress(OSError):
+                if not existed:
+                    self.path.unlink()
+                if created:
+                    self.path.parent.rmdir()
+            raise
+
+    def _acquire(self) -> None:
         try:
             import fcntl
         except ImportError:  # not POSIX: the PID in the file decides
@@ -466,10 +482,10 @@ class RunDirectoryLock:
             if same:
                 break
             os.close(fd)
+        self._fd = fd
         os.ftruncate(fd, 0)
         os.lseek(fd, 0, os.SEEK_SET)
         os.write(fd, f"{os.getpid()}\n".encode())
-        self._fd = fd
 
     def _acquire_by_pid(self) -> None:
         for _ in range(2):
@@ -484,8 +500,8 @@ class RunDirectoryLock:
                 with contextlib.suppress(FileNotFoundError):
                     self.path.unlink()  # a stale lock: its process is gone
                 continue
-            os.write(fd, f"{os.getpid()}\n".encode())
             self._fd = fd
+            os.write(fd, f"{os.getpid()}\n".encode())
             return
         raise self._busy(None)
 
