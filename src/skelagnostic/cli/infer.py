@@ -244,7 +244,7 @@ def _run(
         return 0 if argv else 2
     try:
         from skelagnostic import write_bvh
-        from skelagnostic.io.outputs import check_output_file
+        from skelagnostic.io.outputs import check_output_file, output_path
 
         words, options = parse_arguments(argv)
         apply_threads(options)
@@ -276,16 +276,19 @@ def _run(
         apply = prepare(paths, options)
         aligner = load_from_checkpoint(options["ckpt"], options.get("model"))
         source, result = apply(aligner)
-        Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
-        write_bvh(result, options["out"])
-        print(printable(options["out"]))
-        if "render" in options or "html" in options:
-            labels = options.get("labels")
-            render_options = {**options, "labels": labels or f"input,{verb}"}
-            for path in render_from_options(
-                [source, result], render_options, out_key="render", **(marks or {})
-            ):
-                print(printable(path))
+        rendered: list[Path] = []
+        # out= replaces the previous file only once the renders worked: a render
+        # option refused late (fps=1e9) leaves no result without its picture
+        with output_path(options["out"], "out") as tmp:
+            write_bvh(result, tmp)
+            if "render" in options or "html" in options:
+                labels = options.get("labels")
+                render_options = {**options, "labels": labels or f"input,{verb}"}
+                rendered = render_from_options(
+                    [source, result], render_options, out_key="render", **(marks or {})
+                )
+        for path in [options["out"], *rendered]:
+            print(printable(path))
     except SkelagnosticError as error:
         print(error_line(f"skelagnostic {verb}", error), file=sys.stderr)
         return 2
