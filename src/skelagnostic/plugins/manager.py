@@ -353,6 +353,17 @@ class PluginManager:
         """
         # by name, then distribution: of two distributions claiming one name, the same one wins
         found = metadata.entry_points(group=ENTRY_POINT_GROUP)
+        unknown = sorted((only or set()) - {ep.name for ep in found} - set(self._infos))
+        if unknown:  # a misspelt name would otherwise disable every plugin without a word
+            warnings.warn(
+                printable(
+                    f"{LOAD_PLUGINS_ENV} names {', '.join(map(repr, unknown))}, which no "
+                    "installed plugin is; installed: "
+                    f"{', '.join(sorted({ep.name for ep in found})) or 'none'}"
+                ),
+                PluginLoadWarning,
+                stacklevel=2,
+            )
         for ep in sorted(found, key=lambda e: (e.name, e.dist.name if e.dist else e.value)):
             dist = ep.dist
             version = dist.version if dist is not None else ""
