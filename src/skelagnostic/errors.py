@@ -11,8 +11,10 @@ import re
 from pathlib import Path
 
 #: Characters a message never shows raw: C0 controls (newline, tab, ESC ...), DEL, C1
-#: controls (CSI, NEL ...) and the Unicode line and paragraph separators.
-_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+#: controls (CSI, NEL ...), the Unicode line and paragraph separators, and the
+#: bidirectional marks, embeddings, overrides and isolates (U+202E shows the rest of a
+#: name reversed: "clip\u202egpj.bvh" looks like "clipsvb.jpg").
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u200e\u200f\u2028-\u202e\u2066-\u2069]")
 
 
 def printable(text: object) -> str:

@@ -58,6 +58,22 @@ from test_badinput import assert_no_partial_output, documented, error_line, fit
             "data.batch_size='abc' has the wrong type for ExampleDataModule (expected int)",
         ),
         (["seed=abc"], "seed must be an integer, got 'abc'"),
+        (["seed=-1"], "seed must be from 0 to 4294967295, got -1"),
+        (
+            ["hydra.run.dir={tmp}/`a`"],
+            "hydra.run.dir={tmp}/`a`: Hydra cannot parse this override "
+            "(token recognition error at: '`'); quote the value: hydra.run.dir='...'",
+        ),
+        (
+            ["model.hidden=0"],
+            "model.hidden=0, model.latent=4: the aligner 'example' refuses it "
+            "(ValueError: input_size must be greater than zero)",
+        ),
+        (
+            ["model.lr=nan"],
+            "model.lr=nan: the aligner 'example' refuses it "
+            "(ValueError: Invalid learning rate: nan)",
+        ),
     ],
 )
 def test_cli_names_the_key(

@@ -88,6 +88,17 @@ def test_render_error_is_one_line_without_escapes(
     assert line.replace(str(tmp_path), "<tmp>") in TROUBLESHOOTING.read_text(encoding="utf-8")
 
 
+def test_bidirectional_controls_are_escaped(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bidi = "".join(map(chr, [0x200E, 0x200F, *range(0x202A, 0x202F), *range(0x2066, 0x206A)]))
+    assert printable(bidi) == repr(bidi)[1:-1]
+    missing = tmp_path / "clip\u202egpj.bvh"  # shown reversed: "clipsvb.jpg"
+    assert cli.main(["render", str(missing)]) == 2
+    line = only_line(capsys.readouterr().err, "skelagnostic render")
+    assert line == f"skelagnostic render: error: {tmp_path}/clip\\u202egpj.bvh: no such file"
+
+
 def test_render_option_value_and_missing_input_are_escaped(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -118,3 +129,19 @@ def test_fit_error_on_a_hostile_config_value_is_one_line(
     assert code == 1
     line = only_line(capsys.readouterr().err, "skelagnostic fit")
     assert "model=ex\\x1b]0;pwned\\x07ample" in line
+
+
+def test_output_paths_on_stdout_are_escaped(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The lines naming what a verb wrote escape control characters, and Rich markup stays text."""
+    assert cli.main(["cache", "info", "--cache-dir", str(tmp_path / HOSTILE)]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == f"cache: {tmp_path}/{SHOWN}"
+    out = tmp_path / f"{HOSTILE}.png"
+    assert cli.main(["render", str(CORPUS / "valid_small.bvh"), f"out={out}", "size=32"]) == 0
+    assert capsys.readouterr().out == f"{tmp_path}/{SHOWN}.png\n"
+    demo = tmp_path / f"[bold]{HOSTILE}"
+    assert cli.main(["demo", f"out={demo}", "seconds=0.2", "gif=false", "threads=1"]) == 0
+    shown = capsys.readouterr().out
+    assert "\x1b" not in shown
+    assert f"{tmp_path}/[bold]{SHOWN}/demo.png" in shown.replace("\n", "")

@@ -257,6 +257,26 @@ def test_retarget_checks_every_output_before_writing_any(
     assert out.read_text() == "previous result\n"  # out= was not written first
 
 
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        ("fps=1e9", "fps=1e+09: at most 240 frames per second"),
+        ("size=99999", "size=99999x99999: a panel is at most 4096 pixels a side"),
+    ],
+)
+def test_retarget_with_a_render_refused_late_keeps_the_previous_out(
+    site: Path, trained: Path, tmp_path: Path, capsys, option: str, message: str
+) -> None:
+    """A render option refused only when drawing leaves out= as it was, and no picture."""
+    out = tmp_path / "result.bvh"
+    out.write_text("previous result\n")
+    words = ["retarget", str(CLIP), str(CLIP), f"ckpt={trained}", f"out={out}"]
+    assert cli.main([*words, f"render={tmp_path / 'r.gif'}", option, "threads=1"]) == 2
+    assert message in one_error(capsys, "retarget")
+    assert out.read_text() == "previous result\n"
+    assert not (tmp_path / "r.gif").exists()
+
+
 def test_retarget_refuses_a_folder_as_out(site: Path, trained: Path, tmp_path, capsys) -> None:
     folder = tmp_path / "as_folder.bvh"
     folder.mkdir()
@@ -299,6 +319,7 @@ def test_render_refuses_sizes_that_cannot_fit_before_drawing(
         ("fps=nan", "option fps='nan': must be above 0 and at most 240"),
         ("seconds=inf", "option seconds='inf': must be above 0 and at most 600"),
         ("seconds=1e9", "option seconds='1e9': must be above 0 and at most 600"),
+        ("seed=-1", "option seed='-1': must be a whole number >= 0"),
     ],
 )
 def test_demo_refuses_clip_sizes_before_generating(

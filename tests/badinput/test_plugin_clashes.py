@@ -148,6 +148,7 @@ def test_an_entry_point_name_two_distributions_claim(
         ("raise SystemExit(3)", "SystemExit: 3"),
         ("import sys; sys.exit('bye')", "SystemExit: bye"),
         ("raise KeyboardInterrupt", "KeyboardInterrupt: "),
+        ("class Odd(BaseException): pass\nraise Odd('odd')", "Odd: odd"),
     ],
 )
 def test_a_plugin_exiting_or_interrupting_at_import_is_skipped_and_named(
@@ -233,3 +234,15 @@ def test_plugins_command_lists_the_skipped_plugins_on_one_line_each(
     ], done.stderr
     for line in warned:
         assert line in TROUBLESHOOTING.read_text(encoding="utf-8")
+
+
+def test_a_misspelt_name_in_load_plugins_is_named(
+    site: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv(LOAD_PLUGINS_ENV, "exmaple")
+    with pytest.warns(PluginLoadWarning) as caught:
+        PluginManager()
+    (message,) = [str(w.message) for w in caught if "exmaple" in str(w.message)]
+    start = "SKELAGNOSTIC_LOAD_PLUGINS names 'exmaple', which no installed plugin is; installed: "
+    assert message.startswith(start) and "example" in message
+    assert f"skelagnostic: warning: {start}" in TROUBLESHOOTING.read_text(encoding="utf-8")

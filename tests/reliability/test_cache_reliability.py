@@ -186,3 +186,22 @@ def test_progress_inside_another_bar_draws_no_second_one(terminal: io.StringIO) 
     with Progress(console=progress_module.progress_console()):  # e.g. a verb's own bar
         assert list(progress_module.track_clips(range(4), "inner")) == [0, 1, 2, 3]
     assert "inner" not in terminal.getvalue()
+
+
+def test_an_entry_deleted_while_in_use_is_one_line(tmp_path: Path) -> None:
+    """``cache clear`` while a fit reads its windows: one line naming the entry, no OSError."""
+    cache = sa.data.WindowCache(tmp_path / "cache")
+    entry = cache.put(
+        "0123456789abcdef" * 4, np.zeros((2, 4, 3, 3), np.float32), {"starts": [0, 4]}
+    )
+    assert entry.read(0, 1).shape == (1, 4, 3, 3)
+    cli.main(["cache", "clear", "--cache-dir", str(tmp_path / "cache")])
+    with pytest.raises(sa.SkelagnosticError) as info:
+        entry.read(1, 2)
+    line = str(info.value)
+    assert line == (
+        f"cache entry {entry.array} was deleted while in use (by 'skelagnostic cache clear'?); "
+        "run the command again to rebuild it"
+    )
+    text = line.replace(str(tmp_path), "<tmp>")
+    assert text.split(" was ")[1] in TROUBLESHOOTING.read_text(encoding="utf-8")

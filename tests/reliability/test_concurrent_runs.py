@@ -53,3 +53,43 @@ def test_two_fits_started_at_once_into_one_directory(
     assert (f"in use by another command (process {winner} " in line) or ("is not empty" in line)
     assert not (run_dir / LOCK_FILE).exists()
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["best.ckpt", "last.ckpt"]
+
+
+def test_a_demo_into_an_out_another_command_writes_is_refused(tmp_path: Path, capsys) -> None:
+    """Two demos into one ``out=`` at once never mix their clips: the second refuses."""
+    import os
+
+    from skelagnostic import cli
+    from skelagnostic.cli.runs import RunDirectoryLock
+
+    out = tmp_path / "demo"
+    held = RunDirectoryLock(out, key="out")
+    held.acquire()  # as a running demo holds it
+    try:
+        assert cli.main(["demo", f"out={out}", "seconds=0.2", "gif=false"]) == 1
+    finally:
+        held.release()
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        f"skelagnostic demo: error: out='{out}' is in use by another command "
+        f"(process {os.getpid()} holds {LOCK_FILE}); name another out= or wait until it ends"
+    )
+    assert sorted(p.name for p in out.iterdir()) == []
+    line = err.replace(str(tmp_path), "<tmp>").replace(str(os.getpid()), "<pid>")
+    assert line in (Path(__file__).parents[2] / "docs" / "troubleshooting.md").read_text()
+
+
+def test_a_lock_that_cannot_be_written_leaves_nothing(tmp_path: Path, monkeypatch) -> None:
+    """A full disk while the lock file is written: no stale lock file, no empty run folder."""
+    import errno
+    import os
+
+    from skelagnostic.cli.runs import RunDirectoryLock
+
+    def full(fd: int, length: int) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "ftruncate", full)
+    with pytest.raises(OSError, match="No space left"):
+        RunDirectoryLock(tmp_path / "run").acquire()
+    assert list(tmp_path.iterdir()) == []

@@ -279,3 +279,19 @@ def test_long_renders_show_progress_on_a_terminal(
     monkeypatch.setattr("skelagnostic.viz.render.PROGRESS_FRAMES", 1000)  # a short render
     assert cli.main(["render", str(clip), f"out={out}", "size=32"]) == 0
     assert "render a.gif" not in capsys.readouterr().err
+
+
+def test_new_plugin_on_a_full_disk_leaves_no_half_package(
+    tmp_path: Path, capsys, full_disk
+) -> None:
+    from skelagnostic.cli import new_plugin
+
+    target = tmp_path / "pkg"
+    assert new_plugin.main(["tiny", "--dir", str(target)]) == 1
+    err = capsys.readouterr().err
+    assert err.splitlines() == [
+        f"skelagnostic new-plugin: error: --dir='{target}': cannot write pyproject.toml "
+        "(No space left on device); nothing was left behind"
+    ]
+    assert _left(tmp_path) == []
+    documented(err.strip(), tmp_path)

@@ -19,6 +19,7 @@ import os
 import re
 import shutil
 import sys
+import traceback
 import types
 import typing
 import warnings
@@ -47,6 +48,7 @@ from skelagnostic.aligners.checkpoints import (
 from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.runs import (
     LOCK_FILE,
+    SPLIT_FILE,
     AdaptiveLogInterval,
     RecordSplit,
     RunDirectoryRefused,
@@ -85,6 +87,10 @@ ALIGNER_GROUP = "_aligner"
 _POSITIVE_TRAINER_KEYS = ("accumulate_grad_batches", "check_val_every_n_epoch")
 #: Data-config keys that are not options of the data module or the dataset source.
 _DATA_KEYS = ("source", "representation", "representation_options")
+
+
+#: Largest ``seed=`` (NumPy's generators take 32-bit seeds).
+MAX_SEED = 2**32 - 1
 
 
 class ConfigError(SkelagnosticError):
@@ -213,6 +219,36 @@ def _describe(exc: BaseException) -> str:
     if isinstance(exc, (TypeError, ValueError, KeyError, ZeroDivisionError)) or not text:
         return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
     return text
+
+
+def _raised_in(exc: BaseException, where: str) -> bool:
+    """Whether the innermost frame of ``exc``'s traceback is in a file under ``where``."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    return bool(frames) and where in frames[-1].filename
+
+
+def _model_error(
+    exc: BaseException, name: str, options: dict[str, Any], defaults: dict[str, Any]
+) -> ConfigError:
+    """``exc`` of building or optimising aligner ``name``, naming the ``model.*`` values given.
+
+    The ``model.*`` keys the command line sets are named (only those whose value
+    the message quotes, if any); without any, those that differ from the aligner's
+    defaults (an experiment's), else ``model=<name>``.
+    """
+    from hydra.core.hydra_config import HydraConfig
+
+    given = {k: v for k, v in options.items() if k not in defaults or defaults[k] != v}
+    if HydraConfig.initialized():
+        keys = {o.partition("=")[0].lstrip("+~") for o in HydraConfig.get().overrides.task}
+        given = {k: v for k, v in options.items() if f"model.{k}" in keys} or given
+    text = str(exc)  # "Invalid learning rate: nan": the value the message quotes
+    quoted = {
+        k: v for k, v in given.items() if re.search(rf"(?<![\w.]){re.escape(str(v))}\b", text)
+    }
+    given = quoted or given
+    where = ", ".join(f"model.{k}={v!r}" for k, v in given.items()) or f"model={name}"
+    return ConfigError(f"{where}: the aligner {name!r} refuses it ({_describe(exc)})")
 
 
 def _mentioned(text: str, options: dict[str, Any]) -> str | None:
@@ -447,6 +483,8 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
         )
     if cfg.seed is not None and (not isinstance(cfg.seed, int) or isinstance(cfg.seed, bool)):
         raise ConfigError(f"seed must be an integer, got {cfg.seed!r}")
+    if cfg.seed is not None and not 0 <= cfg.seed <= MAX_SEED:
+        raise ConfigError(f"seed must be from 0 to {MAX_SEED}, got {cfg.seed}")
     threads = cfg.get("threads")
     if threads is not None:
         if not isinstance(threads, int) or threads < 1:
@@ -476,7 +514,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
         if k not in ("name", "_target_")
     }
     _check_options(model_kwargs, spec.module, "model", f"model={spec.name}")
-    model = spec.module(**model_kwargs)
+    try:
+        model = spec.module(**model_kwargs)
+    except (ValueError, TypeError, RuntimeError) as exc:  # e.g. model.hidden=0 in torch.nn
+        raise _model_error(exc, spec.name, model_kwargs, dict(spec.config)) from exc
     saved: dict[str, Any] = {}
     if checkpoint is not None:  # fail before the Trainer starts when the weights cannot fit
         check_architecture(ckpt, checkpoint, model, "ckpt_path")
@@ -545,6 +586,10 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
                     ),
                     run_dir,
                 )
+    except (ValueError, TypeError) as exc:  # e.g. model.lr=nan, refused by torch.optim
+        if not _raised_in(exc, f"torch{os.sep}optim{os.sep}"):
+            raise
+        raise _model_error(exc, spec.name, model_kwargs, dict(spec.config)) from exc
     except MisconfigurationException as exc:
         named = _name_config_key(exc, cfg)
         if named is None:
@@ -703,6 +748,7 @@ _BOOKKEEPING = frozenset(
         "config.yaml",
         "csv/hparams.yaml",
         LOCK_FILE,
+        SPLIT_FILE,
     }
 )
 

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from skelagnostic.data.cache import CACHE_ENV, WindowCache, default_cache_dir
-from skelagnostic.errors import SkelagnosticError, error_line
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 
 def _size(num: float) -> str:
@@ -22,7 +22,7 @@ def _size(num: float) -> str:
 def info(cache: WindowCache, verbose: bool) -> int:
     """Print the directory, entry count and size; with ``verbose`` one line per entry."""
     rows = list(cache.entries())
-    print(f"cache: {cache.root}")
+    print(printable(f"cache: {cache.root}"))
     print(f"entries: {len(rows)}, size: {_size(cache.size())}")
     if verbose:
         for key, array, meta in rows:
@@ -36,7 +36,7 @@ def info(cache: WindowCache, verbose: bool) -> int:
                 if meta is None
                 else (f"{meta.get('clip', '?')} ({len(meta.get('starts', []))} windows)")
             )
-            print(f"  {key[:12]}  {_size(size):>10}  {what}")
+            print(printable(f"  {key[:12]}  {_size(size):>10}  {what}"))
     return 0
 
 
@@ -51,9 +51,11 @@ def clear(cache: WindowCache) -> int:
     are not deleted (:meth:`WindowCache.clear`); one line on stderr names them.
     """
     report = cache.clear()
-    print(f"cache: {cache.root}: removed {report.entries} entries ({_size(report.freed)})")
+    print(
+        printable(f"cache: {cache.root}: removed {report.entries} entries ({_size(report.freed)})")
+    )
     if report.kept:
-        shown = ", ".join(str(p) for p in report.kept[:SHOWN_KEPT])
+        shown = ", ".join(printable(p) for p in report.kept[:SHOWN_KEPT])
         more = len(report.kept) - SHOWN_KEPT
         print(
             f"skelagnostic cache: left alone {len(report.kept)} path(s) the cache did not "

@@ -79,11 +79,15 @@ def _options(argv: Sequence[str]) -> tuple[list[Path], dict[str, Any]]:
     from skelagnostic.io.outputs import check_output_dir
 
     options: dict[str, Any] = {"out": check_output_dir(raw.get("out", "runs/demo"), "out")}
-    for key, kind, default in (("seconds", float, 3.0), ("fps", float, 30.0), ("seed", int, 0)):
+    for key, kind, default in (("seconds", float, 3.0), ("fps", float, 30.0)):
         try:
             options[key] = kind(raw.get(key, default))
         except ValueError:
             raise SkelagnosticError(f"option {key}={raw[key]!r}: not a number") from None
+    seed = raw.get("seed", "0")
+    if not seed.isdecimal():  # NumPy's generators take no negative seed
+        raise SkelagnosticError(f"option seed={seed!r}: must be a whole number >= 0")
+    options["seed"] = int(seed)
     from skelagnostic.viz.render import MAX_FPS
 
     # Checked before anything is generated: fps=1e6 would allocate millions of frames.
@@ -120,10 +124,29 @@ def main(argv: Sequence[str]) -> int:
     except SkelagnosticError as exc:
         print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 2
+    from skelagnostic.cli.runs import RunDirectoryLock, RunDirectoryRefused
+
+    lock = RunDirectoryLock(args["out"], key="out")  # two demos never mix their files
+    try:
+        lock.acquire()
+    except (RunDirectoryRefused, OSError) as exc:
+        if isinstance(exc, OSError):
+            exc = f"out={str(args['out'])!r}: cannot write there ({exc.strerror or exc})"
+        print(error_line("skelagnostic demo", exc), file=sys.stderr)
+        return 1
+    try:
+        return _demo(bvh_files, args)
+    finally:
+        lock.release()
+
+
+def _demo(bvh_files: list[Path], args: dict[str, Any]) -> int:
+    """Generate or read the clips, write the outputs into ``args["out"]``; the exit code."""
     from rich.console import Console
     from rich.table import Table
 
     import skelagnostic as sa
+    from skelagnostic.errors import error_line, printable
     from skelagnostic.io.motion_files import motion_format, read_motion
     from skelagnostic.io.outputs import write_output
     from skelagnostic.viz import render_motion, to_html
@@ -225,9 +248,13 @@ def main(argv: Sequence[str]) -> int:
         print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 1
     for kind, path in outputs.items():
-        console.print(f"{kind}: {path}")
+        console.print(printable(f"{kind}: {path}"), markup=False, highlight=False)
     glb = f"  glTF files: {gltf_dir}" if args["gltf"] else ""
-    console.print(f"BVH files: {bvh_dir}{glb}  summary: {out / 'summary.json'}")
+    console.print(
+        printable(f"BVH files: {bvh_dir}{glb}  summary: {out / 'summary.json'}"),
+        markup=False,
+        highlight=False,
+    )
     return 0
 
 

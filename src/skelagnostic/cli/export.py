@@ -18,7 +18,7 @@ from __future__ import annotations
 import sys
 
 from skelagnostic.core.paths import expand_path
-from skelagnostic.errors import SkelagnosticError, error_line
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 __all__ = ["main"]
 
@@ -93,7 +93,7 @@ def main(argv: list[str]) -> int:
         aligner = load_from_checkpoint(ckpt, options.get("model"))
         name = options.get("model") or _registered_name(aligner)
         for path in export_aligner(aligner, fmt, out, name):
-            print(path)
+            print(printable(path))
     except SkelagnosticError as error:
         print(error_line("skelagnostic export", error), file=sys.stderr)
         return 2

@@ -36,7 +36,7 @@ from skelagnostic.cli.render import (
     render_from_options,
     wants_help,
 )
-from skelagnostic.errors import SkelagnosticError, error_line
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 if TYPE_CHECKING:
     from skelagnostic.aligners import Aligner
@@ -281,16 +281,19 @@ def _run(
         apply = prepare(paths, options)
         aligner = load_from_checkpoint(options["ckpt"], options.get("model"))
         source, result = apply(aligner)
-        Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
-        write_motion(result, options["out"])
-        print(options["out"])
+        rendered: list[Path] = []
+        # the renders come first: a render option refused late (fps=1e9) leaves
+        # the previous out= in place, never a result without its picture
         if "render" in options or "html" in options:
             labels = options.get("labels")
             render_options = {**options, "labels": labels or f"input,{verb}"}
-            for path in render_from_options(
+            rendered = render_from_options(
                 [source, result], render_options, out_key="render", **(marks or {})
-            ):
-                print(path)
+            )
+        Path(options["out"]).parent.mkdir(parents=True, exist_ok=True)
+        write_motion(result, options["out"])  # atomic: replaces out= only when complete
+        for path in [options["out"], *rendered]:
+            print(printable(path))
     except SkelagnosticError as error:
         print(error_line(f"skelagnostic {verb}", error), file=sys.stderr)
         return 2

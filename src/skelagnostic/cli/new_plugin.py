@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import argparse
 import re
+import shutil
 import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from skelagnostic.errors import error_line
+from skelagnostic.errors import error_line, printable
+from skelagnostic.io.atomic import atomic_write
+from skelagnostic.io.outputs import OutputError, check_output_dir
 
 #: Allowed aligner names: what ``model=NAME`` and a Python identifier both accept.
 NAME_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
@@ -367,6 +370,8 @@ def write(name: str, directory: Path) -> list[Path]:
 
     Raises:
         ValueError: ``name`` is not a valid aligner name, or ``directory`` is not empty.
+        OutputError: ``directory`` cannot be written (read-only, under a file, a full
+            disk); nothing is left in it.
     """
     if not NAME_PATTERN.fullmatch(name):
         raise ValueError(
@@ -376,12 +381,22 @@ def write(name: str, directory: Path) -> list[Path]:
         )
     if directory.exists() and (not directory.is_dir() or any(directory.iterdir())):
         raise ValueError(f"{directory} already exists and is not an empty directory")
+    check_output_dir(directory, "--dir")  # read-only, under a file, a dangling link
+    existed = directory.exists()
     written = []
-    for rel, text in files(name).items():
-        path = directory / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
-        written.append(path)
+    try:
+        for rel, text in files(name).items():
+            path = directory / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write(path, text.encode("utf-8"))
+            written.append(path)
+    except OSError as exc:  # a full disk: no half-written package is left
+        for child in [directory] if not existed else list(directory.iterdir()):
+            shutil.rmtree(child, ignore_errors=True)
+        raise OutputError(
+            f"--dir={str(directory)!r}: cannot write {rel} ({exc.strerror or exc}); "
+            "nothing was left behind"
+        ) from None
     return written
 
 
@@ -410,7 +425,7 @@ def main(argv: Sequence[str]) -> int:
     directory = args.dir if args.dir is not None else Path(f"skelagnostic-{args.name}")
     try:
         write(args.name, directory)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, OutputError) as exc:
         print(error_line("skelagnostic new-plugin", exc), file=sys.stderr)
         return 1
     from skelagnostic.plugins import PluginLoadWarning, get_plugin_manager
@@ -426,10 +441,11 @@ def main(argv: Sequence[str]) -> int:
         if taken
         else ""
     )
-    print(
+    text = (
         f"wrote {directory}/ (aligner model={args.name}, package skelagnostic_{args.name})\n"
         f"next:\n  pip install -c {directory / 'constraints.txt'} -e {directory}\n"
         f"  skelagnostic fit model={args.name}\n"
         f"  pytest {directory / 'tests'}{note}"
     )
+    print("\n".join(printable(line) for line in text.split("\n")))  # --dir may hold ESC
     return 0

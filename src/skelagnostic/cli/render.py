@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from skelagnostic.core.paths import expand_path
-from skelagnostic.errors import SkelagnosticError, error_line
+from skelagnostic.errors import SkelagnosticError, error_line, printable
 
 __all__ = [
     "RENDER_OPTIONS",
@@ -365,7 +365,7 @@ def main(argv: list[str]) -> int:
 
         motions = [read_motion(path, other="bvh") for path in paths]
         for path in render_from_options(motions, options):
-            print(path)
+            print(printable(path))
     except SkelagnosticError as error:
         print(error_line("skelagnostic render", error), file=sys.stderr)
         return 2

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import lightning as L
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
 from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf, open_dict
@@ -129,7 +130,13 @@ def value_of(overrides: Sequence[str], key: str) -> str | None:
     for override in overrides:
         name, sep, _ = override.partition("=")
         if sep and name.lstrip("+") == key:
-            parsed = OverridesParser.create().parse_override(override).value()
+            try:
+                parsed = OverridesParser.create().parse_override(override).value()
+            except HydraException as exc:  # e.g. a backtick: Hydra names only the token
+                raise SkelagnosticError(
+                    f"{override}: Hydra cannot parse this override ({exc}); "
+                    f"quote the value: {name}='...'"
+                ) from None
             return None if parsed is None else str(parsed)
     return None
 
@@ -390,6 +397,7 @@ class RunDirectoryLock:
 
     Args:
         run_dir: The run directory (created if missing).
+        key: The option naming it, for the message (``demo`` locks its ``out``).
 
     Example:
         >>> import tempfile
@@ -402,16 +410,22 @@ class RunDirectoryLock:
         False
     """
 
-    def __init__(self, run_dir: str | Path) -> None:
+    def __init__(self, run_dir: str | Path, key: str = "hydra.run.dir") -> None:
         self.path = Path(run_dir) / LOCK_FILE
+        self.key = key
         self._fd: int | None = None
 
     def _busy(self, pid: int | None) -> RunDirectoryRefused:
         holder = f"process {pid}" if pid else "another process"
+        advice = (
+            "a run directory belongs to one run: name another directory, or leave "
+            "hydra.run.dir out (each run then gets a new one)"
+            if self.key == "hydra.run.dir"
+            else f"name another {self.key}= or wait until it ends"
+        )
         return RunDirectoryRefused(
-            f"hydra.run.dir={str(self.path.parent)!r} is in use by another command "
-            f"({holder} holds {self.path.name}); a run directory belongs to one run: "
-            "name another directory, or leave hydra.run.dir out (each run then gets a new one)"
+            f"{self.key}={str(self.path.parent)!r} is in use by another command "
+            f"({holder} holds {self.path.name}); {advice}"
         )
 
     @staticmethod
@@ -427,7 +441,23 @@ class RunDirectoryLock:
             RunDirectoryRefused: A running process holds it.
             OSError: The directory or the file cannot be created.
         """
+        created = not self.path.parent.exists()
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        existed = os.path.lexists(self.path)
+        try:
+            self._acquire()
+        except OSError:  # e.g. a full disk: leave no lock file, nor the folder made for it
+            if self._fd is not None:
+                os.close(self._fd)
+                self._fd = None
+            with contextlib.suppress(OSError):
+                if not existed:
+                    self.path.unlink()
+                if created:
+                    self.path.parent.rmdir()
+            raise
+
+    def _acquire(self) -> None:
         try:
             import fcntl
         except ImportError:  # not POSIX: the PID in the file decides
@@ -452,10 +482,10 @@ class RunDirectoryLock:
             if same:
                 break
             os.close(fd)
+        self._fd = fd
         os.ftruncate(fd, 0)
         os.lseek(fd, 0, os.SEEK_SET)
         os.write(fd, f"{os.getpid()}\n".encode())
-        self._fd = fd
 
     def _acquire_by_pid(self) -> None:
         for _ in range(2):
@@ -470,8 +500,8 @@ class RunDirectoryLock:
                 with contextlib.suppress(FileNotFoundError):
                     self.path.unlink()  # a stale lock: its process is gone
                 continue
-            os.write(fd, f"{os.getpid()}\n".encode())
             self._fd = fd
+            os.write(fd, f"{os.getpid()}\n".encode())
             return
         raise self._busy(None)
 

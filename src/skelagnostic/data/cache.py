@@ -36,7 +36,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -138,14 +138,25 @@ class CacheEntry:
 
     def open(self) -> np.ndarray:
         """The features as a read-only memory map."""
-        return np.load(self.array, mmap_mode="r")
+        with self._opened(-1):  # one line if the entry was deleted
+            return np.load(self.array, mmap_mode="r")
 
     @cached_property
     def layout(self) -> tuple[int, tuple[int, ...]]:
         """Byte offset of the data in the ``.npy`` file and the array's shape."""
-        with self.array.open("rb") as fh:
+        with self._opened(-1) as fh:
             offset, shape, _ = _read_npy_header(fh)
         return offset, shape
+
+    def _opened(self, buffering: int) -> BinaryIO:
+        """The array file open for reading; its removal since it was cached is one line."""
+        try:
+            return self.array.open("rb", buffering=buffering)
+        except FileNotFoundError:  # e.g. 'skelagnostic cache clear' while training reads it
+            raise SkelagnosticError(
+                f"cache entry {self.array} was deleted while in use (by 'skelagnostic "
+                "cache clear'?); run the command again to rebuild it"
+            ) from None
 
     def read(
         self, start: int = 0, stop: int | None = None, out: np.ndarray | None = None
@@ -179,7 +190,7 @@ class CacheEntry:
                 f"cache entry {self.array}: cannot read {size} float32 windows into an array "
                 f"of {out.shape} {out.dtype}"
             )
-        with self.array.open("rb", buffering=0) as fh:
+        with self._opened(0) as fh:
             fh.seek(offset + start * 4 * math.prod(shape[1:]))
             read_exactly(fh, out, self.array)
         return out

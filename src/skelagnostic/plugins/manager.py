@@ -5,7 +5,8 @@
 the ``skelagnostic`` group, and calls the registration hooks of
 :mod:`skelagnostic.plugins.hookspecs` one plugin at a time so that each
 contribution is attributed to its plugin. A plugin that fails to import (an
-exception, ``SystemExit``, or a ``KeyboardInterrupt`` its own code raises), or
+exception, ``SystemExit``, a ``KeyboardInterrupt`` its own code raises, or any
+other ``BaseException``), or
 whose hook raises, is skipped with a :class:`PluginLoadWarning` and reported
 as ``failed``. So is a plugin that registers a name another plugin (or the
 built-in one) registered before it, or whose entry-point name is taken: the
@@ -352,6 +353,17 @@ class PluginManager:
         """
         # by name, then distribution: of two distributions claiming one name, the same one wins
         found = metadata.entry_points(group=ENTRY_POINT_GROUP)
+        unknown = sorted((only or set()) - {ep.name for ep in found} - set(self._infos))
+        if unknown:  # a misspelt name would otherwise disable every plugin without a word
+            warnings.warn(
+                printable(
+                    f"{LOAD_PLUGINS_ENV} names {', '.join(map(repr, unknown))}, which no "
+                    "installed plugin is; installed: "
+                    f"{', '.join(sorted({ep.name for ep in found})) or 'none'}"
+                ),
+                PluginLoadWarning,
+                stacklevel=2,
+            )
         for ep in sorted(found, key=lambda e: (e.name, e.dist.name if e.dist else e.value)):
             dist = ep.dist
             version = dist.version if dist is not None else ""
@@ -380,7 +392,7 @@ class PluginManager:
                         plugin, ep.name, version=version, source=source, description=described
                     )
                     self._require_hooks(plugin, ep.name, ep.value)
-                except (Exception, SystemExit, KeyboardInterrupt) as exc:
+                except BaseException as exc:
                     # a broken third-party plugin must not break (or end) the CLI
                     _raise_if_user_interrupt(exc, interrupts)
                     self._fail(ep.name, version, source, exc)
@@ -597,7 +609,7 @@ class PluginManager:
                 try:
                     mine = _call_hooks(self._pm, plugin, name)
                     names = _registered_names(mine, owners, name)
-                except (Exception, SystemExit, KeyboardInterrupt) as exc:
+                except BaseException as exc:
                     # a plugin whose registration raises, or that registers a name
                     # another plugin holds, is skipped (the first one keeps the name)
                     _raise_if_user_interrupt(exc, interrupts)
