@@ -261,6 +261,7 @@ def test_retarget_checks_every_output_before_writing_any(
     ("option", "message"),
     [
         ("fps=1e9", "fps=1e+09: at most 240 frames per second"),
+        ("fps=1e-300", "fps=1e-300: at least 1 frame per second"),
         ("size=99999", "size=99999x99999: a panel is at most 4096 pixels a side"),
     ],
 )

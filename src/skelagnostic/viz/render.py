@@ -42,6 +42,7 @@ __all__ = [
     "MAX_FRAME_PIXELS",
     "MAX_PANEL_SIDE",
     "MAX_SHEET_PIXELS",
+    "MIN_FPS",
     "Rendering",
     "contact_sheet",
     "render_contact_sheet",
@@ -77,6 +78,8 @@ MAX_PANEL_SIDE = 4096
 MAX_FRAME_PIXELS = 4096 * 4096
 #: Highest output frame rate.
 MAX_FPS = 240.0
+#: Lowest output frame rate of an animation (``fps=``).
+MIN_FPS = 1.0
 #: Largest contact sheet, in pixels.
 MAX_SHEET_PIXELS = 8192 * 8192
 #: Longest delay a GIF frame can hold, in 1/100 s (a 16-bit field).
@@ -246,6 +249,8 @@ def _prepare(
         )
     if fps is not None and math.isfinite(fps) and fps > MAX_FPS:
         raise RenderError(f"fps={fps:g}: at most {MAX_FPS:g} frames per second")
+    if fps is not None and math.isfinite(fps) and fps < MIN_FPS:  # GIF delays end at 655 s
+        raise RenderError(f"fps={fps:g}: at least {MIN_FPS:g} frame per second")
     if not math.isfinite(elev) or not -90.0 <= elev <= 90.0:
         raise RenderError(f"elev must be within [-90, 90] degrees, got {elev}")
     if azim is not None and not math.isfinite(azim):
