@@ -197,7 +197,7 @@ def _read(path: Path, options: dict[str, str]) -> Motion:
     from skelagnostic.data.sources import reroot
     from skelagnostic.io.motion_files import read_motion
 
-    motion = read_motion(path)
+    motion = read_motion(path, other="bvh")  # any name but .glb/.gltf is BVH, as before
     motion = reroot(motion, motion.skeleton.body_root)
     units = options.get("units")
     if units is not None:
