@@ -251,10 +251,14 @@ def _diagnose_rows(
     return BVHError("motion data could not be read", path, first)
 
 
-def _snap_fps(frame_time: float) -> float:
-    fps = 1.0 / frame_time
+def snap_rate(fps: float) -> float:
+    """A frame rate within 0.1 % of a whole number, as that number (1/30 s written as 0.0333333)."""
     nearest = round(fps)
     return float(nearest) if nearest > 0 and abs(fps - nearest) <= 1e-3 * fps else fps
+
+
+def _snap_fps(frame_time: float) -> float:
+    return snap_rate(1.0 / frame_time)
 
 
 def _format_frame_time(seconds: float) -> str:

@@ -1,25 +1,4 @@
-"""glTF 2.0 reading and writing of skeletal motion (``.glb`` and ``.gltf``).
-
-:func:`write_gltf` writes the skeleton as a node hierarchy (one node per joint,
-``translation`` = the joint's rest offset, no rest rotation), one animation with
-a rotation channel per joint and a translation channel on the root (and on every
-joint whose motion carries animated translations), keyed at ``k / fps`` with
-``LINEAR`` interpolation, and, by default, a skin with a simple bone mesh so that
-a viewer shows a figure. Lengths stay in the motion's own units (glTF viewers
-assume metres: call :meth:`Motion.to_metres <skelagnostic.Motion.to_metres>`
-first for a life-size figure); the axes are the motion's own (glTF is +Y up).
-
-:func:`read_gltf` reads skeletal animation from any glTF 2.0 file: the skeleton
-is the joints of a skin (the skin whose joints the animation moves most), else
-the node tree the animation moves; node rest rotations, static uniform scales and
-the transforms of the nodes above the skeleton are folded into the motion.
-
-pygltflib (the ``gltf`` extra) loads and builds the container (GLB chunks, data
-URIs, the JSON objects); the checks of every field read, accessor decoding,
-keyframe evaluation and the folding of node transforms are this module's own.
-Every problem raises :class:`~skelagnostic.errors.GLTFError` naming the file and
-the glTF field at fault.
-"""
+"""glTF reading: the skeletal animation of any glTF 2.0 file as a Motion."""
 
 from __future__ import annotations
 
@@ -40,330 +19,24 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import GLTFError, SkeletonError
-from skelagnostic.io.atomic import atomic_write
+from skelagnostic.io.bvh import snap_rate
+from skelagnostic.io.gltf._common import (
+    _COMPONENTS,
+    _EXTRA,
+    _INTERPOLATIONS,
+    _MAX_FRAMES,
+    _NORMALIZE,
+    _PATH_WIDTH,
+    _SCALE_TOLERANCE,
+    _SNAP,
+    _WIDTH,
+    _pygltflib,
+    _unique,
+)
 
-__all__ = ["GLTF_SUFFIXES", "read_gltf", "write_gltf"]
-
-#: File suffixes of glTF files: binary (``.glb``) and JSON with embedded buffer (``.gltf``).
-GLTF_SUFFIXES = (".glb", ".gltf")
-
-_EXTRA = "skelagnostic"  # key of this package's data in a node's or animation's extras
-_FLOAT = 5126
-_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32}
-_COMPONENTS[_FLOAT] = np.float32
-_NORMALIZE = {np.int8: 127.0, np.uint8: 255.0, np.int16: 32767.0, np.uint16: 65535.0}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-_PATH_WIDTH = {"translation": 3, "rotation": 4, "scale": 3}
-_INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
-#: Relative tolerance under which a node scale counts as uniform and constant.
-_SCALE_TOLERANCE = 1e-5
-#: An evaluation time this close to a keyframe (as a fraction of the key interval)
-#: takes the keyframe's value (float32 key times, float64 frame times).
-_SNAP = 1e-4
-#: Most frames a resampled animation may have (10 hours at 240 fps).
-_MAX_FRAMES = 10 * 3600 * 240
+__all__ = ["read_gltf"]
 
 
-def _pygltflib(path: Path) -> ModuleType:
-    """The pygltflib module, or a :class:`GLTFError` naming the extra that installs it."""
-    try:
-        import pygltflib
-    except ImportError:
-        raise GLTFError(
-            "glTF support needs the pygltflib package: pip install 'skelagnostic[gltf]'", path
-        ) from None
-    return pygltflib
-
-
-# ----------------------------------------------------------------------------- writing
-class _Blob:
-    """The binary buffer of a file being written, with its buffer views and accessors."""
-
-    def __init__(self, pg: ModuleType) -> None:
-        self.pg = pg
-        self.parts: list[bytes] = []
-        self.size = 0
-        self.views: list[Any] = []
-        self.accessors: list[Any] = []
-
-    def add(
-        self,
-        array: np.ndarray,
-        kind: str,
-        target: int | None = None,
-        bounds: bool = False,
-    ) -> int:
-        """Append ``array`` (``[count, width]`` or ``[count]``) as one view and accessor.
-
-        Returns:
-            The accessor's index.
-        """
-        data = np.ascontiguousarray(array)
-        raw = data.astype(data.dtype.newbyteorder("<"), copy=False).tobytes()
-        self.views.append(
-            self.pg.BufferView(buffer=0, byteOffset=self.size, byteLength=len(raw), target=target)
-        )
-        padding = -len(raw) % 4
-        self.parts.append(raw + b"\0" * padding)
-        self.size += len(raw) + padding
-        component = {v: k for k, v in _COMPONENTS.items()}[data.dtype.type]
-        flat = data.reshape(len(data), -1)
-        accessor = self.pg.Accessor(
-            bufferView=len(self.views) - 1,
-            componentType=component,
-            count=len(data),
-            type=kind,
-        )
-        if bounds:
-            accessor.min = [float(v) for v in flat.min(axis=0)]
-            accessor.max = [float(v) for v in flat.max(axis=0)]
-        self.accessors.append(accessor)
-        return len(self.accessors) - 1
-
-    def data(self) -> bytes:
-        return b"".join(self.parts)
-
-
-def _rest_positions(offsets: np.ndarray, parents: list[int]) -> np.ndarray:
-    """Joint positions with every rotation the identity (the bind pose of the skin)."""
-    rest = np.zeros_like(offsets)
-    for j, p in enumerate(parents):
-        rest[j] = offsets[j] if p < 0 else rest[p] + offsets[j]
-    return rest
-
-
-def _bone_mesh(segments: list[tuple[np.ndarray, np.ndarray, int]]) -> tuple[np.ndarray, ...]:
-    """An octahedral bone from ``a`` to ``b`` per segment, skinned to joint ``j``.
-
-    Returns:
-        ``(positions [V, 3] float32, joints [V, 4] uint16, weights [V, 4] float32,
-        indices [F * 3] uint32)``.
-    """
-    positions, joints, faces = [], [], []
-    for a, b, j in segments:
-        d = b - a
-        length = float(np.linalg.norm(d))
-        if length < 1e-9:
-            continue
-        u = d / length
-        helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        v = np.cross(u, helper)
-        v /= np.linalg.norm(v)
-        w = np.cross(u, v)
-        mid, r = a + 0.2 * d, 0.1 * length
-        base = len(positions)
-        positions += [a, mid + r * v, mid + r * w, mid - r * v, mid - r * w, b]
-        joints += [j] * 6
-        ring = [1, 2, 3, 4, 1]
-        for k in range(4):
-            faces += [base, base + ring[k + 1], base + ring[k]]
-            faces += [base + 5, base + ring[k], base + ring[k + 1]]
-    count = len(positions)
-    joint_array = np.zeros((count, 4), dtype=np.uint16)
-    joint_array[:, 0] = joints
-    weights = np.zeros((count, 4), dtype=np.float32)
-    weights[:, 0] = 1.0
-    return (
-        np.asarray(positions, dtype=np.float32).reshape(count, 3),
-        joint_array,
-        weights,
-        np.asarray(faces, dtype=np.uint32),
-    )
-
-
-def _unique(name: str, taken: set[str]) -> str:
-    candidate, k = name, 1
-    while candidate in taken:
-        k += 1
-        candidate = f"{name}{k}"
-    taken.add(candidate)
-    return candidate
-
-
-def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
-    """Write a motion as glTF 2.0: ``.glb`` (binary) or ``.gltf`` (JSON, embedded buffer).
-
-    One node per joint, in joint order (nodes ``0 .. J-1``), its ``translation`` the
-    joint's rest offset; one node per BVH End Site under its joint (marked in
-    ``extras``); one animation with a rotation channel (quaternions x, y, z, w) per
-    joint and a translation channel on the root and on every joint with animated
-    translations, keyed at ``k / fps`` seconds with ``LINEAR`` interpolation.
-    Lengths are the motion's own units and the axes its own. With ``bones`` a skin
-    (bind pose: the rest offsets, no rotation) and a mesh of one octahedron per
-    bone, skinned rigidly to the bone's parent joint, are added, so that Blender
-    imports an armature and viewers show a figure.
-
-    The skeleton's up axis, units, BVH channel layout and body root go into the
-    root node's ``extras`` and the frame rate into the animation's, so that
-    :func:`read_gltf` gives them back. The file is written atomically
-    (:func:`~skelagnostic.io.atomic.atomic_write`).
-
-    Args:
-        motion: The motion.
-        path: Target ``.glb`` or ``.gltf`` file.
-        bones: Add the skin and the bone mesh.
-
-    Raises:
-        GLTFError: If the suffix is neither ``.glb`` nor ``.gltf``, pygltflib (the
-            ``gltf`` extra) is missing, or the file cannot be written.
-
-    Examples:
-        >>> import skelagnostic as sa, tempfile, os
-        >>> motion, _ = sa.procedural.generate("biped22", "walk", seconds=0.5, fps=30)
-        >>> path = os.path.join(tempfile.mkdtemp(), "walk.glb")
-        >>> sa.write_gltf(motion, path)
-        >>> sa.read_gltf(path).num_frames
-        16
-    """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in GLTF_SUFFIXES:
-        raise GLTFError(f"a glTF file name ends in .glb or .gltf, not {path.suffix!r}", path)
-    pg = _pygltflib(path)
-    m = motion.to(dtype=torch.float64, device="cpu")
-    sk = m.skeleton
-    num_joints, num_frames = sk.num_joints, m.num_frames
-    offsets = sk.offsets.detach().double().cpu().numpy()
-    parents = sk.parents
-    blob = _Blob(pg)
-
-    # the node hierarchy: joints first, in joint order, then End Sites
-    nodes = [
-        pg.Node(name=name, translation=[float(v) for v in offsets[j]], children=[])
-        for j, name in enumerate(sk.joint_names)
-    ]
-    for j, p in enumerate(parents):
-        if p >= 0:
-            nodes[p].children.append(j)
-    taken = set(sk.joint_names)
-    sites: list[tuple[int, np.ndarray]] = []
-    for j in sorted(sk.end_sites):
-        for site in sk.end_sites[j]:
-            nodes[j].children.append(len(nodes))
-            nodes.append(
-                pg.Node(
-                    name=_unique(f"{sk.joint_names[j]}_end", taken),
-                    translation=[float(v) for v in site],
-                    extras={_EXTRA: {"end_site": True}},
-                )
-            )
-            sites.append((j, np.asarray(site, dtype=np.float64)))
-    meta: dict[str, Any] = {"up_axis": sk.up_axis, "body_root": sk.body_root}
-    if m.units is not None:
-        meta["units"] = m.units
-    if sk.channels is not None:
-        meta["channels"] = sk.channels
-    nodes[0].extras = {_EXTRA: meta}
-
-    # the animation
-    root_positions = m.root_positions.detach().numpy()
-    translations = None if m.translations is None else m.translations.detach().numpy()
-    times = (np.arange(num_frames, dtype=np.float64) / m.fps).astype(np.float32)
-    time_accessor = blob.add(times, "SCALAR", bounds=True)
-    samplers, channels = [], []
-
-    def channel(node: int, target: str, values: np.ndarray, kind: str) -> None:
-        output = blob.add(values.astype(np.float32), kind)
-        samplers.append(pg.AnimationSampler(input=time_accessor, output=output))
-        channels.append(
-            pg.AnimationChannel(
-                sampler=len(samplers) - 1, target=pg.AnimationChannelTarget(node=node, path=target)
-            )
-        )
-
-    # (w, x, y, z) -> glTF's (x, y, z, w)
-    rotations = m.rotations.detach().numpy()[..., [1, 2, 3, 0]]
-    translated = [0]
-    if translations is not None:
-        moved = np.abs(translations - offsets).max(axis=(0, 2)) > 1e-9
-        translated += [int(j) for j in np.nonzero(moved)[0] if j > 0]
-    for j in range(num_joints):
-        channel(j, "rotation", rotations[:, j], "VEC4")
-        if j == 0:
-            channel(0, "translation", root_positions, "VEC3")
-        elif j in translated:
-            assert translations is not None
-            channel(j, "translation", translations[:, j], "VEC3")
-    animation = pg.Animation(
-        name=m.name or "motion",
-        samplers=samplers,
-        channels=channels,
-        extras={_EXTRA: {"fps": m.fps}},
-    )
-
-    scene_nodes = [0]
-    skins, meshes, materials = [], [], []
-    rest = _rest_positions(offsets, parents)
-    segments = [(rest[p], rest[j], p) for j, p in enumerate(parents) if p >= 0]
-    segments += [(rest[j], rest[j] + site, j) for j, site in sites]
-    positions, joints, weights, indices = _bone_mesh(segments)
-    if bones and len(indices):  # a skin needs a mesh: a lone joint gets neither
-        inverse_bind = np.tile(np.eye(4, dtype=np.float32), (num_joints, 1, 1))
-        inverse_bind[:, 3, :3] = -rest  # column-major: the translation is the 4th column
-        skins.append(
-            pg.Skin(
-                inverseBindMatrices=blob.add(inverse_bind.reshape(num_joints, 16), "MAT4"),
-                joints=list(range(num_joints)),
-                skeleton=0,
-            )
-        )
-        attributes = pg.Attributes(
-            POSITION=blob.add(positions, "VEC3", target=pg.ARRAY_BUFFER, bounds=True),
-            JOINTS_0=blob.add(joints, "VEC4", target=pg.ARRAY_BUFFER),
-            WEIGHTS_0=blob.add(weights, "VEC4", target=pg.ARRAY_BUFFER),
-        )
-        primitive = pg.Primitive(
-            attributes=attributes,
-            indices=blob.add(indices, "SCALAR", target=pg.ELEMENT_ARRAY_BUFFER),
-            material=0,
-        )
-        materials.append(
-            pg.Material(
-                name="bone",
-                doubleSided=True,
-                pbrMetallicRoughness=pg.PbrMetallicRoughness(
-                    baseColorFactor=[0.85, 0.55, 0.3, 1.0],
-                    metallicFactor=0.0,
-                    roughnessFactor=0.8,
-                ),
-            )
-        )
-        meshes.append(pg.Mesh(name="bones", primitives=[primitive]))
-        nodes.append(pg.Node(name=_unique("bones", taken), mesh=0, skin=0))
-        scene_nodes.append(len(nodes) - 1)
-
-    data = blob.data()
-    from skelagnostic.version import distribution_version
-
-    generator = f"skelagnostic {distribution_version('skelagnostic')}"
-    gltf = pg.GLTF2(
-        asset=pg.Asset(version="2.0", generator=generator),
-        scene=0,
-        scenes=[pg.Scene(name=m.name or "motion", nodes=scene_nodes)],
-        nodes=nodes,
-        animations=[animation],
-        skins=skins,
-        meshes=meshes,
-        materials=materials,
-        accessors=blob.accessors,
-        bufferViews=blob.views,
-        buffers=[pg.Buffer(byteLength=len(data))],
-    )
-    if suffix == ".glb":
-        gltf.set_binary_blob(data)
-        content = b"".join(gltf.save_to_bytes())
-    else:
-        gltf.buffers[0].uri = "data:application/octet-stream;base64," + base64.b64encode(
-            data
-        ).decode("ascii")
-        content = gltf.to_json(indent=1).encode("utf-8")
-    try:
-        atomic_write(path, content)
-    except OSError as exc:
-        raise GLTFError(f"cannot write: {exc.strerror or exc}", path) from None
-
-
-# ----------------------------------------------------------------------------- reading
 def _is_index(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
@@ -374,11 +47,6 @@ def _uniform_scale(scale: np.ndarray) -> float | None:
     if s <= 0 or np.abs(scale - s).max() > _SCALE_TOLERANCE * s:
         return None
     return s
-
-
-def _snap_fps(fps: float) -> float:
-    nearest = round(fps)
-    return float(nearest) if nearest > 0 and abs(fps - nearest) <= 1e-3 * fps else fps
 
 
 def _slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -898,7 +566,7 @@ def read_gltf(
     same = all(len(t.times) == len(keys) and np.array_equal(t.times, keys) for t in used[1:])
     densest = max(used, key=lambda t: len(t.times)).times
     span = float(densest[-1] - densest[0])
-    fps = _snap_fps((len(densest) - 1) / span) if len(densest) > 1 and span > 0 else 30.0
+    fps = snap_rate((len(densest) - 1) / span) if len(densest) > 1 and span > 0 else 30.0
     if (
         isinstance(meta_fps, (int, float))
         and not isinstance(meta_fps, bool)
