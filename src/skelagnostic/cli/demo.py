@@ -147,7 +147,7 @@ def _demo(bvh_files: list[Path], args: dict[str, Any]) -> int:
 
     import skelagnostic as sa
     from skelagnostic.errors import error_line, printable
-    from skelagnostic.io.motion_files import MOTION_SUFFIXES, read_motion
+    from skelagnostic.io.motion_files import motion_format, read_motion
     from skelagnostic.io.outputs import write_output
     from skelagnostic.viz import render_motion, to_html
 
@@ -159,10 +159,7 @@ def _demo(bvh_files: list[Path], args: dict[str, Any]) -> int:
         if bvh_files:
             for path in bvh_files:
                 motions.append(read_motion(path, other="bvh"))  # other names: BVH
-            gltf = tuple(s for s in MOTION_SUFFIXES if s != ".bvh")
-            source = ", ".join(
-                sorted({"gltf" if p.suffix.lower() in gltf else "bvh" for p in bvh_files})
-            )
+            source = ", ".join(sorted({motion_format(p, other="bvh") for p in bvh_files}))
         else:
             for i, (kind, gait) in enumerate(_DEFAULT_CLIPS):
                 motion, _ = sa.procedural.generate(

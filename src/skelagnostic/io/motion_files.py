@@ -26,11 +26,13 @@ __all__ = ["MOTION_SUFFIXES", "motion_format", "read_motion", "write_motion"]
 MOTION_SUFFIXES = (".bvh", ".glb", ".gltf")
 
 
-def motion_format(path: str | Path) -> str:
+def motion_format(path: str | Path, other: str | None = None) -> str:
     """The format of a motion file from its suffix (any case).
 
     Args:
         path: The file name.
+        other: ``"bvh"`` or ``"gltf"``: the format of a file with any other suffix
+            (``None``: such a file is an error).
 
     Returns:
         ``"bvh"`` or ``"gltf"``.
@@ -43,6 +45,8 @@ def motion_format(path: str | Path) -> str:
         ('bvh', 'gltf', 'gltf')
     """
     suffix = Path(path).suffix.lower()
+    if suffix not in MOTION_SUFFIXES and other is not None:
+        return other
     if suffix not in MOTION_SUFFIXES:
         raise SkelagnosticError(
             f"{printable(path)}: a motion file ends in .bvh (BVH) or .glb/.gltf (glTF 2.0), "
@@ -75,9 +79,7 @@ def read_motion(
     import torch
 
     dtype = torch.float64 if dtype is None else dtype
-    suffix = Path(path).suffix.lower()
-    kind = other if other is not None and suffix not in MOTION_SUFFIXES else motion_format(path)
-    if kind == "bvh":
+    if motion_format(path, other) == "bvh":
         from skelagnostic.io.bvh import read_bvh
 
         return read_bvh(path, dtype=dtype)
