@@ -93,3 +93,15 @@ def test_a_lock_that_cannot_be_written_leaves_nothing(tmp_path: Path, monkeypatc
     with pytest.raises(OSError, match="No space left"):
         RunDirectoryLock(tmp_path / "run").acquire()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_demo_takes_its_lock_without_the_training_stack(tmp_path: Path) -> None:
+    """``demo`` locks ``out=`` with :mod:`skelagnostic.cli.lock`: no Lightning, Hydra or pluggy."""
+    code = (
+        "import sys\n"
+        "from skelagnostic.cli import demo\n"
+        f"assert demo.main(['out={tmp_path / 'demo'}', 'seconds=0.2', 'gif=false']) == 0\n"
+        "print([m for m in ('lightning', 'hydra', 'pluggy') if m in sys.modules])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout

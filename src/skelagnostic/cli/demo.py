@@ -124,7 +124,7 @@ def main(argv: Sequence[str]) -> int:
     except SkelagnosticError as exc:
         print(error_line("skelagnostic demo", exc), file=sys.stderr)
         return 2
-    from skelagnostic.cli.runs import RunDirectoryLock, RunDirectoryRefused
+    from skelagnostic.cli.lock import RunDirectoryLock, RunDirectoryRefused
 
     lock = RunDirectoryLock(args["out"], key="out")  # two demos never mix their files
     try:
