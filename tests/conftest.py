@@ -19,6 +19,7 @@ from __future__ import annotations
 import importlib
 import os
 import re
+import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -69,6 +70,23 @@ def _retrying_popen() -> Iterator[None]:
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(subprocess, "Popen", RetryingPopen)
         yield
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _ctrl_c_as_on_a_terminal() -> Iterator[None]:
+    """Ctrl-C (SIGINT) raises KeyboardInterrupt here and in every command a test starts.
+
+    A shell starts background jobs with SIGINT ignored (``cmd &`` without job
+    control), and an ignored signal stays ignored across ``exec``: the tests that
+    interrupt a command would then see it run to the end. A Python handler, unlike
+    ``SIG_IGN``, is reset to the default in a child, so children handle Ctrl-C again.
+    """
+    ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    if ignored:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    if ignored:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _ram_bytes() -> int | None:
