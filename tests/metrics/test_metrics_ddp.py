@@ -23,6 +23,8 @@ from skelagnostic.metrics import (
     NPSS,
     BoneLengthConsistency,
     EndEffectorError,
+    FootSkate,
+    FootSkateRatio,
     ManifoldOverlap,
     TemporalKNNDistance,
 )
@@ -84,6 +86,18 @@ def cases() -> dict[str, tuple]:
     out["end_effector"] = (
         lambda: EndEffectorError([4, 2], [2, 4]),
         [(pair(b), {}) for b in sizes],
+    )
+
+    def planted(b: int) -> torch.Tensor:
+        return torch.rand(b, 6, 5, generator=gen) < 0.6
+
+    out["foot_skate"] = (
+        lambda: FootSkate(fps=30.0, feet=[1, 3]),
+        [((pos(b), planted(b)[..., :2]), {}) for b in sizes],
+    )
+    out["foot_skate_ratio"] = (
+        lambda: FootSkateRatio(fps=30.0, threshold=30.0, up_axis="z"),
+        [((pos(b), planted(b)), {}) for b in sizes],
     )
     groups = [i % 3 for i in range(12)]
     out["temporal_knn"] = (

@@ -17,10 +17,12 @@ MODULES = [
     "skelagnostic.metrics.functional.lafan",
     "skelagnostic.metrics.functional.manifold",
     "skelagnostic.metrics.functional.point_cloud",
+    "skelagnostic.metrics.functional.feet",
     "skelagnostic.metrics.positions",
     "skelagnostic.metrics.lafan",
     "skelagnostic.metrics.manifold",
     "skelagnostic.metrics.point_cloud",
+    "skelagnostic.metrics.feet",
 ]
 
 
@@ -37,9 +39,11 @@ def test_public_names():
         "BoneLengthConsistency",
         "TemporalKNNDistance",
         "EndEffectorError",
+        "FootSkate",
+        "FootSkateRatio",
         "functional",
     }
-    for name in ("mpjpe", "l2p", "l2q", "npss", "manifold_overlap"):
+    for name in ("mpjpe", "l2p", "l2q", "npss", "manifold_overlap", "foot_skate"):
         assert callable(getattr(functional, name))
 
 

@@ -12,6 +12,7 @@ other projects can reuse it cheaply:
 """
 
 from skelagnostic.metrics import functional
+from skelagnostic.metrics.feet import FootSkate, FootSkateRatio
 from skelagnostic.metrics.lafan import L2P, L2Q, NPSS
 from skelagnostic.metrics.manifold import ManifoldOverlap
 from skelagnostic.metrics.point_cloud import TemporalKNNDistance
@@ -24,6 +25,8 @@ __all__ = [
     "NPSS",
     "BoneLengthConsistency",
     "EndEffectorError",
+    "FootSkate",
+    "FootSkateRatio",
     "ManifoldOverlap",
     "TemporalKNNDistance",
     "functional",

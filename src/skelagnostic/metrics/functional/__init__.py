@@ -11,7 +11,8 @@ Each function lives in the module that mirrors its class module (torchmetrics'
 layout): :mod:`~skelagnostic.metrics.functional.positions` (``mpjpe``,
 ``bone_length_consistency``, ``end_effector_error``),
 :mod:`~skelagnostic.metrics.functional.lafan` (``l2p``, ``l2q``, ``npss``),
-:mod:`~skelagnostic.metrics.functional.manifold` (``manifold_overlap``) and
+:mod:`~skelagnostic.metrics.functional.manifold` (``manifold_overlap``),
+:mod:`~skelagnostic.metrics.functional.feet` (``foot_skate``, ``foot_skate_ratio``) and
 :mod:`~skelagnostic.metrics.functional.point_cloud` (``temporal_knn_distance``).
 All of them are importable from this package.
 
@@ -31,6 +32,7 @@ Examples:
 # before the split into modules) for metric classes written outside this package.
 from skelagnostic.metrics.functional._utils import REDUCTIONS as REDUCTIONS
 from skelagnostic.metrics.functional._utils import _mean_compute as _mean_compute
+from skelagnostic.metrics.functional.feet import foot_skate, foot_skate_ratio
 from skelagnostic.metrics.functional.lafan import NPSS_POWERS as NPSS_POWERS
 from skelagnostic.metrics.functional.lafan import _l2p_update as _l2p_update
 from skelagnostic.metrics.functional.lafan import _l2q_update as _l2q_update
@@ -64,6 +66,8 @@ from skelagnostic.metrics.functional.positions import (
 __all__ = [
     "bone_length_consistency",
     "end_effector_error",
+    "foot_skate",
+    "foot_skate_ratio",
     "l2p",
     "l2q",
     "manifold_overlap",
