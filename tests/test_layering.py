@@ -44,6 +44,7 @@ LAYERS: dict[str, int] = {
     "skelagnostic.aligners": 6,
     "skelagnostic.data": 6,
     "skelagnostic.callbacks": 6,
+    "skelagnostic.cleanup": 6,
     "skelagnostic.evaluation": 6,
     "skelagnostic.export": 7,
     "skelagnostic.plugins": 8,
@@ -71,6 +72,7 @@ LIGHT = (
     "skelagnostic.matching",
     "skelagnostic.viz",
     "skelagnostic.baselines",
+    "skelagnostic.cleanup",
 )
 FRAMEWORKS = ("lightning", "pytorch_lightning", "lightning_fabric", "hydra", "omegaconf", "pluggy")
 #: Third-party packages allowed only inside the given units.
