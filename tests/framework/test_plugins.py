@@ -76,6 +76,8 @@ def test_builtin_registers_through_hooks() -> None:
         "global_positions",
         "root_local_velocities",
         "local_quaternions",
+        "local_rot6d",
+        "local_axis_angle",
         "foq",
         "point_cloud",
     } == set(pm.representations)

@@ -22,6 +22,8 @@ __all__ = [
     "continuity",
     "euler_to_quat",
     "from_matrix",
+    "from_rot6d",
+    "from_rotvec",
     "identity",
     "inv",
     "mul",
@@ -31,6 +33,8 @@ __all__ = [
     "rotation_between",
     "slerp",
     "to_matrix",
+    "to_rot6d",
+    "to_rotvec",
     "yaw",
 ]
 
@@ -102,6 +106,47 @@ def from_matrix(m: torch.Tensor) -> torch.Tensor:
 
     q = roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(m))
     return torch.where(q[..., :1] < 0, -q, q)
+
+
+def to_rot6d(q: torch.Tensor) -> torch.Tensor:
+    """Unit (w, x, y, z) quaternions ``[..., 4]`` to 6D rotations ``[..., 6]`` (Zhou et al. 2019).
+
+    The 6D layout is the first two columns of the rotation matrix ``m``, column
+    after column: ``(m00, m10, m20, m01, m11, m21)``.
+    """
+    return to_matrix(q)[..., :2].transpose(-1, -2).reshape(*q.shape[:-1], 6)
+
+
+def from_rot6d(x: torch.Tensor) -> torch.Tensor:
+    """6D rotations ``[..., 6]`` (any two non-parallel columns) to unit (w, x, y, z) quaternions.
+
+    The two columns are orthonormalised by Gram-Schmidt
+    (``roma.special_gramschmidt``), so a network's raw 6D output decodes to a
+    rotation; the third column is their cross product. ``w >= 0``.
+    """
+    import roma
+
+    columns = x.reshape(*x.shape[:-1], 2, 3).transpose(-1, -2)
+    return from_matrix(roma.special_gramschmidt(columns))
+
+
+def to_rotvec(q: torch.Tensor) -> torch.Tensor:
+    """Unit (w, x, y, z) quaternions ``[..., 4]`` to rotation vectors ``[..., 3]`` (axis * angle).
+
+    The angle is in ``[0, pi]`` (the shorter arc; ``roma.unitquat_to_rotvec``),
+    so ``q`` and ``-q`` give the same vector; near ``pi`` the vector flips to the
+    opposite axis.
+    """
+    import roma
+
+    return roma.unitquat_to_rotvec(roma.quat_wxyz_to_xyzw(q))
+
+
+def from_rotvec(v: torch.Tensor) -> torch.Tensor:
+    """Rotation vectors ``[..., 3]`` (axis * angle, radians) to unit (w, x, y, z) quaternions."""
+    import roma
+
+    return roma.quat_xyzw_to_wxyz(roma.rotvec_to_unitquat(v))
 
 
 def _unit(v: torch.Tensor, eps: float = 1e-9) -> torch.Tensor:

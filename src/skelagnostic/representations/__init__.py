@@ -6,6 +6,8 @@ class                       registry name                  layout      decode
 GlobalPositions             ``global_positions``           [T, J, 3]   inverse kinematics
 RootLocalVelocities         ``root_local_velocities``      [T, J, 3]   NotInvertibleError
 LocalQuaternions            ``local_quaternions``          [T, J, 7]   exact
+LocalRotations6D            ``local_rot6d``                [T, J, 9]   exact (Gram-Schmidt)
+LocalAxisAngle              ``local_axis_angle``           [T, J, 6]   exact
 FirstFrameOffsetQuaternions ``foq``                        [T, J, 7]   exact, given one pose
 PointCloud                  ``point_cloud``                [T, P, 8]   NotInvertibleError
 ==========================  =============================  ==========  =========================
@@ -28,7 +30,9 @@ from skelagnostic.representations.pointcloud import POINT_GROUPS, PointCloud, Po
 from skelagnostic.representations.positions import GlobalPositions, inverse_kinematics
 from skelagnostic.representations.rotations import (
     FirstFrameOffsetQuaternions,
+    LocalAxisAngle,
     LocalQuaternions,
+    LocalRotations6D,
     RootLocalVelocities,
 )
 
@@ -37,6 +41,8 @@ BUILTIN_REPRESENTATIONS: tuple[type[MotionRepresentation], ...] = (
     GlobalPositions,
     RootLocalVelocities,
     LocalQuaternions,
+    LocalRotations6D,
+    LocalAxisAngle,
     FirstFrameOffsetQuaternions,
     PointCloud,
 )
@@ -46,7 +52,9 @@ __all__ = [
     "POINT_GROUPS",
     "FirstFrameOffsetQuaternions",
     "GlobalPositions",
+    "LocalAxisAngle",
     "LocalQuaternions",
+    "LocalRotations6D",
     "MotionRepresentation",
     "PointCloud",
     "PointSamples",

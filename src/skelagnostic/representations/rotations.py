@@ -1,7 +1,11 @@
-"""Rotation-based representations: root-local velocities, local quaternions and FOQ."""
+"""Rotation-based representations: root-local velocities, local rotations and FOQ.
+
+Local rotations come as quaternions, 6D (two matrix columns) or axis-angle vectors.
+"""
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from typing import ClassVar
 
 import torch
@@ -30,7 +34,45 @@ class RootLocalVelocities(MotionRepresentation):
         return motion.root_local_velocities()
 
 
-class LocalQuaternions(MotionRepresentation):
+class _LocalRotations(MotionRepresentation):
+    """Local joint rotations in one parameterisation, then local translations (tx, ty, tz).
+
+    Subclasses set :attr:`channels` (the rotation's channels first) and the two
+    conversions from and to (w, x, y, z) quaternions. The translations are the
+    root's global position for the root, the rest offset (or the animated
+    translation) for the other joints; :meth:`decode` uses the rotations and the
+    root translation (the other joints' translations come from the skeleton).
+    """
+
+    @abstractmethod
+    def _from_quaternions(self, q: torch.Tensor) -> torch.Tensor:
+        """``[..., R]`` rotation channels of continuity-fixed ``[..., 4]`` quaternions."""
+
+    @abstractmethod
+    def _to_quaternions(self, r: torch.Tensor) -> torch.Tensor:
+        """``[..., 4]`` (w, x, y, z) quaternions of ``[..., R]`` rotation channels."""
+
+    def encode(self, motion: Motion) -> torch.Tensor:
+        """``[T, J, R + 3]`` local rotations and translations."""
+        rot = self._from_quaternions(Q.continuity(motion.rotations, dim=-3))
+        if motion.translations is not None:
+            trans = motion.translations.clone()
+        else:
+            offsets = motion.skeleton.offsets.to(rot.dtype).to(rot.device)
+            trans = offsets.expand(motion.num_frames, -1, -1).clone()
+        trans[:, 0] = motion.root_positions
+        return torch.cat([rot, trans], dim=-1)
+
+    def decode(self, features: torch.Tensor, skeleton: Skeleton, fps: float = 30.0) -> Motion:
+        """The motion with these local rotations and root trajectory."""
+        self._check_decodable(features, skeleton)
+        split = len(self.channels) - 3
+        return Motion(
+            skeleton, self._to_quaternions(features[..., :split]), features[:, 0, split:], fps
+        )
+
+
+class LocalQuaternions(_LocalRotations):
     """Local joint transforms, ``[T, J, 7]``: (qw, qx, qy, qz, tx, ty, tz).
 
     Channels 0-3: the local rotation, with sign flips removed along time
@@ -44,21 +86,56 @@ class LocalQuaternions(MotionRepresentation):
     name: ClassVar[str] = "local_quaternions"
     channels: ClassVar[tuple[str, ...]] = ("qw", "qx", "qy", "qz", "tx", "ty", "tz")
 
-    def encode(self, motion: Motion) -> torch.Tensor:
-        """``[T, J, 7]`` local quaternions and translations."""
-        rot = Q.continuity(motion.rotations, dim=-3)
-        if motion.translations is not None:
-            trans = motion.translations.clone()
-        else:
-            offsets = motion.skeleton.offsets.to(rot.dtype).to(rot.device)
-            trans = offsets.expand(motion.num_frames, -1, -1).clone()
-        trans[:, 0] = motion.root_positions
-        return torch.cat([rot, trans], dim=-1)
+    def _from_quaternions(self, q: torch.Tensor) -> torch.Tensor:
+        return q
 
-    def decode(self, features: torch.Tensor, skeleton: Skeleton, fps: float = 30.0) -> Motion:
-        """The motion with these local rotations and root trajectory."""
-        self._check_decodable(features, skeleton)
-        return Motion(skeleton, features[..., :4], features[:, 0, 4:], fps)
+    def _to_quaternions(self, r: torch.Tensor) -> torch.Tensor:
+        return r
+
+
+class LocalRotations6D(_LocalRotations):
+    """Local joint transforms with 6D rotations (Zhou et al. 2019), ``[T, J, 9]``.
+
+    Channels 0-5: the first two columns of the local rotation matrix ``m``,
+    column after column: (m00, m10, m20, m01, m11, m21)
+    (:func:`~skelagnostic.core.quaternion.to_rot6d`); continuous over all
+    rotations, which makes it a good network output. Channels 6-8: the local
+    translation, as in :class:`LocalQuaternions`. :meth:`decode` orthonormalises
+    the two columns (Gram-Schmidt, ``roma.special_gramschmidt``), so any
+    features whose columns are not parallel decode to a motion; exact for
+    encoded features.
+    """
+
+    name: ClassVar[str] = "local_rot6d"
+    channels: ClassVar[tuple[str, ...]] = (
+        "m00", "m10", "m20", "m01", "m11", "m21", "tx", "ty", "tz",
+    )  # fmt: skip
+
+    def _from_quaternions(self, q: torch.Tensor) -> torch.Tensor:
+        return Q.to_rot6d(q)
+
+    def _to_quaternions(self, r: torch.Tensor) -> torch.Tensor:
+        return Q.from_rot6d(r)
+
+
+class LocalAxisAngle(_LocalRotations):
+    """Local joint transforms with axis-angle rotations, ``[T, J, 6]``: (rx, ry, rz, tx, ty, tz).
+
+    Channels 0-2: the rotation vector (unit axis times the angle in radians,
+    the angle in ``[0, pi]``; :func:`~skelagnostic.core.quaternion.to_rotvec`).
+    Near a half turn the vector flips to the opposite axis between frames.
+    Channels 3-5: the local translation, as in :class:`LocalQuaternions`.
+    Exactly invertible.
+    """
+
+    name: ClassVar[str] = "local_axis_angle"
+    channels: ClassVar[tuple[str, ...]] = ("rx", "ry", "rz", "tx", "ty", "tz")
+
+    def _from_quaternions(self, q: torch.Tensor) -> torch.Tensor:
+        return Q.to_rotvec(q)
+
+    def _to_quaternions(self, r: torch.Tensor) -> torch.Tensor:
+        return Q.from_rotvec(r)
 
 
 class FirstFrameOffsetQuaternions(MotionRepresentation):
