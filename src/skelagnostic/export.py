@@ -1,4 +1,4 @@
-"""Export an aligner's networks for engines: ONNX or TorchScript files plus JSON sidecars.
+"""Export an aligner's networks for engines (ONNX, TorchScript, JSON sidecars) or its weights.
 
 An aligner says what a runtime needs through
 :meth:`skelagnostic.aligners.Aligner.export_graphs`: a list of
@@ -7,7 +7,9 @@ takes and returns tensors only, with example inputs, input and output names,
 the axes that may change size at run time and metadata for the sidecar
 (normalisation statistics, the skeleton, fixed sizes). :func:`export_aligner`
 writes, for every graph, ``<name>.onnx`` (or ``<name>.pt``, TorchScript) and
-``<name>.json``.
+``<name>.json``. ``format="safetensors"`` writes the aligner's weights instead,
+``model.safetensors`` with the model config in its metadata
+(:func:`skelagnostic.aligners.weights.save_weights`), which ``ckpt=`` loads back.
 
 ONNX files come from the dynamo-based exporter
 (``torch.onnx.export(..., dynamo=True)``) with ``dynamic_shapes`` built from
@@ -41,6 +43,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "FORMATS",
+    "GRAPH_FORMATS",
     "ExportError",
     "ExportGraph",
     "Method",
@@ -50,7 +53,9 @@ __all__ = [
 ]
 
 #: Formats :func:`export_aligner` writes, and the suffix of their files.
-FORMATS: dict[str, str] = {"onnx": ".onnx", "torchscript": ".pt"}
+FORMATS: dict[str, str] = {"onnx": ".onnx", "torchscript": ".pt", "safetensors": ".safetensors"}
+#: The formats of networks (graphs); the others hold weights.
+GRAPH_FORMATS = ("onnx", "torchscript")
 #: ONNX opset of the exported files.
 OPSET = 18
 #: Version of the sidecar layout (bumped when a key changes meaning).
@@ -357,8 +362,8 @@ def export_graph(
         ExportError: Unknown format, a missing package, an inconsistent graph or
             an exporter failure (the message names the graph and the cause).
     """
-    if fmt not in FORMATS:
-        raise ExportError(f"format={fmt!r} is not one of {', '.join(FORMATS)}")
+    if fmt not in GRAPH_FORMATS:
+        raise ExportError(f"format={fmt!r} is not one of {', '.join(GRAPH_FORMATS)}")
     graph.check()
     if fmt == "onnx":
         _require_onnx()
@@ -411,21 +416,35 @@ def export_graph(
 def export_aligner(aligner: Aligner, fmt: str, out_dir: str | Path, name: str = "") -> list[Path]:
     """Export every graph of ``aligner.export_graphs()``.
 
+    With ``fmt="safetensors"``, write the aligner's weights and model config as
+    ``<out_dir>/model.safetensors`` instead (every aligner can).
+
     Args:
         aligner: A trained aligner (put in eval mode).
-        fmt: ``"onnx"`` or ``"torchscript"``.
+        fmt: ``"onnx"``, ``"torchscript"`` or ``"safetensors"``.
         out_dir: Output directory.
-        name: Registered name of the aligner, for the sidecars.
+        name: Registered name of the aligner, for the sidecars (required for
+            safetensors: loading the file back builds that aligner).
 
     Returns:
-        The written files, model and sidecar per graph.
+        The written files, model and sidecar per graph (the weights file for safetensors).
 
     Raises:
-        ExportError: The aligner exports nothing, or see :func:`export_graph`.
+        ExportError: The aligner exports nothing, a safetensors export without
+            ``name`` or the ``safetensors`` package, or see :func:`export_graph`.
     """
     if fmt not in FORMATS:
         raise ExportError(f"format={fmt!r} is not one of {', '.join(FORMATS)}")
     aligner.eval()
+    if fmt == "safetensors":
+        from skelagnostic.aligners.weights import WEIGHTS_FILE, save_weights
+
+        try:
+            return [save_weights(aligner, Path(out_dir) / WEIGHTS_FILE, name)]
+        except OutputError:
+            raise
+        except SkelagnosticError as error:
+            raise ExportError(str(error)) from error
     with torch.no_grad():
         graphs = list(aligner.export_graphs())
     if not graphs:

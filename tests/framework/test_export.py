@@ -3,7 +3,9 @@
 Every built-in aligner (and the example plugin) is built small, exported, and the
 exported files are run (ONNX in onnxruntime, TorchScript with ``torch.jit.load``)
 on windows cut from real clips at two batch/time sizes; the outputs must match
-the aligner's own PyTorch methods within 1e-4.
+the aligner's own PyTorch methods within 1e-4. ``format=safetensors`` weights of a
+trained run load back (``ckpt=``) to equal outputs (its errors:
+``test_export_safetensors.py``).
 """
 
 from __future__ import annotations
@@ -21,9 +23,12 @@ from typing import Any
 import numpy as np
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 import skelagnostic as sa
 from skelagnostic import cli
+from skelagnostic.aligners.weights import WEIGHTS_FILE
+from skelagnostic.cli.app import ConfigError
 from skelagnostic.export import ExportError, export_aligner
 
 ort = pytest.importorskip("onnxruntime")
@@ -266,6 +271,80 @@ def test_an_aligner_without_graphs_exports_nothing(example_plugin: Path, tmp_pat
     with pytest.raises(ExportError, match="Opaque exports no networks"):
         export_aligner(Opaque(hidden=8, latent=4), "onnx", out)
     assert not out.exists()
+
+
+# ------------------------------------------------------------------------ safetensors
+def outputs(aligner: torch.nn.Module, motion: sa.Motion) -> tuple[torch.Tensor, torch.Tensor]:
+    """The example aligner's latent of ``motion`` and its decoding onto a quadruped."""
+    from skelagnostic.representations import GlobalPositions
+
+    height = motion.skeleton.height()
+    positions = (GlobalPositions(frame="root").encode(motion).float() / height)[None]
+    template = (motion.skeleton.template().float() / height)[None]
+    other = sa.procedural.skeleton("quadruped")
+    with torch.no_grad():
+        z = aligner.encode_positions(positions, template)
+        back = aligner.decode_positions(z, (other.template().float() / other.height())[None])
+    return z, back
+
+
+def test_export_then_load_back_gives_equal_outputs(
+    example_plugin: Path,
+    example_run: Path,
+    lafan: sa.Motion,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from skelagnostic.cli.infer import load_from_checkpoint
+
+    st = pytest.importorskip("safetensors.torch")
+    ckpt = example_run / "checkpoints" / "last.ckpt"
+    out = tmp_path / "weights"
+    assert cli.main(["export", f"ckpt={ckpt}", "format=safetensors", f"out={out}"]) == 0
+    assert capsys.readouterr().out.split() == [str(out / WEIGHTS_FILE), str(out / "config.yaml")]
+    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", WEIGHTS_FILE]  # no temp file
+    beside = OmegaConf.load(out / "config.yaml")  # the run's model and data nodes
+    assert beside.model.name == "example" and beside.model.hidden == 16
+    assert beside.data == OmegaConf.load(example_run / "config.yaml").data
+    with st.safe_open(str(out / WEIGHTS_FILE), framework="pt") as handle:
+        meta = handle.metadata()
+    assert meta["model"] == "example"
+    config = json.loads(meta["model_config"])  # the model config the run resolved
+    assert (config["hidden"], config["latent"]) == (16, 4)
+
+    original = load_from_checkpoint(ckpt)
+    want = outputs(original, lafan)
+    for where in (out, out / WEIGHTS_FILE):  # ckpt=<dir or file>; the model from the file
+        loaded = load_from_checkpoint(where)
+        assert type(loaded) is type(original) and not loaded.training
+        for got, expected in zip(outputs(loaded, lafan), want, strict=True):
+            assert torch.equal(got, expected)
+    loaded = sa.load_aligner("example", checkpoint=out)
+    for got, expected in zip(outputs(loaded, lafan), want, strict=True):
+        assert torch.equal(got, expected)
+    for key, value in original.state_dict().items():
+        assert torch.equal(loaded.state_dict()[key], value), key
+
+
+def test_evaluate_accepts_a_weights_file(
+    example_plugin: Path,
+    example_run: Path,
+    tmp_path: Path,
+    fit_example: Callable[..., Path],
+) -> None:
+    from skelagnostic.cli.infer import load_from_checkpoint
+
+    file = export_aligner(
+        load_from_checkpoint(example_run / "checkpoints" / "last.ckpt"),
+        "safetensors",
+        tmp_path / "w",
+        "example",
+    )[0]
+    run = fit_example(tmp_path, [*FAST, f"ckpt_path={file.parent}"], task="evaluate")
+    assert any(run.glob("*.json")), sorted(p.name for p in run.iterdir())
+    # the Trainer verbs need a Lightning checkpoint (loop states, the data's statistics)
+    with pytest.raises(ConfigError, match=r"weights file .*validate needs a run's Lightning"):
+        fit_example(tmp_path, [*FAST, f"ckpt_path={file}"], task="validate")
 
 
 # ------------------------------------------------------------------------------ HuMoT

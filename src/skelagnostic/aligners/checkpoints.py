@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import inspect
+import io
 import pickle
 import re
 from collections.abc import Iterator, Mapping
@@ -24,6 +25,12 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import torch
 
+from skelagnostic.aligners.weights import (
+    is_weights,
+    named_tensor_mismatch,
+    read_weights,
+    weights_file,
+)
 from skelagnostic.core.finite import first_non_finite
 from skelagnostic.errors import SkelagnosticError
 
@@ -74,8 +81,12 @@ def read_checkpoint(
 ) -> dict[str, Any]:
     """Load a Lightning checkpoint with ``weights_only=True`` and check whose it is.
 
+    A safetensors weights file (``skelagnostic export format=safetensors``) is read
+    too, as the checkpoint it stands for (:func:`~skelagnostic.aligners.weights.read_weights`).
+
     Args:
-        path: The checkpoint file.
+        path: The checkpoint file, a ``.safetensors`` weights file or a directory
+            holding ``model.safetensors``.
         model: The aligner that will load it: a registered name or a class;
             ``None`` skips the check of the model that wrote it.
         option: How the user named the file, for the message (``ckpt_path``).
@@ -97,6 +108,28 @@ def read_checkpoint(
             floating-point value in its ``state_dict`` (the error names the first).
     """
     file = Path(path)
+    if is_weights(file):
+        checkpoint = read_weights(file, option)
+        file = weights_file(file) or file
+        _check_weights_model(file, checkpoint["skelagnostic_model"], model, option, aligners)
+    else:
+        checkpoint = _load_lightning(file, option)
+    if model is not None:
+        _check_model(file, checkpoint, model, option, aligners or {})
+    bad = first_non_finite(checkpoint["state_dict"].items())
+    if bad is not None:
+        raise CheckpointError(
+            file,
+            f"{str(file)!r} holds non-finite weights ({bad} has NaN or infinite values): the "
+            "run that wrote it diverged; use an earlier checkpoint of that run, or train again "
+            "(e.g. with a lower learning rate)",
+            option,
+        )
+    return checkpoint
+
+
+def _load_lightning(file: Path, option: str) -> dict[str, Any]:
+    """``torch.load(file, weights_only=True)``, checked to be a Lightning checkpoint."""
     shown = repr(str(file))
     if not file.is_file():
         raise CheckpointNotFoundError(file, f"no checkpoint file {shown}", option)
@@ -137,17 +170,6 @@ def read_checkpoint(
             f"{shown} is a torch file but not a Lightning checkpoint (it has no state_dict)",
             option,
         )
-    if model is not None:
-        _check_model(file, checkpoint, model, option, aligners or {})
-    bad = first_non_finite(checkpoint["state_dict"].items())
-    if bad is not None:
-        raise CheckpointError(
-            file,
-            f"{shown} holds non-finite weights ({bad} has NaN or infinite values): the run "
-            "that wrote it diverged; use an earlier checkpoint of that run, or train again "
-            "(e.g. with a lower learning rate)",
-            option,
-        )
     return checkpoint
 
 
@@ -163,7 +185,7 @@ def load_checkpoint(
 
     Args:
         module: The LightningModule class to build.
-        path: The checkpoint file.
+        path: The checkpoint file, or a safetensors weights file (or its directory).
         option: How the user named the file, for the messages.
         aligners: The registered aligners, to name the one that wrote the
             checkpoint (see :func:`read_checkpoint`).
@@ -178,9 +200,16 @@ def load_checkpoint(
     """
     checkpoint = read_checkpoint(path, module, option=option, aligners=aligners)
     saved = dict(checkpoint.get("hyper_parameters") or {})
-    with architecture_mismatch(path, saved, {**saved, **overrides}, option):
+    source: Path | io.BytesIO = Path(path)
+    named: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
+    if is_weights(path):  # Lightning reads torch files: hand it the checkpoint in memory
+        source = io.BytesIO()
+        torch.save(checkpoint, source)
+        source.seek(0)
+        named = named_tensor_mismatch(path, option)
+    with architecture_mismatch(path, saved, {**saved, **overrides}, option), named:
         return module.load_from_checkpoint(
-            Path(path), map_location="cpu", weights_only=True, **overrides
+            source, map_location="cpu", weights_only=True, **overrides
         )
 
 
@@ -319,6 +348,28 @@ def _plain(value: Any) -> bool:
 
 
 # ------------------------------------------------------------------ which model
+def _check_weights_model(
+    file: Path,
+    stored: str,
+    model: str | type | None,
+    option: str,
+    aligners: Mapping[str, type] | None,
+) -> None:
+    """Raise :class:`CheckpointError` if a weights file's ``model`` field names another aligner."""
+    if model is None:
+        return
+    if isinstance(model, str):
+        name = model
+    else:
+        name = next((n for n, c in (aligners or {}).items() if c is model), "")
+    if name and stored != name:
+        raise CheckpointError(
+            file,
+            f"{str(file)!r}: metadata field 'model' is {stored!r}, this is model={name}",
+            option,
+        )
+
+
 def _accepted(cls: type) -> tuple[set[str], bool]:
     """The keyword arguments of ``cls.__init__`` and whether it takes ``**kwargs``."""
     params = inspect.signature(cls.__init__).parameters

@@ -45,6 +45,7 @@ from skelagnostic.aligners.checkpoints import (
     check_architecture,
     read_checkpoint,
 )
+from skelagnostic.aligners.weights import is_weights
 from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.runs import (
     LOCK_FILE,
@@ -469,6 +470,11 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
         raise ConfigError(
             f"ckpt_path={ckpt!r} (checkpoint reader {external[0].name!r}) is "
             f"read by evaluate and the inference verbs, not by {task}"
+        )
+    if ckpt and task != "evaluate" and is_weights(ckpt):  # export format=safetensors
+        raise ConfigError(
+            f"ckpt_path={ckpt!r} is a weights file (export format=safetensors), read by "
+            f"evaluate and the inference verbs; {task} needs a run's Lightning checkpoint"
         )
     # an external checkpoint (a plugin's reader) is read below, once the data are built
     if external is None and ckpt and ckpt not in _CKPT_ALIASES and "://" not in str(ckpt):

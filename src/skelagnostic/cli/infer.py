@@ -95,12 +95,15 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
     """Build the aligner saved in a ``skelagnostic fit`` checkpoint, or read by a plugin.
 
     Args:
-        ckpt: The checkpoint file, or ``<scheme>:<path>`` for a checkpoint reader a
-            plugin registered (``register_checkpoint_readers``; for example
-            ``authors:<run dir>`` of the VQ-PAE plugin), which also names the model.
+        ckpt: The checkpoint file, a weights file written by ``export
+            format=safetensors`` (or its directory), or ``<scheme>:<path>`` for a
+            checkpoint reader a plugin registered (``register_checkpoint_readers``;
+            for example ``authors:<run dir>`` of the VQ-PAE plugin), which also
+            names the model.
         model: Registered aligner name; ``None`` reads ``model.name`` from the
             ``config.yaml`` of the run directory holding the checkpoint
-            (``<run>/checkpoints/<file>.ckpt`` or ``<run>/<file>.ckpt``).
+            (``<run>/checkpoints/<file>.ckpt`` or ``<run>/<file>.ckpt``), or the
+            ``model`` field of a weights file.
 
     Returns:
         The aligner in eval mode.
@@ -112,6 +115,7 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
             model or of a different architecture.
     """
     from skelagnostic.aligners.checkpoints import load_checkpoint, read_checkpoint
+    from skelagnostic.aligners.weights import is_weights, weights_model
     from skelagnostic.plugins import get_plugin_manager
 
     pm = get_plugin_manager()
@@ -119,10 +123,11 @@ def load_from_checkpoint(ckpt: str | Path, model: str | None = None) -> Aligner:
     if external is not None:
         return external
     path = Path(ckpt)
-    if not path.is_file():
+    weights = is_weights(path)  # export format=safetensors: the file names its model
+    if not weights and not path.is_file():
         read_checkpoint(path, option="ckpt")  # raises the "no checkpoint file" error
     if model is None:
-        model = _model_name_near(path)
+        model = weights_model(path, option="ckpt") if weights else _model_name_near(path)
     return load_checkpoint(
         pm.aligner(model).module, path, option="ckpt", aligners=pm.aligner_classes()
     ).eval()

@@ -27,6 +27,7 @@ from hydra.experimental.callback import Callback
 from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from skelagnostic.aligners.weights import WEIGHTS_FILE
 from skelagnostic.cli.lock import LOCK_FILE, RunDirectoryLock, RunDirectoryRefused
 from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
@@ -82,6 +83,9 @@ def find_run_dir(ckpt: str | Path) -> Path | None:
 def checkpoint_of(path: str | Path, prefer: str | None = None) -> Path:
     """``path`` itself, or for a run directory the checkpoint that stands for its model.
 
+    A directory without them that holds ``model.safetensors`` (``export
+    format=safetensors``) stands for that file.
+
     That is ``best.ckpt`` (lowest ``val/loss``) unless ``prefer`` or, without it, the
     run's own ``config.yaml`` says ``run_checkpoint: last`` (a schedule whose last
     step is the trained model, such as a cosine cycle that ends at zero). When the
@@ -118,9 +122,11 @@ def checkpoint_of(path: str | Path, prefer: str | None = None) -> Path:
         for candidate in (path / "checkpoints" / f"{name}.ckpt", path / f"{name}.ckpt"):
             if candidate.is_file():
                 return candidate
+    if (path / WEIGHTS_FILE).is_file():  # a directory of export format=safetensors
+        return path / WEIGHTS_FILE
     raise SkelagnosticError(
         f"ckpt_path: the directory {str(path)!r} holds no "
-        "checkpoints/best.ckpt or checkpoints/last.ckpt"
+        f"checkpoints/best.ckpt, checkpoints/last.ckpt or {WEIGHTS_FILE}"
     )
 
 
