@@ -49,7 +49,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from skelagnostic_vqpae.aligner import VqpaeAligner  # noqa: E402
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip  # noqa: E402
-from skelagnostic_vqpae.evaluation import rhythm_figures, touchdown_frequency  # noqa: E402
+from skelagnostic_vqpae.evaluation import rhythm_figures  # noqa: E402
 from skelagnostic_vqpae.transfer import (  # noqa: E402
     build_database,
     matching_frequency,
@@ -59,6 +59,7 @@ from skelagnostic_vqpae.transfer import (  # noqa: E402
 )
 
 from skelagnostic.aligners.checkpoints import load_checkpoint  # noqa: E402
+from skelagnostic.analysis import touchdown_frequency  # noqa: E402
 from skelagnostic.core.motion import Motion  # noqa: E402
 from skelagnostic.io import read_bvh  # noqa: E402
 

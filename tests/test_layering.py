@@ -35,7 +35,8 @@ LAYERS: dict[str, int] = {
     "skelagnostic.core": 1,
     "skelagnostic.allocator": 1,
     "skelagnostic.io": 2,
-    "skelagnostic.baselines": 3,
+    "skelagnostic.analysis": 3,
+    "skelagnostic.baselines": 4,
     "skelagnostic.representations": 4,
     "skelagnostic.procedural": 4,
     "skelagnostic.metrics": 5,
@@ -66,6 +67,7 @@ PLUGIN_PACKAGES = (
 #: Packages other projects reuse: torch (and torchmetrics) only, no training framework.
 LIGHT = (
     "skelagnostic.core",
+    "skelagnostic.analysis",
     "skelagnostic.io",
     "skelagnostic.representations",
     "skelagnostic.metrics",

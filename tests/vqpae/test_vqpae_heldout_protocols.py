@@ -14,18 +14,9 @@ import pytest
 import torch
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
 from skelagnostic_vqpae.evaluation import (
-    LOCOMOTION_SPEED,
     PROCEDURAL_SEED,
-    contact_frequency,
-    contact_lock,
-    contact_onsets,
     frequency_head_figures,
-    gait_frequency,
-    gait_phase,
-    locomotion_frames,
-    locomotion_runs,
     manifold_protocol,
-    motion_onsets,
     phase_oracle_errors,
     procedural_kind,
     rhythm_figures,
@@ -35,6 +26,17 @@ from skelagnostic_vqpae.evaluation import (
 )
 
 from skelagnostic import procedural
+from skelagnostic.analysis import (
+    LOCOMOTION_SPEED,
+    contact_frequency,
+    contact_lock,
+    contact_onsets,
+    gait_frequency,
+    gait_phase,
+    locomotion_frames,
+    locomotion_runs,
+    motion_onsets,
+)
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.evaluation import MODEL, held_out

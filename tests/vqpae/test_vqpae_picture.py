@@ -82,7 +82,7 @@ def test_picture_checks_its_arguments(clips) -> None:
 
 
 def test_swing_timeline_marks_one_event_per_stride(clips) -> None:
-    from skelagnostic_vqpae.evaluation import forward_swings, gait_frequency
+    from skelagnostic.analysis import forward_swings, gait_frequency
 
     human, dogs = clips
     fig = plot_transfer(human, dogs, events="swing")

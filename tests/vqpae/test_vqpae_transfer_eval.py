@@ -11,16 +11,10 @@ import lightning as L
 import pytest
 import torch
 from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
-from skelagnostic_vqpae.evaluation import (
-    OWN_RATE,
-    UNSCALED,
-    acceleration,
-    foot_joints,
-    gait_frequency,
-    transfer_protocol,
-)
+from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_protocol
 
 from skelagnostic import procedural
+from skelagnostic.analysis import acceleration, foot_joints, gait_frequency
 from skelagnostic.core.motion import Motion
 from skelagnostic.evaluation import MODEL, EvaluationError, held_out
 
@@ -201,7 +195,7 @@ def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
 
 def _touchdowns_by_hand(motion: Motion, max_interval: float = 2.0) -> list[float]:
     """Per frame: the mean over the feet of fps / (the stride interval holding the frame)."""
-    from skelagnostic_vqpae.evaluation import motion_onsets
+    from skelagnostic.analysis import motion_onsets
 
     onsets = [list(map(float, o)) for o in motion_onsets(motion)]
     out = []
@@ -219,8 +213,7 @@ def _touchdowns_by_hand(motion: Motion, max_interval: float = 2.0) -> list[float
 def test_touchdown_frequency_equals_the_stride_intervals_counted_by_hand(
     shared_data: Path,
 ) -> None:
-    from skelagnostic_vqpae.evaluation import contact_frequency, touchdown_frequency
-
+    from skelagnostic.analysis import contact_frequency, touchdown_frequency
     from skelagnostic.io import read_bvh
 
     walk, _ = procedural.generate("quadruped", "trot", seconds=5.0, fps=30, seed=7)
@@ -296,9 +289,10 @@ def test_known_frequencies_replace_the_rules_where_given(tiny_run) -> None:
 
 
 def test_transfer_protocol_reports_the_touchdown_bound(tiny_run, tmp_path) -> None:
-    from skelagnostic_vqpae.evaluation import rhythm_figures, touchdown_frequency
+    from skelagnostic_vqpae.evaluation import rhythm_figures
     from skelagnostic_vqpae.transfer import build_database, transfer
 
+    from skelagnostic.analysis import touchdown_frequency
     from skelagnostic.evaluation import clips_of_split
 
     model, held = tiny_run

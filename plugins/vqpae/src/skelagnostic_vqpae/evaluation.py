@@ -38,7 +38,6 @@ against the source's (:func:`gait_frequency`, :func:`contact_frequency`,
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -47,6 +46,22 @@ from typing import Any
 import numpy as np
 import torch
 
+from skelagnostic.analysis import (
+    LOCOMOTION_RUN_SECONDS,
+    LOCOMOTION_SPAN,
+    LOCOMOTION_SPEED,
+    acceleration,
+    contact_frequency,
+    contact_lock,
+    gait_frequency,
+    gait_phase,
+    locomotion_frames,
+    locomotion_runs,
+    motion_onsets,
+    onset_rate,
+    rate_in_runs,
+    touchdown_frequency,
+)
 from skelagnostic.baselines import mean_pose
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
@@ -72,9 +87,6 @@ from skelagnostic_vqpae.transfer import (
 )
 
 __all__ = [
-    "CONTACT_ENTER",
-    "LOCOMOTION_SPAN",
-    "LOCOMOTION_SPEED",
     "ORACLE_PHASE_BINS",
     "OWN_RATE",
     "PROCEDURAL_SECONDS",
@@ -83,19 +95,8 @@ __all__ = [
     "RHYTHM_TOLERANCE",
     "TRANSFER_METRICS",
     "UNSCALED",
-    "acceleration",
     "code_overlap",
-    "contact_frequency",
-    "contact_lock",
-    "contact_onsets",
-    "foot_heights",
-    "foot_joints",
-    "forward_swings",
     "frequency_head_figures",
-    "gait_frequency",
-    "gait_phase",
-    "locomotion_frames",
-    "locomotion_runs",
     "manifold_protocol",
     "phase_line",
     "phase_oracle_errors",
@@ -149,47 +150,6 @@ def code_overlap(codes: Mapping[str, torch.Tensor], num_codes: int) -> dict[str,
     }
 
 
-#: Locomotion rule of :func:`locomotion_frames`: root speed over the skeleton height, 1/s.
-LOCOMOTION_SPEED = 0.25
-
-#: Span (seconds) over which :func:`locomotion_frames` measures the root's displacement.
-LOCOMOTION_SPAN = 0.5
-
-
-def locomotion_frames(
-    motion: Motion, threshold: float = LOCOMOTION_SPEED, span: float = LOCOMOTION_SPAN
-) -> torch.Tensor:
-    """Which frames of a clip are locomotion: the character travels over the ground.
-
-    A frame is locomotion when its root's horizontal displacement over a centred
-    ``span`` (seconds), divided by that span and by the skeleton height
-    (:meth:`~skelagnostic.core.skeleton.Skeleton.height`), reaches ``threshold``
-    heights per second. The rule needs neither joint names nor clip names: a
-    standing or idling character stays below it (the MANN dog's idle clip: a median
-    of 0.006 heights/s), a walking human (1.2 m/s over 1.6 m: 0.75/s) or dog
-    (0.84 m/s over 0.43 m: 2/s) is far above it; a quarter of the height per second
-    is a slow stroll.
-
-    Args:
-        motion: A clip.
-        threshold: Smallest speed, in skeleton heights per second.
-        span: Seconds over which the displacement is measured (at least one frame).
-
-    Returns:
-        ``[F]`` boolean tensor.
-    """
-    up = motion.skeleton.up_index
-    flat = [a for a in range(3) if a != up]
-    root = motion.root_positions.double()[:, flat]
-    frames = root.shape[0]
-    half = max(1, round(span * motion.fps / 2))
-    idx = torch.arange(frames)
-    ahead, behind = (idx + half).clamp(max=frames - 1), (idx - half).clamp(min=0)
-    elapsed = (ahead - behind).double().clamp(min=1) / motion.fps
-    speed = (root[ahead] - root[behind]).norm(dim=-1) / elapsed
-    return speed >= threshold * max(motion.skeleton.height(), 1e-9)
-
-
 def _pose_errors(aligner: Any, clip: Any, emb: ClipEmbedding) -> tuple[torch.Tensor, ...]:
     """Per-frame joint error (m) of the decoded average pose and of the clip's mean pose.
 
@@ -227,46 +187,6 @@ def _pose_errors(aligner: Any, clip: Any, emb: ClipEmbedding) -> tuple[torch.Ten
 #: Phase bins of :func:`phase_oracle_errors` (1/16 cycle: finer bins change its error by
 #: under 1 % on the LaFAN1 and MANN dog clips, docs/reports/vqpae.md section 23).
 ORACLE_PHASE_BINS = 16
-
-#: Longest interval (seconds) between two touch-downs that :func:`gait_phase` spans.
-GAIT_PHASE_MAX_STRIDE = 2.0
-
-
-def gait_phase(motion: Motion, max_stride: float = GAIT_PHASE_MAX_STRIDE) -> np.ndarray:
-    """``[F]`` gait phase in cycles, ``[0, 1)``, measured from the feet alone.
-
-    The reference foot is the one with the most touch-downs (:func:`motion_onsets`);
-    between two successive touch-downs at most ``max_stride`` seconds apart the phase
-    rises linearly from 0 to 1. It is the phase a perfect phase manifold would read
-    from the stride; nothing of any model is used.
-
-    Args:
-        motion: A clip.
-        max_stride: Longest interval between touch-downs (s) that counts as a stride.
-
-    Returns:
-        The phase per frame; NaN before the first touch-down, after the last, in a
-        longer pause, and on every frame when no foot steps.
-
-    Example:
-        >>> from skelagnostic import procedural
-        >>> clip, _ = procedural.generate("quadruped", "walk", seconds=4.0, fps=30, seed=0)
-        >>> phase = gait_phase(clip)
-        >>> bool(np.nanmin(phase) >= 0 and np.nanmax(phase) < 1), bool(np.isfinite(phase).any())
-        (True, True)
-    """
-    frames = motion.num_frames
-    phase = np.full(frames, np.nan)
-    onsets = motion_onsets(motion)
-    if not onsets:
-        return phase
-    ref = max(onsets, key=len)
-    for start, end in itertools.pairwise(ref):
-        if (end - start) / motion.fps > max_stride:
-            continue
-        idx = np.arange(math.ceil(start), min(math.ceil(end), frames))
-        phase[idx] = (idx - start) / (end - start)
-    return phase
 
 
 def phase_oracle_errors(
@@ -795,285 +715,12 @@ def transition_note(halflife: float | None, frequency_tolerance: float | None) -
 OWN_RATE = "own_rate_clip"
 
 
-def foot_joints(motion: Motion, max_height: float = 0.35) -> list[int]:
-    """The end effectors that stay near the ground: the feet (or toes) of a character.
-
-    Args:
-        motion: A clip.
-        max_height: Largest mean height over the ground, as a share of the skeleton height
-            (a quadruped's height is that of its shoulders and hips, its head held level:
-            the MANN dog's ankle joints move about 11 cm above the ground, 26 % of 43 cm).
-
-    Returns:
-        Joint indices: every end effector whose mean height above the root's ground
-        projection is below ``max_height`` of the skeleton height, else the two lowest.
-    """
-    skeleton = motion.skeleton
-    ends = skeleton.end_effectors()
-    heights = GlobalPositions(frame="root").encode(motion)[:, ends, skeleton.up_index].mean(0)
-    scale = max(skeleton.height(), 1e-9)
-    feet = [j for j, h in zip(ends, heights.tolist(), strict=True) if h < max_height * scale]
-    if feet:
-        return feet
-    return [ends[k] for k in heights.argsort()[:2].tolist()]
-
-
-def gait_frequency(motion: Motion, hysteresis: float = 0.25) -> float:
-    """Gait (stride) frequency in Hz, measured from the feet alone.
-
-    Each foot (:func:`foot_joints`) swings forward once per stride: its horizontal
-    position in the character's root frame
-    (:class:`~skelagnostic.representations.GlobalPositions` ``frame="root"``),
-    projected on its main (fore-aft) direction, crosses its mean upwards once per
-    cycle. The crossings are found with hysteresis (the signal must go below
-    ``-hysteresis`` and above ``+hysteresis`` standard deviations) and timed to a
-    fraction of a frame; the frequency is the number of forward swings per
-    second between each foot's first and last swing (summed over the feet):
-    how many strides the motion makes, whatever replays or cuts it is made of.
-    Nothing of any model is used.
-
-    Args:
-        motion: A clip of a few strides.
-        hysteresis: Half-width of the dead band, in standard deviations.
-
-    Returns:
-        The frequency in Hz, or NaN when no foot completes two forward swings.
-
-    Example:
-        >>> from skelagnostic import procedural
-        >>> clip, info = procedural.generate("quadruped", "trot", seconds=6.0, fps=60, seed=3)
-        >>> abs(gait_frequency(clip) / info["frequency"] - 1) < 0.02
-        True
-    """
-    return _onset_rate(forward_swings(motion, hysteresis), motion.fps)
-
-
-def forward_swings(motion: Motion, hysteresis: float = 0.25) -> list[np.ndarray]:
-    """When each foot swings forward (fractional frames): one event per stride and foot.
-
-    The events :func:`gait_frequency` counts: each foot's (:func:`foot_joints`)
-    root-local horizontal position, projected on its main (fore-aft) direction,
-    crossing its mean upwards, found with hysteresis (below ``-hysteresis`` then
-    above ``+hysteresis`` standard deviations) and timed to a fraction of a frame.
-
-    Returns:
-        One array of crossing times (frames) per foot of :func:`foot_joints`, empty
-        for a foot that does not move.
-    """
-    feet = foot_joints(motion)
-    up = motion.skeleton.up_index
-    flat = [a for a in range(3) if a != up]
-    positions = GlobalPositions(frame="root").encode(motion).double().numpy()
-    swings = []
-    for foot in feet:
-        x = positions[:, foot, flat]
-        x = x - x.mean(0, keepdims=True)
-        _, _, axes = np.linalg.svd(x, full_matrices=False)
-        signal = x @ axes[0]
-        std = float(signal.std())
-        if std <= 1e-9:
-            swings.append(np.zeros(0))
-            continue
-        crossings, armed = [], False
-        for t in range(1, len(signal)):
-            if signal[t] < -hysteresis * std:
-                armed = True
-            elif armed and signal[t - 1] < 0 <= signal[t]:
-                crossings.append(t - 1 + signal[t - 1] / (signal[t - 1] - signal[t]))
-                armed = False
-        swings.append(np.asarray(crossings))
-    return swings
-
-
-#: Contact rule of :func:`contact_onsets`: a foot touches down when its height above its
-#: local lowest drops below this share of its local height range (and lifts off above twice
-#: that).
-CONTACT_ENTER = 0.25
-
-#: Seconds of the centred window over which :func:`contact_onsets` takes a foot's local
-#: lowest and highest level (about one stride of a walk).
-CONTACT_WINDOW = 1.0
-
-#: Smallest local height range of a foot that counts as stepping, in skeleton heights.
-CONTACT_MIN_LIFT = 0.02
-
 #: The issue's target for :data:`TRANSFER_METRICS` ``contact_rhythm_within_10pct``.
 RHYTHM_TOLERANCE = 0.10
 
 #: Shortest run of locomotion frames (s) over which :func:`rhythm_figures` compares the
 #: rhythms (:func:`locomotion_runs`): a few strides.
-RHYTHM_RUN_SECONDS = 3.0
-
-
-def locomotion_runs(
-    motion: Motion, min_seconds: float = RHYTHM_RUN_SECONDS
-) -> list[tuple[int, int]]:
-    """``(start, end)`` frames (end excluded) of each run of locomotion frames.
-
-    Runs of :func:`locomotion_frames` shorter than ``min_seconds`` are left out.
-
-    Example:
-        >>> from skelagnostic import procedural
-        >>> walk, _ = procedural.generate("biped22", "walk", seconds=4.0, fps=30, seed=1)
-        >>> locomotion_runs(walk), locomotion_runs(walk, min_seconds=5.0)
-        ([(0, 121)], [])
-    """
-    edges = np.diff(np.r_[0, locomotion_frames(motion).numpy().astype(np.int8), 0])
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [
-        (int(a), int(b))
-        for a, b in zip(starts, ends, strict=True)
-        if (b - a) / motion.fps >= min_seconds
-    ]
-
-
-def _rate_in_runs(
-    onsets: Sequence[np.ndarray], runs: Sequence[tuple[float, float]], fps: float
-) -> float:
-    """Touch-downs per second and foot inside ``runs`` (frames of the onsets' clip)."""
-    seconds = sum(b - a for a, b in runs) / fps
-    if not onsets or seconds <= 0:
-        return math.nan
-    count = sum(int(((o >= a) & (o < b)).sum()) for o in onsets for a, b in runs)
-    return count / len(onsets) / seconds
-
-
-def contact_onsets(
-    heights: np.ndarray,
-    fps: float,
-    min_lift: float,
-    enter: float = CONTACT_ENTER,
-    window: float = CONTACT_WINDOW,
-) -> list[np.ndarray]:
-    """Touch-down times (fractional frames) of each foot, from its height over time.
-
-    Each foot's height is measured from its local lowest level and scaled by its local
-    range (minimum and maximum over a centred ``window`` of seconds), so the rule is the
-    same for a human's toes and a dog's paws, needs no ground plane and follows a
-    floor that changes (steps, obstacles). A foot is in contact below ``enter`` of its
-    range and lifted above ``2 * enter`` (hysteresis), and only while its local range
-    reaches ``min_lift`` (a foot that stays put does not step); each touch-down is
-    timed to a fraction of a frame by linear interpolation at the ``enter`` level.
-
-    Args:
-        heights: ``[F, N]`` height of N feet.
-        fps: Frame rate.
-        min_lift: Smallest local range of a stepping foot, in the units of ``heights``.
-        enter: Contact level, share of the local range.
-        window: Seconds of the centred window of the local range.
-
-    Returns:
-        One array of onset times (frames) per foot.
-
-    Example:
-        >>> t = np.arange(400) / 100.0
-        >>> feet = np.stack([np.sin(np.pi * 1.5 * t) ** 2], 1)  # one foot, 1.5 steps/s
-        >>> onsets = contact_onsets(feet, fps=100.0, min_lift=0.1)[0]
-        >>> np.round(np.diff(onsets) / 100.0, 2).tolist()
-        [0.67, 0.67, 0.67, 0.67, 0.67]
-    """
-    from numpy.lib.stride_tricks import sliding_window_view
-
-    half = max(1, round(window * fps / 2))
-    out = []
-    for h in np.asarray(heights, dtype=np.float64).T:
-        padded = sliding_window_view(np.pad(h, half, mode="edge"), 2 * half + 1)
-        low, span = padded.min(1), np.ptp(padded, axis=1)
-        stepping = span >= min_lift
-        level = np.where(stepping, (h - low) / np.maximum(span, 1e-12), 0.0)
-        onsets, lifted = [], False
-        for t in range(1, len(level)):
-            if stepping[t] and level[t] > 2 * enter:
-                lifted = True
-            elif lifted and level[t - 1] >= enter > level[t]:
-                onsets.append(t - 1 + (level[t - 1] - enter) / (level[t - 1] - level[t]))
-                lifted = False
-        out.append(np.asarray(onsets))
-    return out
-
-
-def _onset_rate(onsets: Sequence[np.ndarray], fps: float) -> float:
-    """Events per second and foot: intervals between each foot's first and last event.
-
-    Counts the touch-downs of :func:`contact_frequency` and the forward swings of
-    :func:`gait_frequency` alike; NaN when no foot has two events.
-    """
-    intervals = sum(max(len(o) - 1, 0) for o in onsets)
-    span = sum(float(o[-1] - o[0]) for o in onsets if len(o) >= 2)
-    return float(fps * intervals / span) if intervals and span > 0 else math.nan
-
-
-def foot_heights(motion: Motion) -> np.ndarray:
-    """``[F, N]`` heights (along the up axis) of the feet (:func:`foot_joints`)."""
-    feet = foot_joints(motion)
-    up = motion.skeleton.up_index
-    return motion.global_positions()[:, feet, up].double().numpy()
-
-
-def motion_onsets(motion: Motion) -> list[np.ndarray]:
-    """Touch-down times (frames) of a clip's feet (:func:`contact_onsets`).
-
-    A stepping foot lifts at least :data:`CONTACT_MIN_LIFT` of the skeleton height.
-    """
-    min_lift = CONTACT_MIN_LIFT * max(motion.skeleton.height(), 1e-9)
-    return contact_onsets(foot_heights(motion), motion.fps, min_lift)
-
-
-def contact_frequency(motion: Motion) -> float:
-    """Foot-contact frequency in Hz: touch-downs per second of each foot.
-
-    :func:`motion_onsets` of the feet (:func:`foot_joints`), counted like
-    :func:`gait_frequency` counts swings (intervals between each foot's first and
-    last touch-down, summed over the feet). On captured steady gaits each foot
-    touches down once per stride, so this is the stride frequency measured from the
-    feet's heights instead of their fore-aft swing (within a few % on the LaFAN1
-    walks and MANN dog gaits of the tests). The procedural generator's feet are not
-    grounded: they dip twice per stride, so on its clips this reads up to twice the
-    stride frequency. Nothing of any model is used.
-
-    Returns:
-        Hz, or NaN when no foot touches down twice.
-    """
-    return _onset_rate(motion_onsets(motion), motion.fps)
-
-
-#: Longest interval (s) between a foot's consecutive touch-downs that
-#: :func:`touchdown_frequency` reads as one stride (slower than 0.5 Hz is no gait).
-TOUCHDOWN_MAX_INTERVAL = 2.0
-
-
-def touchdown_frequency(
-    motion: Motion, max_interval: float = TOUCHDOWN_MAX_INTERVAL
-) -> torch.Tensor:
-    """Per-frame stride frequency from the feet's touch-downs (Hz; NaN where none steps).
-
-    For every foot (:func:`motion_onsets`), a frame between two consecutive
-    touch-downs at most ``max_interval`` seconds apart gets ``fps / interval``;
-    a frame covered by several feet gets their mean. Nothing of any model is used:
-    :func:`touchdown_bound` times a transfer with these frequencies.
-
-    Returns:
-        ``[F]`` float32, NaN on frames no foot's stride covers.
-
-    Example:
-        >>> from skelagnostic import procedural
-        >>> dog, _ = procedural.generate("quadruped", "walk", seconds=6.0, fps=30, seed=3)
-        >>> f = touchdown_frequency(dog)  # per frame; the clip's rate is contact_frequency
-        >>> bool(abs(float(f.nanmean()) / contact_frequency(dog) - 1) < 0.05)
-        True
-    """
-    frames = motion.num_frames
-    total, count = np.zeros(frames), np.zeros(frames)
-    for onsets in motion_onsets(motion):
-        for a, b in itertools.pairwise(onsets.tolist()):
-            if not 0 < (b - a) / motion.fps <= max_interval:
-                continue
-            lo, hi = math.ceil(a), min(math.floor(b), frames - 1)
-            total[lo : hi + 1] += motion.fps / (b - a)
-            count[lo : hi + 1] += 1
-    out = np.full(frames, np.nan)
-    np.divide(total, count, out=out, where=count > 0)
-    return torch.from_numpy(out).float()
+RHYTHM_RUN_SECONDS = LOCOMOTION_RUN_SECONDS
 
 
 def frequency_head_figures(
@@ -1149,47 +796,6 @@ def frequency_head_figures(
     return {"tolerance_pct": 100 * tolerance, "characters": characters, "per_clip": per_clip}
 
 
-def contact_lock(source_onsets: Sequence[np.ndarray], output_onsets: Sequence[np.ndarray]) -> float:
-    """How steadily the output's touch-downs keep their place in the source's stride cycle.
-
-    The source's cycle is read from its first foot with at least two onsets: cycle
-    ``k`` runs from its ``k``-th to its ``k+1``-th touch-down, so the source's phase at
-    any time between them is ``(t - o_k) / (o_{k+1} - o_k)`` (the source's own tempo,
-    even when it changes). Each output foot's touch-downs inside that span get a
-    source phase; the lock of the foot is the length of the mean of
-    ``exp(2 pi i phase)`` (1: every touch-down of that foot at the same point of the
-    source's cycle, one per cycle or a whole multiple; about 0: no relation). The
-    result is the mean over the output feet with at least two such touch-downs. It
-    does not need to know which output foot matches which source foot, nor the lag.
-
-    Args:
-        source_onsets: Onset times (frames) per source foot (:func:`contact_onsets`).
-        output_onsets: The same for the output, on the same time axis.
-
-    Returns:
-        A value in [0, 1], NaN when either side has too few touch-downs.
-
-    Example:
-        >>> src = [np.array([0.0, 10.0, 20.0, 30.0])]
-        >>> round(contact_lock(src, [np.array([3.0, 13.0, 23.0])]), 6)  # lag 0.3 cycle
-        1.0
-        >>> round(contact_lock(src, [np.array([3.0, 18.0, 28.0])]), 3)  # one off by half
-        0.333
-    """
-    reference = next((np.sort(o) for o in source_onsets if len(o) >= 2), None)
-    if reference is None:
-        return math.nan
-    locks = []
-    for onsets in output_onsets:
-        inside = onsets[(onsets >= reference[0]) & (onsets < reference[-1])]
-        if len(inside) < 2:
-            continue
-        k = np.searchsorted(reference, inside, side="right") - 1
-        phase = (inside - reference[k]) / (reference[k + 1] - reference[k])
-        locks.append(float(np.abs(np.exp(2j * math.pi * phase).mean())))
-    return float(np.mean(locks)) if locks else math.nan
-
-
 def rhythm_figures(source: Motion, output: Motion) -> dict[str, float]:
     """Foot-contact timing of a transfer's output against its source (same time axis).
 
@@ -1215,14 +821,14 @@ def rhythm_figures(source: Motion, output: Motion) -> dict[str, float]:
         one).
     """
     src_onsets, out_onsets = motion_onsets(source), motion_onsets(output)
-    source_hz = _onset_rate(src_onsets, source.fps)
-    contact_hz = _onset_rate(out_onsets, output.fps)
+    source_hz = onset_rate(src_onsets, source.fps)
+    contact_hz = onset_rate(out_onsets, output.fps)
     error = abs(contact_hz / source_hz - 1) if source_hz > 0 else math.nan
     scale = output.fps / source.fps  # the output's frames on the source's time axis
     span = min(source.num_frames, output.num_frames / scale)  # the time both cover
     runs = [(a, min(b, span)) for a, b in locomotion_runs(source) if a < span]
-    src_run = _rate_in_runs(src_onsets, runs, source.fps)
-    out_run = _rate_in_runs(out_onsets, [(a * scale, b * scale) for a, b in runs], output.fps)
+    src_run = rate_in_runs(src_onsets, runs, source.fps)
+    out_run = rate_in_runs(out_onsets, [(a * scale, b * scale) for a, b in runs], output.fps)
     run_error = abs(out_run / src_run - 1) if src_run > 0 else math.nan
 
     def within(e: float) -> float:
@@ -1236,25 +842,6 @@ def rhythm_figures(source: Motion, output: Motion) -> dict[str, float]:
         "locomotion_rhythm_error_pct": 100 * run_error,
         "locomotion_rhythm_within_10pct": within(run_error),
     }
-
-
-def acceleration(motion: Motion) -> tuple[float, float]:
-    """Mean and largest per-frame joint acceleration over the skeleton height, 1/s^2.
-
-    The second difference of the global joint positions, times ``fps^2``; its norm
-    averaged over the joints of each frame, divided by the skeleton height; then the
-    mean and the maximum over the frames (lower is smoother; a cut between replayed
-    windows shows as a large maximum).
-
-    Returns:
-        ``(mean, max)``, NaN for clips shorter than 3 frames.
-    """
-    pos = motion.global_positions().double()
-    if len(pos) < 3:
-        return math.nan, math.nan
-    per_frame = (pos[2:] - 2 * pos[1:-1] + pos[:-2]).norm(dim=-1).mean(-1) * motion.fps**2
-    per_frame = per_frame / max(motion.skeleton.height(), 1e-9)
-    return float(per_frame.mean()), float(per_frame.max())
 
 
 def _source_embeddings(

@@ -7,7 +7,7 @@ baselines of :func:`~skelagnostic_vqpae.evaluation.transfer_rows`):
 * a grid of side views, one column per motion and one row per instant, every
   target motion at one scale (the same axis limits), the source at its own;
 * a foot-contact timeline per target motion: the source's touch-downs drawn over
-  the target's (:func:`~skelagnostic_vqpae.evaluation.motion_onsets`, the rule the
+  the target's (:func:`~skelagnostic.analysis.motion_onsets`, the rule the
   rhythm figures use), so whether the target steps in the source's rhythm shows at
   a glance, with the touch-down rates of both.
 
@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from skelagnostic.analysis import foot_joints, forward_swings, motion_onsets, onset_rate
 from skelagnostic.core.motion import Motion
 from skelagnostic.viz.render import BODY_GROUP_COLORS
 from skelagnostic.viz.stick import RenderError, StickFigure
@@ -130,9 +131,7 @@ EVENTS = {
 
 
 def _events(motion: Motion, events: str) -> list[np.ndarray]:
-    """Per foot (:func:`~skelagnostic_vqpae.evaluation.foot_joints`), event times in frames."""
-    from skelagnostic_vqpae.evaluation import forward_swings, motion_onsets
-
+    """Per foot (:func:`~skelagnostic.analysis.foot_joints`), event times in frames."""
     return motion_onsets(motion) if events == "touchdown" else forward_swings(motion)
 
 
@@ -162,9 +161,9 @@ def plot_transfer(
         source_label: The source character's name on the timelines' lanes.
         target_label: The target character's name on the timelines' lanes.
         events: What the timelines mark per foot (:data:`EVENTS`): ``"touchdown"``
-            (:func:`~skelagnostic_vqpae.evaluation.motion_onsets`, the rule of the
+            (:func:`~skelagnostic.analysis.motion_onsets`, the rule of the
             rhythm figures) or ``"swing"``
-            (:func:`~skelagnostic_vqpae.evaluation.forward_swings`, the events of the
+            (:func:`~skelagnostic.analysis.forward_swings`, the events of the
             gait frequency; for characters whose feet touch down more than once per
             stride, such as the procedural generator's).
         out: Optional image path (``.png``).
@@ -185,8 +184,6 @@ def plot_transfer(
         5
     """
     import textwrap
-
-    from skelagnostic_vqpae.evaluation import _onset_rate, foot_joints
 
     if not outputs:
         raise RenderError("outputs: no transferred motion to draw")
@@ -257,7 +254,7 @@ def plot_transfer(
             if r == rows - 1 and c in (0, 1):
                 _scale_bar(ax, xlim, ylim)
     source_events = _events(source, events)
-    source_rate = _onset_rate(source_events, source.fps)
+    source_rate = onset_rate(source_events, source.fps)
     source_feet = [source.skeleton.joint_names[j] for j in foot_joints(source)]
     timeline = fig.add_gridspec(
         len(outputs),
@@ -290,7 +287,7 @@ def plot_transfer(
         ax.set_ylim(-0.7, len(lanes) - 0.3)
         for t in instants:
             ax.axvspan(t - 0.02, t + 0.02, color="#ffca28", alpha=0.6, zorder=0)
-        rate = _onset_rate(marks, motion.fps)
+        rate = onset_rate(marks, motion.fps)
         error = abs(rate / source_rate - 1) * 100 if source_rate > 0 else math.nan
         ax.set_title(
             label.replace("\n", " "), loc="left", fontsize=12, color=color, fontweight="bold"
