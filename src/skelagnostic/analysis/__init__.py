@@ -3,18 +3,29 @@
 Everything here is measured on the motion itself (no model), with thresholds relative
 to the skeleton's height, so the same call serves a human, a dog or a procedural
 character. Importing this package needs only numpy and torch (no Lightning, Hydra or
-pluggy). Modules: :mod:`~skelagnostic.analysis.touchdowns`
+pluggy). Modules: :mod:`~skelagnostic.analysis.contacts` (per-frame foot contacts
+through the skeleton's body groups), :mod:`~skelagnostic.analysis.touchdowns`
 (touch-down times of the feet), :mod:`~skelagnostic.analysis.gait` (stride and
 contact frequency, gait phase, phase locking), :mod:`~skelagnostic.analysis.locomotion`
 (which frames travel) and :mod:`~skelagnostic.analysis.smoothness` (joint acceleration).
 
     >>> from skelagnostic import procedural
-    >>> from skelagnostic.analysis import gait_frequency
+    >>> from skelagnostic.analysis import foot_contacts, gait_frequency
     >>> dog, info = procedural.generate("quadruped", "trot", seconds=4.0, fps=30, seed=3)
+    >>> contacts, feet = foot_contacts(dog)
+    >>> tuple(contacts.shape), len(feet)
+    ((121, 4), 4)
     >>> abs(gait_frequency(dog) / info["frequency"] - 1) < 0.05
     True
 """
 
+from skelagnostic.analysis.contacts import (
+    CONTACT_HEIGHT,
+    CONTACT_SPEED,
+    FootContacts,
+    contact_joints,
+    foot_contacts,
+)
 from skelagnostic.analysis.gait import (
     GAIT_PHASE_MAX_STRIDE,
     TOUCHDOWN_MAX_INTERVAL,
@@ -47,17 +58,22 @@ from skelagnostic.analysis.touchdowns import (
 
 __all__ = [
     "CONTACT_ENTER",
+    "CONTACT_HEIGHT",
     "CONTACT_MIN_LIFT",
+    "CONTACT_SPEED",
     "CONTACT_WINDOW",
     "GAIT_PHASE_MAX_STRIDE",
     "LOCOMOTION_RUN_SECONDS",
     "LOCOMOTION_SPAN",
     "LOCOMOTION_SPEED",
     "TOUCHDOWN_MAX_INTERVAL",
+    "FootContacts",
     "acceleration",
     "contact_frequency",
+    "contact_joints",
     "contact_lock",
     "contact_onsets",
+    "foot_contacts",
     "foot_heights",
     "foot_joints",
     "forward_swings",
