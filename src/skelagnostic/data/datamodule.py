@@ -7,7 +7,7 @@ import hashlib
 import inspect
 import math
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -735,11 +735,18 @@ class MotionDataModule(L.LightningDataModule):
                 ds,
                 batch_size=self.batch_size,
                 num_workers=self.num_workers,
-                collate_fn=_Tagged(name),
+                collate_fn=self.predict_collate(name),
             )
             for name, ds in self.datasets[split].items()
         ]
         return CombinedLoader(loaders, mode="sequential")
+
+    def predict_collate(self, name: str) -> Callable[[Any], dict[str, Any]]:
+        """Collate function of dataset ``name``'s predict loader: ``{name: collated batch}``.
+
+        A data module whose datasets return stacked batches overrides it.
+        """
+        return _Tagged(name)
 
     # -------------------------------------------------------- checkpoint state
     def state_dict(self) -> dict[str, Any]:

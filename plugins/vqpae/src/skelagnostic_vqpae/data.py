@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -510,21 +510,9 @@ class VqpaeDataModule(MotionDataModule):
             loader.collate_fn = _passthrough
         return combined
 
-    def predict_dataloader(self) -> Any:
-        """The test windows (else validation), dataset after dataset, as ``{name: batch}``."""
-        from lightning.pytorch.utilities import CombinedLoader
-
-        split = "test" if self.datasets["test"] else "val"
-        loaders = [
-            DataLoader(
-                ds,
-                batch_size=self.batch_size,
-                num_workers=self.num_workers,
-                collate_fn=_Tagged(name),
-            )
-            for name, ds in self.datasets[split].items()
-        ]
-        return CombinedLoader(loaders, mode="sequential")
+    def predict_collate(self, name: str) -> Callable[[Any], dict[str, Any]]:
+        """The predict loaders' collate: windows come stacked (``__getitems__``), only tagged."""
+        return _Tagged(name)
 
     def state_dict(self) -> dict[str, Any]:
         """Velocity and pose normalisation statistics per dataset."""
