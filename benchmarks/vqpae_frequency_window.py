@@ -49,7 +49,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from skelagnostic_vqpae.aligner import VqpaeAligner  # noqa: E402
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip  # noqa: E402
-from skelagnostic_vqpae.evaluation import rhythm_figures  # noqa: E402
+from skelagnostic_vqpae.protocols.rhythm import rhythm_figures  # noqa: E402
 from skelagnostic_vqpae.transfer import (  # noqa: E402
     build_database,
     matching_frequency,

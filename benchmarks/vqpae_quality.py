@@ -41,7 +41,8 @@ import torch  # noqa: E402
 from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner  # noqa: E402
 from skelagnostic_vqpae.data import MultiSource, VqpaeDataModule  # noqa: E402
 from skelagnostic_vqpae.embed import embed_clip  # noqa: E402
-from skelagnostic_vqpae.evaluation import code_overlap, phase_line  # noqa: E402
+from skelagnostic_vqpae.losses import pivot_mpjpe  # noqa: E402
+from skelagnostic_vqpae.protocols.tables import code_overlap, phase_line  # noqa: E402
 
 from skelagnostic import procedural  # noqa: E402
 from skelagnostic.aligners import quiet_trainer  # noqa: E402
@@ -264,7 +265,7 @@ def pose_mpjpe_cm(model: VqpaeAligner, dm: VqpaeDataModule) -> dict[str, float]:
             for start in range(0, len(dataset), 256):  # the windows gather batches in one go
                 b = dataset.gather(range(start, min(start + 256, len(dataset))))
                 _, params = model.forward_dataset(k, b["features"])
-                err = model._pivot_mpjpe(k, params, b["poses"])
+                err = pivot_mpjpe(model.characters[k], params, b["poses"])
                 sums[name] += float(err) * len(b["features"])
                 counts[name] += len(b["features"])
     return {name: round(100.0 * sums[name] / max(counts[name], 1), 3) for name in sums}

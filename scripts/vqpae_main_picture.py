@@ -18,7 +18,7 @@ from pathlib import Path
 
 import torch
 from PIL import Image
-from skelagnostic_vqpae.fit_outputs import SUMMARY_PLANS, fit_summary
+from skelagnostic_vqpae.protocols.summary import SUMMARY_PLANS, fit_summary
 
 from skelagnostic.errors import SkelagnosticError
 

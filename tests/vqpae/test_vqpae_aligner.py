@@ -9,6 +9,9 @@ import pytest
 import torch
 from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
 from skelagnostic_vqpae.data import VqpaeDataModule
+from skelagnostic_vqpae.embed import embed_datasets
+from skelagnostic_vqpae.losses import phase_rate_loss
+from skelagnostic_vqpae.model import PhaseParameters
 
 from skelagnostic import procedural
 from skelagnostic.errors import SkelagnosticError
@@ -55,7 +58,7 @@ def test_fit_writes_metrics_and_the_manifold_pictures(trained: dict) -> None:
     assert 0.0 < train["usage"] <= 1.0
     # the written overlap is the metric of the validation clips' codes, recomputed here
     model: VqpaeAligner = trained["model"]
-    embeddings = model.embed_datasets(trained["dm"].datasets["val"], FPS)
+    embeddings = embed_datasets(model, trained["dm"].datasets["val"], FPS)
     for name in names:
         codes = torch.cat([e.code for e in embeddings[name]])
         assert metrics["codes_used"][name] == int(codes.unique().numel())
@@ -208,7 +211,13 @@ def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
     k = model.dataset_names.index("procedural/quadruped")
     model.train()
     _, params = model.forward_dataset(k, batch["features"])
-    loss = model._phase_rate_loss(k, "procedural/quadruped", batch, params)
+
+    def rate_loss(p: PhaseParameters) -> torch.Tensor:
+        """The aligner's phase-rate loss of this batch (its current ``phase_rate_grad``)."""
+        pae, mode = model.characters[k].pae, model.hparams.phase_rate_grad
+        return phase_rate_loss(pae, "procedural/quadruped", batch, p, mode)
+
+    loss = rate_loss(params)
     # the same figure computed here from the two windows' phases and frequencies
     _, partner = model.forward_dataset(k, batch["shifted"])
     p1, p2 = params.phase.detach().double().numpy(), partner.phase.detach().double().numpy()
@@ -228,7 +237,7 @@ def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
         model.hparams["phase_rate_grad"] = mode
         model.zero_grad()
         _, fresh = model.forward_dataset(k, batch["features"])
-        model._phase_rate_loss(k, "procedural/quadruped", batch, fresh).backward()
+        rate_loss(fresh).backward()
         return tuple(
             float(0 if w.grad is None else w.grad.abs().sum())
             for w in (
@@ -251,7 +260,7 @@ def test_phase_rate_loss_ties_the_frequency_to_the_phase_advance(
         model.hparams["phase_rate_grad"] = mode
         with torch.no_grad():
             _, fresh = model.forward_dataset(k, batch["features"])
-            values.append(float(model._phase_rate_loss(k, "procedural/quadruped", batch, fresh)))
+            values.append(float(rate_loss(fresh)))
     assert values == pytest.approx([values[0]] * 3, rel=1e-5)
 
 

@@ -8,7 +8,8 @@ import lightning as L
 import pytest
 import torch
 from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
-from skelagnostic_vqpae.evaluation import code_overlap, manifold_protocol, phase_line
+from skelagnostic_vqpae.protocols.manifold import manifold_protocol
+from skelagnostic_vqpae.protocols.tables import code_overlap, phase_line
 
 from skelagnostic.evaluation import held_out
 

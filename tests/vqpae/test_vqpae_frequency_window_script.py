@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 from skelagnostic_vqpae.embed import embed_clip
-from skelagnostic_vqpae.evaluation import rhythm_figures
+from skelagnostic_vqpae.protocols.rhythm import rhythm_figures
 from skelagnostic_vqpae.transfer import build_database, phase_rate, transfer
 
 from script_loader import load_script

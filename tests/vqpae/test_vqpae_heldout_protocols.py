@@ -13,17 +13,11 @@ import numpy as np
 import pytest
 import torch
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
-from skelagnostic_vqpae.evaluation import (
-    PROCEDURAL_SEED,
-    frequency_head_figures,
-    manifold_protocol,
-    phase_oracle_errors,
-    procedural_kind,
-    rhythm_figures,
-    table1,
-    table2,
-    transfer_protocol,
-)
+from skelagnostic_vqpae.protocols.manifold import manifold_protocol
+from skelagnostic_vqpae.protocols.procedural import PROCEDURAL_SEED, procedural_kind
+from skelagnostic_vqpae.protocols.rhythm import frequency_head_figures, rhythm_figures
+from skelagnostic_vqpae.protocols.tables import phase_oracle_errors, table1, table2
+from skelagnostic_vqpae.protocols.transfer import transfer_protocol
 
 from skelagnostic import procedural
 from skelagnostic.analysis import (

@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 import pytest
 import torch
-from skelagnostic_vqpae import evaluation
 from skelagnostic_vqpae.embed import embed_clip
-from skelagnostic_vqpae.evaluation import manifold_protocol
+from skelagnostic_vqpae.protocols import manifold as evaluation
+from skelagnostic_vqpae.protocols.manifold import manifold_protocol
 
 
 def _unwrap(phase: np.ndarray) -> np.ndarray:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from skelagnostic_vqpae.fit_outputs import shared_codes_sentence
 from skelagnostic_vqpae.picture import plot_transfer, side_view
+from skelagnostic_vqpae.protocols.summary import shared_codes_sentence
 
 from skelagnostic import procedural
 from skelagnostic.viz import StickFigure

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from skelagnostic_vqpae.fit_outputs import SUMMARY_PLANS
+from skelagnostic_vqpae.protocols.summary import SUMMARY_PLANS
 
 from skelagnostic.callbacks import FitSummary
 
@@ -77,7 +77,7 @@ def test_full_summary_transfers_more_and_animates(
 def _check_animation(gif: Path, motions: list[Any], options: dict[str, Any]) -> None:
     """The transfer GIF: large panels, named as the picture names them, the dogs at one scale."""
     from PIL import Image
-    from skelagnostic_vqpae.fit_outputs import RENDER_PANEL
+    from skelagnostic_vqpae.protocols.summary import RENDER_PANEL
 
     from skelagnostic.viz import render_frames
 
@@ -112,7 +112,7 @@ def test_table2_summary_on_known_codes() -> None:
     from types import SimpleNamespace
 
     import torch
-    from skelagnostic_vqpae.fit_outputs import table2_summary
+    from skelagnostic_vqpae.protocols.summary import table2_summary
 
     def clips(*codes: list[int]) -> list[Any]:
         return [SimpleNamespace(code=torch.tensor(c)) for c in codes]

@@ -11,7 +11,7 @@ import lightning as L
 import pytest
 import torch
 from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
-from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_protocol
+from skelagnostic_vqpae.protocols.transfer import OWN_RATE, UNSCALED, transfer_protocol
 
 from skelagnostic import procedural
 from skelagnostic.analysis import acceleration, foot_joints, gait_frequency
@@ -289,7 +289,7 @@ def test_known_frequencies_replace_the_rules_where_given(tiny_run) -> None:
 
 
 def test_transfer_protocol_reports_the_touchdown_bound(tiny_run, tmp_path) -> None:
-    from skelagnostic_vqpae.evaluation import rhythm_figures
+    from skelagnostic_vqpae.protocols.rhythm import rhythm_figures
     from skelagnostic_vqpae.transfer import build_database, transfer
 
     from skelagnostic.analysis import touchdown_frequency

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import pytest
 import torch
-from skelagnostic_vqpae import evaluation
+from skelagnostic_vqpae.protocols import transfer as evaluation
 
 from numpy_reference import global_pose
 from skelagnostic.evaluation import mean_rows

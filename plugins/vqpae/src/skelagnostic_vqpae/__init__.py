@@ -6,8 +6,10 @@ Registered as ``model=vqpae`` through the ``skelagnostic`` entry-point group
 codebook), :mod:`~skelagnostic_vqpae.data` (frame windows, data module),
 :mod:`~skelagnostic_vqpae.aligner` (training and inference),
 :mod:`~skelagnostic_vqpae.embed` (clip embeddings, retrieval),
-:mod:`~skelagnostic_vqpae.transfer` (frequency-scaled motion matching) and
-:mod:`~skelagnostic_vqpae.authors` (runs of the authors' trainer, loaded).
+:mod:`~skelagnostic_vqpae.transfer` (frequency-scaled motion matching),
+:mod:`~skelagnostic_vqpae.authors` (runs of the authors' trainer, loaded) and
+:mod:`~skelagnostic_vqpae.protocols` (evaluation protocols and the fit summary).
+Floors import downwards only (model < embed < transfer < protocols < plugin).
 Imports are lazy: ``import skelagnostic_vqpae`` loads no model code until one of
 the names below is used.
 """

@@ -34,28 +34,38 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-import numpy as np
 import torch
 from lightning.pytorch.utilities import rank_zero_info
 from torch import Tensor, nn
 
-from skelagnostic.aligners import Aligner, Latent, steps_per_epoch
+from skelagnostic.aligners import Aligner, Latent
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.export import ExportGraph, Method
+from skelagnostic.export import ExportGraph
 from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.metrics import ManifoldOverlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
+from skelagnostic_vqpae.graphs import export_graphs
+from skelagnostic_vqpae.lending import LendsWork
+from skelagnostic_vqpae.losses import phase_rate_loss, pivot_mpjpe
 from skelagnostic_vqpae.model import (
-    VQPAE,
-    AveragePoseMLP,
+    Character,
     PhaseParameters,
-    phase_advance_rate,
     phase_manifold,
 )
+from skelagnostic_vqpae.options import (
+    PHASE_RATE_GRADS,
+    PLUS_OPTIONS,
+    POSE_MODES,
+    PREVIOUS_DEFAULTS,
+    SCHEDULES,
+    DatasetSpec,
+)
+from skelagnostic_vqpae.predictions import write_embeddings
+from skelagnostic_vqpae.schedule import configure_optimizers
 
 if TYPE_CHECKING:
     import lightning as L
@@ -64,102 +74,8 @@ if TYPE_CHECKING:
 
 __all__ = ["PLUS_OPTIONS", "PREVIOUS_DEFAULTS", "SCHEDULES", "DatasetSpec", "VqpaeAligner"]
 
-POSE_MODES = ("none", "detached", "joint")
-#: What the phase-rate loss trains (``model.phase_rate_grad``).
-PHASE_RATE_GRADS = ("network", "timing", "head")
 
-#: Learning-rate schedules (``model.schedule``).
-SCHEDULES = ("authors", "cosine")
-
-#: skelagnostic's changes to the authors' training, enabled together by
-#: ``experiment=vqpae_plus`` (conf/experiment/vqpae_plus.yaml holds the same values; a test
-#: checks it). docs/reports/vqpae.md lists each with the authors' value and the reason.
-PLUS_OPTIONS: dict[str, Any] = {
-    "freq_layers": 5,
-    "decoder_centering": False,
-    "spectrum": "normalized",
-    "padding_mode": "replicate",
-    "frequency_head": "centroid_residual",
-    "phase_kernel": 1,
-    "freq_hidden_elu": False,
-    "center_windows": True,
-    "lambda_phase_rate": 1.0,
-    "reinit_squared_distance": False,
-    "pose_mlp": "detached",
-}
-
-#: The defaults before they became the authors' (with ``schedule="cosine"``): what a
-#: checkpoint lacking one of these hyperparameters was trained with, and what the presets
-#: written for them (``vqpae_main``, ``vqpae_human_dog``, ``vqpae_stylized``) still use.
-PREVIOUS_DEFAULTS: dict[str, Any] = {**PLUS_OPTIONS, "frequency_head": "mlp", "schedule": "cosine"}
-
-#: Per dataset: ``{"channels", "window", "fps", "skeleton" (Skeleton.to_dict())}``; a run
-#: of the authors' trainer (:mod:`~skelagnostic_vqpae.authors`) has no skeleton unless one
-#: is given, and with its phase decoders ``"pose_channels"`` (their output size) and
-#: ``"pose_features"`` (their feature names).
-DatasetSpec = Mapping[str, Any]
-
-
-#: Per-pivot fields of an embedding, in :class:`~skelagnostic_vqpae.embed.ClipEmbedding` order.
-EMBEDDING_FIELDS = ("phase", "frequency", "code", "amplitude", "manifold")
-
-
-def _clips_in_frame_order(cat: Mapping[str, Tensor]) -> list[tuple[int, Tensor]]:
-    """``(clip index, indices of its windows sorted by pivot frame)`` for every clip in ``cat``."""
-    out = []
-    for c in cat["clip"].unique().tolist():
-        sel = (cat["clip"] == c).nonzero().squeeze(1)
-        out.append((c, sel[cat["pivot"][sel].argsort()]))
-    return out
-
-
-class _Character(nn.Module):
-    """One dataset's VQ-PAE, average-pose MLP and normalisation statistics."""
-
-    def __init__(
-        self, spec: DatasetSpec, latent: int, pose_layers: int, **pae_options: Any
-    ) -> None:
-        super().__init__()
-        channels, window = int(spec["channels"]), int(spec["window"])
-        pose = int(spec.get("pose_channels") or channels)  # an authors' phase decoder: more
-        self.pae = VQPAE(channels, window, float(spec["fps"]), latent, **pae_options)
-        self.pose = AveragePoseMLP(latent, pose, pose_layers)
-        self.register_buffer("input_mean", torch.zeros(channels))
-        self.register_buffer("input_std", torch.ones(channels))
-        self.register_buffer("pose_mean", torch.zeros(pose))
-        self.register_buffer("pose_std", torch.ones(pose))
-        self.register_buffer("pose_fitted", torch.tensor(False))
-
-
-class _PivotEncoder(nn.Module):
-    """One character's VQ-PAE encoder as a graph: normalised windows -> pivot embedding.
-
-    The same computation as :meth:`VqpaeAligner.forward_dataset` up to the
-    manifold point at the pivot, where ``Phi = phi + f * 0 = phi``.
-    """
-
-    def __init__(self, pae: VQPAE, codebook: SharedCodebook) -> None:
-        super().__init__()
-        self.pae = pae
-        self.register_buffer("codebook", codebook.weight.detach().clone())
-
-    def forward(self, windows: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-        """``[B, C, T]`` -> phase ``[B]``, frequency ``[B]``, code ``[B]``, amplitude, point."""
-        latent = self.pae.encoder(windows)
-        phase, frequency, _ = self.pae.timing(latent)
-        raw = self.pae.amp_mlp(latent.mean(dim=-1))
-        d2 = (
-            raw.square().sum(1, keepdim=True)
-            - 2 * raw @ self.codebook.t()
-            + self.codebook.square().sum(1)
-        )
-        code = d2.argmin(dim=1)
-        amplitude = self.codebook[code]
-        point = phase_manifold(amplitude, phase.unsqueeze(-1))[..., 0]
-        return phase, frequency, code, amplitude, point
-
-
-class VqpaeAligner(Aligner):
+class VqpaeAligner(Aligner, LendsWork):
     """VQ-PAEs of several characters sharing one amplitude codebook (WalkTheDog).
 
     The networks are built from the data module in :meth:`setup` (or from
@@ -308,7 +224,7 @@ class VqpaeAligner(Aligner):
         hp = self.hparams
         self.dataset_names = list(datasets)
         self.characters = nn.ModuleList(
-            _Character(
+            Character(
                 spec,
                 hp.latent,
                 hp.pose_layers,
@@ -418,7 +334,9 @@ class VqpaeAligner(Aligner):
             logs[f"rec/{name}"] = rec_loss.detach()
             logs[f"vq/{name}"] = params.vq_loss.detach()
             if self.training and hp.lambda_phase_rate > 0:
-                rate_loss = self._phase_rate_loss(k, name, b, params)
+                rate_loss = phase_rate_loss(
+                    self.characters[k].pae, name, b, params, hp.phase_rate_grad
+                )
                 loss = loss + hp.lambda_phase_rate * rate_loss
                 logs[f"phase_rate/{name}"] = rate_loss.detach()
             if hp.pose_mlp != "none":
@@ -432,51 +350,8 @@ class VqpaeAligner(Aligner):
             if "overlap" in self._metrics and not self.training:
                 self._metrics["overlap"].update(params.code, dataset=k)
             if not self.training and hp.pose_mlp != "none":
-                logs[f"pose_mpjpe/{name}"] = self._pivot_mpjpe(k, params, b["poses"])
+                logs[f"pose_mpjpe/{name}"] = pivot_mpjpe(self.characters[k], params, b["poses"])
         return torch.stack(parts).mean(), logs
-
-    def _phase_rate_loss(
-        self, k: int, name: str, batch: Mapping[str, Tensor], params: PhaseParameters
-    ) -> Tensor:
-        """Mean L1 (Hz) between the two windows' frequencies and their phase advance rate."""
-        if "shifted" not in batch:
-            raise SkelagnosticError(
-                f"model.lambda_phase_rate > 0 needs partner windows, but the training batch of "
-                f"dataset {name!r} has none: set data.pair_seconds > 0 (VqpaeDataModule)"
-            )
-        pae = self.characters[k].pae
-        shift = batch["shift"].to(params.phase)
-        valid = shift != 0
-        if not bool(valid.any()):
-            return params.phase.new_zeros(())
-        freq1 = params.frequency
-        mode = self.hparams.phase_rate_grad
-        if mode == "head":
-            # only the frequency MLP learns from it: the encoder's signal is detached
-            freq1 = pae.frequency_of(params.signal.detach())
-            with torch.no_grad():
-                phase2, _, signal2 = pae.phase_and_frequency(batch["shifted"])
-            freq2 = pae.frequency_of(signal2)
-        elif mode == "timing":
-            # the timing branch (kernel-1 conv + frequency MLP) learns, the shared latent not
-            with torch.no_grad():
-                latents = pae.encoder(torch.cat([batch["features"], batch["shifted"]]))
-            phases, freqs, _ = pae.timing(latents)
-            freq1, freq2 = freqs.chunk(2)
-            phase2 = phases.chunk(2)[1]
-        else:
-            phase2, freq2, _ = pae.phase_and_frequency(batch["shifted"])
-        rate = phase_advance_rate(
-            params.phase[valid], phase2[valid], shift[valid], pae.fps
-        ).detach()
-        return 0.5 * ((freq1[valid] - rate).abs().mean() + (freq2[valid] - rate).abs().mean())
-
-    def _pivot_mpjpe(self, k: int, params: PhaseParameters, poses: Tensor) -> Tensor:
-        char = self.characters[k]
-        pivot = params.manifold.shape[-1] // 2
-        pred = char.pose(params.manifold[..., pivot]) * char.pose_std + char.pose_mean
-        true = poses[:, pivot] * char.pose_std + char.pose_mean
-        return (pred - true).view(len(pred), -1, 3).norm(dim=-1).mean()
 
     # ---------------------------------------------------------------- lightning
     def training_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
@@ -563,7 +438,7 @@ class VqpaeAligner(Aligner):
         """
         out = {}
         for name, b in batch.items():
-            out[name] = self._pivot_embedding(self.dataset_names.index(name), b)
+            out[name] = self.pivot_embedding(self.dataset_names.index(name), b)
             self._predictions.setdefault(name, []).append(
                 {k: v.detach().cpu() for k, v in out[name].items()}
             )
@@ -574,134 +449,23 @@ class VqpaeAligner(Aligner):
         self._predictions = {}
 
     def on_predict_epoch_end(self) -> None:
-        """Write the collected embeddings per clip as ``<default_root_dir>/embeddings.npz``.
-
-        Keys are ``<dataset>/<clip id>/<field>`` with fields ``frame`` (pivot frame
-        index in the clip, at the dataset frame rate), ``phase``, ``frequency``,
-        ``code``, ``amplitude`` and ``manifold``, plus ``fps``. Clip ids come from
-        the data module's predict split (``clip<k>`` without one). Only pivots whose
-        1 s window lies inside the clip are predicted; for every frame of a clip
-        use :func:`skelagnostic_vqpae.embed.embed_clip`. Under DDP the global-zero
-        rank writes the windows it predicted (predict on one device for all).
-        """
+        """Write the collected embeddings per clip (:func:`.predictions.write_embeddings`)."""
         collected = getattr(self, "_predictions", {})
         self._predictions = {}
-        if not collected or self.trainer is None or not self.trainer.is_global_zero:
-            return
-        dm = self.trainer.datamodule
-        split = "test" if dm is not None and dm.datasets.get("test") else "val"
-        ids = getattr(dm, "clip_ids", {}).get(split, {}) if dm is not None else {}
-        arrays: dict[str, Any] = {}
-        for name, parts in collected.items():
-            cat = {k: torch.cat([p[k] for p in parts]) for k in parts[0]}
-            names = ids.get(name, [])
-            for c, sel in _clips_in_frame_order(cat):
-                clip = names[c] if c < len(names) else f"clip{c}"
-                arrays[f"{name}/{clip}/frame"] = cat["pivot"][sel].numpy()
-                for key in EMBEDDING_FIELDS:
-                    arrays[f"{name}/{clip}/{key}"] = cat[key][sel].numpy()
-        spec = next(iter(self.hparams["datasets"].values()))
-        arrays["fps"] = np.float64(spec["fps"])
-        path = Path(self.trainer.default_root_dir) / "embeddings.npz"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(path, **arrays)
-        self.predictions_path = path
+        path = write_embeddings(self, collected)
+        if path is not None:
+            self.predictions_path = path
 
     def configure_optimizers(self) -> Any:
-        """AdamW + the schedule of ``model.schedule`` (per step); pose MLPs in their own group."""
-        hp = self.hparams
-        book = self._require_built()
-        main = [p for c in self.characters for p in c.pae.parameters()] + [book.weight]
-        groups = [{"params": main, "lr": hp.lr, "weight_decay": hp.weight_decay}]
-        if hp.pose_mlp != "none":
-            groups.append(
-                {
-                    "params": [p for c in self.characters for p in c.pose.parameters()],
-                    "lr": hp.pose_lr,
-                    "weight_decay": 0.0,
-                }
-            )
-        # the fused kernel is 3-4x faster than foreach on this model's ~60 small tensors
-        # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
-        fused = all(p.device.type in ("cpu", "cuda") for p in main)
-        optimizer = torch.optim.AdamW(groups, fused=fused, foreach=None if fused else True)
-        if hp.schedule == "authors":
-            from skelagnostic_vqpae.schedule import CyclicRestarts
+        """AdamW + the schedule of ``model.schedule`` (per step); pose MLPs in their own group.
 
-            epoch_size, batch_size = self._authors_epoch()
-            scheduler: Any = CyclicRestarts(
-                optimizer, epoch_size, batch_size, hp.restart_period, hp.restart_mult, groups=1
-            )
-        else:
-            steps = steps_per_epoch(self._trainer)
-            scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
-                optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult
-            )
-        return {
-            "optimizer": optimizer,
-            "lr_scheduler": {"scheduler": scheduler, "interval": "step"},
-        }
-
-    def _authors_epoch(self) -> tuple[int, int]:
-        """``(samples, batch size)`` of the authors' epoch: one pass over the smallest dataset.
-
-        Per rank under DDP. Without a data module's training windows (an aligner
-        trained by hand with a plain loader), the trainer's batches per epoch stand
-        for the samples, with one sample per batch.
+        See :func:`skelagnostic_vqpae.schedule.configure_optimizers`.
         """
-        trainer = self._trainer
-        dm = getattr(trainer, "datamodule", None) if trainer is not None else None
-        train = getattr(dm, "datasets", {}).get("train") if dm is not None else None
-        batch = getattr(dm, "batch_size", None)
-        if train and isinstance(batch, int) and batch > 0:
-            ranks = max(1, int(getattr(trainer, "world_size", 1)))
-            size = min(len(ds) for ds in train.values()) // ranks
-            if size >= batch:
-                return size, batch
-        return steps_per_epoch(trainer), 1
+        return configure_optimizers(self)
 
     def fit_summary(self, trainer: L.Trainer, mode: str = "full") -> SummaryContent:
-        """The manifold overlap and pictures of the fit summary (see :mod:`.fit_outputs`)."""
-        from skelagnostic_vqpae.fit_outputs import fit_summary
-
-        return fit_summary(self, trainer, mode=mode)
-
-    @torch.no_grad()
-    def embed_datasets(
-        self, datasets: Mapping[str, Any], fps: float, batch_size: int = 1024
-    ) -> dict[str, list[Any]]:
-        """Embed every window of a data-module split, grouped into per-clip embeddings.
-
-        Args:
-            datasets: Dataset name -> windows (``VqpaeDataModule.datasets[split]``).
-            fps: Frame rate of the windows.
-            batch_size: Windows per forward pass.
-
-        Returns:
-            Dataset name -> one :class:`~skelagnostic_vqpae.embed.ClipEmbedding` per clip
-            (pivots in frame order; only pivots whose window lies inside the clip).
-        """
-        from skelagnostic_vqpae.embed import ClipEmbedding
-
-        out: dict[str, list[Any]] = {}
-        for name, windows in datasets.items():
-            k = self.dataset_names.index(name)
-            parts: dict[str, list[Tensor]] = {}
-            for start in range(0, len(windows), batch_size):
-                b = windows.gather(range(start, min(start + batch_size, len(windows))))
-                b["features"] = b["features"].to(self.device)
-                for key, value in self._pivot_embedding(k, b).items():
-                    parts.setdefault(key, []).append(value.detach().cpu())
-            cat = {key: torch.cat(v) for key, v in parts.items()}
-            out[name] = (
-                [
-                    ClipEmbedding(*(cat[key][sel] for key in EMBEDDING_FIELDS), float(fps), name)
-                    for _, sel in _clips_in_frame_order(cat)
-                ]
-                if cat
-                else []
-            )
-        return out
+        """The manifold overlap and pictures of the fit summary (lent: :data:`.lending.LENT`)."""
+        return self._borrow("fit_summary")(self, trainer, mode=mode)
 
     @torch.no_grad()
     def average_pose(self, points: Tensor, dataset: int | str) -> Tensor:
@@ -771,7 +535,7 @@ class VqpaeAligner(Aligner):
             "reconstruction": rec,
         }
 
-    def _pivot_embedding(self, k: int, batch: Mapping[str, Tensor]) -> dict[str, Tensor]:
+    def pivot_embedding(self, k: int, batch: Mapping[str, Tensor]) -> dict[str, Tensor]:
         """Dataset ``k``'s embedding of each window's pivot, with its ``clip`` and ``pivot``."""
         p = self.encode_dataset(k, batch["features"])
         return {
@@ -794,119 +558,28 @@ class VqpaeAligner(Aligner):
     def transfer(self, motion: Motion, targets: Sequence[Motion]) -> Motion:
         """Re-enact ``motion`` with the target character's clips (Sec. 4, Alg. 1, Eq. 9).
 
-        The target clips (one trained character) become a motion-matching database
-        (:func:`~skelagnostic_vqpae.transfer.build_database`); the source clip's
-        manifold points and frequencies query it with frequency-scaled motion
-        matching (``lambda1`` 0.5, ``lambda2`` 1), and the matched target windows,
-        time-warped to the source's periods, form the result.
-
-        Args:
-            motion: The source clip, on a trained skeleton.
-            targets: Clips of another trained character (the database).
-
-        Returns:
-            The motion on the targets' skeleton, at the trained frame rate.
+        Lent by :func:`skelagnostic_vqpae.transfer.transfer_clips` (:data:`.lending.LENT`):
+        the targets (one trained character) become a motion-matching database that
+        the source's manifold points and frequencies query (frequency-scaled motion
+        matching); the matched windows, time-warped to the source's periods, form the
+        result, on the targets' skeleton at the trained frame rate.
 
         Raises:
             SkelagnosticError: ``targets`` is empty, mixes characters, or a skeleton
                 was not trained.
         """
-        from skelagnostic_vqpae.transfer import build_database
-        from skelagnostic_vqpae.transfer import transfer as match_transfer
-
-        database = build_database(self, list(targets))
-        result = match_transfer(self, motion, database)
-        self.last_transitions = [seg.start for seg in result.match.segments[1:]]
-        return result.motion
+        motion, self.last_transitions = self._borrow("transfer")(self, motion, list(targets))
+        return motion
 
     def export_graphs(self) -> list[ExportGraph]:
-        """Per character: the encoder (phase, frequency, code, amplitude, manifold point).
+        """Per character: the encoder and, when trained, the average-pose decoder.
 
-        And, when its average-pose MLP was trained, the decoder from a manifold
-        point to the average pose. The window length is fixed by the
-        architecture (the frequency MLP reads its ``T // 2 + 1`` rfft bins), so
-        only the batch axis is dynamic.
+        See :func:`skelagnostic_vqpae.graphs.export_graphs`.
 
         Raises:
             SkelagnosticError: The aligner has no datasets yet.
         """
-        book = self._require_built()
-        graphs = []
-        for name, char in zip(self.dataset_names, self.characters, strict=True):
-            spec = self.hparams["datasets"][name]
-            channels, window = int(spec["channels"]), int(spec["window"])
-            stem = "".join(c if c.isalnum() or c in "_.-" else "_" for c in name)
-            meta = {
-                "dataset": name,
-                "skeleton": spec.get("skeleton"),  # None for an authors' run (.authors)
-                "fps": float(spec["fps"]),
-                "window": window,
-                "pivot": window // 2,
-                "channels": channels,
-            }
-            fixed = {
-                "window": f"{window} frames ({float(spec['fps']):g} fps): the frequency "
-                f"MLP reads the {window // 2 + 1} rfft bins of the window"
-            }
-            graphs.append(
-                ExportGraph(
-                    f"encoder_{stem}",
-                    _PivotEncoder(char.pae, book),
-                    (torch.zeros(2, channels, window).normal_(),),
-                    ("windows",),
-                    ("phase", "frequency", "code", "amplitude", "manifold"),
-                    {
-                        k: {0: "batch"}
-                        for k in ("windows", "phase", "frequency", "code", "amplitude", "manifold")
-                    },
-                    description=(
-                        f"{name!r}: normalised windows [B, {channels}, {window}] centred on the "
-                        "pivot frame -> pivot phase (cycles), frequency (Hz), codebook index, "
-                        "quantised amplitude [B, 2d] and phase-manifold point [B, d]"
-                    ),
-                    fixed_axes=fixed,
-                    metadata={
-                        **meta,
-                        "representation": "RootLocalVelocities of the motion in metres, "
-                        "[T, J, 3] flattened to [T, J*3] and transposed to [J*3, T]",
-                        "normalisation": {
-                            "input_mean": char.input_mean,
-                            "input_std": char.input_std,
-                            "formula": "(features - input_mean) / input_std",
-                        },
-                        "preprocess": "resample to fps; the window of frame i holds frames "
-                        "i - pivot .. i + pivot (repeat the end frames at "
-                        "the clip edges)",
-                    },
-                )
-            )
-            if bool(char.pose_fitted) and not spec.get("pose_features"):
-                graphs.append(
-                    ExportGraph(
-                        f"pose_decoder_{stem}",
-                        Method(char.pose, "forward"),
-                        (torch.zeros(2, self.hparams.latent).normal_(),),
-                        ("manifold",),
-                        ("pose",),
-                        {"manifold": {0: "batch"}, "pose": {0: "batch"}},
-                        description=(
-                            f"{name!r}: phase-manifold point [B, d] -> normalised "
-                            f"average root-local pose [B, {channels}] (Sec. 5.2)"
-                        ),
-                        metadata={
-                            **meta,
-                            "representation": "GlobalPositions(frame='root'), [J, 3] "
-                            "flattened to [J*3]",
-                            "normalisation": {
-                                "pose_mean": char.pose_mean,
-                                "pose_std": char.pose_std,
-                                "formula": "pose * pose_std + pose_mean",
-                            },
-                            "postprocess": "inverse kinematics gives rotations",
-                        },
-                    )
-                )
-        return graphs
+        return export_graphs(self)
 
     def dataset_of(self, skeleton: Skeleton) -> int:
         """Index of the dataset whose skeleton has ``skeleton``'s topology.

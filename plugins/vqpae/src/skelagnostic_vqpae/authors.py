@@ -291,55 +291,9 @@ def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
     n_state = _option(args, "n_layers_state", int, args_path)
     key_map = vqae_key_map(n_fft, n_state)
 
-    states, specs = [], {}
-    for i, name in enumerate(names):
-        path = run / f"{epoch}_{i}_{phases}Channels.pt"
-        if not path.is_file():
-            raise SkelagnosticError(f"authors' run: {path} not found (dataset {i}, {name!r})")
-        state = _load(path)
-        tpi = float(_tensor(state, "tpi", path))
-        if not math.isclose(tpi, 2 * math.pi, rel_tol=1e-6):
-            raise SkelagnosticError(f"authors' run: {path}: 'tpi' is {tpi}, not 2 pi")
-        grid = _tensor(state, "args", path).float()
-        if grid.dim() != 1 or grid.numel() < 3 or grid.numel() % 2 == 0:
-            raise SkelagnosticError(
-                f"authors' run: {path}: 'args' (the time grid) must be an odd-length vector, "
-                f"got shape {list(grid.shape)}"
-            )
-        conv = _tensor(state, "convs.0.weight", path)
-        span = float(grid[-1] - grid[0])
-        if not span > 0:
-            raise SkelagnosticError(
-                f"authors' run: {path}: 'args' (the time grid) must increase, got {grid.tolist()}"
-            )
-        specs[name] = {
-            "channels": int(conv.shape[1]),
-            "window": grid.numel(),
-            "fps": (grid.numel() - 1) / span,
-        }
-        states.append((path, state, grid))
-    loads = [part.strip() for part in _option(args, "load", str, args_path).split(",")]
-    decoder_files = phase_decoder_files(run, epoch)
-    decoders: dict[str, tuple[Path, dict[str, Tensor]]] = {}
-    for name, load in zip(names, loads, strict=True):
-        if load in decoder_files:
-            path = decoder_files[load]
-            decoders[name] = (path, _load(path))
+    states, specs = _network_states(run, epoch, names, phases)
+    decoders = _phase_decoders(run, epoch, names, args, args_path, specs)
     pose_layers = _option(args, "n_layers_phase_decoder", int, args_path, default=8)
-    if decoders:
-        activation = args.get("activation_phase_decoder", "LeakyReLU")
-        if activation != "LeakyReLU":
-            raise SkelagnosticError(
-                f"authors' run: {args_path}: --activation_phase_decoder={activation} is not "
-                "supported (only LeakyReLU, their default, as skelagnostic's average-pose MLP)"
-            )
-        features = args.get(
-            "needed_channel_names_phase_decoder", "Velocities,Positions,Rotations"
-        ).split(",")
-        for name, (path, state) in decoders.items():
-            out = _tensor(state, "std_out", path)
-            specs[name]["pose_channels"] = int(out.numel())
-            specs[name]["pose_features"] = [f.strip() for f in features]
     normalization = {}
     for name in names:
         skeleton, stats = _character_files(run, name, int(specs[name]["channels"]))
@@ -394,6 +348,81 @@ def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
             char.input_std.copy_(normalization[name][1])
     _copy_codebook(book_state, model, order, book_path)
     return model.eval()
+
+
+def _network_states(
+    run: Path, epoch: int, names: list[str], phases: int
+) -> tuple[list[tuple[Path, dict[str, Tensor], Tensor]], dict[str, dict[str, Any]]]:
+    """Each dataset's network state of ``epoch``, checked, and the spec it implies.
+
+    Returns:
+        ``([(path, state, time grid)], dataset name -> {"channels", "window", "fps"})``.
+    """
+    states: list[tuple[Path, dict[str, Tensor], Tensor]] = []
+    specs: dict[str, dict[str, Any]] = {}
+    for i, name in enumerate(names):
+        path = run / f"{epoch}_{i}_{phases}Channels.pt"
+        if not path.is_file():
+            raise SkelagnosticError(f"authors' run: {path} not found (dataset {i}, {name!r})")
+        state = _load(path)
+        tpi = float(_tensor(state, "tpi", path))
+        if not math.isclose(tpi, 2 * math.pi, rel_tol=1e-6):
+            raise SkelagnosticError(f"authors' run: {path}: 'tpi' is {tpi}, not 2 pi")
+        grid = _tensor(state, "args", path).float()
+        if grid.dim() != 1 or grid.numel() < 3 or grid.numel() % 2 == 0:
+            raise SkelagnosticError(
+                f"authors' run: {path}: 'args' (the time grid) must be an odd-length vector, "
+                f"got shape {list(grid.shape)}"
+            )
+        conv = _tensor(state, "convs.0.weight", path)
+        span = float(grid[-1] - grid[0])
+        if not span > 0:
+            raise SkelagnosticError(
+                f"authors' run: {path}: 'args' (the time grid) must increase, got {grid.tolist()}"
+            )
+        specs[name] = {
+            "channels": int(conv.shape[1]),
+            "window": grid.numel(),
+            "fps": (grid.numel() - 1) / span,
+        }
+        states.append((path, state, grid))
+    return states, specs
+
+
+def _phase_decoders(
+    run: Path,
+    epoch: int,
+    names: list[str],
+    args: Mapping[str, str],
+    args_path: Path,
+    specs: dict[str, dict[str, Any]],
+) -> dict[str, tuple[Path, dict[str, Tensor]]]:
+    """The phase decoders of ``epoch`` per dataset name.
+
+    Their output size and feature names go into each dataset's ``specs`` entry.
+    """
+    loads = [part.strip() for part in _option(args, "load", str, args_path).split(",")]
+    decoder_files = phase_decoder_files(run, epoch)
+    decoders: dict[str, tuple[Path, dict[str, Tensor]]] = {}
+    for name, load in zip(names, loads, strict=True):
+        if load in decoder_files:
+            path = decoder_files[load]
+            decoders[name] = (path, _load(path))
+    if decoders:
+        activation = args.get("activation_phase_decoder", "LeakyReLU")
+        if activation != "LeakyReLU":
+            raise SkelagnosticError(
+                f"authors' run: {args_path}: --activation_phase_decoder={activation} is not "
+                "supported (only LeakyReLU, their default, as skelagnostic's average-pose MLP)"
+            )
+        features = args.get(
+            "needed_channel_names_phase_decoder", "Velocities,Positions,Rotations"
+        ).split(",")
+        for name, (path, state) in decoders.items():
+            out = _tensor(state, "std_out", path)
+            specs[name]["pose_channels"] = int(out.numel())
+            specs[name]["pose_features"] = [f.strip() for f in features]
+    return decoders
 
 
 def _character_files(

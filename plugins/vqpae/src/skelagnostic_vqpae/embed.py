@@ -2,6 +2,7 @@
 
 * :func:`embed_clip` -> :class:`ClipEmbedding` (phase, frequency, code,
   amplitude, manifold point per frame; saved as ``.npz``), Sec. 4;
+  :func:`embed_datasets`: the same for every clip of a data-module split;
 * :func:`fit_average_pose`: train the per-dataset average-pose MLPs on a frozen
   VQ-PAE (Sec. 5.2, Eq. 10) when they were not trained alongside;
 * :func:`retrieve`: motion retrieval by amplitude + frequency (Sec. 5.4);
@@ -24,12 +25,14 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.model import phase_manifold
+from skelagnostic_vqpae.predictions import EMBEDDING_FIELDS, clips_in_frame_order
 
 __all__ = [
     "ClipEmbedding",
     "Retrieval",
     "ellipse_points",
     "embed_clip",
+    "embed_datasets",
     "fit_average_pose",
     "plot_clip_timing",
     "plot_manifold",
@@ -130,6 +133,43 @@ def embed_clip(aligner: VqpaeAligner, motion: Motion) -> ClipEmbedding:
         latent.fps,
         aligner.dataset_names[int(x["dataset"])],
     )
+
+
+@torch.no_grad()
+def embed_datasets(
+    aligner: VqpaeAligner, datasets: Mapping[str, Any], fps: float, batch_size: int = 1024
+) -> dict[str, list[ClipEmbedding]]:
+    """Embed every window of a data-module split, grouped into per-clip embeddings.
+
+    Args:
+        aligner: A trained aligner.
+        datasets: Dataset name -> windows (``VqpaeDataModule.datasets[split]``).
+        fps: Frame rate of the windows.
+        batch_size: Windows per forward pass.
+
+    Returns:
+        Dataset name -> one :class:`ClipEmbedding` per clip (pivots in frame order; only
+        pivots whose window lies inside the clip).
+    """
+    out: dict[str, list[ClipEmbedding]] = {}
+    for name, windows in datasets.items():
+        k = aligner.dataset_names.index(name)
+        parts: dict[str, list[Tensor]] = {}
+        for start in range(0, len(windows), batch_size):
+            b = windows.gather(range(start, min(start + batch_size, len(windows))))
+            b["features"] = b["features"].to(aligner.device)
+            for key, value in aligner.pivot_embedding(k, b).items():
+                parts.setdefault(key, []).append(value.detach().cpu())
+        cat = {key: torch.cat(v) for key, v in parts.items()}
+        out[name] = (
+            [
+                ClipEmbedding(*(cat[key][sel] for key in EMBEDDING_FIELDS), float(fps), name)
+                for _, sel in clips_in_frame_order(cat)
+            ]
+            if cat
+            else []
+        )
+    return out
 
 
 def fit_average_pose(

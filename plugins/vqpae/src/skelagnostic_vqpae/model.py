@@ -26,9 +26,10 @@ power spectrum); the options hold skelagnostic's variants (``experiment=vqpae_pl
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from itertools import pairwise
+from typing import Any
 
 import torch
 from torch import Tensor, nn
@@ -38,6 +39,7 @@ from skelagnostic.errors import SkelagnosticError
 __all__ = [
     "VQPAE",
     "AveragePoseMLP",
+    "Character",
     "PhaseParameters",
     "TemporalCentering",
     "mason_phase",
@@ -440,3 +442,21 @@ class AveragePoseMLP(nn.Module):
     def forward(self, points: Tensor) -> Tensor:
         """``[..., d] -> [..., pose]``."""
         return self.net(points)
+
+
+class Character(nn.Module):
+    """One dataset's VQ-PAE, average-pose MLP and normalisation statistics."""
+
+    def __init__(
+        self, spec: Mapping[str, Any], latent: int, pose_layers: int, **pae_options: Any
+    ) -> None:
+        super().__init__()
+        channels, window = int(spec["channels"]), int(spec["window"])
+        pose = int(spec.get("pose_channels") or channels)  # an authors' phase decoder: more
+        self.pae = VQPAE(channels, window, float(spec["fps"]), latent, **pae_options)
+        self.pose = AveragePoseMLP(latent, pose, pose_layers)
+        self.register_buffer("input_mean", torch.zeros(channels))
+        self.register_buffer("input_std", torch.ones(channels))
+        self.register_buffer("pose_mean", torch.zeros(pose))
+        self.register_buffer("pose_std", torch.ones(pose))
+        self.register_buffer("pose_fitted", torch.tensor(False))

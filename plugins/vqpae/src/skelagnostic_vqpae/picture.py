@@ -2,7 +2,7 @@
 
 :func:`plot_transfer` draws, for one source clip (a held-out human walk) and the
 motions made from it on the target character (the VQ-PAE transfer and the two
-baselines of :func:`~skelagnostic_vqpae.evaluation.transfer_rows`):
+baselines of :func:`~skelagnostic_vqpae.protocols.transfer.transfer_rows`):
 
 * a grid of side views, one column per motion and one row per instant, every
   target motion at one scale (the same axis limits), the source at its own;
@@ -135,6 +135,141 @@ def _events(motion: Motion, events: str) -> list[np.ndarray]:
     return motion_onsets(motion) if events == "touchdown" else forward_swings(motion)
 
 
+def _instants(source: Motion, instants: Sequence[float] | None) -> list[float]:
+    """The instants to draw (default: two, a third of a second apart), checked in the clip."""
+    duration = (source.num_frames - 1) / source.fps
+    if instants is None:
+        start = min(1.0, duration / 3)
+        instants = [start, min(start + 1 / 3, duration)]
+    instants = [float(t) for t in instants]
+    if not instants or any(not 0 <= t <= duration for t in instants):
+        raise RenderError(
+            f"instants: every instant must lie within 0-{duration:.2f} s of the source"
+        )
+    return instants
+
+
+def _draw_header(fig: Figure, title: str, wrapped: Sequence[str], height: float) -> None:
+    """The figure's title and its note lines (``height``: the figure's, inches)."""
+    fig.suptitle(
+        title,
+        fontsize=17,
+        fontweight="bold",
+        y=1 - 0.2 / height,
+        va="top",
+    )
+    for k, line in enumerate(wrapped):
+        fig.text(
+            0.5,
+            1 - (0.62 + 0.25 * k) / height,
+            line,
+            ha="center",
+            va="top",
+            fontsize=12,
+            color="#37474f",
+        )
+
+
+def _draw_poses(
+    fig: Figure,
+    grid: Any,
+    figures: Sequence[StickFigure],
+    views: Sequence[np.ndarray],
+    instants: Sequence[float],
+    labels: Sequence[str],
+) -> None:
+    """The pose grid: one row per instant, the source's column first, then each output's."""
+    rows = len(instants)
+    source_lim = _limits(views[:1], 1.0)
+    target_lim = _limits(views[1:], 1.0)
+    for r, t in enumerate(instants):
+        for c, (figure, view) in enumerate(zip(figures, views, strict=True)):
+            ax = fig.add_subplot(grid[r, c])
+            color = "#212121" if c == 0 else METHOD_COLORS[(c - 1) % len(METHOD_COLORS)]
+            xlim, ylim = source_lim if c == 0 else target_lim
+            ax.axhspan(ylim[0], 0, color="#eceff1", zorder=0)
+            _draw_pose(ax, figure, view[r])
+            ax.set_xlim(*xlim)
+            ax.set_ylim(*ylim)
+            ax.set_aspect("equal", adjustable="box")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            for side in ("top", "right", "left", "bottom"):
+                ax.spines[side].set_color("#b0bec5" if c == 0 else color)
+                ax.spines[side].set_linewidth(1 if c == 0 else 2)
+            if r == 0:
+                ax.set_title(labels[c], fontsize=13, color=color, fontweight="bold")
+            ax.text(
+                0.03,
+                0.95,
+                f"t = {t:.2f} s",
+                transform=ax.transAxes,
+                fontsize=11,
+                va="top",
+                color="#455a64",
+            )
+            if r == rows - 1 and c in (0, 1):
+                _scale_bar(ax, xlim, ylim)
+
+
+class _Lanes:
+    """The feet's timelines: the source's events beside one output's, and their rates."""
+
+    def __init__(self, source: Motion, events: str, source_label: str, target_label: str) -> None:
+        self.source, self.events = source, events
+        self.source_label, self.target_label = source_label, target_label
+        self.source_events = _events(source, events)
+        self.source_rate = onset_rate(self.source_events, source.fps)
+        self.source_feet = [source.skeleton.joint_names[j] for j in foot_joints(source)]
+        self.reference = next(
+            (np.sort(o) / source.fps for o in self.source_events if len(o)), np.zeros(0)
+        )
+        self.unit = "touch-downs" if events == "touchdown" else "strides"
+
+    def draw(
+        self, ax: Any, label: str, motion: Motion, color: str, instants: Sequence[float]
+    ) -> None:
+        """One output's timeline on ``ax``, titled ``label``, with its rate against the source's."""
+        source, source_events = self.source, self.source_events
+        source_label, target_label = self.source_label, self.target_label
+        duration = (source.num_frames - 1) / source.fps
+        marks = _events(motion, self.events)
+        feet = [motion.skeleton.joint_names[j] for j in foot_joints(motion)]
+        lanes = [o / source.fps for o in source_events] + [o / motion.fps for o in marks]
+        names = [f"{source_label} {n}" for n in self.source_feet] + [
+            f"{target_label} {n}" for n in feet
+        ]
+        offsets = list(range(len(lanes)))[::-1]
+        colors = ["#212121"] * len(source_events) + [color] * len(marks)
+        for t in self.reference:
+            ax.axvline(t, color="#9e9e9e", lw=0.8, ls=(0, (3, 3)), zorder=0)
+        ax.eventplot(lanes, lineoffsets=offsets, linelengths=0.8, linewidths=2.4, colors=colors)
+        ax.set_yticks(offsets, names)
+        ax.tick_params(axis="y", labelsize=9)
+        for tick, c in zip(ax.get_yticklabels(), colors, strict=True):
+            tick.set_color(c)
+        ax.set_xlim(0, duration)
+        ax.set_ylim(-0.7, len(lanes) - 0.3)
+        for t in instants:
+            ax.axvspan(t - 0.02, t + 0.02, color="#ffca28", alpha=0.6, zorder=0)
+        rate = onset_rate(marks, motion.fps)
+        source_rate = self.source_rate
+        error = abs(rate / source_rate - 1) * 100 if source_rate > 0 else math.nan
+        ax.set_title(
+            label.replace("\n", " "), loc="left", fontsize=12, color=color, fontweight="bold"
+        )
+        ax.text(
+            1.015,
+            0.5,
+            f"{self.unit}\nper second and foot:\n{source_label} {source_rate:.2f}\n"
+            f"{target_label} {rate:.2f} ({error:.1f} % off)",
+            transform=ax.transAxes,
+            fontsize=11,
+            va="center",
+            color=color,
+        )
+
+
 def plot_transfer(
     source: Motion,
     outputs: Mapping[str, Motion],
@@ -189,15 +324,7 @@ def plot_transfer(
         raise RenderError("outputs: no transferred motion to draw")
     if events not in EVENTS:
         raise RenderError(f"events: one of {', '.join(EVENTS)}, got {events!r}")
-    duration = (source.num_frames - 1) / source.fps
-    if instants is None:
-        start = min(1.0, duration / 3)
-        instants = [start, min(start + 1 / 3, duration)]
-    instants = [float(t) for t in instants]
-    if not instants or any(not 0 <= t <= duration for t in instants):
-        raise RenderError(
-            f"instants: every instant must lie within 0-{duration:.2f} s of the source"
-        )
+    instants = _instants(source, instants)
     motions = [source, *outputs.values()]
     labels = [
         f"{source_label}: {source.name}" if getattr(source, "name", None) else source_label,
@@ -223,39 +350,7 @@ def plot_transfer(
         wspace=0.03,
         hspace=0.12,
     )
-    source_lim = _limits(views[:1], 1.0)
-    target_lim = _limits(views[1:], 1.0)
-    for r, t in enumerate(instants):
-        for c, (figure, view) in enumerate(zip(figures, views, strict=True)):
-            ax = fig.add_subplot(grid[r, c])
-            color = "#212121" if c == 0 else METHOD_COLORS[(c - 1) % len(METHOD_COLORS)]
-            xlim, ylim = source_lim if c == 0 else target_lim
-            ax.axhspan(ylim[0], 0, color="#eceff1", zorder=0)
-            _draw_pose(ax, figure, view[r])
-            ax.set_xlim(*xlim)
-            ax.set_ylim(*ylim)
-            ax.set_aspect("equal", adjustable="box")
-            ax.set_xticks([])
-            ax.set_yticks([])
-            for side in ("top", "right", "left", "bottom"):
-                ax.spines[side].set_color("#b0bec5" if c == 0 else color)
-                ax.spines[side].set_linewidth(1 if c == 0 else 2)
-            if r == 0:
-                ax.set_title(labels[c], fontsize=13, color=color, fontweight="bold")
-            ax.text(
-                0.03,
-                0.95,
-                f"t = {t:.2f} s",
-                transform=ax.transAxes,
-                fontsize=11,
-                va="top",
-                color="#455a64",
-            )
-            if r == rows - 1 and c in (0, 1):
-                _scale_bar(ax, xlim, ylim)
-    source_events = _events(source, events)
-    source_rate = onset_rate(source_events, source.fps)
-    source_feet = [source.skeleton.joint_names[j] for j in foot_joints(source)]
+    _draw_poses(fig, grid, figures, views, instants, labels)
     timeline = fig.add_gridspec(
         len(outputs),
         1,
@@ -265,43 +360,10 @@ def plot_transfer(
         bottom=0.5 / height,
         hspace=0.55,
     )
-    reference = next((np.sort(o) / source.fps for o in source_events if len(o)), np.zeros(0))
-    unit = "touch-downs" if events == "touchdown" else "strides"
+    lanes = _Lanes(source, events, source_label, target_label)
     for i, (label, motion) in enumerate(outputs.items()):
-        color = METHOD_COLORS[i % len(METHOD_COLORS)]
         ax = fig.add_subplot(timeline[i, 0])
-        marks = _events(motion, events)
-        feet = [motion.skeleton.joint_names[j] for j in foot_joints(motion)]
-        lanes = [o / source.fps for o in source_events] + [o / motion.fps for o in marks]
-        names = [f"{source_label} {n}" for n in source_feet] + [f"{target_label} {n}" for n in feet]
-        offsets = list(range(len(lanes)))[::-1]
-        colors = ["#212121"] * len(source_events) + [color] * len(marks)
-        for t in reference:
-            ax.axvline(t, color="#9e9e9e", lw=0.8, ls=(0, (3, 3)), zorder=0)
-        ax.eventplot(lanes, lineoffsets=offsets, linelengths=0.8, linewidths=2.4, colors=colors)
-        ax.set_yticks(offsets, names)
-        ax.tick_params(axis="y", labelsize=9)
-        for tick, c in zip(ax.get_yticklabels(), colors, strict=True):
-            tick.set_color(c)
-        ax.set_xlim(0, duration)
-        ax.set_ylim(-0.7, len(lanes) - 0.3)
-        for t in instants:
-            ax.axvspan(t - 0.02, t + 0.02, color="#ffca28", alpha=0.6, zorder=0)
-        rate = onset_rate(marks, motion.fps)
-        error = abs(rate / source_rate - 1) * 100 if source_rate > 0 else math.nan
-        ax.set_title(
-            label.replace("\n", " "), loc="left", fontsize=12, color=color, fontweight="bold"
-        )
-        ax.text(
-            1.015,
-            0.5,
-            f"{unit}\nper second and foot:\n{source_label} {source_rate:.2f}\n"
-            f"{target_label} {rate:.2f} ({error:.1f} % off)",
-            transform=ax.transAxes,
-            fontsize=11,
-            va="center",
-            color=color,
-        )
+        lanes.draw(ax, label, motion, METHOD_COLORS[i % len(METHOD_COLORS)], instants)
         if i == len(outputs) - 1:
             ax.set_xlabel(
                 f"time (s). Ticks: each foot's {EVENTS[events]}; black: {source_label}, "
@@ -311,23 +373,12 @@ def plot_transfer(
             )
         else:
             ax.set_xticklabels([])
-    fig.suptitle(
+    _draw_header(
+        fig,
         title or f"Held-out clip {source.name!r} re-enacted by another character",
-        fontsize=17,
-        fontweight="bold",
-        y=1 - 0.2 / height,
-        va="top",
+        wrapped,
+        height,
     )
-    for k, line in enumerate(wrapped):
-        fig.text(
-            0.5,
-            1 - (0.62 + 0.25 * k) / height,
-            line,
-            ha="center",
-            va="top",
-            fontsize=12,
-            color="#37474f",
-        )
     if out is not None:
         path = Path(out)
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -24,13 +24,21 @@ Their epoch is one pass over the smallest dataset.
 from __future__ import annotations
 
 import math
+from typing import Any
 
+import torch
 from torch.optim import Optimizer
 from torch.optim.lr_scheduler import LRScheduler
 
 from skelagnostic.errors import SkelagnosticError
 
-__all__ = ["AUTHORS_MIN_LR", "CyclicRestarts", "cyclic_restart_factors"]
+__all__ = [
+    "AUTHORS_MIN_LR",
+    "CyclicRestarts",
+    "authors_epoch",
+    "configure_optimizers",
+    "cyclic_restart_factors",
+]
 
 #: The floor of the authors' learning rate (``CyclicLRWithRestarts(min_lr=1e-7)``).
 AUTHORS_MIN_LR = 1e-7
@@ -143,3 +151,63 @@ class CyclicRestarts(LRScheduler):
             group["weight_decay"] = self.base_weight_decays[k] * eta * norm / lr
             rates.append(lr)
         return rates
+
+
+def configure_optimizers(aligner: Any) -> Any:
+    """AdamW + the schedule of ``model.schedule`` (per step); pose MLPs in their own group.
+
+    :meth:`VqpaeAligner.configure_optimizers
+    <skelagnostic_vqpae.aligner.VqpaeAligner.configure_optimizers>`.
+    """
+    from skelagnostic.aligners import steps_per_epoch  # Lightning: only when training
+
+    hp = aligner.hparams
+    book = aligner._require_built()
+    main = [p for c in aligner.characters for p in c.pae.parameters()] + [book.weight]
+    groups = [{"params": main, "lr": hp.lr, "weight_decay": hp.weight_decay}]
+    if hp.pose_mlp != "none":
+        groups.append(
+            {
+                "params": [p for c in aligner.characters for p in c.pose.parameters()],
+                "lr": hp.pose_lr,
+                "weight_decay": 0.0,
+            }
+        )
+    # the fused kernel is 3-4x faster than foreach on this model's ~60 small tensors
+    # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
+    fused = all(p.device.type in ("cpu", "cuda") for p in main)
+    optimizer = torch.optim.AdamW(groups, fused=fused, foreach=None if fused else True)
+    if hp.schedule == "authors":
+        epoch_size, batch_size = authors_epoch(aligner._trainer)
+        scheduler: Any = CyclicRestarts(
+            optimizer, epoch_size, batch_size, hp.restart_period, hp.restart_mult, groups=1
+        )
+    else:
+        steps = steps_per_epoch(aligner._trainer)
+        scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
+            optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult
+        )
+    return {
+        "optimizer": optimizer,
+        "lr_scheduler": {"scheduler": scheduler, "interval": "step"},
+    }
+
+
+def authors_epoch(trainer: Any) -> tuple[int, int]:
+    """``(samples, batch size)`` of the authors' epoch: one pass over the smallest dataset.
+
+    Per rank under DDP. Without a data module's training windows (an aligner
+    trained by hand with a plain loader), the trainer's batches per epoch stand
+    for the samples, with one sample per batch.
+    """
+    from skelagnostic.aligners import steps_per_epoch  # Lightning: only when training
+
+    dm = getattr(trainer, "datamodule", None) if trainer is not None else None
+    train = getattr(dm, "datasets", {}).get("train") if dm is not None else None
+    batch = getattr(dm, "batch_size", None)
+    if train and isinstance(batch, int) and batch > 0:
+        ranks = max(1, int(getattr(trainer, "world_size", 1)))
+        size = min(len(ds) for ds in train.values()) // ranks
+        if size >= batch:
+            return size, batch
+    return steps_per_epoch(trainer), 1

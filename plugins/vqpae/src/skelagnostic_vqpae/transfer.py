@@ -381,3 +381,21 @@ def transfer(
         )
     motion = assemble_motion(target.motions, match, target.database, halflife=halflife)
     return TransferResult(motion, match, emb)
+
+
+def transfer_clips(
+    aligner: VqpaeAligner, motion: Motion, targets: Sequence[Motion]
+) -> tuple[Motion, list[int]]:
+    """The work of :meth:`VqpaeAligner.transfer <skelagnostic_vqpae.aligner.VqpaeAligner.transfer>`.
+
+    The targets become a database (:func:`build_database`) that :func:`transfer`
+    queries with ``motion``.
+
+    Returns:
+        ``(motion on the targets' skeleton, frames where a new matched window starts)``.
+    """
+    result = transfer(aligner, motion, build_database(aligner, list(targets)))
+    return result.motion, [seg.start for seg in result.match.segments[1:]]
+
+
+VqpaeAligner.lend("transfer", transfer_clips)

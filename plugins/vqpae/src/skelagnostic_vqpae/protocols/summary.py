@@ -30,14 +30,26 @@ from typing import TYPE_CHECKING, Any
 import torch
 
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import manifold_overlap
+from skelagnostic_vqpae.aligner import VqpaeAligner
+from skelagnostic_vqpae.embed import embed_datasets, plot_clip_timing, plot_manifold
+from skelagnostic_vqpae.picture import plot_transfer
+from skelagnostic_vqpae.protocols.procedural import procedural_kind
+from skelagnostic_vqpae.protocols.tables import table2
+from skelagnostic_vqpae.protocols.transfer import (
+    OWN_RATE,
+    UNSCALED,
+    transfer_rows,
+    transition_note,
+)
+from skelagnostic_vqpae.transfer import FREQUENCY_TOLERANCE, HALFLIFE
 
 if TYPE_CHECKING:
     import lightning as L
 
     from skelagnostic.callbacks import SummaryContent
-    from skelagnostic_vqpae.aligner import VqpaeAligner
 
 __all__ = [
     "SUMMARY_PLANS",
@@ -165,7 +177,7 @@ def fit_summary(aligner: VqpaeAligner, trainer: L.Trainer, mode: str = "full") -
         + ["manifold plots"],
     )
     stages(f"embed the {' and '.join(splits)} clips")
-    embeddings = {name: aligner.embed_datasets(dm.datasets[name], dm.fps) for name in splits}
+    embeddings = {name: embed_datasets(aligner, dm.datasets[name], dm.fps) for name in splits}
     figures = {name: overlap_figures(aligner, embeddings[name]) for name in splits}
     metrics: dict[str, Any] = {
         "split": splits[0],
@@ -197,8 +209,6 @@ def fit_summary(aligner: VqpaeAligner, trainer: L.Trainer, mode: str = "full") -
     shown = {n: embs for n, embs in embeddings[splits[0]].items() if embs}
     if shown:
         stages("manifold and timing plots")
-        from skelagnostic_vqpae.embed import plot_clip_timing, plot_manifold
-
         content.setdefault("figures", {}).update(
             {
                 "manifold": plot_manifold(aligner, shown),
@@ -245,8 +255,6 @@ def table2_summary(
         the held-out clips of the first two characters share) and ``num_codes``; and
         a ``## Table 2`` section for ``summary.md``.
     """
-    from skelagnostic_vqpae.evaluation import table2
-
     names = list(aligner.dataset_names)
     num_codes = int(aligner._require_built().num_codes)
     trained = _codes(train, names)
@@ -339,7 +347,7 @@ def transfer_summary(
 
     The first ``plan.transfer_clips`` validation (else test) clips of the first dataset
     (their first ``plan.transfer_seconds`` seconds: motion-capture clips can last
-    minutes) go through :func:`skelagnostic_vqpae.evaluation.transfer_rows` with the
+    minutes) go through :func:`skelagnostic_vqpae.protocols.transfer.transfer_rows` with the
     second dataset's training clips (the first ``plan.database_clips``) as the database.
 
     Args:
@@ -363,27 +371,12 @@ def transfer_summary(
         every database clip), ``metrics`` is ``{"skipped": reason}``, no picture, and
         the notes say why: the fit still succeeds.
     """
-    from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
-    from skelagnostic_vqpae.evaluation import OWN_RATE, UNSCALED, transfer_rows, transition_note
-    from skelagnostic_vqpae.transfer import FREQUENCY_TOLERANCE, HALFLIFE
-
     stage = stages or (lambda name: None)
     clips = plan.transfer_clips if max_clips is None else max_clips
-    if len(aligner.dataset_names) < 2 or not hasattr(datamodule, "sources"):
+    found = _transfer_clips(aligner, datamodule, plan)
+    if found is None:
         return {}
-    for split in ("val", "test"):
-        sources = [
-            c for c in clips_of_split(datamodule, split) if aligner.dataset_of(c.skeleton) == 0
-        ]
-        if sources:
-            break
-    database = [
-        c for c in clips_of_split(datamodule, "train") if aligner.dataset_of(c.skeleton) == 1
-    ]
-    if plan.database_clips is not None:
-        database = database[: plan.database_clips]
-    if not sources or not database:
-        return {}
+    split, sources, database = found
     seconds = plan.transfer_seconds
     excerpts = [c[: int(seconds * c.fps) + 1] for c in sources[:clips]]
     try:
@@ -396,43 +389,11 @@ def transfer_summary(
         }
     means = mean_rows(rows)
     source, target = aligner.dataset_names[0], aligner.dataset_names[1]
-    lines = [
-        "## Transfer of held-out clips",
-        "",
-        f"{len(rows)} held-out ({split}) clip(s) of `{source}` (at most their first "
-        f"{seconds:g} s) re-enacted with {len(database)} training clips of `{target}`, on the "
-        "same manifold query: `model`, frequency-scaled motion matching (the paper); "
-        f"`{UNSCALED}`, classical motion matching (1 s replays, no time warping: the target "
-        f"at its own rate, re-matched every second); `{OWN_RATE}`, the best-matching target "
-        "stretch as long as the source, at its own rate. Gait frequencies are counted from "
-        "the feet's forward swings of each motion, independently of the model; acceleration "
-        "(mean and worst frame, over the skeleton height, 1/s^2) measures smoothness, lower "
-        f"is smoother. Transitions: {transition_note(HALFLIFE, FREQUENCY_TOLERANCE)}.",
-        "",
-        "| clip | source Hz | method | output Hz | frequency error % | mean accel | max accel |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for row in rows:
-        for method in (MODEL, UNSCALED, OWN_RATE):
-            v = row["values"][method]
-            lines.append(
-                f"| {markdown_cell(row['clip'])} | {row['source_hz']:.3f} | `{method}` | "
-                f"{v['output_hz']:.3f} | "
-                f"{v['frequency_error_pct']:.1f} | {v['accel_height_per_s2']:.2f} | "
-                f"{v['accel_max_height_per_s2']:.1f} |"
-            )
-    for method in (MODEL, UNSCALED, OWN_RATE):
-        v = means.get(method, {})
-        lines.append(
-            f"| **mean** | | `{method}` | | **{v.get('frequency_error_pct', math.nan):.1f}** | "
-            f"{v.get('accel_height_per_s2', math.nan):.2f} | "
-            f"{v.get('accel_max_height_per_s2', math.nan):.1f} |"
-        )
     first = next(iter(outputs))
     stage(f"picture of {first}")
     picture = transfer_picture(aligner, outputs[first], split=split, table=table, steps=steps)
     notes = [
-        "\n".join(lines),
+        _transfer_table(rows, means, split, source, target, seconds, len(database)),
         f"Picture `vqpae_transfer.png`: {first} (held-out, first {seconds:g} s) and the "
         f"`{target}` motions made from it at one scale, with the feet's touch-downs over time.",
     ]
@@ -469,6 +430,77 @@ def transfer_summary(
         "render_options": options,
         "notes": notes,
     }
+
+
+def _transfer_clips(
+    aligner: VqpaeAligner, datamodule: Any, plan: SummaryPlan
+) -> tuple[str, list[Any], list[Any]] | None:
+    """``(split, held-out sources of the first character, database of the second)``, or None.
+
+    None without two characters, a held-out (validation, else test) source clip or a
+    training clip of the target.
+    """
+    if len(aligner.dataset_names) < 2 or not hasattr(datamodule, "sources"):
+        return None
+    for split in ("val", "test"):
+        sources = [
+            c for c in clips_of_split(datamodule, split) if aligner.dataset_of(c.skeleton) == 0
+        ]
+        if sources:
+            break
+    database = [
+        c for c in clips_of_split(datamodule, "train") if aligner.dataset_of(c.skeleton) == 1
+    ]
+    if plan.database_clips is not None:
+        database = database[: plan.database_clips]
+    if not sources or not database:
+        return None
+    return split, sources, database
+
+
+def _transfer_table(
+    rows: list[dict[str, Any]],
+    means: Mapping[str, Any],
+    split: str,
+    source: str,
+    target: str,
+    seconds: float,
+    database: int,
+) -> str:
+    """The ``## Transfer of held-out clips`` section of ``summary.md``: per clip and mean."""
+    lines = [
+        "## Transfer of held-out clips",
+        "",
+        f"{len(rows)} held-out ({split}) clip(s) of `{source}` (at most their first "
+        f"{seconds:g} s) re-enacted with {database} training clips of `{target}`, on the "
+        "same manifold query: `model`, frequency-scaled motion matching (the paper); "
+        f"`{UNSCALED}`, classical motion matching (1 s replays, no time warping: the target "
+        f"at its own rate, re-matched every second); `{OWN_RATE}`, the best-matching target "
+        "stretch as long as the source, at its own rate. Gait frequencies are counted from "
+        "the feet's forward swings of each motion, independently of the model; acceleration "
+        "(mean and worst frame, over the skeleton height, 1/s^2) measures smoothness, lower "
+        f"is smoother. Transitions: {transition_note(HALFLIFE, FREQUENCY_TOLERANCE)}.",
+        "",
+        "| clip | source Hz | method | output Hz | frequency error % | mean accel | max accel |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        for method in (MODEL, UNSCALED, OWN_RATE):
+            v = row["values"][method]
+            lines.append(
+                f"| {markdown_cell(row['clip'])} | {row['source_hz']:.3f} | `{method}` | "
+                f"{v['output_hz']:.3f} | "
+                f"{v['frequency_error_pct']:.1f} | {v['accel_height_per_s2']:.2f} | "
+                f"{v['accel_max_height_per_s2']:.1f} |"
+            )
+    for method in (MODEL, UNSCALED, OWN_RATE):
+        v = means.get(method, {})
+        lines.append(
+            f"| **mean** | | `{method}` | | **{v.get('frequency_error_pct', math.nan):.1f}** | "
+            f"{v.get('accel_height_per_s2', math.nan):.2f} | "
+            f"{v.get('accel_max_height_per_s2', math.nan):.1f} |"
+        )
+    return "\n".join(lines)
 
 
 def transfer_labels(aligner: VqpaeAligner, source: Any) -> list[str]:
@@ -533,7 +565,7 @@ def transfer_picture(
     Args:
         aligner: The trained aligner.
         motions: ``[source, model output, unscaled-matching output, own-rate output]``
-            (one value of :func:`~skelagnostic_vqpae.evaluation.transfer_rows`' outputs).
+            (one value of :func:`~skelagnostic_vqpae.protocols.transfer.transfer_rows`' outputs).
         split: The source clip's split (held out from training).
         table: :func:`table2_summary`'s figures: the header states the shared codes.
         steps: Optimiser steps of the run, for the header (optional).
@@ -541,9 +573,6 @@ def transfer_picture(
     Returns:
         The matplotlib figure.
     """
-    from skelagnostic_vqpae.evaluation import procedural_kind
-    from skelagnostic_vqpae.picture import plot_transfer
-
     source_name, target_name = aligner.dataset_names[0], aligner.dataset_names[1]
     short = source_name.rsplit("/", 1)[-1], target_name.rsplit("/", 1)[-1]
     source = motions[0]
@@ -603,3 +632,6 @@ def overlap_figures(aligner: VqpaeAligner, embeddings: Mapping[str, list[Any]]) 
             n: int(c.unique().numel()) for n, c in zip(aligner.dataset_names, codes, strict=True)
         },
     }
+
+
+VqpaeAligner.lend("fit_summary", fit_summary)

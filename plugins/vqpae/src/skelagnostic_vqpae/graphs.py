@@ -1,0 +1,139 @@
+"""VQ-PAE's networks as export graphs (ONNX / TorchScript): per character, encoder and decoder.
+
+:func:`export_graphs` is :meth:`VqpaeAligner.export_graphs
+<skelagnostic_vqpae.aligner.VqpaeAligner.export_graphs>`; ``skelagnostic export`` calls it.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import torch
+from torch import Tensor, nn
+
+from skelagnostic.export import ExportGraph, Method
+from skelagnostic_vqpae.codebook import SharedCodebook
+from skelagnostic_vqpae.model import VQPAE, phase_manifold
+
+if TYPE_CHECKING:
+    from skelagnostic_vqpae.aligner import VqpaeAligner
+
+__all__ = ["export_graphs"]
+
+
+class _PivotEncoder(nn.Module):
+    """One character's VQ-PAE encoder as a graph: normalised windows -> pivot embedding.
+
+    The same computation as :meth:`VqpaeAligner.forward_dataset` up to the
+    manifold point at the pivot, where ``Phi = phi + f * 0 = phi``.
+    """
+
+    def __init__(self, pae: VQPAE, codebook: SharedCodebook) -> None:
+        super().__init__()
+        self.pae = pae
+        self.register_buffer("codebook", codebook.weight.detach().clone())
+
+    def forward(self, windows: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+        """``[B, C, T]`` -> phase ``[B]``, frequency ``[B]``, code ``[B]``, amplitude, point."""
+        latent = self.pae.encoder(windows)
+        phase, frequency, _ = self.pae.timing(latent)
+        raw = self.pae.amp_mlp(latent.mean(dim=-1))
+        d2 = (
+            raw.square().sum(1, keepdim=True)
+            - 2 * raw @ self.codebook.t()
+            + self.codebook.square().sum(1)
+        )
+        code = d2.argmin(dim=1)
+        amplitude = self.codebook[code]
+        point = phase_manifold(amplitude, phase.unsqueeze(-1))[..., 0]
+        return phase, frequency, code, amplitude, point
+
+
+def export_graphs(aligner: VqpaeAligner) -> list[ExportGraph]:
+    """Per character: the encoder (phase, frequency, code, amplitude, manifold point).
+
+    And, when its average-pose MLP was trained, the decoder from a manifold
+    point to the average pose. The window length is fixed by the
+    architecture (the frequency MLP reads its ``T // 2 + 1`` rfft bins), so
+    only the batch axis is dynamic.
+
+    Raises:
+        SkelagnosticError: The aligner has no datasets yet.
+    """
+    book = aligner._require_built()
+    graphs = []
+    for name, char in zip(aligner.dataset_names, aligner.characters, strict=True):
+        spec = aligner.hparams["datasets"][name]
+        channels, window = int(spec["channels"]), int(spec["window"])
+        stem = "".join(c if c.isalnum() or c in "_.-" else "_" for c in name)
+        meta = {
+            "dataset": name,
+            "skeleton": spec.get("skeleton"),  # None for an authors' run (.authors)
+            "fps": float(spec["fps"]),
+            "window": window,
+            "pivot": window // 2,
+            "channels": channels,
+        }
+        fixed = {
+            "window": f"{window} frames ({float(spec['fps']):g} fps): the frequency "
+            f"MLP reads the {window // 2 + 1} rfft bins of the window"
+        }
+        graphs.append(
+            ExportGraph(
+                f"encoder_{stem}",
+                _PivotEncoder(char.pae, book),
+                (torch.zeros(2, channels, window).normal_(),),
+                ("windows",),
+                ("phase", "frequency", "code", "amplitude", "manifold"),
+                {
+                    k: {0: "batch"}
+                    for k in ("windows", "phase", "frequency", "code", "amplitude", "manifold")
+                },
+                description=(
+                    f"{name!r}: normalised windows [B, {channels}, {window}] centred on the "
+                    "pivot frame -> pivot phase (cycles), frequency (Hz), codebook index, "
+                    "quantised amplitude [B, 2d] and phase-manifold point [B, d]"
+                ),
+                fixed_axes=fixed,
+                metadata={
+                    **meta,
+                    "representation": "RootLocalVelocities of the motion in metres, "
+                    "[T, J, 3] flattened to [T, J*3] and transposed to [J*3, T]",
+                    "normalisation": {
+                        "input_mean": char.input_mean,
+                        "input_std": char.input_std,
+                        "formula": "(features - input_mean) / input_std",
+                    },
+                    "preprocess": "resample to fps; the window of frame i holds frames "
+                    "i - pivot .. i + pivot (repeat the end frames at "
+                    "the clip edges)",
+                },
+            )
+        )
+        if bool(char.pose_fitted) and not spec.get("pose_features"):
+            graphs.append(
+                ExportGraph(
+                    f"pose_decoder_{stem}",
+                    Method(char.pose, "forward"),
+                    (torch.zeros(2, aligner.hparams.latent).normal_(),),
+                    ("manifold",),
+                    ("pose",),
+                    {"manifold": {0: "batch"}, "pose": {0: "batch"}},
+                    description=(
+                        f"{name!r}: phase-manifold point [B, d] -> normalised "
+                        f"average root-local pose [B, {channels}] (Sec. 5.2)"
+                    ),
+                    metadata={
+                        **meta,
+                        "representation": "GlobalPositions(frame='root'), [J, 3] "
+                        "flattened to [J*3]",
+                        "normalisation": {
+                            "pose_mean": char.pose_mean,
+                            "pose_std": char.pose_std,
+                            "formula": "pose * pose_std + pose_mean",
+                        },
+                        "postprocess": "inverse kinematics gives rotations",
+                    },
+                )
+            )
+    return graphs
