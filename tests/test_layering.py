@@ -85,6 +85,62 @@ ONLY_IN = {
 #: Upward imports that exist today, each with the reason it is tolerated. An entry that
 #: no longer matches an import fails the test, so the list only shrinks.
 KNOWN_UPWARD: dict[tuple[str, str], str] = {}
+#: Floors inside each method plugin, bottom first (ARCHITECTURE.md: the model < its
+#: embedding/inference < applications (transfer, retarget) < evaluation protocols < the
+#: plugin's wiring): a module may import modules of its own floor or lower ones, never a
+#: higher one (``TYPE_CHECKING`` imports aside). Keys are module names or prefixes (the
+#: longest that matches decides; the plugin's own name matches its ``__init__`` only); a
+#: plugin module that matches none fails the test.
+#: PC-MRL is left out while its modules move into ``recon/`` and ``interp/`` (#49 item 2).
+PLUGIN_FLOORS: dict[str, dict[str, int]] = {
+    "skelagnostic_vqpae": {
+        "skelagnostic_vqpae.model": 0,
+        "skelagnostic_vqpae.codebook": 0,
+        "skelagnostic_vqpae.schedule": 0,
+        "skelagnostic_vqpae.data": 0,
+        "skelagnostic_vqpae.aligner": 0,
+        "skelagnostic_vqpae.graphs": 0,
+        "skelagnostic_vqpae.options": 0,
+        "skelagnostic_vqpae.losses": 0,
+        "skelagnostic_vqpae.predictions": 0,
+        "skelagnostic_vqpae.lending": 0,
+        "skelagnostic_vqpae.authors": 0,
+        "skelagnostic_vqpae.embed": 1,
+        "skelagnostic_vqpae.transfer": 2,
+        "skelagnostic_vqpae.picture": 2,
+        "skelagnostic_vqpae.protocols": 3,
+        "skelagnostic_vqpae.plugin": 4,
+        "skelagnostic_vqpae": 4,
+    },
+    "skelagnostic_humot": {
+        "skelagnostic_humot.xcit": 0,
+        "skelagnostic_humot.model": 0,
+        "skelagnostic_humot.template": 0,
+        "skelagnostic_humot.data": 0,
+        "skelagnostic_humot.aligner": 0,
+        "skelagnostic_humot.receptive": 1,
+        "skelagnostic_humot.evaluation": 3,
+        "skelagnostic_humot.ablations": 3,
+        "skelagnostic_humot.plugin": 4,
+        "skelagnostic_humot": 4,
+    },
+}
+#: Upward imports inside plugins that exist today (module, target) -> why: none tolerated.
+KNOWN_UPWARD_IN_PLUGINS: dict[tuple[str, str], str] = {}
+#: Import cycles among the modules of ``src/`` and ``plugins/*/src`` that exist today, each
+#: a set of modules. An entry that no longer matches a cycle fails the test (the set only
+#: shrinks); any other cycle fails it too.
+KNOWN_CYCLES: set[frozenset[str]] = {
+    # being removed in #49 (item 3: one task function per verb)
+    frozenset({"skelagnostic.cli.app", "skelagnostic.cli.evaluate"}),
+    # being removed in #49 (item 8: the plugin manager split)
+    frozenset({"skelagnostic.plugins.builtin", "skelagnostic.plugins.manager"}),
+    # being removed in #49 (the matching database builds its window index lazily)
+    frozenset({"skelagnostic.matching.database", "skelagnostic.matching.windows"}),
+    # being removed in #49 (came with the safetensors weights: weights.py imports the
+    # checkpoint errors lazily from checkpoints.py, which imports weights.py)
+    frozenset({"skelagnostic.aligners.checkpoints", "skelagnostic.aligners.weights"}),
+}
 
 
 @dataclass(frozen=True)
@@ -96,6 +152,8 @@ class Edge:
     file: Path
     line: int
     type_checking: bool
+    #: The names of a ``from target import ...`` (a name may be a submodule of ``target``).
+    names: tuple[str, ...] = ()
 
     def __str__(self) -> str:
         return f"{self.file.relative_to(REPO)}:{self.line}: {self.module} imports {self.target}"
@@ -163,8 +221,9 @@ def _scan(root: Path, facade: dict[str, str]) -> Iterator[Edge]:
                     ]
             else:
                 continue
+            names = tuple(a.name for a in node.names) if isinstance(node, ast.ImportFrom) else ()
             for target in targets:
-                yield Edge(module, target, file, node.lineno, node.lineno in checking)
+                yield Edge(module, target, file, node.lineno, node.lineno in checking, names)
 
 
 def _unit(name: str) -> str:
@@ -252,6 +311,128 @@ def test_the_scan_sees_every_kind_of_import(tmp_path):
         ("pkg.sub.mod", "pkg", False),
         ("pkg.sub.mod", "pkg.sub.sib", False),
     }
+
+
+def _floor(plugin: str, module: str) -> int | None:
+    """The floor of ``module`` inside ``plugin`` (longest matching key), or None."""
+    floors = PLUGIN_FLOORS[plugin]
+    # the plugin's own name stands for its package ``__init__`` only, not for every module
+    keys = [k for k in floors if module == k or (k != plugin and module.startswith(k + "."))]
+    return floors[max(keys, key=len)] if keys else None
+
+
+@pytest.mark.parametrize("plugin", sorted(PLUGIN_FLOORS))
+def test_every_plugin_module_has_a_floor(plugin):
+    modules = sorted({e.module for e in EDGES if e.module.split(".")[0] == plugin})
+    missing = [m for m in modules if _floor(plugin, m) is None]
+    assert not missing, f"place {missing} in PLUGIN_FLOORS[{plugin!r}] (tests/test_layering.py)"
+
+
+@pytest.mark.parametrize("plugin", sorted(PLUGIN_FLOORS))
+def test_imports_inside_a_plugin_point_down_its_floors(plugin):
+    bad, used = [], set()
+    for edge in EDGES:
+        if edge.type_checking or edge.module.split(".")[0] != plugin:
+            continue
+        if edge.target.split(".")[0] != plugin:
+            continue
+        src, dst = _floor(plugin, edge.module), _floor(plugin, edge.target)
+        if src is None or dst is None or dst <= src:
+            continue
+        key = (edge.module, edge.target)
+        if key in KNOWN_UPWARD_IN_PLUGINS:
+            used.add(key)
+            continue
+        bad.append(f"{edge} (floor {src} imports floor {dst})")
+    assert not bad, "imports inside a plugin must point to its own or a lower floor:\n" + (
+        "\n".join(bad)
+    )
+    stale = {k for k in KNOWN_UPWARD_IN_PLUGINS if k[0].split(".")[0] == plugin} - used
+    assert not stale, f"stale KNOWN_UPWARD_IN_PLUGINS entries: {stale}"
+
+
+def _import_graph(edges: list[Edge]) -> dict[str, set[str]]:
+    """Module -> the modules it imports at run time (``TYPE_CHECKING`` imports left out).
+
+    ``from package import name`` points at ``package.name`` when that is a module; an
+    import of a name inside a module points at the module.
+    """
+    modules = {e.module for e in edges}
+
+    def resolve(target: str) -> str:
+        while target and target not in modules:
+            target = target.rpartition(".")[0]
+        return target
+
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for edge in edges:
+        if edge.type_checking:
+            continue
+        subs = [f"{edge.target}.{n}" for n in edge.names if f"{edge.target}.{n}" in modules]
+        for target in subs or [edge.target]:
+            found = resolve(target)
+            if found and found != edge.module:
+                graph[edge.module].add(found)
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> set[frozenset[str]]:
+    """The import cycles of ``graph``: its strongly connected components of two or more."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: set[frozenset[str]] = set()
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        while work:  # Tarjan's algorithm without recursion
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    work.append((child, iter(sorted(graph.get(child, ())))))
+                elif child in stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = {stack.pop()}
+                while node not in component:
+                    component.add(stack.pop())
+                if len(component) > 1:
+                    found.add(frozenset(component))
+    return found
+
+
+def test_no_import_cycles():
+    cycles = _cycles(_import_graph(EDGES))
+    new = [sorted(c) for c in cycles - KNOWN_CYCLES]
+    assert not new, "import cycles (module-level and function-level imports):\n" + "\n".join(
+        " <-> ".join(c) for c in sorted(new)
+    )
+    stale = [sorted(c) for c in KNOWN_CYCLES - cycles]
+    assert not stale, f"stale KNOWN_CYCLES entries (the cycle is gone: remove them): {stale}"
+
+
+def test_the_cycle_check_finds_a_loop_through_a_lazy_import(tmp_path):
+    pkg = tmp_path / "loop"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "model.py").write_text("def f():\n    from loop import report\n")
+    (pkg / "report.py").write_text(
+        "from typing import TYPE_CHECKING\nfrom loop.model import f\n"
+        "if TYPE_CHECKING:\n    from loop import other\n"
+    )
+    (pkg / "other.py").write_text("from loop import report\n")
+    edges = list(_scan(pkg, {}))
+    assert _cycles(_import_graph(edges)) == {frozenset({"loop.model", "loop.report"})}
 
 
 def _python(code: str) -> subprocess.CompletedProcess[str]:
