@@ -26,6 +26,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "read_gltf": ("skelagnostic.io.gltf", "read_gltf"),
     "write_gltf": ("skelagnostic.io.gltf", "write_gltf"),
     "forward_kinematics": ("skelagnostic.core.kinematics", "forward_kinematics"),
+    "reroot": ("skelagnostic.core.motion", "reroot"),
     "SkelagnosticError": ("skelagnostic.errors", "SkelagnosticError"),
     "BVHError": ("skelagnostic.errors", "BVHError"),
     "GLTFError": ("skelagnostic.errors", "GLTFError"),
@@ -54,6 +55,7 @@ __all__ = [
     "procedural",
     "read_bvh",
     "read_gltf",
+    "reroot",
     "write_bvh",
     "write_gltf",
 ]
@@ -61,7 +63,7 @@ __all__ = [
 if TYPE_CHECKING:  # pragma: no cover
     from skelagnostic import plugins, procedural
     from skelagnostic.core.kinematics import forward_kinematics
-    from skelagnostic.core.motion import Motion
+    from skelagnostic.core.motion import Motion, reroot
     from skelagnostic.core.skeleton import Skeleton
     from skelagnostic.errors import (
         BVHError,

@@ -15,7 +15,6 @@ import torch
 
 import skelagnostic as sa
 from skelagnostic.core.units import infer_units
-from skelagnostic.data import reroot
 from skelagnostic.errors import SkeletonError
 
 LAYOUTS = {
@@ -153,7 +152,7 @@ def test_reroot_at_the_body_root_gives_the_ordinary_motion(
 ) -> None:
     plain = sa.read_bvh(files["plain"])
     motion = sa.read_bvh(files[name])
-    body = reroot(motion, motion.skeleton.body_root)
+    body = sa.reroot(motion, motion.skeleton.body_root)
     assert body.skeleton.joint_names == plain.skeleton.joint_names
     assert body.skeleton.body_root == 0 and body.translations is None
     torch.testing.assert_close(body.skeleton.offsets[1:], plain.skeleton.offsets[1:])

@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import skelagnostic as sa
+from skelagnostic.core.motion import reroot
 from skelagnostic.data import (
     PRESETS,
     BVHSource,
@@ -17,7 +18,6 @@ from skelagnostic.data import (
     ProceduralSource,
     WindowCache,
     preset_source,
-    reroot,
 )
 from skelagnostic.data.datamodule import _split_clips
 from skelagnostic.data.sources import ClipRef

@@ -198,8 +198,7 @@ def keyframes_from_options(num_frames: int, every: str | None, keys: str | None)
 
 def _read(path: Path, options: dict[str, str]) -> Motion:
     """``read_motion(path)`` without a trajectory carrier, with the ``units=`` option applied."""
-    from skelagnostic.core.motion import UNITS
-    from skelagnostic.data.sources import reroot
+    from skelagnostic.core.motion import UNITS, reroot
     from skelagnostic.io.motion_files import read_motion
 
     motion = read_motion(path, other="bvh")  # any name but .glb/.gltf is BVH, as before

@@ -16,7 +16,7 @@ from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import MotionError
 
-__all__ = ["UNITS", "Motion"]
+__all__ = ["UNITS", "Motion", "reroot"]
 
 
 def _as_tensor(x: Any, name: str, dtype: torch.dtype | None) -> torch.Tensor:
@@ -431,3 +431,50 @@ class Motion:
             ('m', 0.01)
         """
         return self.convert_units("m", from_=infer_units(self.skeleton, units or self.units))
+
+
+def reroot(motion: Motion, joint: str | int) -> Motion:
+    """Drop the joints above ``joint`` and make it the root (keeping its global motion).
+
+    Used for rigs whose file root is a fixed helper (Bandai-Namco's ``joint_Root``,
+    a static trajectory carrier: see :attr:`Skeleton.body_root
+    <skelagnostic.Skeleton.body_root>`). Forward kinematics of the kept joints is
+    unchanged. Animated translations that only repeat the kept joints' offsets
+    (six channels on every joint) are dropped. The skeleton counterpart is
+    :meth:`Skeleton.rooted_at <skelagnostic.core.skeleton.Skeleton.rooted_at>`.
+
+    Args:
+        motion: The motion.
+        joint: The new root (name or index); the joints not below it are dropped.
+
+    Returns:
+        The motion on ``motion.skeleton.rooted_at(joint)`` (``motion`` itself when
+        ``joint`` is already the root).
+
+    Raises:
+        SkeletonError: ``joint`` is unknown.
+    """
+    sk = motion.skeleton
+    new_root = sk.index(joint)
+    if new_root == 0:
+        return motion
+    skeleton = sk.rooted_at(new_root)
+    keep = [sk.index(name) for name in skeleton.joint_names]
+    offsets = skeleton.offsets
+    rotations = motion.rotations[:, keep].clone()
+    rotations[:, 0] = motion.global_rotations()[:, new_root]
+    root = motion.global_positions()[:, new_root]
+    trans = None if motion.translations is None else motion.translations[:, keep]
+    if trans is not None and torch.equal(
+        trans[:, 1:], offsets[1:].to(trans).expand_as(trans[:, 1:])
+    ):
+        trans = None
+    return Motion(
+        skeleton,
+        rotations,
+        root,
+        motion.fps,
+        translations=trans,
+        name=motion.name,
+        units=motion.units,
+    )

@@ -841,7 +841,7 @@ class Skeleton:
 
         ``skeleton.rooted_at(skeleton.body_root)`` drops a trajectory carrier. The
         motion counterpart, which keeps the global motion of the kept joints, is
-        :func:`skelagnostic.data.reroot`.
+        :func:`skelagnostic.core.motion.reroot`.
 
         Raises:
             SkeletonError: ``joint`` is unknown.

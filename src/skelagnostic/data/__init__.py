@@ -25,7 +25,6 @@ from skelagnostic.data.sources import (
     dataset_root,
     flatten_sources,
     preset_source,
-    reroot,
 )
 
 __all__ = [
@@ -50,5 +49,4 @@ __all__ = [
     "default_cache_dir",
     "flatten_sources",
     "preset_source",
-    "reroot",
 ]

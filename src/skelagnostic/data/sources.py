@@ -25,7 +25,7 @@ from typing import Any
 
 import torch
 
-from skelagnostic.core.motion import UNITS, Motion
+from skelagnostic.core.motion import UNITS, Motion, reroot
 from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
@@ -45,7 +45,6 @@ __all__ = [
     "dataset_root",
     "flatten_sources",
     "preset_source",
-    "reroot",
 ]
 
 
@@ -195,44 +194,6 @@ def flatten_sources(sources: ClipSource | Sequence[ClipSource] | None) -> list[C
     return [part for s in listed for part in (s.parts if isinstance(s, MultiSource) else [s])]
 
 
-def reroot(motion: Motion, joint: str | int) -> Motion:
-    """Drop the joints above ``joint`` and make it the root (keeping its global motion).
-
-    Used for rigs whose file root is a fixed helper (Bandai-Namco's ``joint_Root``,
-    a static trajectory carrier: see :attr:`Skeleton.body_root
-    <skelagnostic.Skeleton.body_root>`). Forward kinematics of the kept joints is
-    unchanged. Animated translations that only repeat the kept joints' offsets
-    (six channels on every joint) are dropped.
-
-    Raises:
-        SkeletonError: ``joint`` is unknown.
-    """
-    sk = motion.skeleton
-    new_root = sk.index(joint)
-    if new_root == 0:
-        return motion
-    skeleton = sk.rooted_at(new_root)
-    keep = [sk.index(name) for name in skeleton.joint_names]
-    offsets = skeleton.offsets
-    rotations = motion.rotations[:, keep].clone()
-    rotations[:, 0] = motion.global_rotations()[:, new_root]
-    root = motion.global_positions()[:, new_root]
-    trans = None if motion.translations is None else motion.translations[:, keep]
-    if trans is not None and torch.equal(
-        trans[:, 1:], offsets[1:].to(trans).expand_as(trans[:, 1:])
-    ):
-        trans = None
-    return Motion(
-        skeleton,
-        rotations,
-        root,
-        motion.fps,
-        translations=trans,
-        name=motion.name,
-        units=motion.units,
-    )
-
-
 def file_sha256(path: Path, step: Callable[[int], None] | None = None) -> str:
     """Hex SHA-256 of the file at ``path``, read in blocks (``step`` gets the bytes of each)."""
     digest = hashlib.sha256()
@@ -254,7 +215,8 @@ class BVHSource(ClipSource):
         test_pattern: Regular expression; clips whose path matches go to the test split.
         units: Length unit of the files (a key of :data:`~skelagnostic.core.UNITS`);
             the clips are converted to metres. ``None`` keeps the file's units.
-        root_joint: Re-root every clip at this joint (see :func:`reroot`). ``None``:
+        root_joint: Re-root every clip at this joint (see
+            :func:`~skelagnostic.core.motion.reroot`). ``None``:
             a file whose root is a static trajectory carrier (detected by
             :func:`~skelagnostic.read_bvh`, see :attr:`Skeleton.body_root
             <skelagnostic.Skeleton.body_root>`) is re-rooted at its body root, any
