@@ -4,7 +4,8 @@ import pytest
 import torch
 
 import skelagnostic as sa
-from skelagnostic.core.skeleton import BODY_GROUPS, infer_body_groups
+from skelagnostic.core.names import infer_body_groups
+from skelagnostic.core.skeleton import BODY_GROUPS
 
 NAMES = ["Hips", "Spine", "Head", "LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg"]
 PARENTS = [-1, 0, 1, 0, 3, 0, 5]
@@ -150,3 +151,26 @@ def test_real_skeleton_groups(shared_data, rel, left_arm_joint, left_leg_joint, 
     mapping = s.mirror_map()
     assert all(mapping[mapping[j]] == j for j in range(s.num_joints))
     assert s.morphology == ("quadruped" if "dog" in rel else "biped")
+
+
+def test_joint_name_heuristics_are_public() -> None:
+    """The name rules the baselines and the template use (skelagnostic.core.names)."""
+    from skelagnostic.core.names import (
+        counterpart_names,
+        is_middle_joint,
+        is_toe_joint,
+        is_twist_joint,
+        name_side,
+        name_words,
+    )
+
+    assert name_words("LeftUpLeg") == ["left", "up", "leg"]
+    assert name_words("LHipJoint") == ["l", "hip", "joint"]
+    sides = [name_side(n) for n in ("LeftArm", "RightFoot", "arm_L", "r_hand", "lfemur", "Neck")]
+    assert sides == [1, -1, 1, -1, 1, 0]
+    assert "RightHand" in counterpart_names("LeftHand")
+    assert "hand.R" in counterpart_names("hand.L")
+    assert is_middle_joint("LeftForeArm", "arm") and is_middle_joint("RightLeg", "leg")
+    assert not is_middle_joint("RightUpLeg", "leg")
+    assert is_twist_joint("LeftForeArmRoll") and is_toe_joint("RightToeBase")
+    assert not is_twist_joint("LeftForeArm") and not is_toe_joint("RightFoot")

@@ -15,6 +15,7 @@ import torch
 import skelagnostic as sa
 from skelagnostic import procedural
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.template import template_from_lengths
 
 TOLERANCE = 0.10  # of the standing height
 
@@ -157,7 +158,7 @@ def test_the_check_fails_on_the_length_only_template(shared_data: Path):
     sk = motion.skeleton
     reference = upright_biped(motion, "Head", ("LeftUpLeg", "RightUpLeg"))
     arms = [sk.index("LeftArm"), sk.index("RightArm")]
-    old = sk._template_from_lengths()
+    old = template_from_lengths(sk)
     assert worst_error(old, reference, arms) > 0.15 * sk.height()  # 27-29 cm, mostly low
     assert worst_error(sk.template(), reference, arms) < 0.06 * sk.height()
 
@@ -367,7 +368,7 @@ def test_template_keeps_clavicle_and_torso_and_hangs_the_limbs():
 def test_template_falls_back_without_a_body_frame():
     """No left/right limbs: the length-only construction (spine up)."""
     sk = sa.Skeleton(["root", "a", "b"], [-1, 0, 1], [[0, 0, 0], [5, 0, 0], [0, 0, 3]])
-    torch.testing.assert_close(sk.template(), sk._template_from_lengths())
+    torch.testing.assert_close(sk.template(), template_from_lengths(sk))
     torch.testing.assert_close(sk.template()[2], torch.tensor([0.0, 8.0, 0.0], dtype=torch.float64))
 
 

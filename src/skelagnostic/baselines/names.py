@@ -28,7 +28,8 @@ import torch
 
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import UNITS, Motion
-from skelagnostic.core.skeleton import Skeleton, _side, _words
+from skelagnostic.core.names import name_side, name_words
+from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
 from skelagnostic.errors import MotionError
 
@@ -49,8 +50,8 @@ def joint_key(name: str) -> tuple[int, str]:
         ((1, 'hipjoint'), (0, 'ringfinger1'))
     """
     base = re.split(r"[:|]", name)[-1]
-    side = _side(base)
-    words = _words(base)
+    side = name_side(base)
+    words = name_words(base)
     if side:
         marker = "left" if side > 0 else "right"
         letter = marker[0]

@@ -2,7 +2,8 @@
 
 from skelagnostic.core.kinematics import forward_kinematics
 from skelagnostic.core.motion import UNITS, Motion, reroot
-from skelagnostic.core.skeleton import BODY_GROUPS, Skeleton, infer_body_groups
+from skelagnostic.core.names import infer_body_groups
+from skelagnostic.core.skeleton import BODY_GROUPS, Skeleton
 
 __all__ = [
     "BODY_GROUPS",

@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import torch
 
+from skelagnostic.core.names import counterpart_names, infer_body_groups, is_effector_name
+from skelagnostic.core.template import canonical_template
 from skelagnostic.errors import SkeletonError
 
-__all__ = ["BODY_GROUPS", "Skeleton", "infer_body_groups"]
+__all__ = ["BODY_GROUPS", "Skeleton"]
 
 #: The body groups a joint can belong to.
 BODY_GROUPS: tuple[str, ...] = (
@@ -26,218 +27,54 @@ BODY_GROUPS: tuple[str, ...] = (
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
-# Name tokens. Names are split into lowercase words at case changes, digits and
-# separators ("LeftUpLeg" -> ["left", "up", "leg"], "l_hand" -> ["l", "hand"]).
-_ARM = {
-    "shoulder",
-    "arm",
-    "forearm",
-    "elbow",
-    "wrist",
-    "hand",
-    "finger",
-    "fingers",
-    "thumb",
-    "index",
-    "middle",
-    "ring",
-    "pinky",
-    "collar",
-    "clavicle",
-    "scapula",
-    "palm",
-    "carpal",
-}
-_LEG = {
-    "hip",
-    "thigh",
-    "upleg",
-    "leg",
-    "knee",
-    "calf",
-    "shin",
-    "ankle",
-    "foot",
-    "toe",
-    "toes",
-    "heel",
-    "ball",
-    "tibia",
-    "femur",
-}
-_SPINE = {
-    "hips",
-    "pelvis",
-    "root",
-    "spine",
-    "chest",
-    "neck",
-    "head",
-    "back",
-    "torso",
-    "abdomen",
-    "jaw",
-    "skull",
-    "lowerback",
-    "upperback",
-    "waist",
-    "body",
-    "lowerneck",
-    "upperneck",
-}
-_TAIL = {"tail"}
-_EFFECTOR_WORDS = ("hand", "wrist", "foot", "ankle", "toe", "head")
+
+def _check_hierarchy(names: list[str], parents: list[int]) -> dict[str, int]:
+    """Check names and parents (unique names, root 0 only, parents first); name -> index."""
+    if not names:
+        raise SkeletonError("skeleton has no joints")
+    if len(parents) != len(names):
+        raise SkeletonError(f"parents has {len(parents)} entries for {len(names)} joint names")
+    seen: dict[str, int] = {}
+    for j, n in enumerate(names):
+        if n in seen:
+            raise SkeletonError(f"duplicate joint name {n!r} (joints {seen[n]} and {j})")
+        seen[n] = j
+    roots = [j for j, p in enumerate(parents) if p < 0]
+    if roots != [0]:
+        raise SkeletonError(f"the root must be joint 0 and unique; roots found at {roots}")
+    for j, p in enumerate(parents):
+        if p >= j:
+            raise SkeletonError(
+                f"joint {names[j]!r} has parent index {p}: parents must come before children"
+            )
+    return seen
 
 
-def _words(name: str) -> list[str]:
-    # Split "LHipJoint" -> L Hip Joint, "lhand" stays "lhand" (handled by prefix rules).
-    parts = re.findall(r"[A-Z]+(?=[A-Z][a-z])|[A-Z]?[a-z]+|[A-Z]+|\d+", name)
-    return [p.lower() for p in parts]
+def _as_offsets(
+    offsets: torch.Tensor | np.ndarray | Sequence[Sequence[float]], names: list[str]
+) -> torch.Tensor:
+    """``[J, 3]`` floating-point, finite rest offsets as a tensor (float64 from non-tensors)."""
+    off = torch.as_tensor(
+        np.asarray(offsets, dtype=np.float64) if not isinstance(offsets, torch.Tensor) else offsets
+    )
+    if not off.is_floating_point():
+        off = off.to(torch.float64)
+    if off.shape != (len(names), 3):
+        raise SkeletonError(f"offsets must have shape [{len(names)}, 3], got {list(off.shape)}")
+    if not torch.isfinite(off).all():
+        bad = int((~torch.isfinite(off)).any(-1).nonzero()[0, 0])
+        raise SkeletonError(f"offset of joint {names[bad]!r} is not finite")
+    return off
 
 
-def _side(name: str) -> int:
-    """+1 for left, -1 for right, 0 when the name gives no side."""
-    words = _words(name)
-    if not words:
-        return 0
-    if "left" in words:
-        return 1
-    if "right" in words:
-        return -1
-    low = name.lower()
-    if re.search(r"(^|[_.\-:\s])l($|[_.\-:\s])", low) or re.match(r"^l(?=[A-Z_])", name):
-        return 1
-    if re.search(r"(^|[_.\-:\s])r($|[_.\-:\s])", low) or re.match(r"^r(?=[A-Z_])", name):
-        return -1
-    # lowercase glued prefixes such as "lhand", "rfingers", "lshoulder"
-    for prefix, side in (("l", 1), ("r", -1)):
-        if low.startswith(prefix) and low[1:] and any(low[1:].startswith(w) for w in _ARM | _LEG):
-            return side
-    return 0
-
-
-def _limb(name: str) -> str | None:
-    words = set(_words(name))
-    low = name.lower()
-    stripped = low[1:] if low[:1] in {"l", "r"} else low
-    if words & _TAIL or "tail" in low:
-        return "tail"
-    if words & _SPINE and not (words & _ARM) and not (words & _LEG):
-        return "spine"
-    if words & _ARM or any(stripped.startswith(w) for w in _ARM):
-        return "arm"
-    if words & _LEG or any(stripped.startswith(w) for w in _LEG):
-        return "leg"
-    if words & _SPINE:
-        return "spine"
-    return None
-
-
-_ELBOW_WORDS = frozenset({"forearm", "elbow", "lowerarm"})
-_KNEE_WORDS = frozenset({"knee", "calf", "shin", "lowerleg", "tibia"})
-_TWIST_WORDS = frozenset({"twist", "roll"})
-_TOE_WORDS = frozenset({"toe", "toes", "ball"})
-_LIMB_GROUPS = ("left_arm", "right_arm", "left_leg", "right_leg")
-
-
-def _is_middle_joint(name: str, words: frozenset[str]) -> bool:
-    """Whether a joint name denotes an elbow (``words`` of the arm) or a knee."""
-    w = _words(name)
-    if set(w) & words:
-        return True
-    if words is _ELBOW_WORDS:
-        return "arm" in w and bool({"fore", "lower"} & set(w))
-    # "LeftLeg" (Mixamo, CMU, MANN) is the knee; "LeftUpLeg", "UpperLeg", "LegHip" are not
-    return "leg" in w and not ({"up", "upper", "thigh", "hip", "top"} & set(w))
-
-
-def _parallel(d: torch.Tensor, axis: torch.Tensor, tol: float = 0.1) -> bool:
-    """Whether unit ``d`` lies along ``axis`` (either way) within ``tol`` of the sine."""
-    return float(torch.linalg.cross(d, axis).norm()) < tol
-
-
-def _axis_rotation(axis: torch.Tensor, angle: float) -> torch.Tensor:
-    """``[3, 3]`` rotation by ``angle`` radians about unit ``axis`` (Rodrigues)."""
-    k = torch.zeros(3, 3, dtype=axis.dtype)
-    k[0, 1], k[0, 2], k[1, 2] = -axis[2], axis[1], -axis[0]
-    k = k - k.T
-    a = torch.tensor(angle, dtype=axis.dtype)
-    return torch.eye(3, dtype=axis.dtype) + torch.sin(a) * k + (1 - torch.cos(a)) * (k @ k)
-
-
-def _rotation_between(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """``[3, 3]`` smallest rotation taking unit ``a`` to unit ``b``.
-
-    For opposite vectors the half turn is about an axis perpendicular to ``a``.
-    """
-    axis = torch.linalg.cross(a, b)
-    sin = float(axis.norm())
-    cos = float(a @ b)
-    if sin < 1e-9:
-        if cos > 0:
-            return torch.eye(3, dtype=a.dtype)
-        helper = torch.zeros(3, dtype=a.dtype)
-        helper[int(torch.argmin(a.abs()))] = 1.0
-        perp = torch.linalg.cross(a, helper)
-        return _axis_rotation(perp / perp.norm(), torch.pi)
-    return _axis_rotation(axis / sin, float(np.arctan2(sin, cos)))
-
-
-def infer_body_groups(
-    joint_names: Sequence[str],
-    parents: Sequence[int],
-    offsets: np.ndarray | torch.Tensor | None = None,
-    lateral_axis: int = 0,
-) -> list[str]:
-    """Assign each joint a body group from its name, its parent and the rest geometry.
-
-    Rules, in order: the root is ``spine``; a name with limb words (arm, hand,
-    shoulder, leg, knee, foot, ...) and a side (``Left``, ``L_``, ``lhand``, ...)
-    gives ``left_arm`` / ``right_arm`` / ``left_leg`` / ``right_leg``; ``tail``
-    words give ``tail``; spine words (spine, chest, neck, head, ...) give
-    ``spine``; a limb name without a side takes its parent's side, or, failing
-    that, the sign of the rest offset along ``lateral_axis`` (+ is left);
-    anything else inherits its parent's group.
-
-    Args:
-        joint_names: Joint names.
-        parents: Parent indices (root -1, parents before children).
-        offsets: ``[J, 3]`` rest offsets, used for the side of unnamed limbs.
-        lateral_axis: Axis index whose positive direction is the character's left.
-
-    Returns:
-        One group name per joint, each in :data:`BODY_GROUPS`.
-    """
-    num = len(joint_names)
-    groups: list[str] = ["other"] * num
-    pos = None
-    if offsets is not None:
-        off = np.asarray(offsets, dtype=np.float64)
-        pos = np.zeros((num, 3))
-        for j, p in enumerate(parents):
-            pos[j] = off[j] if p < 0 else pos[p] + off[j]
-        pos = pos - pos[0]
-    for j, (name, p) in enumerate(zip(joint_names, parents, strict=True)):
-        if p < 0:
-            groups[j] = "spine"
-            continue
-        limb = _limb(name)
-        parent_group = groups[p]
-        if limb in {"arm", "leg"}:
-            side = _side(name)
-            if side == 0 and parent_group.startswith(("left_", "right_")):
-                side = 1 if parent_group.startswith("left_") else -1
-            if side == 0 and pos is not None:
-                lat = pos[j, lateral_axis]
-                side = 1 if lat > 1e-9 else (-1 if lat < -1e-9 else 0)
-            groups[j] = ("left_" if side > 0 else "right_") + limb if side else "other"
-        elif limb == "tail":
-            groups[j] = "tail"
-        elif limb == "spine" and parent_group in {"spine", "other"}:
-            groups[j] = "spine"
-        else:
-            groups[j] = parent_group
-    return groups
+def _resolve_morphology(morphology: str | None, groups: Sequence[str]) -> str:
+    """``morphology`` checked, or inferred: tail plus both arms and legs is a quadruped."""
+    if morphology is None:
+        has_all = {"left_arm", "right_arm", "left_leg", "right_leg"} <= set(groups)
+        morphology = "quadruped" if has_all and "tail" in groups else "biped"
+    if morphology not in {"biped", "quadruped"}:
+        raise SkeletonError(f"morphology must be 'biped' or 'quadruped', got {morphology!r}")
+    return morphology
 
 
 class Skeleton:
@@ -287,43 +124,12 @@ class Skeleton:
     ) -> None:
         names = [str(n) for n in joint_names]
         parents_l = [int(p) for p in parents]
-        if not names:
-            raise SkeletonError("skeleton has no joints")
-        if len(parents_l) != len(names):
-            raise SkeletonError(
-                f"parents has {len(parents_l)} entries for {len(names)} joint names"
-            )
-        seen: dict[str, int] = {}
-        for j, n in enumerate(names):
-            if n in seen:
-                raise SkeletonError(f"duplicate joint name {n!r} (joints {seen[n]} and {j})")
-            seen[n] = j
-        roots = [j for j, p in enumerate(parents_l) if p < 0]
-        if roots != [0]:
-            raise SkeletonError(f"the root must be joint 0 and unique; roots found at {roots}")
-        for j, p in enumerate(parents_l):
-            if p >= j:
-                raise SkeletonError(
-                    f"joint {names[j]!r} has parent index {p}: parents must come before children"
-                )
-        off = torch.as_tensor(
-            np.asarray(offsets, dtype=np.float64)
-            if not isinstance(offsets, torch.Tensor)
-            else offsets
-        )
-        if not off.is_floating_point():
-            off = off.to(torch.float64)
-        if off.shape != (len(names), 3):
-            raise SkeletonError(f"offsets must have shape [{len(names)}, 3], got {list(off.shape)}")
-        if not torch.isfinite(off).all():
-            bad = int((~torch.isfinite(off)).any(-1).nonzero()[0, 0])
-            raise SkeletonError(f"offset of joint {names[bad]!r} is not finite")
-        if up_axis not in _AXES:
-            raise SkeletonError(f"up_axis must be 'x', 'y' or 'z', got {up_axis!r}")
+        self._index = _check_hierarchy(names, parents_l)
         self._names = names
         self._parents = parents_l
-        self._offsets = off
-        self._index = seen
+        self._offsets = _as_offsets(offsets, names)
+        if up_axis not in _AXES:
+            raise SkeletonError(f"up_axis must be 'x', 'y' or 'z', got {up_axis!r}")
         self.up_axis = up_axis
         self.name = name
         self.end_sites: dict[int, list[list[float]]] = {
@@ -335,17 +141,23 @@ class Skeleton:
                 f"channels has {len(self.channels)} entries for {len(names)} joints"
             )
         self._body_root = 0 if body_root is None else self._body_root_index(body_root)
+        self._groups = self._resolve_groups(body_groups)
+        self.morphology = _resolve_morphology(morphology, self._groups)
+
+    def _resolve_groups(self, given: Sequence[str] | Mapping[str, str] | None) -> list[str]:
+        """The body groups: inferred, then overridden by ``given`` (all, or some by name)."""
+        names = self._names
         inferred = infer_body_groups(
-            names, parents_l, self.rest_offsets(), lateral_axis=self._lateral_axis()
+            names, self._parents, self.rest_offsets(), lateral_axis=self._lateral_axis()
         )
-        if body_groups is None:
+        if given is None:
             groups = inferred
-        elif isinstance(body_groups, Mapping):
+        elif isinstance(given, Mapping):
             groups = list(inferred)
-            for jn, g in body_groups.items():
+            for jn, g in given.items():
                 groups[self.index(jn)] = g
         else:
-            groups = list(body_groups)
+            groups = list(given)
             if len(groups) != len(names):
                 raise SkeletonError(
                     f"body_groups has {len(groups)} entries for {len(names)} joints"
@@ -355,13 +167,7 @@ class Skeleton:
                 raise SkeletonError(
                     f"body group {g!r} of joint {jn!r} is not one of {', '.join(BODY_GROUPS)}"
                 )
-        self._groups = groups
-        if morphology is None:
-            has_all = {"left_arm", "right_arm", "left_leg", "right_leg"} <= set(groups)
-            morphology = "quadruped" if has_all and "tail" in groups else "biped"
-        if morphology not in {"biped", "quadruped"}:
-            raise SkeletonError(f"morphology must be 'biped' or 'quadruped', got {morphology!r}")
-        self.morphology = morphology
+        return groups
 
     # ------------------------------------------------------------------ basics
     @property
@@ -505,7 +311,7 @@ class Skeleton:
             cands = [j for j in leaves if self._groups[j] == group]
             if not cands:
                 continue
-            named = [j for j in cands if any(w in self._names[j].lower() for w in _EFFECTOR_WORDS)]
+            named = [j for j in cands if is_effector_name(self._names[j])]
             pick = named or cands
             # the deepest candidate ends the main chain
             result.append(max(pick, key=self.depth))
@@ -522,42 +328,14 @@ class Skeleton:
         """For every joint, the index of its left/right counterpart (itself if none).
 
         Counterparts are found by swapping side markers in names (``Left``/``Right``,
-        ``L``/``R`` prefixes, ``_l``/``_r`` suffixes).
+        ``L``/``R`` prefixes, ``_l``/``_r`` suffixes:
+        :func:`~skelagnostic.core.names.counterpart_names`).
         """
-        swaps = [
-            (r"Left", "Right"),
-            (r"left", "right"),
-            (r"LEFT", "RIGHT"),
-        ]
-
-        def swap(n: str) -> set[str]:
-            out = set()
-            for a, b in swaps:
-                if a in n:
-                    out.add(n.replace(a, b))
-                if b in n:
-                    out.add(n.replace(b, a))
-            for a, b in (("L", "R"), ("l", "r")):
-                if n.startswith(a):
-                    out.add(b + n[1:])
-                if n.startswith(b):
-                    out.add(a + n[1:])
-                for sep in ("_", ".", "-"):
-                    if n.endswith(sep + a):
-                        out.add(n[:-1] + b)
-                    if n.endswith(sep + b):
-                        out.add(n[:-1] + a)
-                    if n.startswith(a + sep):
-                        out.add(b + n[1:])
-                    if n.startswith(b + sep):
-                        out.add(a + n[1:])
-            return out
-
         mapping = list(range(self.num_joints))
         for j, n in enumerate(self._names):
             if not self._groups[j].startswith(("left_", "right_")):
                 continue
-            for cand in swap(n):
+            for cand in counterpart_names(n):
                 k = self._index.get(cand)
                 if k is not None and k != j:
                     mapping[j] = k
@@ -602,192 +380,11 @@ class Skeleton:
            or knee is rotated at the end of its first non-zero bone.
 
         Without a body frame (no head, no left/right hips or upper arms, or a
-        collinear rest pose) the whole template is the length-only construction.
+        collinear rest pose) the whole template is the length-only construction
+        (:func:`~skelagnostic.core.template.template_from_lengths`). The geometry
+        is in :mod:`skelagnostic.core.template`.
         """
-        units, lengths = self._rest_directions()
-        rest = torch.zeros_like(self._offsets)
-        for j, p in enumerate(self._parents):
-            if p >= 0:
-                rest[j] = rest[p] + lengths[j] * units[j]
-        pivots = {g: self._limb_pivot(g, lengths) for g in _LIMB_GROUPS}
-        frame = self._body_frame(rest, pivots)
-        if frame is None:
-            return self._template_from_lengths()
-        return self._template_from_rest(frame, units, lengths, rest, pivots)
-
-    def _rest_directions(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """``[J, 3]`` unit rest directions (zero for zero-length bones), ``[J]`` lengths."""
-        offsets = self.rest_offsets()
-        norms = offsets.norm(dim=-1, keepdim=True)
-        units = torch.where(norms > 1e-12, offsets / norms.clamp_min(1e-12), 0.0)
-        units[0] = 0.0
-        return units, self.bone_lengths()
-
-    def _head_joint(self) -> int | None:
-        """The head: the shallowest spine joint named ``head``, else the deepest spine leaf."""
-        spine = [j for j in range(1, self.num_joints) if self._groups[j] == "spine"]
-        named = [j for j in spine if "head" in _words(self._names[j])]
-        if named:
-            return min(named, key=self.depth)
-        has_child = set(self._parents)
-        leaves = [j for j in spine if j not in has_child]
-        return max(leaves, key=self.depth) if leaves else None
-
-    def _limb_pivot(self, group: str, lengths: torch.Tensor) -> int | None:
-        """The joint at which a limb is turned to hang down (upper-arm or hip joint).
-
-        The parent of the limb's first joint named as an elbow (arms) or knee (legs),
-        moving up past twist/roll joints and zero-length links; failing that, the
-        end of the limb's first non-zero bone. ``None`` when nothing of the limb
-        hangs below that joint.
-        """
-        members = [j for j in range(1, self.num_joints) if self._groups[j] == group]
-        words = _ELBOW_WORDS if group.endswith("_arm") else _KNEE_WORDS
-        middle = next((j for j in members if _is_middle_joint(self._names[j], words)), None)
-        if middle is not None:
-            pivot = self._parents[middle]
-            while (
-                pivot > 0
-                and self._groups[self._parents[pivot]] == group
-                and (_TWIST_WORDS & set(_words(self._names[pivot])) or lengths[middle] <= 0)
-            ):
-                middle, pivot = pivot, self._parents[pivot]
-            if self._groups[pivot] == group:
-                return pivot
-        first = next((j for j in members if lengths[j] > 0), None)
-        if first is None or not any(self._groups[c] == group for c in self.children(first)):
-            return None
-        return first
-
-    def _body_frame(
-        self, rest: torch.Tensor, pivots: Mapping[str, int | None]
-    ) -> torch.Tensor | None:
-        """``[3, 3]`` rotation taking rest vectors into the canonical frame, or ``None``.
-
-        Its rows are the body's left, up and forward directions in the rest pose.
-        """
-        lateral = None
-        for left, right in (("left_leg", "right_leg"), ("left_arm", "right_arm")):
-            if pivots[left] is not None and pivots[right] is not None:
-                lateral = rest[pivots[left]] - rest[pivots[right]]
-                break
-        target = self._head_joint()
-        if self.morphology == "quadruped":
-            front = [
-                self._parents[j]
-                for j in range(1, self.num_joints)
-                if self._groups[j].endswith("_arm")
-                and not self._groups[self._parents[j]].endswith("_arm")
-            ]
-            target = front[0] if front else target
-        if lateral is None or target is None or float(rest[target].norm()) <= 1e-9:
-            return None
-        axis = rest[target] / rest[target].norm()
-        lateral = lateral - (lateral @ axis) * axis
-        if float(lateral.norm()) <= 1e-6 * float(rest[target].norm()):
-            return None
-        lateral = lateral / lateral.norm()
-        if self.morphology == "quadruped":
-            fwd, up = axis, torch.linalg.cross(axis, lateral)
-        else:
-            up, fwd = axis, torch.linalg.cross(lateral, axis)
-        return torch.stack([lateral, up, fwd])
-
-    def _template_from_rest(
-        self,
-        frame: torch.Tensor,
-        units: torch.Tensor,
-        lengths: torch.Tensor,
-        rest: torch.Tensor,
-        pivots: Mapping[str, int | None],
-    ) -> torch.Tensor:
-        """The construction of :meth:`template` given the body frame and limb pivots."""
-        dtype = units.dtype
-        lat, up, fwd = torch.eye(3, dtype=dtype)
-        quad = self.morphology == "quadruped"
-        body_axis = fwd if quad else up
-        pivot_of = {pv: g for g, pv in pivots.items() if pv is not None}
-        # rot[j]: the rotation applied to the rest directions of the bones below joint j
-        rot = [frame.to(dtype)] * self.num_joints
-        hanging = [False] * self.num_joints  # j lies below its limb's pivot
-        pos = torch.zeros_like(self._offsets)
-        for j, p in enumerate(self._parents):
-            if p < 0:
-                continue
-            g = self._groups[j]
-            r = rot[p]
-            d = r @ units[j]
-            hanging[j] = hanging[p] or p in pivot_of
-            girdle = g.endswith(("_arm", "_leg")) and not hanging[j]
-            if lengths[j] > 0 and float(d.norm()) > 0:
-                fix = torch.eye(3, dtype=dtype)
-                hind = quad and (g == "tail" or (girdle and g.endswith("_leg")))
-                if hind and float(d @ fwd) > 1e-6 and float(d @ up) >= 0:
-                    # forward and up from the pelvis: a segment rested upside down
-                    fix = _axis_rotation(lat, torch.pi)
-                elif girdle and _parallel(d, body_axis):
-                    side = (1.0 if g.startswith("left_") else -1.0) * lat
-                    quad_arm = quad and g.endswith("_arm")
-                    target = (side - 2 * up + fwd) / 6**0.5 if quad_arm else side
-                    fix = _rotation_between(d, target)
-                elif hanging[j] and set(_words(self._names[j])) & _TOE_WORDS and d @ up < -0.9:
-                    fix = _rotation_between(d, fwd)
-                r, d = fix @ r, fix @ d
-            pos[j] = pos[p] + lengths[j] * d
-            rot[j] = r
-            if j in pivot_of:
-                hang = r @ self._pivot_vector(j, rest)
-                if float(hang.norm()) > 1e-12:
-                    rot[j] = _rotation_between(hang / hang.norm(), -up) @ r
-        return pos - pos[0]
-
-    def _pivot_vector(self, pivot: int, rest: torch.Tensor) -> torch.Tensor:
-        """Rest vector from a limb's pivot to the nearest limb joint below it not on it."""
-        group = self._groups[pivot]
-        queue = [c for c in self.children(pivot) if self._groups[c] == group]
-        while queue:
-            c = queue.pop(0)
-            vec = rest[c] - rest[pivot]
-            if float(vec.norm()) > 1e-9:
-                return vec
-            queue.extend(k for k in self.children(c) if self._groups[k] == group)
-        return torch.zeros(3, dtype=rest.dtype)
-
-    def _template_from_lengths(self) -> torch.Tensor:
-        """The length-only construction, used when the rest geometry gives no body frame.
-
-        Bipeds stand with the spine straight up; quadrupeds hold the spine forward
-        with the head and neck raised by 45 degrees. Each limb's first non-zero bone
-        points sideways (hip, clavicle), the rest straight down (arms down), bones
-        ending in a toe/ball point forward; the tail points backward.
-        """
-        lengths = self.bone_lengths()
-        pos = torch.zeros_like(self._offsets)
-        up = torch.tensor([0.0, 1.0, 0.0], dtype=pos.dtype)
-        fwd = torch.tensor([0.0, 0.0, 1.0], dtype=pos.dtype)
-        lat = torch.tensor([1.0, 0.0, 0.0], dtype=pos.dtype)
-        # started[j]: a non-zero bone of j's limb already lies between the limb's start and j
-        started = [False] * self.num_joints
-        for j, p in enumerate(self._parents):
-            if p < 0:
-                continue
-            g = self._groups[j]
-            name = self._names[j].lower()
-            if g in {"spine", "other"}:
-                d = fwd if self.morphology == "quadruped" else up
-                if self.morphology == "quadruped" and ("head" in name or "neck" in name):
-                    d = (fwd + up) / 2**0.5
-            elif g == "tail":
-                d = -fwd
-            else:
-                before = started[p] if self._groups[p] == g else False
-                if not before and lengths[j] > 0:
-                    d = (1.0 if g.startswith("left_") else -1.0) * lat
-                else:
-                    d = fwd if any(w in name for w in ("toe", "ball")) else -up
-                started[j] = before or bool(lengths[j] > 0)
-            pos[j] = pos[p] + lengths[j] * d
-        return pos - pos[0]
+        return canonical_template(self)
 
     def height(self) -> float:
         """Extent of :meth:`template` along the up axis (the character's standing height).
