@@ -50,8 +50,8 @@ class PointNet(nn.Module):
 
 def main(argv: list[str] | None = None) -> None:
     """Parse the arguments, train, print the errors."""
-    from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
     from skelagnostic_pcmrl.points import heading_frames, sample_layout
+    from skelagnostic_pcmrl.recon.point_transformer import PointTransformerEncoder
 
     from skelagnostic.core import quaternion as Q
     from skelagnostic.errors import SkelagnosticError

@@ -1,7 +1,7 @@
 r"""How fast does PC-MRL's stage-2 model learn beyond LERP? A training probe.
 
 A diagnostic for stage 2 (docs/reports/pcmrl.md, "Learning beyond LERP"):
-trains :class:`~skelagnostic_pcmrl.interp.PcmrlInterpAligner` on the
+trains :class:`~skelagnostic_pcmrl.interp.aligner.PcmrlInterpAligner` on the
 ``--train`` clips for ``--minutes`` (one thread, the training step of ``fit``
 without Lightning), and every ``--every`` steps prints, on the fixed windows of
 the held-out ``--test`` clips (128 frames, a key every 15 and every 30 frames),
@@ -73,8 +73,8 @@ def _position_error(model: Any, batch: dict[str, torch.Tensor]) -> tuple[float, 
 
 def main(argv: list[str] | None = None) -> int:
     """Command line (see the module docstring)."""
-    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
-    from skelagnostic_pcmrl.interp_data import FixedWindows, PcmrlInterpDataModule
+    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp.data import FixedWindows, PcmrlInterpDataModule
 
     from skelagnostic.data.sources import BVHSource
 

@@ -87,7 +87,7 @@ def _humot(workdir: Path) -> Path:
 
 
 def _pcmrl_interp(workdir: Path) -> Path:
-    from skelagnostic_pcmrl.interp_aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
 
     from skelagnostic import procedural
 

@@ -24,7 +24,7 @@ reports, each next to a baseline measured in the same run:
 * PC-MRL interpolation (``quality_pcmrl_interp``): L2P, L2Q and NPSS at keyframe
   gaps 5, 15 and 30 on 128-frame windows of held-out procedural biped31 clips
   (the paper's Table 1 protocol as the authors compute it,
-  ``skelagnostic_pcmrl.interp_eval.authors_table1``; L2P in metres over all
+  ``skelagnostic_pcmrl.interp.evaluation.authors_table1``; L2P in metres over all
   frames), against LERP/SLERP, for ``experiment=pcmrl_interp_cpu``.
 
 * PC-MRL reconstruction (``quality_pcmrl_recon``): the paper's Table 2
@@ -194,8 +194,8 @@ def pcmrl_interp(steps: int) -> dict[str, Any]:
     """Train ``experiment=pcmrl_interp_cpu`` for ``steps`` steps; Table 1 on held-out clips."""
     _one_thread()
     _plugin("pcmrl")
-    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
-    from skelagnostic_pcmrl.interp_eval import GAPS, evaluate
+    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp.evaluation import GAPS, evaluate
 
     from skelagnostic import procedural
     from skelagnostic.baselines import lerp_slerp
@@ -216,7 +216,7 @@ def pcmrl_recon(steps: int) -> dict[str, Any]:
     _one_thread()
     _plugin("pcmrl")
     from skelagnostic_pcmrl.evaluation import evaluate_clips
-    from skelagnostic_pcmrl.recon import PcmrlReconAligner
+    from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
 
     from skelagnostic import procedural
 

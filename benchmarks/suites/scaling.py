@@ -207,8 +207,8 @@ def build(method: str, tiny: bool, clips: Any, batch: int, cache_dir: str) -> tu
         dm = HumotDataModule([clips], **common)
         model = HumotAligner(**options)
     elif method == "pcmrl_recon":
-        from skelagnostic_pcmrl.recon import PcmrlReconAligner
-        from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
+        from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
+        from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule
 
         window = 16 if tiny else 64
         dm = PcmrlReconDataModule(
@@ -216,8 +216,8 @@ def build(method: str, tiny: bool, clips: Any, batch: int, cache_dir: str) -> tu
         )
         model = PcmrlReconAligner(lr=1e-4, **options)
     elif method == "pcmrl_interp":
-        from skelagnostic_pcmrl.interp import PcmrlInterpAligner
-        from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
+        from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+        from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
 
         window = 32 if tiny else 128
         dm = PcmrlInterpDataModule(clips, fps=30.0, window=window, **common)
@@ -534,8 +534,8 @@ def _import_everything() -> None:
             sys.path.insert(0, path)
     import lightning  # noqa: F401
     import skelagnostic_humot  # noqa: F401
-    import skelagnostic_pcmrl.interp
-    import skelagnostic_pcmrl.recon  # noqa: F401
+    import skelagnostic_pcmrl.interp.aligner
+    import skelagnostic_pcmrl.recon.aligner  # noqa: F401
     import skelagnostic_vqpae.aligner  # noqa: F401
     import torch  # noqa: F401
 

@@ -132,10 +132,10 @@ def setup(
     """
     sys.path.insert(0, str(REPO_ROOT / "plugins" / "pcmrl" / "src"))
     import torch
-    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
-    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
-    from skelagnostic_pcmrl.recon import PcmrlReconAligner
-    from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
+    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
+    from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
+    from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule
 
     from skelagnostic.data import BVHSource, ProceduralSource
 

@@ -153,7 +153,7 @@ def test_summary_md_tables_hold_hostile_names(render: Any, tmp_path: Path) -> No
 
 def test_pcmrl_tables_hold_hostile_model_names() -> None:
     evaluation = pytest.importorskip("skelagnostic_pcmrl.evaluation")
-    interp_eval = pytest.importorskip("skelagnostic_pcmrl.interp_eval")
+    interp_eval = pytest.importorskip("skelagnostic_pcmrl.interp.evaluation")
     rows = {name: {"knn@0.1": 1.0, "l_end": 2.0} for name in HOSTILE}
     parsed = _tables(evaluation.format_table({"rows": rows}), _render_commonmark)
     assert [row[0] for row in parsed.rows[1:]] == list(map(_shown, HOSTILE))

@@ -110,8 +110,8 @@ def test_humot(walks: dict[str, Path], tmp_path: Path, humot_small: dict[str, in
 
 
 def test_pcmrl_interpolation(walks: dict[str, Path], tmp_path: Path) -> None:
-    from skelagnostic_pcmrl.interp_aligner import PcmrlInterpAligner
-    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
+    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
 
     def make(path: Path, cache: Path) -> PcmrlInterpDataModule:
         return PcmrlInterpDataModule(
@@ -136,8 +136,8 @@ def test_pcmrl_point_clouds(
 ) -> None:
     """Stage 1: source windows, and the target hierarchy given as a carrier file."""
     from skelagnostic_pcmrl.points import sample_layout, zero_length_bones
-    from skelagnostic_pcmrl.recon import PcmrlReconAligner
-    from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule, load_target_skeleton
+    from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
+    from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule, load_target_skeleton
 
     carrier_file = str(walks["carrier"] / "walk.bvh")
     plain_target, plain_units = load_target_skeleton(str(walks["plain"] / "walk.bvh"))

@@ -116,8 +116,8 @@ def test_hooks_are_public_and_overridable(tmp_path: Path) -> None:
 
 def test_plugin_data_modules_forward_the_base_options(tmp_path: Path) -> None:
     from skelagnostic_humot.data import HumotDataModule
-    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
-    from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
+    from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
+    from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule
     from skelagnostic_vqpae.data import VqpaeDataModule
 
     for cls in (HumotDataModule, VqpaeDataModule, PcmrlReconDataModule, PcmrlInterpDataModule):

@@ -446,7 +446,7 @@ def test_vqpae_encoder_and_pose_decoder_match_pytorch(
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
 def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str, tmp_path: Path) -> None:
     from skelagnostic_pcmrl.points import global_to_local, sample_layout
-    from skelagnostic_pcmrl.recon import PcmrlReconAligner
+    from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
 
     from skelagnostic.core import quaternion as Q
 
@@ -491,8 +491,8 @@ def test_pcmrl_reconstruction_matches_pytorch(lafan: sa.Motion, fmt: str, tmp_pa
 
 @pytest.mark.parametrize("fmt", ["onnx", "torchscript"])
 def test_pcmrl_interpolation_matches_pytorch(lafan: sa.Motion, fmt: str, tmp_path: Path) -> None:
-    from skelagnostic_pcmrl.interp import PcmrlInterpAligner
-    from skelagnostic_pcmrl.rpa import bone_tails
+    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp.rpa import bone_tails
 
     torch.manual_seed(0)
     metric = lafan.to_metres().to(torch.float32)

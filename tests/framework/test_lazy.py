@@ -44,10 +44,9 @@ def test_unknown_names_are_attribute_errors(package):
     [
         ("skelagnostic_vqpae.aligner", "VQPAEAligner", "VqpaeAligner"),
         ("skelagnostic_vqpae.data", "VQPAEDataModule", "VqpaeDataModule"),
-        ("skelagnostic_pcmrl.recon", "PcmrlReconstruction", "PcmrlReconAligner"),
-        ("skelagnostic_pcmrl.interp_aligner", "InterpolationAligner", "PcmrlInterpAligner"),
-        ("skelagnostic_pcmrl.interp", "InterpolationAligner", "PcmrlInterpAligner"),
-        ("skelagnostic_pcmrl.interp_data", "InterpolationDataModule", "PcmrlInterpDataModule"),
+        ("skelagnostic_pcmrl.recon.aligner", "PcmrlReconstruction", "PcmrlReconAligner"),
+        ("skelagnostic_pcmrl.interp.aligner", "InterpolationAligner", "PcmrlInterpAligner"),
+        ("skelagnostic_pcmrl.interp.data", "InterpolationDataModule", "PcmrlInterpDataModule"),
     ],
 )
 def test_renamed_aligner_classes_keep_their_old_names_with_a_warning(module, old, new):

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 import torch
-from skelagnostic_pcmrl.interp_eval import authors_table1, keyframe_centre
-from skelagnostic_pcmrl.losses import authors_alpha, authors_knn_terms, temporal_knn_loss
+from skelagnostic_pcmrl.interp.evaluation import authors_table1, keyframe_centre
+from skelagnostic_pcmrl.recon.losses import authors_alpha, authors_knn_terms, temporal_knn_loss
 
 from skelagnostic.errors import SkelagnosticError
 

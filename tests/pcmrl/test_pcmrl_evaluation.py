@@ -13,7 +13,7 @@ from skelagnostic_pcmrl.evaluation import (
     limb_end_pairs,
     reconstruction_protocol,
 )
-from skelagnostic_pcmrl.recon import PcmrlReconAligner
+from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
 
 import skelagnostic as sa
 from skelagnostic.baselines import (

@@ -6,7 +6,7 @@ import warnings
 from pathlib import Path
 
 import torch
-from skelagnostic_pcmrl.recon import PcmrlReconAligner
+from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
 
 from skelagnostic import procedural
 from skelagnostic.cli import app

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
-from skelagnostic_pcmrl.fps import farthest_point_sampling, gather_points, knn_indices
+from skelagnostic_pcmrl.recon.fps import farthest_point_sampling, gather_points, knn_indices
 
 from skelagnostic.errors import SkelagnosticError
 

@@ -1,4 +1,4 @@
-"""PC-MRL Table 1 protocol (interp_eval): reference values and the pcmrl.interpolation protocol."""
+"""PC-MRL Table 1 protocol (interp.evaluation): reference values and pcmrl.interpolation."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import torch
 from skelagnostic_pcmrl.evaluation import interpolation_protocol
-from skelagnostic_pcmrl.interp import PcmrlInterpAligner
-from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
-from skelagnostic_pcmrl.interp_eval import evaluate, format_table, position_stats, windows
+from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
+from skelagnostic_pcmrl.interp.evaluation import evaluate, format_table, position_stats, windows
 
 from skelagnostic import Motion, procedural
 from skelagnostic.baselines import lerp_slerp

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import pytest
 import torch
-from skelagnostic_pcmrl.interp_aligner import PcmrlInterpAligner
-from skelagnostic_pcmrl.interp_network import CITLInterpolator
+from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+from skelagnostic_pcmrl.interp.network import CITLInterpolator
 
 from skelagnostic import procedural
 

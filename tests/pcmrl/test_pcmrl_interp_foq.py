@@ -7,11 +7,12 @@ from pathlib import Path
 
 import pytest
 import torch
-from skelagnostic_pcmrl.interp import global_to_local, window_features
-from skelagnostic_pcmrl.rpa import bone_tails
+from skelagnostic_pcmrl.interp.keyframes import window_features
+from skelagnostic_pcmrl.interp.rpa import bone_tails
 
 from skelagnostic import Motion, Skeleton, procedural, read_bvh
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import local_from_global
 from skelagnostic.representations import FirstFrameOffsetQuaternions
 
 
@@ -61,7 +62,7 @@ def test_model_features_are_the_library_foq() -> None:
     assert torch.allclose(f["positions"][0], motion.global_positions(), atol=1e-9)
     # FOQ * q0 gives back the global rotations, and local rotations through FK the motion
     assert _same_rotation(f["global"][0], grot)
-    local = global_to_local(f["global"][0], motion.skeleton.parents)
+    local = local_from_global(f["global"][0], motion.skeleton.parents)
     rebuilt = Motion(motion.skeleton, local, motion.root_positions, motion.fps)
     assert torch.allclose(rebuilt.global_positions(), motion.global_positions(), atol=1e-9)
     # non-key frames carry no information: zero features and a zero key flag

@@ -9,19 +9,15 @@ from pathlib import Path
 import lightning as L
 import pytest
 import torch
-from skelagnostic_pcmrl.interp import (
-    PcmrlInterpAligner,
-    key_brackets,
-    lerp_keys,
-    slerp_keys,
-)
-from skelagnostic_pcmrl.interp_data import (
+from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+from skelagnostic_pcmrl.interp.data import (
     PcmrlInterpDataModule,
     gap_keys,
     random_keys,
     regular_keys,
 )
-from skelagnostic_pcmrl.rpa import bone_tails
+from skelagnostic_pcmrl.interp.keyframes import key_brackets, lerp_keys, slerp_keys
+from skelagnostic_pcmrl.interp.rpa import bone_tails
 
 from skelagnostic import Motion, procedural
 from skelagnostic.baselines import lerp_slerp
@@ -301,9 +297,9 @@ def test_ema_averages_the_network_built_from_the_data(tmp_path: Path) -> None:
 
 
 def _local(clip) -> torch.Tensor:  # type: ignore[no-untyped-def]
-    from skelagnostic_pcmrl.interp import global_to_local
+    from skelagnostic.core.kinematics import local_from_global
 
-    return global_to_local(clip.global_rotations, clip.skeleton.parents)
+    return local_from_global(clip.global_rotations, clip.skeleton.parents)
 
 
 @pytest.mark.parametrize("layout", ["skelagnostic", "authors"])
@@ -353,7 +349,7 @@ def test_canonical_heading_makes_interpolation_turn_with_the_input(canonical: bo
 
 
 def test_window_heading_is_equivariant_and_needs_left_and_right() -> None:
-    from skelagnostic_pcmrl.interp import window_heading
+    from skelagnostic_pcmrl.interp.keyframes import window_heading
     from skelagnostic_pcmrl.points import group_of_joints
 
     motion = _motion(seconds=1.0)
@@ -421,8 +417,8 @@ def test_canonical_heading_is_saved_with_the_checkpoint(tmp_path: Path) -> None:
 def test_lerp_tokens_see_the_baseline_pose_and_the_place_in_the_gap() -> None:
     """``interm_inputs`` = FK of the LERP/SLERP baseline (as :func:`lerp_slerp` computes it
     on its own) in the model's frame, plus ``w``, ``sin(pi w)`` and the gap length."""
-    from skelagnostic_pcmrl.interp import window_features
-    from skelagnostic_pcmrl.rpa import bone_tails
+    from skelagnostic_pcmrl.interp.keyframes import window_features
+    from skelagnostic_pcmrl.interp.rpa import bone_tails
 
     motion = _motion(seconds=1.0)
     skel = motion.skeleton

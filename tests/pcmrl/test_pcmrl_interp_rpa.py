@@ -6,8 +6,7 @@ import math
 
 import pytest
 import torch
-from skelagnostic_pcmrl.interp import global_to_local
-from skelagnostic_pcmrl.rpa import (
+from skelagnostic_pcmrl.interp.rpa import (
     augment_rest_pose,
     bone_tails,
     max_real_quaternion,
@@ -16,6 +15,7 @@ from skelagnostic_pcmrl.rpa import (
 
 from skelagnostic import Motion, Skeleton, procedural
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.kinematics import local_from_global
 from skelagnostic.representations import FirstFrameOffsetQuaternions
 
 
@@ -132,7 +132,7 @@ def test_rpa_keeps_bone_directions_and_foq() -> None:
     assert torch.equal(offsets[~nonzero], sk.offsets[~nonzero])
     # the augmented motion, through plain FK on the augmented skeleton
     aug_sk = Skeleton(sk.joint_names, sk.parents, offsets, end_sites=sk.end_sites)
-    aug = Motion(aug_sk, global_to_local(grot_aug, sk.parents), motion.root_positions, motion.fps)
+    aug = Motion(aug_sk, local_from_global(grot_aug, sk.parents), motion.root_positions, motion.fps)
     assert torch.allclose(aug.global_rotations(), grot_aug, atol=1e-9)
     pos, pos_aug = motion.global_positions(), aug.global_positions()
     child = bone_tails(sk).child

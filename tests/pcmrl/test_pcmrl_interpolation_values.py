@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 import torch
 from skelagnostic_pcmrl.evaluation import interpolation_protocol
-from skelagnostic_pcmrl.interp import PcmrlInterpAligner
+from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
 
 from numpy_reference import global_pose, hemisphere_continuous, npss
 from skelagnostic import Motion, procedural

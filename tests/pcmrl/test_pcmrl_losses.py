@@ -6,7 +6,7 @@ import math
 
 import pytest
 import torch
-from skelagnostic_pcmrl.losses import end_effector_loss, temporal_knn_loss, unit_norm_penalty
+from skelagnostic_pcmrl.recon.losses import end_effector_loss, temporal_knn_loss, unit_norm_penalty
 
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.metrics.functional import temporal_knn_distance

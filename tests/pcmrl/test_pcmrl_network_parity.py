@@ -12,18 +12,18 @@ from pathlib import Path
 import pytest
 import torch
 from skelagnostic_pcmrl.authors import load_stage1, load_stage2, read_state
-from skelagnostic_pcmrl.fps import farthest_point_sampling
-from skelagnostic_pcmrl.interp_aligner import PcmrlInterpAligner
-from skelagnostic_pcmrl.interp_data import Clip, PcmrlInterpDataModule, TrainWindows
-from skelagnostic_pcmrl.interp_keyframes import window_features
-from skelagnostic_pcmrl.points import ZeroLengthBoneWarning, sample_layout
-from skelagnostic_pcmrl.recon import PcmrlReconAligner
-from skelagnostic_pcmrl.rpa import (
+from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+from skelagnostic_pcmrl.interp.data import Clip, PcmrlInterpDataModule, TrainWindows
+from skelagnostic_pcmrl.interp.keyframes import window_features
+from skelagnostic_pcmrl.interp.rpa import (
     authors_rest_pose_rotations,
     lateral_axis,
     left_right_pairs,
     mirrored_tail_offsets,
 )
+from skelagnostic_pcmrl.points import ZeroLengthBoneWarning, sample_layout
+from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
+from skelagnostic_pcmrl.recon.fps import farthest_point_sampling
 
 import skelagnostic as sa
 from skelagnostic.core import quaternion as Q

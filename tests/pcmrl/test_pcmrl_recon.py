@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 import torch
-from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder, VectorAttention
 from skelagnostic_pcmrl.points import ZeroLengthBoneWarning, sample_layout
-from skelagnostic_pcmrl.recon import PcmrlReconAligner, end_effector_pairs
+from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner, end_effector_pairs
+from skelagnostic_pcmrl.recon.point_transformer import PointTransformerEncoder, VectorAttention
 
 import skelagnostic as sa
 from skelagnostic import procedural
@@ -293,7 +293,7 @@ def test_wrong_target_and_stage_are_clear_errors(model, pcmrl_tiny) -> None:
 @pytest.mark.parametrize("layout", ["skelagnostic", "authors"])
 def test_a_few_steps_reduce_the_knn_loss(pcmrl_tiny, layout) -> None:
     """Unsupervised learning signal: the KNN loss of one batch drops when optimised."""
-    from skelagnostic_pcmrl.losses import temporal_knn_loss
+    from skelagnostic_pcmrl.recon.losses import temporal_knn_loss
 
     torch.manual_seed(0)
     if layout == "authors":  # its temporal width is the frame feature's + 16

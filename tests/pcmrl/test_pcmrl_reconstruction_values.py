@@ -22,7 +22,7 @@ import pytest
 import torch
 from scipy.spatial.distance import cdist
 from skelagnostic_pcmrl.evaluation import BASELINES, evaluate_pair, reconstruction_protocol
-from skelagnostic_pcmrl.recon import PcmrlReconAligner
+from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
 
 import skelagnostic as sa
 from numpy_reference import global_pose, metres, qrot

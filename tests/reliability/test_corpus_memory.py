@@ -44,10 +44,10 @@ MODULES: dict[str, tuple[str, dict[str, Any]]] = {
     ),
     "humot": ("skelagnostic_humot.data:HumotDataModule", {"batch_size": 32}),
     "pcmrl_recon": (
-        "skelagnostic_pcmrl.recon_data:PcmrlReconDataModule",
+        "skelagnostic_pcmrl.recon.data:PcmrlReconDataModule",
         {"batch_size": 8, "target": "biped31"},
     ),
-    "pcmrl_interp": ("skelagnostic_pcmrl.interp_data:PcmrlInterpDataModule", {"batch_size": 16}),
+    "pcmrl_interp": ("skelagnostic_pcmrl.interp.data:PcmrlInterpDataModule", {"batch_size": 16}),
 }
 
 #: Run in the subprocess: set the data module up and read batches, print the peak RSS.

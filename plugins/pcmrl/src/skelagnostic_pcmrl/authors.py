@@ -7,9 +7,9 @@ dicts: ``train_pointcloud.py`` writes ``ckpt_pc-mrl/PCMRL{step}.pt`` (their
 interpolation network). :func:`load_stage1` and :func:`load_stage2` read such
 files into skelagnostic's own modules, built with ``layout="authors"`` so that
 they compute what the authors' networks compute
-(:class:`~skelagnostic_pcmrl.point_transformer.PointTransformerEncoder`,
-:class:`~skelagnostic_pcmrl.temporal.TemporalTransformer`,
-:class:`~skelagnostic_pcmrl.interp_network.CITLInterpolator`). Every tensor is
+(:class:`~skelagnostic_pcmrl.recon.point_transformer.PointTransformerEncoder`,
+:class:`~skelagnostic_pcmrl.recon.temporal.TemporalTransformer`,
+:class:`~skelagnostic_pcmrl.interp.network.CITLInterpolator`). Every tensor is
 moved by an explicit key mapping; a missing, unexpected or misshapen key is an
 error naming the file and the key.
 
@@ -35,9 +35,9 @@ import torch
 from torch import Tensor, nn
 
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic_pcmrl.interp_network import CITLInterpolator
-from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
-from skelagnostic_pcmrl.temporal import (
+from skelagnostic_pcmrl.interp.network import CITLInterpolator
+from skelagnostic_pcmrl.recon.point_transformer import PointTransformerEncoder
+from skelagnostic_pcmrl.recon.temporal import (
     AUTHORS_POSITION_DIM,
     TemporalTransformer,
     sinusoidal_positions,
@@ -252,7 +252,7 @@ def load_stage2(
         heads: Attention heads (``n_heads``, 8).
 
     Returns:
-        A :class:`~skelagnostic_pcmrl.interp_network.CITLInterpolator` with
+        A :class:`~skelagnostic_pcmrl.interp.network.CITLInterpolator` with
         ``layout="authors"``, in eval mode.
 
     Raises:

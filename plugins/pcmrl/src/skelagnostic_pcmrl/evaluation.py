@@ -7,7 +7,7 @@ Protocols (``skelagnostic evaluate ckpt_path=... [protocol=...]``):
   Table 2 metrics below, beside the baselines.
 * ``pcmrl.interpolation`` (default of ``model=pcmrl_interp``,
   :func:`interpolation_protocol`): the Table 1 protocol of
-  :mod:`skelagnostic_pcmrl.interp_eval` (L2P, L2Q, NPSS at keyframe gaps 5, 15,
+  :mod:`skelagnostic_pcmrl.interp.evaluation` (L2P, L2Q, NPSS at keyframe gaps 5, 15,
   30) per held-out clip, beside :func:`~skelagnostic.baselines.lerp_slerp`:
   ``l2p``/``l2q``/``npss`` as the authors compute Table 1, ``lafan1_*`` the
   LaFAN1 benchmark's definitions.
@@ -75,7 +75,7 @@ from skelagnostic.evaluation import (
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import end_effector_error, temporal_knn_distance
 from skelagnostic.representations import PointCloud
-from skelagnostic_pcmrl.interp_eval import GAPS, evaluate, position_stats, windows
+from skelagnostic_pcmrl.interp.evaluation import GAPS, evaluate, position_stats, windows
 from skelagnostic_pcmrl.points import end_effector_pairs
 
 __all__ = [
@@ -228,7 +228,8 @@ def evaluate_clips(
     Args:
         clips: Source motions.
         target: Target skeleton (its own units).
-        aligner: A trained :class:`~skelagnostic_pcmrl.recon.PcmrlReconAligner`, or ``None``.
+        aligner: A trained
+            :class:`~skelagnostic_pcmrl.recon.aligner.PcmrlReconAligner`, or ``None``.
         baselines: Also compute the ``original`` and :data:`BASELINES` rows.
         **options: Passed to :func:`evaluate_pair` (``sigmas``, ``num_points``, ``k``,
             ``seed``, ``stride``).
@@ -314,7 +315,7 @@ def reconstruction_protocol(
     """``pcmrl.reconstruction``: Table 2 of every held-out clip retargeted onto the target.
 
     Args:
-        aligner: A trained :class:`~skelagnostic_pcmrl.recon.PcmrlReconAligner`.
+        aligner: A trained :class:`~skelagnostic_pcmrl.recon.aligner.PcmrlReconAligner`.
         held: The held-out clips.
         out_dir: The evaluation's directory (unused: no plots of its own).
         max_frames: Each clip is cut to its first ``max_frames`` frames before it is

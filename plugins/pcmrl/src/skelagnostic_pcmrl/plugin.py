@@ -6,10 +6,10 @@ Two aligners, one per stage of the paper (one registered name has one module
 and one data-module class, so the stages are two names):
 
 * ``model=pcmrl``: stage 1, point cloud -> target-skeleton reconstruction
-  (:class:`~skelagnostic_pcmrl.recon.PcmrlReconAligner`). ``model.stage``
+  (:class:`~skelagnostic_pcmrl.recon.aligner.PcmrlReconAligner`). ``model.stage``
   accepts only ``reconstruction`` and points to ``pcmrl_interp`` otherwise.
 * ``model=pcmrl_interp``: stage 2, FOQ keyframe interpolation
-  (``skelagnostic_pcmrl.interp.PcmrlInterpAligner``).
+  (``skelagnostic_pcmrl.interp.aligner.PcmrlInterpAligner``).
 """
 
 from __future__ import annotations
@@ -48,8 +48,8 @@ DATA_OPTIONS: dict[str, Any] = {
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
     """Register ``model=pcmrl`` (stage 1) and ``model=pcmrl_interp`` (stage 2)."""
-    from skelagnostic_pcmrl.recon import PcmrlReconAligner
-    from skelagnostic_pcmrl.recon_data import PcmrlReconDataModule
+    from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
+    from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule
 
     register(
         "pcmrl",
@@ -61,12 +61,9 @@ def register_aligners(register: Callable[..., Any]) -> None:
         data=DEFAULT_DATA,
         data_options=DATA_OPTIONS,
     )
-    from skelagnostic_pcmrl.interp import (
-        INTERP_DATA_DEFAULTS,
-        INTERP_DATA_OPTIONS,
-        PcmrlInterpAligner,
-    )
-    from skelagnostic_pcmrl.interp_data import PcmrlInterpDataModule
+    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
+    from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
+    from skelagnostic_pcmrl.interp.defaults import INTERP_DATA_DEFAULTS, INTERP_DATA_OPTIONS
 
     register(
         "pcmrl_interp",

@@ -10,7 +10,7 @@ frames:
   between the surrounding keys, then forward kinematics
   (:func:`skelagnostic.baselines.lerp_slerp`);
 * ``PC-MRL``: :meth:`PcmrlInterpAligner.interpolate
-  <skelagnostic_pcmrl.interp.PcmrlInterpAligner.interpolate>`.
+  <skelagnostic_pcmrl.interp.aligner.PcmrlInterpAligner.interpolate>`.
 
 Two sets of metrics are computed on the same predictions:
 
@@ -52,7 +52,7 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import l2p, l2q, npss
 from skelagnostic.metrics.functional.lafan import _npss_sums
-from skelagnostic_pcmrl.interp_data import gap_keys
+from skelagnostic_pcmrl.interp.data import gap_keys
 from skelagnostic_pcmrl.points import effective_joints
 
 __all__ = [

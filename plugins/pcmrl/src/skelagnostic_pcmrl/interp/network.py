@@ -20,7 +20,7 @@ import torch
 from torch import Tensor, nn
 
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic_pcmrl.point_transformer import AUTHORS_RMS_EPS, LAYOUTS
+from skelagnostic_pcmrl.layouts import AUTHORS_RMS_EPS, LAYOUTS
 
 
 class RelativeAttention(nn.Module):

@@ -21,7 +21,7 @@ import torch
 from torch import nn
 
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic_pcmrl.point_transformer import AUTHORS_RMS_EPS, LAYOUTS
+from skelagnostic_pcmrl.layouts import AUTHORS_RMS_EPS, LAYOUTS
 
 __all__ = ["TemporalTransformer", "sinusoidal_positions"]
 

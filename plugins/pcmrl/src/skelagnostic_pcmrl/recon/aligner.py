@@ -3,8 +3,8 @@
 :class:`PcmrlReconAligner` is the ``model=pcmrl`` aligner. Per training
 sequence it draws a 256-point cloud on the source motion (Eq. 3, sigma 0.05
 m), encodes every frame with a Point Transformer
-(:mod:`~skelagnostic_pcmrl.point_transformer`), runs a temporal transformer
-(:mod:`~skelagnostic_pcmrl.temporal`) to the root position and global unit
+(:mod:`~skelagnostic_pcmrl.recon.point_transformer`), runs a temporal transformer
+(:mod:`~skelagnostic_pcmrl.recon.temporal`) to the root position and global unit
 quaternions of the target skeleton, derives the target joints with Eq. 1
 (:func:`~skelagnostic.core.kinematics.fk_from_global`), draws a 1024-point
 cloud on the reconstruction and minimises the temporal KNN loss per body group
@@ -33,13 +33,6 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph
 from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.representations import POINT_GROUPS
-from skelagnostic_pcmrl.losses import (
-    authors_alpha,
-    end_effector_loss,
-    temporal_knn_loss,
-    unit_norm_penalty,
-)
-from skelagnostic_pcmrl.point_transformer import PointTransformerEncoder
 from skelagnostic_pcmrl.points import (
     effective_joints,
     end_effector_pairs,
@@ -49,7 +42,14 @@ from skelagnostic_pcmrl.points import (
     sample_layout,
     warn_zero_length_bones,
 )
-from skelagnostic_pcmrl.temporal import AUTHORS_POSITION_DIM, TemporalTransformer
+from skelagnostic_pcmrl.recon.losses import (
+    authors_alpha,
+    end_effector_loss,
+    temporal_knn_loss,
+    unit_norm_penalty,
+)
+from skelagnostic_pcmrl.recon.point_transformer import PointTransformerEncoder
+from skelagnostic_pcmrl.recon.temporal import AUTHORS_POSITION_DIM, TemporalTransformer
 
 __all__ = ["PcmrlReconAligner", "end_effector_pairs"]
 
@@ -91,11 +91,11 @@ class PcmrlReconAligner(Aligner):
         dropout: Dropout of the temporal transformer.
         knn_k: Neighbours of the KNN loss (8).
         knn_variant: ``"paper"`` (Eq. 5) or ``"authors"`` (the authors' code:
-            :func:`~skelagnostic_pcmrl.losses.authors_knn_terms`, global +
+            :func:`~skelagnostic_pcmrl.recon.losses.authors_knn_terms`, global +
             ``alpha`` x normalised + velocity terms).
         knn_alpha_warmup: ``knn_variant="authors"``: steps of the linear ramp of the
             normalised term's weight ``alpha``, which then decays linearly to 0 at
-            ``trainer.max_steps`` (:func:`~skelagnostic_pcmrl.losses.authors_alpha`;
+            ``trainer.max_steps`` (:func:`~skelagnostic_pcmrl.recon.losses.authors_alpha`;
             500 in the authors' code; 0: ``alpha = 1`` throughout; no decay when
             ``trainer.max_steps`` is not set).
         knn_reduction: ``"sum"`` (Eq. 5 as is) or ``"mean"`` (per point, neighbour and
@@ -128,8 +128,8 @@ class PcmrlReconAligner(Aligner):
         sample_seed: Seed of the point clouds drawn at inference and validation.
         layout: ``"skelagnostic"`` or ``"authors"``: the point encoder and temporal
             transformer of the authors' code
-            (:class:`~skelagnostic_pcmrl.point_transformer.PointTransformerEncoder`,
-            :class:`~skelagnostic_pcmrl.temporal.TemporalTransformer`;
+            (:class:`~skelagnostic_pcmrl.recon.point_transformer.PointTransformerEncoder`,
+            :class:`~skelagnostic_pcmrl.recon.temporal.TemporalTransformer`;
             ``point_heads``, ``point_attention``, ``attention_k``, ``layer_scale``
             and ``dropout`` do not apply to it). The output layer starts from the
             target's rest pose in both.
@@ -215,7 +215,7 @@ class PcmrlReconAligner(Aligner):
         self.target_units: str | None = None
         self.window: int | None = chunk
         if target is not None:
-            from skelagnostic_pcmrl.recon_data import load_target_skeleton
+            from skelagnostic_pcmrl.recon.data import load_target_skeleton
 
             self.set_target(*load_target_skeleton(target, target_units))
 

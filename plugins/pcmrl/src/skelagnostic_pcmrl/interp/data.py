@@ -13,7 +13,7 @@ Training windows (``window`` frames, 128 in the paper) are drawn at random
 positions with a random number of keyframes in ``[min_keys, max_keys]`` (5 to
 36 in the paper), the first and last frames always keys, the others spread
 uniformly at random (or, with ``key_mode="regular"``, a key every ``g`` frames
-with ``g`` drawn per window); rest pose augmentation (:mod:`skelagnostic_pcmrl.rpa`) is
+with ``g`` drawn per window); rest pose augmentation (:mod:`skelagnostic_pcmrl.interp.rpa`) is
 applied to a share ``rpa_prob`` of them with range ``rpa_range`` (metres).
 Validation/test windows are fixed (every ``stride`` frames) with a key every
 ``val_gap`` frames plus the last frame.
@@ -41,7 +41,7 @@ from skelagnostic.data.cache import CacheEntry, cache_key, read_exactly, slot_ke
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.lazy import deprecated_aliases
-from skelagnostic_pcmrl.rpa import (
+from skelagnostic_pcmrl.interp.rpa import (
     RPA_OFFSETS,
     RPA_SOLVES,
     augment_rest_pose,
@@ -72,7 +72,7 @@ class Clip:
         global_rotations: ``[T, J, 4]``.
         root: ``[T, 3]``.
         offsets: ``[J, 3]``.
-        tails: ``[J, 3]`` bone tails (:func:`~skelagnostic_pcmrl.rpa.bone_tails`).
+        tails: ``[J, 3]`` bone tails (:func:`~skelagnostic_pcmrl.interp.rpa.bone_tails`).
     """
 
     name: str
@@ -324,18 +324,18 @@ class PcmrlInterpDataModule(MotionDataModule):
         rpa_range: RPA tail offset range in metres (paper 0.1; 0 disables RPA).
         rpa_prob: Share of training windows that get RPA (not given by the paper).
         rpa_offsets: How the RPA tail offsets are drawn
-            (:data:`~skelagnostic_pcmrl.rpa.RPA_OFFSETS`): ``"independent"`` (every bone
+            (:data:`~skelagnostic_pcmrl.interp.rpa.RPA_OFFSETS`): ``"independent"`` (every bone
             its own offset in ``[-rpa_range, rpa_range]^3``) or ``"mirrored"`` (the
             authors' draw: arm and leg bones only, each left/right pair one offset
             mirrored across the sagittal plane,
-            :func:`~skelagnostic_pcmrl.rpa.mirrored_tail_offsets`; their ``aug_range``
+            :func:`~skelagnostic_pcmrl.interp.rpa.mirrored_tail_offsets`; their ``aug_range``
             of 0.1 is ``rpa_range=0.05``).
         rpa_solve: How the motion follows the moved tails
-            (:data:`~skelagnostic_pcmrl.rpa.RPA_SOLVES`): ``"directions"`` (the bones
+            (:data:`~skelagnostic_pcmrl.interp.rpa.RPA_SOLVES`): ``"directions"`` (the bones
             take the new lengths and keep their directions,
-            :func:`~skelagnostic_pcmrl.rpa.augment_rest_pose`) or ``"authors"`` (the
+            :func:`~skelagnostic_pcmrl.interp.rpa.augment_rest_pose`) or ``"authors"`` (the
             authors' code: the bone lengths stay and the rotations are solved again,
-            :func:`~skelagnostic_pcmrl.rpa.authors_rest_pose_rotations`).
+            :func:`~skelagnostic_pcmrl.interp.rpa.authors_rest_pose_rotations`).
         mirror: Also train on the left/right mirror of every training clip (not in the paper).
         procedural_kind: Add procedural clips of this kind (same hierarchy) to training.
         procedural_clips: How many per gait (walk, run).

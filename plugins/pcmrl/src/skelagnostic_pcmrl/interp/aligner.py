@@ -24,11 +24,11 @@ from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import MotionError, SkelagnosticError
 from skelagnostic.export import ExportGraph, Method
 from skelagnostic.lazy import deprecated_aliases
-from skelagnostic_pcmrl.interp_keyframes import sign_invariant_l1, window_features, window_heading
-from skelagnostic_pcmrl.interp_network import CITLInterpolator
-from skelagnostic_pcmrl.point_transformer import LAYOUTS
+from skelagnostic_pcmrl.interp.keyframes import sign_invariant_l1, window_features, window_heading
+from skelagnostic_pcmrl.interp.network import CITLInterpolator
+from skelagnostic_pcmrl.interp.rpa import bone_tails
+from skelagnostic_pcmrl.layouts import LAYOUTS
 from skelagnostic_pcmrl.points import group_of_joints
-from skelagnostic_pcmrl.rpa import bone_tails
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +38,7 @@ class PcmrlInterpAligner(Aligner):
 
     The network is built in :meth:`setup` from the data module's target skeleton
     (or from ``skeleton=`` / a checkpoint). Training batches come from
-    :class:`~skelagnostic_pcmrl.interp_data.PcmrlInterpDataModule`.
+    :class:`~skelagnostic_pcmrl.interp.data.PcmrlInterpDataModule`.
 
     Args:
         dim: Transformer width (paper 512).
@@ -82,7 +82,7 @@ class PcmrlInterpAligner(Aligner):
             into chunks of at most this many frames by :meth:`interpolate`).
         layout: ``"skelagnostic"`` (pre-norm blocks) or ``"authors"`` (the blocks of the
             authors' CITL: post-norm with masked norms, every frame attending to itself,
-            :class:`~skelagnostic_pcmrl.interp_network.CITLInterpolator`).
+            :class:`~skelagnostic_pcmrl.interp.network.CITLInterpolator`).
         fast_path: Run the keyframe encoder on the keyframe tokens only (default): the
             same values and gradients as ``False`` (the reference network, which
             encodes every frame) up to rounding, in less time; no parameter changes, so
@@ -275,7 +275,7 @@ class PcmrlInterpAligner(Aligner):
 
         Args:
             batch: ``global_rotations``, ``root``, ``offsets``, ``tails`` and ``keys``
-                as :class:`~skelagnostic_pcmrl.interp_data.PcmrlInterpDataModule` yields.
+                as :class:`~skelagnostic_pcmrl.interp.data.PcmrlInterpDataModule` yields.
 
         Returns:
             ``(feats, pred, positions)``: :meth:`features` (targets included), the
@@ -388,7 +388,8 @@ class PcmrlInterpAligner(Aligner):
             root: ``[B, T, 3]`` root positions (training units, metres); only keyframes are read.
             keys: ``[B, T]`` boolean keyframe mask; frame 0 must be a key.
             offsets: ``[B, J, 3]`` rest offsets.
-            tails: ``[B, J, 3]`` rest bone tails (:func:`~skelagnostic_pcmrl.rpa.bone_tails`).
+            tails: ``[B, J, 3]`` rest bone tails
+                (:func:`~skelagnostic_pcmrl.interp.rpa.bone_tails`).
 
         Returns:
             ``(global_rotations [B, T, J, 4], root [B, T, 3])``: the keys as given,

@@ -3,8 +3,8 @@
 Keyframe brackets and LERP/SLERP between keys, the heading of a window, the
 per-joint input features (:func:`window_features`, Sec. 3.4), the LERP/SLERP
 baseline and the sign-invariant quaternion loss. The network is in
-:mod:`~skelagnostic_pcmrl.interp_network`, the aligner in
-:mod:`~skelagnostic_pcmrl.interp_aligner`; :mod:`~skelagnostic_pcmrl.interp`
+:mod:`~skelagnostic_pcmrl.interp.network`, the aligner in
+:mod:`~skelagnostic_pcmrl.interp.aligner`; :mod:`~skelagnostic_pcmrl.interp`
 re-exports all three.
 """
 

@@ -36,11 +36,11 @@ import torch
 from torch import nn
 
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic_pcmrl.fps import farthest_point_sampling, gather_points, knn_indices
+from skelagnostic_pcmrl.layouts import AUTHORS_RMS_EPS, LAYOUTS
+from skelagnostic_pcmrl.recon.fps import farthest_point_sampling, gather_points, knn_indices
 
 __all__ = [
     "ATTENTIONS",
-    "LAYOUTS",
     "AuthorsPointStage",
     "PointAttention",
     "PointTransformerEncoder",
@@ -50,10 +50,6 @@ __all__ = [
 
 #: Values of the encoder's ``attention`` option.
 ATTENTIONS = ("full", "vector", "none")
-#: Values of the ``layout`` option of the PC-MRL networks (encoder, temporal, CITL).
-LAYOUTS = ("skelagnostic", "authors")
-#: RMSNorm epsilon inside the square root equivalent to the authors' 1e-8 added to the RMS.
-AUTHORS_RMS_EPS = 1e-16
 
 
 class _Scale(nn.Module):
