@@ -302,6 +302,56 @@ class FixedWindows(Dataset):
         return _window(clip, start, self.window, self.keys)
 
 
+def _check_options(
+    *,
+    window: int,
+    stride: int,
+    batch_size: int,
+    samples_per_epoch: int,
+    val_gap: int,
+    min_keys: int,
+    max_keys: int,
+    key_mode: str,
+    min_gap: int,
+    max_gap: int,
+    rpa_range: float,
+    rpa_prob: float,
+    rpa_offsets: str,
+    rpa_solve: str,
+) -> None:
+    """Raise :class:`SkelagnosticError` naming the first out-of-range data option."""
+    checks = (
+        ("window", window, 2),
+        ("stride", stride, 0),
+        ("batch_size", batch_size, 0),
+        ("samples_per_epoch", samples_per_epoch, 0),
+        ("val_gap", val_gap, 0),
+        ("min_keys", min_keys, 1),
+    )
+    for arg, value, low in checks:
+        if value <= low:
+            raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
+    if max_keys < min_keys:
+        raise SkelagnosticError(f"data.max_keys ({max_keys}) < data.min_keys ({min_keys})")
+    if key_mode not in ("random", "regular"):
+        raise SkelagnosticError(f"data.key_mode must be 'random' or 'regular', got {key_mode!r}")
+    if not 1 <= min_gap <= max_gap:
+        raise SkelagnosticError(
+            f"data.min_gap ({min_gap}) and data.max_gap ({max_gap}) must satisfy "
+            "1 <= min_gap <= max_gap"
+        )
+    if rpa_range < 0 or not 0 <= rpa_prob <= 1:
+        raise SkelagnosticError("data.rpa_range must be >= 0 and data.rpa_prob in [0, 1]")
+    if rpa_offsets not in RPA_OFFSETS:
+        raise SkelagnosticError(
+            f"data.rpa_offsets must be one of {', '.join(RPA_OFFSETS)}, got {rpa_offsets!r}"
+        )
+    if rpa_solve not in RPA_SOLVES:
+        raise SkelagnosticError(
+            f"data.rpa_solve must be one of {', '.join(RPA_SOLVES)}, got {rpa_solve!r}"
+        )
+
+
 class PcmrlInterpDataModule(MotionDataModule):
     """Keyframe-interpolation windows on one target skeleton (see the module docstring).
 
@@ -383,38 +433,22 @@ class PcmrlInterpDataModule(MotionDataModule):
             raise SkelagnosticError(
                 "data.representation is not used by pcmrl_interp (it computes FOQ features)"
             )
-        checks = (
-            ("window", window, 2),
-            ("stride", stride, 0),
-            ("batch_size", batch_size, 0),
-            ("samples_per_epoch", samples_per_epoch, 0),
-            ("val_gap", val_gap, 0),
-            ("min_keys", min_keys, 1),
+        _check_options(
+            window=window,
+            stride=stride,
+            batch_size=batch_size,
+            samples_per_epoch=samples_per_epoch,
+            val_gap=val_gap,
+            min_keys=min_keys,
+            max_keys=max_keys,
+            key_mode=key_mode,
+            min_gap=min_gap,
+            max_gap=max_gap,
+            rpa_range=rpa_range,
+            rpa_prob=rpa_prob,
+            rpa_offsets=rpa_offsets,
+            rpa_solve=rpa_solve,
         )
-        for arg, value, low in checks:
-            if value <= low:
-                raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
-        if max_keys < min_keys:
-            raise SkelagnosticError(f"data.max_keys ({max_keys}) < data.min_keys ({min_keys})")
-        if key_mode not in ("random", "regular"):
-            raise SkelagnosticError(
-                f"data.key_mode must be 'random' or 'regular', got {key_mode!r}"
-            )
-        if not 1 <= min_gap <= max_gap:
-            raise SkelagnosticError(
-                f"data.min_gap ({min_gap}) and data.max_gap ({max_gap}) must satisfy "
-                "1 <= min_gap <= max_gap"
-            )
-        if rpa_range < 0 or not 0 <= rpa_prob <= 1:
-            raise SkelagnosticError("data.rpa_range must be >= 0 and data.rpa_prob in [0, 1]")
-        if rpa_offsets not in RPA_OFFSETS:
-            raise SkelagnosticError(
-                f"data.rpa_offsets must be one of {', '.join(RPA_OFFSETS)}, got {rpa_offsets!r}"
-            )
-        if rpa_solve not in RPA_SOLVES:
-            raise SkelagnosticError(
-                f"data.rpa_solve must be one of {', '.join(RPA_SOLVES)}, got {rpa_solve!r}"
-            )
         if sources is None:
             sources = [ProceduralSource(kinds=("biped31",), gaits=("walk", "run"))]
         super().__init__(
