@@ -9,7 +9,7 @@ import torch
 import skelagnostic as sa
 from skelagnostic.errors import MotionError
 from skelagnostic.metrics import NPSS
-from skelagnostic.metrics.functional import npss
+from skelagnostic.metrics.functional import feature_npss, npss
 
 
 def fast_npss_np(gt_seq: np.ndarray, pred_seq: np.ndarray, power: str = "real") -> float:
@@ -166,3 +166,34 @@ def test_errors():
         npss(preds, target, mask=mask)
     metric = NPSS()
     assert metric.higher_is_better is False and metric.full_state_update is False
+
+
+@pytest.mark.parametrize("power", ["real", "abs"])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_feature_npss_matches_fast_npss_transcription_on_any_channels(power, dtype):
+    """Positions and rotations side by side (PC-MRL's Table 1 layout), no quaternion rule."""
+    gen = torch.Generator().manual_seed(8)
+    target = torch.randn(3, 20, 7, generator=gen, dtype=torch.float64).cumsum(1)
+    preds = target + 0.3 * torch.randn(3, 20, 7, generator=gen, dtype=torch.float64)
+    expected = fast_npss_np(target.numpy(), preds.numpy(), power)
+    value = feature_npss(preds.to(dtype), target.to(dtype), power)
+    assert value.dtype == dtype
+    assert value.item() == pytest.approx(expected, rel=1e-5 if dtype == torch.float32 else 1e-9)
+    # no continuity step: negating a channel of both inputs changes nothing, of one input it does
+    flipped = preds.clone()
+    flipped[:, 5:, 0] *= -1
+    assert feature_npss(flipped, target, power).item() == pytest.approx(
+        fast_npss_np(target.numpy(), flipped.numpy(), power), rel=1e-9
+    )
+
+
+def test_feature_npss_errors():
+    x = torch.randn(2, 8, 3)
+    with pytest.raises(MotionError, match=r"power must be one of"):
+        feature_npss(x, x, "complex")
+    with pytest.raises(MotionError, match=r"channels differ: 3 vs 2"):
+        feature_npss(x, x[..., :2])
+    with pytest.raises(MotionError, match=r"shape \[B, T, D\]"):
+        feature_npss(x[None], x[None])
+    with pytest.raises(MotionError, match=r"preds contains NaN"):
+        feature_npss(x * float("nan"), x)

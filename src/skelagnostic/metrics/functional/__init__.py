@@ -10,7 +10,8 @@ they are exact under DDP.
 Each function lives in the module that mirrors its class module (torchmetrics'
 layout): :mod:`~skelagnostic.metrics.functional.positions` (``mpjpe``,
 ``bone_length_consistency``, ``end_effector_error``),
-:mod:`~skelagnostic.metrics.functional.lafan` (``l2p``, ``l2q``, ``npss``),
+:mod:`~skelagnostic.metrics.functional.lafan` (``l2p``, ``l2q``, ``npss``,
+``feature_npss``),
 :mod:`~skelagnostic.metrics.functional.manifold` (``manifold_overlap``),
 :mod:`~skelagnostic.metrics.functional.feet` (``foot_skate``, ``foot_skate_ratio``) and
 :mod:`~skelagnostic.metrics.functional.point_cloud` (``temporal_knn_distance``).
@@ -37,7 +38,7 @@ from skelagnostic.metrics.functional.lafan import NPSS_POWERS as NPSS_POWERS
 from skelagnostic.metrics.functional.lafan import _l2p_update as _l2p_update
 from skelagnostic.metrics.functional.lafan import _l2q_update as _l2q_update
 from skelagnostic.metrics.functional.lafan import _npss_update as _npss_update
-from skelagnostic.metrics.functional.lafan import l2p, l2q, npss
+from skelagnostic.metrics.functional.lafan import feature_npss, l2p, l2q, npss
 from skelagnostic.metrics.functional.manifold import (
     _manifold_overlap_compute as _manifold_overlap_compute,
 )
@@ -66,6 +67,7 @@ from skelagnostic.metrics.functional.positions import (
 __all__ = [
     "bone_length_consistency",
     "end_effector_error",
+    "feature_npss",
     "foot_skate",
     "foot_skate_ratio",
     "l2p",

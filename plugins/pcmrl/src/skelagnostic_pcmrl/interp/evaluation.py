@@ -50,8 +50,7 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.io.markdown import markdown_cell
-from skelagnostic.metrics.functional import l2p, l2q, npss
-from skelagnostic.metrics.functional.lafan import _npss_sums
+from skelagnostic.metrics.functional import feature_npss, l2p, l2q, npss
 from skelagnostic_pcmrl.interp.data import gap_keys
 from skelagnostic_pcmrl.points import effective_joints
 
@@ -169,12 +168,12 @@ def authors_table1(
     pos, tpos = pos - centre, target_positions - centre
     l2p_value = (pos - tpos).flatten(2).norm(dim=-1).mean()
     l2q_value = (rot - target_rotations).flatten(2).norm(dim=-1).mean()
-    emd, weight = _npss_sums(
+    npss_value = feature_npss(
         torch.cat([pos, rot], dim=-1).flatten(2),
         torch.cat([tpos, target_rotations], dim=-1).flatten(2),
         "abs",
     )
-    return {"l2p": float(l2p_value), "l2q": float(l2q_value), "npss": float(emd / weight)}
+    return {"l2p": float(l2p_value), "l2q": float(l2q_value), "npss": float(npss_value)}
 
 
 def _authors_inputs(
