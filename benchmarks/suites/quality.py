@@ -97,7 +97,8 @@ def humot(steps: int) -> dict[str, Any]:
     _plugin("humot")
     import lightning as L
     from skelagnostic_humot import HumotAligner, HumotDataModule
-    from skelagnostic_humot.evaluation import HUMAN_KINDS, evaluate_procedural
+    from skelagnostic_humot.evaluation.held_out import HUMAN_KINDS
+    from skelagnostic_humot.evaluation.suite import evaluate_procedural
 
     from skelagnostic.aligners import quiet_trainer
     from skelagnostic.data import ProceduralSource

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 from skelagnostic_humot.data import corpus_and_procedural_source
-from skelagnostic_humot.evaluation import topology_status, trained_hierarchies
+from skelagnostic_humot.evaluation.held_out import topology_status, trained_hierarchies
 
 import skelagnostic as sa
 from skelagnostic.cli.app import build_datamodule, compose

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 from skelagnostic_humot.aligner import HumotAligner
-from skelagnostic_humot.evaluation import (
+from skelagnostic_humot.evaluation.reconstruction import (
     denoising_figures,
     mean_denoising_curve,
     reconstruction_protocol,

@@ -1,6 +1,6 @@
 import torch
 from skelagnostic_humot.aligner import HumotAligner
-from skelagnostic_humot.evaluation import chunks_of, reconstruction
+from skelagnostic_humot.evaluation.reconstruction import chunks_of, reconstruction
 
 import skelagnostic as sa
 
@@ -30,7 +30,7 @@ def test_chunks_of_resamples_and_converts_to_metres():
 
 # --------------------------------------------------------------- retargeting and curves
 def test_motion_error_of_a_translation():
-    from skelagnostic_humot.evaluation import _motion_error
+    from skelagnostic_humot.evaluation.retarget import _motion_error
 
     truth = sa.procedural.generate("biped17", "run", seconds=1.0, fps=30)[0]
     shifted = sa.Motion(
@@ -46,7 +46,7 @@ def test_motion_error_of_a_translation():
 
 
 def test_retargeting_procedural_uses_paired_ground_truth(humot_small):
-    from skelagnostic_humot.evaluation import retargeting_procedural
+    from skelagnostic_humot.evaluation.retarget import retargeting_procedural
 
     torch.manual_seed(0)
     model = HumotAligner(**humot_small).eval()
@@ -70,7 +70,7 @@ def test_retargeting_procedural_uses_paired_ground_truth(humot_small):
 
 
 def test_upsampling_curve_counts_removed_joints(humot_small):
-    from skelagnostic_humot.evaluation import upsampling_curve
+    from skelagnostic_humot.evaluation.reconstruction import upsampling_curve
 
     model = HumotAligner(**humot_small).eval()
     motion = sa.procedural.generate("biped22", "walk", seconds=2.0, fps=30)[0]
@@ -89,7 +89,7 @@ def _held(*clips):
 
 
 def test_reconstruction_protocol_rows_curves_and_plots(tmp_path, humot_small):
-    from skelagnostic_humot.evaluation import reconstruction_protocol
+    from skelagnostic_humot.evaluation.reconstruction import reconstruction_protocol
 
     torch.manual_seed(0)
     model = HumotAligner(**humot_small).eval()
@@ -114,7 +114,7 @@ def test_reconstruction_protocol_rows_curves_and_plots(tmp_path, humot_small):
 
 
 def test_retarget_protocol_cycles_through_another_topology(tmp_path, humot_small):
-    from skelagnostic_humot.evaluation import retarget_protocol
+    from skelagnostic_humot.evaluation.retarget import retarget_protocol
 
     torch.manual_seed(0)
     model = HumotAligner(**humot_small).eval()
@@ -145,7 +145,7 @@ class _RunData:
 
 
 def test_topology_status_compares_hierarchies_not_names():
-    from skelagnostic_humot.evaluation import topology_status, trained_hierarchies
+    from skelagnostic_humot.evaluation.held_out import topology_status, trained_hierarchies
 
     from skelagnostic.evaluation import HeldOut
 
@@ -162,7 +162,7 @@ def test_topology_status_compares_hierarchies_not_names():
 
 
 def test_reconstruction_protocol_groups_extra_clips_by_topology(tmp_path, humot_small):
-    from skelagnostic_humot.evaluation import reconstruction_protocol
+    from skelagnostic_humot.evaluation.reconstruction import reconstruction_protocol
 
     from skelagnostic.evaluation import HeldOut
 
@@ -197,7 +197,7 @@ def test_reconstruction_protocol_groups_extra_clips_by_topology(tmp_path, humot_
 
 def test_extra_clips_refuse_training_clips_and_missing_paths(tmp_path):
     import pytest
-    from skelagnostic_humot.evaluation import extra_clips
+    from skelagnostic_humot.evaluation.held_out import extra_clips
 
     from skelagnostic.evaluation import EvaluationError, HeldOut
 
@@ -215,7 +215,7 @@ def test_extra_clips_refuse_training_clips_and_missing_paths(tmp_path):
 
 
 def test_retarget_protocol_labels_procedural_topologies(tmp_path, humot_small):
-    from skelagnostic_humot.evaluation import retarget_protocol
+    from skelagnostic_humot.evaluation.retarget import retarget_protocol
 
     from skelagnostic.evaluation import HeldOut
 

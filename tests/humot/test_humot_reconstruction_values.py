@@ -20,7 +20,7 @@ import pytest
 import torch
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.data import prepare_chunks
-from skelagnostic_humot.evaluation import reconstruction_protocol
+from skelagnostic_humot.evaluation.reconstruction import reconstruction_protocol
 
 import skelagnostic as sa
 from numpy_reference import global_pose, humot_chunks, mpjpe

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import torch
 from skelagnostic_humot.aligner import HumotAligner
-from skelagnostic_humot.evaluation import retarget_protocol
+from skelagnostic_humot.evaluation.retarget import retarget_protocol
 
 import skelagnostic as sa
 from numpy_reference import global_pose

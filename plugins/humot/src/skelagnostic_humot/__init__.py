@@ -6,7 +6,7 @@ Registered as ``model=humot`` through the ``skelagnostic`` entry-point group
 :mod:`~skelagnostic_humot.template` (templates, major joints, axes),
 :mod:`~skelagnostic_humot.data` (chunks, joint subsampling, data module),
 :mod:`~skelagnostic_humot.aligner` (training and inference),
-:mod:`~skelagnostic_humot.evaluation` (paper evaluations and protocols),
+:mod:`~skelagnostic_humot.evaluation` (paper evaluations, one module per protocol),
 :mod:`~skelagnostic_humot.receptive` (receptive field of the encoder).
 Imports are lazy: ``import skelagnostic_humot`` loads no model code until one of
 the names below is used.

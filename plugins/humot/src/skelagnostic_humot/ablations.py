@@ -12,7 +12,8 @@ optimiser steps on the run's training clips, once per variant of
 * ``no_bone_length_loss``: ``lambda_blc=0``, the paper's "no BLC".
 
 Every variant, the evaluated checkpoint itself (:data:`~skelagnostic.evaluation.MODEL`)
-and the ground-truth baselines of :func:`~skelagnostic_humot.evaluation.reconstruction`
+and the ground-truth baselines of
+:func:`~skelagnostic_humot.evaluation.reconstruction.reconstruction`
 are then measured on the held-out clips: the reconstruction MPJPE on the clip's
 own template (Table 2), the temporal bone-length consistency of the reconstruction
 (Eq. 2, over the bones of non-zero length; what the BLC loss targets) and the
@@ -34,7 +35,12 @@ from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut
 from skelagnostic.metrics.functional import bone_length_consistency
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.data import prepare_chunks
-from skelagnostic_humot.evaluation import _run, chunks_of, reconstruction, upsampling_curve
+from skelagnostic_humot.evaluation.reconstruction import (
+    chunks_of,
+    reconstruction,
+    run_network,
+    upsampling_curve,
+)
 
 __all__ = ["ABLATIONS", "METRICS", "ablation_protocol", "train_variant"]
 
@@ -105,7 +111,7 @@ def _measure(model: HumotAligner, chunks: torch.Tensor, clip: Any) -> dict[str, 
     sk = clip.skeleton
     topo = model.topology(sk)
     pos, tmpl = prepare_chunks(chunks, topo, sk.up_axis)
-    rec = _run(model, pos, tmpl, tmpl)
+    rec = run_network(model, pos, tmpl, tmpl)
     # Eq. 2 divides by the true length: bones of zero length (CMU's hip joints) are left out
     bones = [
         (p, c)

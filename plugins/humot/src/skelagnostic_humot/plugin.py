@@ -76,7 +76,8 @@ def register_config_paths(register: Callable[..., Any]) -> None:
 def register_evaluations(register: Callable[..., Any]) -> None:
     """Register ``humot.reconstruction`` (the default), ``humot.retarget``, ``humot.ablations``."""
     from skelagnostic_humot.ablations import ablation_protocol
-    from skelagnostic_humot.evaluation import reconstruction_protocol, retarget_protocol
+    from skelagnostic_humot.evaluation.reconstruction import reconstruction_protocol
+    from skelagnostic_humot.evaluation.retarget import retarget_protocol
 
     register(
         "humot.reconstruction",
