@@ -91,7 +91,8 @@ KNOWN_UPWARD: dict[tuple[str, str], str] = {}
 #: higher one (``TYPE_CHECKING`` imports aside). Keys are module names or prefixes (the
 #: longest that matches decides; the plugin's own name matches its ``__init__`` only); a
 #: plugin module that matches none fails the test.
-#: PC-MRL is left out while its modules move into ``recon/`` and ``interp/`` (#49 item 2).
+#: PC-MRL: one subpackage per stage (``recon``, ``interp``) on the model floor, the
+#: Table 1 protocol of ``interp`` and the plugin's protocols above them.
 PLUGIN_FLOORS: dict[str, dict[str, int]] = {
     "skelagnostic_vqpae": {
         "skelagnostic_vqpae.model": 0,
@@ -123,6 +124,17 @@ PLUGIN_FLOORS: dict[str, dict[str, int]] = {
         "skelagnostic_humot.ablations": 3,
         "skelagnostic_humot.plugin": 4,
         "skelagnostic_humot": 4,
+    },
+    "skelagnostic_pcmrl": {
+        "skelagnostic_pcmrl.points": 0,
+        "skelagnostic_pcmrl.layouts": 0,
+        "skelagnostic_pcmrl.recon": 0,
+        "skelagnostic_pcmrl.interp": 0,
+        "skelagnostic_pcmrl.authors": 0,
+        "skelagnostic_pcmrl.interp.evaluation": 3,
+        "skelagnostic_pcmrl.evaluation": 3,
+        "skelagnostic_pcmrl.plugin": 4,
+        "skelagnostic_pcmrl": 4,
     },
 }
 #: Upward imports inside plugins that exist today (module, target) -> why: none tolerated.
