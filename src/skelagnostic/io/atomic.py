@@ -21,8 +21,9 @@ through :func:`atomic_write`, so that all of them behave the same way:
 Tools that write by file name (ffmpeg, exporters) use :func:`atomic_path`: they
 write to the temporary path it gives, which replaces the target on success.
 
-Checkpoints (:func:`skelagnostic.callbacks.checkpoint_io.atomic_torch_save`) go
-through the same function with a fixed temporary name, so that a save killed
+Both are one implementation. Checkpoints
+(:func:`skelagnostic.callbacks.checkpoint_io.atomic_torch_save`) go through
+:func:`atomic_write` with a fixed temporary name, so that a save killed
 mid-write leaves one ``<name>.tmp`` that the next save of that name reuses.
 Writers that only take a file name (``torch.onnx.export``, ``torch.jit.save``) write
 into the temporary file :func:`atomic_path` names, with the same guarantees.
@@ -111,6 +112,51 @@ def _existing_mode(target: Path) -> int | None:
     return stat.S_IMODE(info.st_mode) if stat.S_ISREG(info.st_mode) else None
 
 
+def _fsync_file(path: Path) -> None:
+    """Flush the content of the file at ``path`` to disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def _replacing(
+    path: str | Path, *, follow_symlinks: bool, temp_suffix: str | None, sync_directory: bool
+) -> Iterator[tuple[Path, Path]]:
+    """The one implementation of :func:`atomic_path` and :func:`atomic_write`.
+
+    Creates the temporary file next to the target (empty, mode ``0o666`` minus the
+    umask) and yields it with the target; when the block ends without an exception
+    the temporary file gets the target's mode (its own if it exists, else the new
+    file's), is flushed to disk and replaces the target. On an exception the target
+    is untouched and the temporary file removed.
+
+    Yields:
+        ``(temporary, target)``: the path to write and the file it replaces.
+    """
+    target = write_target(path) if follow_symlinks else Path(os.path.abspath(path))
+    keep_mode = _existing_mode(target)
+    fd, tmp = _create_temporary(target, temp_suffix)
+    try:
+        created = stat.S_IMODE(os.fstat(fd).st_mode)  # 0o666 minus the umask
+    finally:
+        os.close(fd)
+    mode = keep_mode if keep_mode is not None else created
+    try:
+        yield tmp, target
+        os.chmod(tmp, mode)
+        _fsync_file(tmp)
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    if sync_directory:
+        fsync_directory(target.parent)
+
+
 @contextlib.contextmanager
 def atomic_path(
     path: str | Path, *, follow_symlinks: bool = True, sync_directory: bool = False
@@ -141,29 +187,10 @@ def atomic_path(
         >>> (folder / "out.txt").read_text(), [p.name for p in folder.iterdir()]
         ('done', ['out.txt'])
     """
-    target = write_target(path) if follow_symlinks else Path(os.path.abspath(path))
-    keep_mode = _existing_mode(target)
-    fd, tmp = _create_temporary(target, None)
-    try:
-        created = stat.S_IMODE(os.fstat(fd).st_mode)  # 0o666 minus the umask
-    finally:
-        os.close(fd)
-    mode = keep_mode if keep_mode is not None else created
-    try:
+    with _replacing(
+        path, follow_symlinks=follow_symlinks, temp_suffix=None, sync_directory=sync_directory
+    ) as (tmp, _):
         yield tmp
-        os.chmod(tmp, mode)
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    if sync_directory:
-        fsync_directory(target.parent)
 
 
 def atomic_write(
@@ -197,26 +224,15 @@ def atomic_write(
             form a loop, ...; the target is then untouched and no temporary file
             is left behind. Exceptions raised by ``data`` propagate the same way.
     """
-    target = write_target(path) if follow_symlinks else Path(os.path.abspath(path))
-    keep_mode = _existing_mode(target)
-    fd, tmp = _create_temporary(target, temp_suffix)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            if keep_mode is not None:
-                os.chmod(tmp, keep_mode)
+    with _replacing(
+        path,
+        follow_symlinks=follow_symlinks,
+        temp_suffix=temp_suffix,
+        sync_directory=sync_directory,
+    ) as (tmp, target):
+        with open(tmp, "wb") as fh:
             if callable(data):
                 data(fh)
             else:
                 fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    if sync_directory:
-        fsync_directory(target.parent)
     return target
