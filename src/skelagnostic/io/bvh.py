@@ -15,15 +15,14 @@ without a line end is read with a :class:`BVHWarning` (the file may be cut).
 Writing goes through :func:`~skelagnostic.io.atomic.atomic_write`: a temporary
 file replaces the target only when complete, with the permissions the umask
 allows, and a symbolic link is written through.
+
+The file's syntax (tokens, hierarchy, MOTION header, rows and their diagnosis) is
+read by :mod:`skelagnostic.io._bvh_syntax`; this module turns it into a motion.
 """
 
 from __future__ import annotations
 
-import io
-import math
-import re
 import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +32,7 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import BVHError, SkeletonError, printable
+from skelagnostic.io import _bvh_syntax as syntax
 from skelagnostic.io.atomic import atomic_write
 
 __all__ = ["BVHWarning", "parse_bvh", "read_bvh", "write_bvh"]
@@ -42,213 +42,11 @@ class BVHWarning(UserWarning):
     """A BVH file that reads but looks damaged (its last motion line has no line end)."""
 
 
-_ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
-_POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 _DEFAULT_ROOT = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
 _DEFAULT_JOINT = ["Zrotation", "Yrotation", "Xrotation"]
 #: Indentation stops growing at this depth (a 10,000-level chain would otherwise
 #: write 50 million tabs).
 _MAX_INDENT = 32
-_BOM = b"\xef\xbb\xbf"
-_MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
-_MOTION_BYTES = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
-
-
-def _head(raw: bytes) -> bytes:
-    """``raw`` up to the end of the second non-blank line after ``MOTION``.
-
-    Only this part is decoded to text: the motion lines go to numpy as bytes.
-    Without a ``MOTION`` line the whole file is returned (for the error message).
-    """
-    match = _MOTION_BYTES.search(raw)
-    if match is None:
-        return raw
-    pos, found = match.end(), 0
-    while found < 2 and pos < len(raw):
-        end = raw.find(b"\n", pos)
-        end = len(raw) if end < 0 else end
-        found += bool(raw[pos:end].strip()) and pos > match.end()
-        pos = end + 1
-    return raw[:pos]
-
-
-@dataclass
-class _Joint:
-    name: str
-    parent: int
-    offset: list[float]
-    channels: list[str] = field(default_factory=list)
-    end_sites: list[list[float]] = field(default_factory=list)
-
-
-class _Tokens:
-    """Whitespace tokens of the hierarchy section (the lines before MOTION), with 1-based lines."""
-
-    def __init__(self, lines: list[str], path: Path | None):
-        self.items: list[tuple[str, int]] = [
-            (w, i) for i, line in enumerate(lines, start=1) for w in line.split()
-        ]
-        self.path = path
-        self.pos = 0
-        self.last_line = len(lines)
-
-    def error(self, reason: str, line: int | None = None) -> BVHError:
-        if line is None:
-            line = self.items[self.pos][1] if self.pos < len(self.items) else self.last_line
-        return BVHError(reason, self.path, line)
-
-    def next(self, what: str) -> tuple[str, int]:
-        if self.pos >= len(self.items):
-            raise self.error(f"unexpected end of the hierarchy, expected {what}")
-        tok = self.items[self.pos]
-        self.pos += 1
-        return tok
-
-    def expect(self, word: str) -> int:
-        tok, line = self.next(repr(word))
-        if tok != word:
-            raise self.error(f"expected {word!r}, found {tok!r}", line)
-        return line
-
-    def floats(self, n: int, what: str) -> list[float]:
-        out = []
-        for _ in range(n):
-            tok, line = self.next(what)
-            try:
-                v = float(tok)
-            except ValueError:
-                raise self.error(f"{what}: {tok!r} is not a number", line) from None
-            if not math.isfinite(v):
-                raise self.error(f"{what}: value {tok!r} is not finite", line)
-            out.append(v)
-        return out
-
-    def peek(self) -> str | None:
-        return self.items[self.pos][0] if self.pos < len(self.items) else None
-
-
-def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
-    """The joints of the hierarchy, parents before children.
-
-    The nesting is followed with an explicit stack of open joints (no recursion), so
-    the depth of the hierarchy is limited only by memory.
-    """
-    tok, line = tokens.next("'HIERARCHY'")
-    if tok.upper() != "HIERARCHY":
-        raise tokens.error(f"a BVH file starts with 'HIERARCHY', found {tok!r}", line)
-    tok, line = tokens.next("'ROOT'")
-    if tok.upper() != "ROOT":
-        raise tokens.error(f"expected 'ROOT', found {tok!r}", line)
-    joints: list[_Joint] = []
-    names: dict[str, int] = {}
-
-    def open_joint(parent: int) -> int:
-        """Read a joint's name, '{', OFFSET and CHANNELS; returns its index."""
-        name, line = tokens.next("a joint name")
-        if name in {"{", "}"}:
-            raise tokens.error("missing joint name", line)
-        if name in names:
-            raise tokens.error(f"duplicate joint name {name!r}", line)
-        tokens.expect("{")
-        tokens.expect("OFFSET")
-        offset = tokens.floats(3, f"OFFSET of joint {name!r}")
-        index = len(joints)
-        joint = _Joint(name, parent, offset)
-        names[name] = index
-        joints.append(joint)
-        if tokens.peek() == "CHANNELS":
-            tokens.next("CHANNELS")
-            tok, cline = tokens.next("the channel count")
-            try:
-                count = int(tok)
-            except ValueError:
-                raise tokens.error(
-                    f"channel count {tok!r} of joint {name!r} is not an integer", cline
-                ) from None
-            if count < 0 or count > 6:
-                raise tokens.error(
-                    f"joint {name!r} declares {count} channels (0 to 6 allowed)", cline
-                )
-            for _ in range(count):
-                ch, chl = tokens.next(f"a channel name of joint {name!r}")
-                if ch not in _ROT and ch not in _POS:
-                    if ch in {"}", "JOINT", "End", "{", "OFFSET"}:
-                        raise tokens.error(
-                            f"joint {name!r} declares {count} channels but lists "
-                            f"{len(joint.channels)}",
-                            chl,
-                        )
-                    raise tokens.error(f"unknown channel {ch!r} on joint {name!r}", chl)
-                if ch in joint.channels:
-                    raise tokens.error(f"channel {ch!r} repeated on joint {name!r}", chl)
-                joint.channels.append(ch)
-        return index
-
-    open_joints = [open_joint(-1)]  # the joints whose closing '}' is still to come
-    while open_joints:
-        joint = joints[open_joints[-1]]
-        name = joint.name
-        tok, tline = tokens.next(f"'JOINT', 'End Site' or '}}' in joint {name!r}")
-        if tok == "}":
-            open_joints.pop()
-        elif tok == "JOINT":
-            open_joints.append(open_joint(open_joints[-1]))
-        elif tok == "End":
-            site, sline = tokens.next("'Site'")
-            if site != "Site":
-                raise tokens.error(f"expected 'End Site', found 'End {site}'", sline)
-            tokens.expect("{")
-            tokens.expect("OFFSET")
-            joint.end_sites.append(tokens.floats(3, f"End Site OFFSET of joint {name!r}"))
-            tokens.expect("}")
-        elif tok == "CHANNELS":
-            raise tokens.error(f"CHANNELS of joint {name!r} must follow its OFFSET", tline)
-        else:
-            raise tokens.error(f"unexpected {tok!r} in joint {name!r}", tline)
-    if tokens.pos < len(tokens.items):
-        tok, line = tokens.items[tokens.pos]
-        if tok.upper() == "MOTION":  # e.g. "} MOTION", or a lone CR before MOTION
-            raise tokens.error(
-                "'MOTION' must stand alone on its line (a line ending in LF or CR LF)", line
-            )
-        raise tokens.error(f"unexpected {tok!r} after the root joint (a second ROOT?)", line)
-    return joints
-
-
-def _diagnose_rows(
-    lines: list[str],
-    first: int,
-    num_frames: int,
-    num_channels: int,
-    frames_line: int,
-    path: Path | None,
-) -> BVHError:
-    """Find the first bad motion line (slow path, only used after a failure)."""
-    rows = [k for k, line in enumerate(lines) if line.strip()]
-    if len(rows) != num_frames:
-        return BVHError(
-            f"the file declares {num_frames} frames but has {len(rows)} motion lines"
-            + (" (truncated?)" if len(rows) < num_frames else ""),
-            path,
-            first + rows[-1] if rows else frames_line,
-        )
-    for k in rows:
-        words = lines[k].split()
-        if len(words) != num_channels:
-            return BVHError(
-                f"motion line has {len(words)} values, the hierarchy declares {num_channels} "
-                "channels",
-                path,
-                first + k,
-            )
-        for w in words:
-            try:
-                v = float(w)
-            except ValueError:
-                return BVHError(f"motion value {w!r} is not a number", path, first + k)
-            if not math.isfinite(v):
-                return BVHError(f"motion value {w!r} is not finite (NaN/inf)", path, first + k)
-    return BVHError("motion data could not be read", path, first)
 
 
 def snap_rate(fps: float) -> float:
@@ -288,107 +86,29 @@ def parse_bvh(
         BVHError: On any malformed input, naming the line.
     """
     path = None if path is None else Path(path)
-    raw = data if isinstance(data, bytes) else data.encode("utf-8")
-    skipped = 0  # bytes of a UTF-8 byte order mark, for the offsets in messages
-    if raw.startswith(_BOM):
-        raw, skipped = raw[len(_BOM) :], len(_BOM)
-    if b"\n" not in raw and b"\r" in raw:  # CR-only line ends (classic Mac OS)
-        raw = raw.replace(b"\r", b"\n")
-    head = _head(raw)
-    try:
-        text = head.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        text = head.decode("utf-8", errors="replace")
-        if text.split(None, 1)[0].upper() == "HIERARCHY":  # else: not BVH, said below
-            raise BVHError(
-                f"invalid UTF-8 at byte offset {exc.start + skipped} "
-                f"(0x{head[exc.start]:02x}); BVH files are read as UTF-8, re-save this "
-                "one in that encoding",
-                path,
-                head.count(b"\n", 0, exc.start) + 1,
-            ) from None
-    match = _MOTION.search(text)
+    raw, text = syntax.decode(data, path)
+    match = syntax.MOTION.search(text)
     lines = (text if match is None else text[: match.start()]).splitlines()
     if match is None and not any(line.strip() for line in lines):
         raise BVHError("the file is empty", path, 1)
-    tokens = _Tokens(lines, path)
-    joints = _parse_hierarchy(tokens)
+    tokens = syntax.Tokens(lines, path)
+    joints = syntax.parse_hierarchy(tokens)
     if match is None:
         raise BVHError("no MOTION section (truncated file?)", path, len(lines))
-    # the 'Frames:' and 'Frame Time:' lines, scanned without splitting the data
-    pos, line_no = match.end(), len(lines) + 1
-    header: dict[str, tuple[str, int]] = {}
-    while len(header) < 2:
-        if pos >= len(text):
-            missing = "Frames" if "frames" not in header else "Frame Time"
-            raise BVHError(f"missing '{missing}:' line after MOTION", path, line_no)
-        end = text.find("\n", pos + 1)
-        end = len(text) if end < 0 else end
-        line = text[pos:end].strip()
-        pos = end
-        line_no += 1
-        if not line:
-            continue
-        key, _, value = line.partition(":")
-        key = " ".join(key.split()).lower()
-        if key not in {"frames", "frame time"}:
-            raise BVHError(f"expected 'Frames:' and 'Frame Time:', found {line!r}", path, line_no)
-        header[key] = (value.strip(), line_no)
-    try:
-        num_frames = int(header["frames"][0])
-    except ValueError:
-        raise BVHError(
-            f"Frames: {header['frames'][0]!r} is not an integer", path, header["frames"][1]
-        ) from None
-    if num_frames <= 0:
-        raise BVHError(
-            f"the file declares {num_frames} frames; a motion needs at least one",
-            path,
-            header["frames"][1],
-        )
-    try:
-        frame_time = float(header["frame time"][0])
-    except ValueError:
-        raise BVHError(
-            f"Frame Time: {header['frame time'][0]!r} is not a number",
-            path,
-            header["frame time"][1],
-        ) from None
-    if not math.isfinite(frame_time):
-        raise BVHError(
-            f"Frame Time must be a finite number of seconds, got {frame_time}",
-            path,
-            header["frame time"][1],
-        )
-    if frame_time <= 0:
-        raise BVHError(
-            f"Frame Time must be positive, got {frame_time}", path, header["frame time"][1]
-        )
-    if not math.isfinite(1.0 / frame_time):
-        raise BVHError(
-            f"Frame Time {header['frame time'][0]} is too small: the frame rate "
-            "1 / Frame Time is not a finite number",
-            path,
-            header["frame time"][1],
-        )
+    header, pos, line_no = syntax.motion_header(text, match.end(), len(lines) + 1, path)
+    num_frames = syntax.parse_frame_count(header, path)
+    frame_time = syntax.parse_frame_time(header, path)
     num_channels = sum(len(j.channels) for j in joints)
     first_data_line = line_no + 1
     offset = len(text[: pos + 1].encode("utf-8"))
     body = raw[offset:]
-    values = None
-    if num_channels:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # "input contained no data": diagnosed below
-                values = np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2)
-        except ValueError:
-            values = None
+    values = syntax.read_values(body, num_channels)
     if (
         values is None
         or values.shape != (num_frames, num_channels)
         or not np.isfinite(values).all()
     ):
-        raise _diagnose_rows(
+        raise syntax.diagnose_rows(
             body.decode("utf-8", errors="replace").splitlines(),
             first_data_line,
             num_frames,
@@ -423,7 +143,7 @@ def _warn_if_cut(body: bytes, first_line: int, path: Path | None) -> None:
 _STATIC_TOLERANCE = 1e-9
 
 
-def _carrier_child(joints: list[_Joint], values: np.ndarray) -> int | None:
+def _carrier_child(joints: list[syntax.Joint], values: np.ndarray) -> int | None:
     """The body root under a static trajectory-carrier root, or ``None`` for ordinary files.
 
     The rule: the file root's channels (if any) keep one value over the whole
@@ -432,7 +152,7 @@ def _carrier_child(joints: list[_Joint], values: np.ndarray) -> int | None:
     MotionBuilder exports) and is the body's root (:attr:`Skeleton.body_root`).
     """
     children = [k for k, joint in enumerate(joints) if joint.parent == 0]
-    if len(children) != 1 or not set(_POS) <= set(joints[children[0]].channels):
+    if len(children) != 1 or not set(syntax.POSITIONS) <= set(joints[children[0]].channels):
         return None
     root_columns = values[:, : len(joints[0].channels)]
     if root_columns.size and float(np.ptp(root_columns, axis=0).max()) > _STATIC_TOLERANCE:
@@ -441,7 +161,7 @@ def _carrier_child(joints: list[_Joint], values: np.ndarray) -> int | None:
 
 
 def _build_motion(
-    joints: list[_Joint],
+    joints: list[syntax.Joint],
     values: np.ndarray,
     frame_time: float,
     path: Path | None,
@@ -458,11 +178,11 @@ def _build_motion(
     for k, joint in enumerate(joints):
         order = ""
         for ch in joint.channels:
-            if ch in _ROT:
+            if ch in syntax.ROTATIONS:
                 rot.append((col, k, len(order)))
-                order += _ROT[ch]
+                order += syntax.ROTATIONS[ch]
             else:
-                pos.append((col, k, _POS[ch]))
+                pos.append((col, k, syntax.POSITIONS[ch]))
             col += 1
         orders.append(order)
     rot_cols, rot_joint, rot_slot = (list(v) for v in zip(*rot, strict=True)) if rot else ([],) * 3
@@ -572,8 +292,8 @@ def _channels_for(motion: Motion) -> list[list[str]]:
             layout = list(sk.channels[k])
         else:
             layout = list(_DEFAULT_ROOT if k == 0 else _DEFAULT_JOINT)
-        pos = [c for c in layout if c in _POS]
-        rot = [c for c in layout if c in _ROT]
+        pos = [c for c in layout if c in syntax.POSITIONS]
+        rot = [c for c in layout if c in syntax.ROTATIONS]
         if len(rot) != 3:  # 0-2 rotation axes cannot carry an arbitrary rotation
             rot = list(_DEFAULT_JOINT)
             layout = pos + rot
@@ -645,7 +365,7 @@ def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
     eulers: dict[int, np.ndarray] = {}
     by_order: dict[str, list[int]] = {}
     for k, layout in enumerate(channels):
-        order = "".join(_ROT[c] for c in layout if c in _ROT)
+        order = "".join(syntax.ROTATIONS[c] for c in layout if c in syntax.ROTATIONS)
         by_order.setdefault(order, []).append(k)
     for order, ks in by_order.items():
         ang = Q.quat_to_euler(m.rotations[:, ks], order).numpy()
@@ -655,11 +375,11 @@ def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
     for k, layout in enumerate(channels):
         r = 0
         for ch in layout:
-            if ch in _ROT:
+            if ch in syntax.ROTATIONS:
                 columns.append(eulers[k][:, r])
                 r += 1
             else:
-                axis = _POS[ch]
+                axis = syntax.POSITIONS[ch]
                 if k == 0:
                     columns.append(root[:, axis])
                 elif trans is not None:
