@@ -36,8 +36,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import torch
 
@@ -155,6 +156,118 @@ def cycle_lengths(
     return periods
 
 
+def _check_build_arguments(
+    database: MotionDatabase,
+    control: Sequence[str],
+    pose: str | None,
+    frequency: str | None,
+    length: int | None,
+    basis_size: int,
+) -> None:
+    """Raise :class:`MatchingError` on the arguments :meth:`WindowIndex.build` refuses."""
+    if (frequency is None) == (length is None):
+        raise MatchingError("frequency/length: give exactly one of them")
+    if len(control) == 0:
+        raise MatchingError("control: at least one control feature group is needed")
+    for name in (*control, *([pose] if pose else []), *([frequency] if frequency else [])):
+        if name not in database.groups:
+            raise MatchingError(
+                f"group: unknown feature group {name!r}; the database has {database.groups}"
+            )
+    if basis_size < 1:
+        raise MatchingError(f"basis_size: must be >= 1, got {basis_size}")
+
+
+def _window_lengths(
+    database: MotionDatabase, frequency: str | None, length: int | None
+) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """The window starting at every database frame: one period of ``frequency``, or ``length``.
+
+    Returns:
+        ``[N]`` frames covered by the window starting at each frame, ``[N]`` bool
+        whether that window fits in its clip, and the default samples per window.
+
+    Raises:
+        MatchingError: ``frequency`` has more than one channel, or ``length`` < 1.
+    """
+    frames = torch.arange(database.num_frames, device=database.device)
+    ends = database.clip_end_of(frames)
+    if frequency is not None:
+        if database.dims[frequency] != 1:
+            raise MatchingError(
+                f"frequency: group {frequency!r} must have 1 channel, "
+                f"has {database.dims[frequency]}"
+            )
+        per_frame = cycle_lengths(database.raw(frequency)[:, 0], database.fps, ends)
+        return per_frame, per_frame > 0, max(1, round(database.fps))
+    fixed = int(length or 0)
+    if fixed < 1:
+        raise MatchingError(f"length: must be >= 1 frame, got {length}")
+    per_frame = torch.full_like(frames, fixed)
+    return per_frame, frames + per_frame <= ends - 1, fixed
+
+
+def _projection_basis(
+    windows: Callable[[torch.Tensor], torch.Tensor],
+    count: int,
+    dim: int,
+    basis_size: int,
+    device: torch.device,
+) -> torch.Tensor:
+    """``[dim, r]`` float64 orthonormal basis of the lower bound (``r = min(basis_size, dim)``).
+
+    Args:
+        windows: Resampled windows ``[len(sel), dim]`` of the window indices ``sel``.
+        count: Number of windows.
+        dim: Dimension of a resampled window.
+        basis_size: Requested rank.
+        device: Device of the database.
+    """
+    rank = min(basis_size, dim)
+    if rank == dim:
+        return torch.eye(dim, dtype=torch.float64, device=device)
+    # principal directions of the (uncentred: the features are normalised to
+    # zero mean) windows; any orthonormal basis gives a valid bound
+    pick = torch.unique(torch.linspace(0, count - 1, min(count, _BASIS_SAMPLE), device=device))
+    sample = windows(pick.long())
+    _, vectors = torch.linalg.eigh(sample.T @ sample)
+    return vectors[:, -rank:].flip(1).contiguous()
+
+
+def _window_table(
+    windows: Callable[[torch.Tensor], torch.Tensor],
+    basis: torch.Tensor,
+    starts: torch.Tensor,
+    pose_values: torch.Tensor | None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The rows ``[B_k, J_k, rho_k]`` of every window and their squared norms, chunk by chunk.
+
+    Returns:
+        ``[W, r + Dj + 1]`` float32 table and ``[3, W]`` float32 squared norms
+        (projection, start pose, residual).
+    """
+    count, rank, device = starts.numel(), basis.shape[1], starts.device
+    pose_dims = pose_values.shape[1] if pose_values is not None else 0
+    table = torch.empty(count, rank + pose_dims + 1, dtype=torch.float32, device=device)
+    norms = torch.empty(3, count, dtype=torch.float32, device=device)
+    for lo in range(0, count, _BUILD_CHUNK):
+        hi = min(count, lo + _BUILD_CHUNK)
+        values = windows(torch.arange(lo, hi, device=device))
+        coords = values @ basis
+        resid = _residual_norm(values, coords)
+        table[lo:hi, :rank] = coords.float()
+        table[lo:hi, -1] = resid.float()
+        norms[0, lo:hi] = coords.square().sum(1).float()
+        norms[2, lo:hi] = resid.square().float()
+        if pose_values is not None:
+            pose_start = pose_values[starts[lo:hi]]
+            table[lo:hi, rank:-1] = pose_start
+            norms[1, lo:hi] = pose_start.double().square().sum(1).float()
+        else:
+            norms[1, lo:hi] = 0.0
+    return table, norms
+
+
 @dataclass
 class WindowIndex:
     """Exact nearest-window search over the candidate windows of a database.
@@ -222,37 +335,8 @@ class WindowIndex:
                 ``length``, non-positive sizes, or when no window fits in any clip.
         """
         started = time.perf_counter()
-        if (frequency is None) == (length is None):
-            raise MatchingError("frequency/length: give exactly one of them")
-        if len(control) == 0:
-            raise MatchingError("control: at least one control feature group is needed")
-        for name in (*control, *([pose] if pose else []), *([frequency] if frequency else [])):
-            if name not in database.groups:
-                raise MatchingError(
-                    f"group: unknown feature group {name!r}; the database has {database.groups}"
-                )
-        if basis_size < 1:
-            raise MatchingError(f"basis_size: must be >= 1, got {basis_size}")
-        device = database.device
-        n = database.num_frames
-        frames = torch.arange(n, device=device)
-        ends = database.clip_end_of(frames)
-        if frequency is not None:
-            if database.dims[frequency] != 1:
-                raise MatchingError(
-                    f"frequency: group {frequency!r} must have 1 channel, "
-                    f"has {database.dims[frequency]}"
-                )
-            per_frame = cycle_lengths(database.raw(frequency)[:, 0], database.fps, ends)
-            valid = per_frame > 0
-            default_samples = max(1, round(database.fps))
-        else:
-            fixed = int(length or 0)
-            if fixed < 1:
-                raise MatchingError(f"length: must be >= 1 frame, got {length}")
-            per_frame = torch.full_like(frames, fixed)
-            valid = frames + per_frame <= ends - 1
-            default_samples = fixed
+        _check_build_arguments(database, control, pose, frequency, length, basis_size)
+        per_frame, valid, default_samples = _window_lengths(database, frequency, length)
         samples = default_samples if samples is None else int(samples)
         if samples < 1:
             raise MatchingError(f"samples: must be >= 1, got {samples}")
@@ -274,36 +358,9 @@ class WindowIndex:
             out = sample_frames(control_values, s, w, samples, samples, s + w)
             return out.reshape(sel.numel(), -1)
 
-        count = starts.numel()
         dim = samples * control_values.shape[1]
-        rank = min(basis_size, dim)
-        pick = torch.unique(torch.linspace(0, count - 1, min(count, _BASIS_SAMPLE), device=device))
-        if rank == dim:
-            basis = torch.eye(dim, dtype=torch.float64, device=device)
-        else:
-            # principal directions of the (uncentred: the features are normalised to
-            # zero mean) windows; any orthonormal basis gives a valid bound
-            sample = windows(pick.long())
-            _, vectors = torch.linalg.eigh(sample.T @ sample)
-            basis = vectors[:, -rank:].flip(1).contiguous()
-        pose_dims = pose_values.shape[1] if pose_values is not None else 0
-        table = torch.empty(count, rank + pose_dims + 1, dtype=torch.float32, device=device)
-        norms = torch.empty(3, count, dtype=torch.float32, device=device)
-        for lo in range(0, count, _BUILD_CHUNK):
-            hi = min(count, lo + _BUILD_CHUNK)
-            values = windows(torch.arange(lo, hi, device=device))
-            coords = values @ basis
-            resid = _residual_norm(values, coords)
-            table[lo:hi, :rank] = coords.float()
-            table[lo:hi, -1] = resid.float()
-            norms[0, lo:hi] = coords.square().sum(1).float()
-            norms[2, lo:hi] = resid.square().float()
-            if pose_values is not None:
-                pose_start = pose_values[starts[lo:hi]]
-                table[lo:hi, rank:-1] = pose_start
-                norms[1, lo:hi] = pose_start.double().square().sum(1).float()
-            else:
-                norms[1, lo:hi] = 0.0
+        basis = _projection_basis(windows, starts.numel(), dim, basis_size, database.device)
+        table, norms = _window_table(windows, basis, starts, pose_values)
         return cls(
             starts=starts,
             lengths=lengths,
@@ -491,6 +548,85 @@ class WindowIndex:
         """
         if method not in ("fast", "naive"):
             raise MatchingError(f"method: expected 'fast' or 'naive', got {method!r}")
+        queries, query_lengths, start_pose = self._checked_queries(
+            queries, query_lengths, start_pose, max_period_ratio
+        )
+        device = self.starts.device
+        batch = queries.shape[0]
+        best = torch.empty(batch, dtype=torch.int64, device=device)
+        costs = torch.empty(batch, dtype=torch.float64, device=device)
+        group = max(1, _LB_BUDGET // (4 * self.num_windows))
+        for b0 in range(0, batch, group):
+            b1 = min(batch, b0 + group)
+            poses = start_pose[b0:b1] if start_pose is not None else None
+            shifted: tuple[torch.Tensor, torch.Tensor] | None = None
+            if method == "fast":
+                shifted = self._shifted_bounds(
+                    queries[b0:b1],
+                    query_lengths[b0:b1],
+                    poses,
+                    lambda_pose,
+                    lambda_period,
+                    max_period_ratio,
+                )
+            for b in range(b0, b1):
+                args = (
+                    queries[b],
+                    int(query_lengths[b]),
+                    start_pose[b] if start_pose is not None else None,
+                    lambda_pose,
+                    lambda_period,
+                    max_period_ratio,
+                )
+                if shifted is None:
+                    ids = torch.arange(self.num_windows, device=device)
+                else:
+                    ids = self._candidates(shifted[0][b - b0], float(shifted[1][b - b0]), args)
+                cand = self.exact_costs(ids, *args)
+                pick = int(torch.argmin(cand))
+                if not math.isfinite(float(cand[pick])):
+                    raise MatchingError(
+                        f"max_period_ratio: no window has a period within {max_period_ratio}x "
+                        f"of the query's {int(query_lengths[b])} frames"
+                    )
+                best[b] = ids[pick]
+                costs[b] = cand[pick]
+        return best, costs
+
+    def _candidates(self, row: torch.Tensor, shift: float, args: tuple[Any, ...]) -> torch.Tensor:
+        """The windows whose lower bound does not exceed the best exact cost of a first few.
+
+        Args:
+            row: ``[W]`` shifted lower bounds of one query (see :meth:`_shifted_bounds`).
+            shift: The query's constant term ``q_term``.
+            args: The query's arguments of :meth:`exact_costs` after the window ids.
+
+        Returns:
+            ``[C]`` int64 window ids that may hold the best window.
+        """
+        first = torch.topk(row, min(_FIRST_CANDIDATES, row.numel()), largest=False)
+        best_first = float(self.exact_costs(first.indices, *args).min())
+        # row + q_term <= best_first, with slack for rounding the threshold
+        slack = 1e-6 * (abs(best_first) + abs(shift))
+        return (row <= best_first - shift + slack).nonzero()[:, 0]
+
+    def _checked_queries(
+        self,
+        queries: torch.Tensor,
+        query_lengths: torch.Tensor,
+        start_pose: torch.Tensor | None,
+        max_period_ratio: float | None,
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """:meth:`search`'s inputs checked and moved to the index device.
+
+        Returns:
+            ``[B, L * Dc]`` float64 queries, ``[B]`` int64 lengths and ``[B, Dj]``
+            float64 start poses (or None).
+
+        Raises:
+            MatchingError: On shape mismatches, non-finite values, lengths < 1 or a
+                ``max_period_ratio`` < 1.
+        """
         device = self.starts.device
         dim = self.samples * self.control.shape[1]
         queries = torch.as_tensor(queries, device=device).double()
@@ -523,52 +659,7 @@ class WindowIndex:
                 raise MatchingError("start_pose: holds NaN or inf")
         if max_period_ratio is not None and not max_period_ratio >= 1:
             raise MatchingError(f"max_period_ratio: must be >= 1, got {max_period_ratio}")
-        best = torch.empty(batch, dtype=torch.int64, device=device)
-        costs = torch.empty(batch, dtype=torch.float64, device=device)
-        group = max(1, _LB_BUDGET // (4 * self.num_windows))
-        for b0 in range(0, batch, group):
-            b1 = min(batch, b0 + group)
-            poses = start_pose[b0:b1] if start_pose is not None else None
-            shifted: tuple[torch.Tensor, torch.Tensor] | None = None
-            if method == "fast":
-                shifted = self._shifted_bounds(
-                    queries[b0:b1],
-                    query_lengths[b0:b1],
-                    poses,
-                    lambda_pose,
-                    lambda_period,
-                    max_period_ratio,
-                )
-            for b in range(b0, b1):
-                args = (
-                    queries[b],
-                    int(query_lengths[b]),
-                    start_pose[b] if start_pose is not None else None,
-                    lambda_pose,
-                    lambda_period,
-                    max_period_ratio,
-                )
-                if shifted is None:
-                    ids = torch.arange(self.num_windows, device=device)
-                else:
-                    bounds, q_term = shifted
-                    row = bounds[b - b0]
-                    first = torch.topk(row, min(_FIRST_CANDIDATES, row.numel()), largest=False)
-                    best_first = float(self.exact_costs(first.indices, *args).min())
-                    # row + q_term <= best_first, with slack for rounding the threshold
-                    shift = float(q_term[b - b0])
-                    slack = 1e-6 * (abs(best_first) + abs(shift))
-                    ids = (row <= best_first - shift + slack).nonzero()[:, 0]
-                cand = self.exact_costs(ids, *args)
-                pick = int(torch.argmin(cand))
-                if not math.isfinite(float(cand[pick])):
-                    raise MatchingError(
-                        f"max_period_ratio: no window has a period within {max_period_ratio}x "
-                        f"of the query's {int(query_lengths[b])} frames"
-                    )
-                best[b] = ids[pick]
-                costs[b] = cand[pick]
-        return best, costs
+        return queries, query_lengths, start_pose
 
 
 def _residual_norm(values: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
