@@ -371,6 +371,60 @@ def generate(
         >>> motion.num_frames, round(info["frequency"], 2) > 0
         (61, True)
     """
+    table = _check_arguments(kind, gait, seconds, fps, root_carrier, channels)
+    rng = np.random.default_rng(seed)
+    g = table[gait]
+    jitter = lambda spread: float(1.0 + spread * (2.0 * rng.random() - 1.0))  # noqa: E731
+    body = scale if scale is not None else jitter(0.08)
+    freq = frequency if frequency is not None else g.frequency * jitter(0.08)
+    amp = jitter(0.10)
+    phase0 = float(rng.random())
+    sk = skeleton(kind, body)
+    roles = {s[3]: j for j, s in enumerate(_SPECS[kind]) if s[3] is not None}
+    num_frames = math.floor(seconds * fps + 1e-9) + 1
+    t = torch.arange(num_frames, dtype=torch.float64) / fps
+    phase = torch.remainder(phase0 + freq * t, 1.0)
+    rot = Q.identity(num_frames, sk.num_joints, dtype=torch.float64)
+    stride = _Stride(g, amp, freq, phase, t, gait == "idle")
+    if kind == "quadruped":
+        pelvis, bob, default_speed, sway = _animate_quadruped(rot, roles, sk, stride)
+    else:
+        pelvis, bob, default_speed, sway = _animate_biped(rot, roles, sk, stride, body)
+    spd = default_speed if speed is None else float(speed)
+    heading = torch.deg2rad(torch.as_tensor(turn_rate, dtype=torch.float64) * t)
+    yaw = _axis_angle("y", torch.rad2deg(heading))
+    rot[:, 0] = Q.mul(yaw, pelvis)
+    root = _root_path(spd, turn_rate, heading, t, sway, sk.offsets[0, 1] + bob)
+    if noise > 0:
+        _add_noise(rot, sorted(j for r, j in roles.items() if r != "root"), noise, seed)
+    motion = Motion(sk, rot, root, fps, name=f"{kind}_{gait}_{seed}", units="cm")
+    if root_carrier is not None or channels is not None:
+        motion = _export_layout(motion, root_carrier, channels)
+    info = {
+        "kind": kind,
+        "gait": gait,
+        "frequency": float(freq),
+        "phase": phase.to(torch.float32),
+        "speed": float(spd),
+        "seed": seed,
+        "synthetic": True,
+    }
+    return motion, info
+
+
+def _check_arguments(
+    kind: str,
+    gait: str,
+    seconds: float,
+    fps: float,
+    root_carrier: str | None,
+    channels: str | None,
+) -> dict[str, _Gait]:
+    """The gait table of ``kind``'s morphology, after checking :func:`generate`'s arguments.
+
+    Raises:
+        SkelagnosticError: As :func:`generate` says.
+    """
     if kind not in _SPECS:
         raise SkelagnosticError(f"unknown procedural skeleton {kind!r}; known: {', '.join(KINDS)}")
     morph = "quadruped" if kind == "quadruped" else "biped"
@@ -392,123 +446,172 @@ def generate(
         raise SkelagnosticError(
             f"channels must be one of {', '.join(map(repr, _CHANNEL_LAYOUTS))}, got {channels!r}"
         )
-    rng = np.random.default_rng(seed)
-    g = table[gait]
-    jitter = lambda spread: float(1.0 + spread * (2.0 * rng.random() - 1.0))  # noqa: E731
-    body = scale if scale is not None else jitter(0.08)
-    freq = frequency if frequency is not None else g.frequency * jitter(0.08)
-    amp = jitter(0.10)
-    phase0 = float(rng.random())
-    sk = skeleton(kind, body)
-    spec = _SPECS[kind]
-    roles = {s[3]: j for j, s in enumerate(spec) if s[3] is not None}
-    num_frames = math.floor(seconds * fps + 1e-9) + 1
-    t = torch.arange(num_frames, dtype=torch.float64) / fps
-    phase = torch.remainder(phase0 + freq * t, 1.0)
+    return table
+
+
+@dataclass(frozen=True)
+class _Stride:
+    """What every joint's curve of one clip depends on.
+
+    Attributes:
+        gait: The gait's angles and timing.
+        amp: Amplitude factor of the clip (varied by the seed).
+        freq: Stride frequency in Hz.
+        phase: ``[T]`` stride phase in [0, 1).
+        t: ``[T]`` time in seconds.
+        idle: The gait stands still.
+    """
+
+    gait: _Gait
+    amp: float
+    freq: float
+    phase: torch.Tensor
+    t: torch.Tensor
+    idle: bool
+
+
+#: The root's rotation (without heading), vertical bob, default speed (cm/s) and
+#: lateral sway of a clip.
+_RootMotion = tuple[torch.Tensor, torch.Tensor, float, torch.Tensor]
+
+
+def _put(rot: torch.Tensor, roles: dict[str, int], role: str, q: torch.Tensor) -> None:
+    """Set the local rotation of the joint playing ``role``, if the skeleton has one."""
+    if role in roles:
+        rot[:, roles[role]] = q
+
+
+def _animate_biped(
+    rot: torch.Tensor, roles: dict[str, int], sk: Skeleton, stride: _Stride, body: float
+) -> _RootMotion:
+    """Write the legs', arms' and spine's rotations of a biped into ``rot``.
+
+    Returns:
+        The root's motion (see :data:`_RootMotion`).
+    """
+    g, amp, phase, t = stride.gait, stride.amp, stride.phase, stride.t
     two_pi = 2.0 * math.pi
-    rot = Q.identity(num_frames, sk.num_joints, dtype=torch.float64)
-
-    def put(role: str, q: torch.Tensor) -> None:
-        if role in roles:
-            rot[:, roles[role]] = q
-
     hip, knee = g.hip * amp, g.knee * amp
-    if morph == "biped":
-        leg = float(sk.offsets[roles["l_knee"]].norm() + sk.offsets[roles["l_ankle"]].norm())
-        for side, shift in (("l", 0.0), ("r", 0.5)):
-            ph = two_pi * (phase + shift)
-            # hip flexion is a negative rotation about +X (the foot moves to +Z)
-            put(f"{side}_hip", _axis_angle("x", -hip * torch.sin(ph)))
-            put(
-                f"{side}_knee",
-                _axis_angle("x", knee * torch.clamp(torch.sin(ph - 1.2), min=0) + 0.1 * knee),
-            )
-            put(f"{side}_ankle", _axis_angle("x", -0.3 * hip * torch.sin(ph - 0.5)))
-            down = 78.0 if side == "l" else -78.0
-            arm = -(g.arm * amp) * torch.sin(ph + math.pi)  # swings opposite to the leg
-            put(f"{side}_shoulder", Q.mul(_axis_angle("x", arm), _axis_angle("z", -down + 0 * t)))
-            bend = g.elbow * amp * (1.0 + 0.3 * torch.sin(ph + math.pi))
-            put(f"{side}_elbow", _axis_angle("y", (-bend if side == "l" else bend)))
-        twist = g.spine * amp * torch.sin(two_pi * phase)
-        put("spine0", _axis_angle("y", -0.5 * twist))
-        put("spine1", _axis_angle("y", -0.5 * twist))
-        put("spine2", _axis_angle("x", torch.full_like(t, 3.0)))
-        put("neck", _axis_angle("y", 0.3 * twist))
-        pelvis = _axis_angle("y", twist)
-        bob = g.bob * leg * torch.cos(2.0 * two_pi * phase)
-        default_speed = 4.0 * leg * math.sin(math.radians(hip)) * freq
-        if gait == "idle":
-            default_speed = 0.0
-            sway = 1.5 * body * torch.sin(two_pi * phase)
-        else:
-            sway = 0.03 * leg * torch.sin(two_pi * phase)
+    leg = float(sk.offsets[roles["l_knee"]].norm() + sk.offsets[roles["l_ankle"]].norm())
+    for side, shift in (("l", 0.0), ("r", 0.5)):
+        ph = two_pi * (phase + shift)
+        # hip flexion is a negative rotation about +X (the foot moves to +Z)
+        _put(rot, roles, f"{side}_hip", _axis_angle("x", -hip * torch.sin(ph)))
+        _put(
+            rot,
+            roles,
+            f"{side}_knee",
+            _axis_angle("x", knee * torch.clamp(torch.sin(ph - 1.2), min=0) + 0.1 * knee),
+        )
+        _put(rot, roles, f"{side}_ankle", _axis_angle("x", -0.3 * hip * torch.sin(ph - 0.5)))
+        down = 78.0 if side == "l" else -78.0
+        arm = -(g.arm * amp) * torch.sin(ph + math.pi)  # swings opposite to the leg
+        shoulder = Q.mul(_axis_angle("x", arm), _axis_angle("z", -down + 0 * t))
+        _put(rot, roles, f"{side}_shoulder", shoulder)
+        bend = g.elbow * amp * (1.0 + 0.3 * torch.sin(ph + math.pi))
+        _put(rot, roles, f"{side}_elbow", _axis_angle("y", (-bend if side == "l" else bend)))
+    twist = g.spine * amp * torch.sin(two_pi * phase)
+    _put(rot, roles, "spine0", _axis_angle("y", -0.5 * twist))
+    _put(rot, roles, "spine1", _axis_angle("y", -0.5 * twist))
+    _put(rot, roles, "spine2", _axis_angle("x", torch.full_like(t, 3.0)))
+    _put(rot, roles, "neck", _axis_angle("y", 0.3 * twist))
+    pelvis = _axis_angle("y", twist)
+    bob = g.bob * leg * torch.cos(2.0 * two_pi * phase)
+    default_speed = 4.0 * leg * math.sin(math.radians(hip)) * stride.freq
+    if stride.idle:
+        default_speed = 0.0
+        sway = 1.5 * body * torch.sin(two_pi * phase)
     else:
-        front = float(sum(sk.offsets[roles[f"lf_{k}"]].norm() for k in (1, 2, 3)))
-        hind = float(sum(sk.offsets[roles[f"lh_{k}"]].norm() for k in (1, 2)))
-        leg = 0.5 * (front + hind)
-        for (prefix, chain), off in zip(
-            (("lf", 3), ("rf", 3), ("lh", 2), ("rh", 2)), g.offsets, strict=True
-        ):
-            ph = two_pi * (phase + off)
-            put(f"{prefix}_1", _axis_angle("x", -hip * torch.sin(ph)))
-            sign = 1.0 if prefix.endswith("f") else -1.0  # elbows and hocks bend opposite ways
-            put(
-                f"{prefix}_2",
-                _axis_angle("x", sign * knee * torch.clamp(torch.sin(ph - 1.2), min=0)),
+        sway = 0.03 * leg * torch.sin(two_pi * phase)
+    return pelvis, bob, default_speed, sway
+
+
+def _animate_quadruped(
+    rot: torch.Tensor, roles: dict[str, int], sk: Skeleton, stride: _Stride
+) -> _RootMotion:
+    """Write the four legs', spine's and tail's rotations of a quadruped into ``rot``.
+
+    Returns:
+        The root's motion (see :data:`_RootMotion`).
+    """
+    g, amp, phase = stride.gait, stride.amp, stride.phase
+    two_pi = 2.0 * math.pi
+    hip, knee = g.hip * amp, g.knee * amp
+    front = float(sum(sk.offsets[roles[f"lf_{k}"]].norm() for k in (1, 2, 3)))
+    hind = float(sum(sk.offsets[roles[f"lh_{k}"]].norm() for k in (1, 2)))
+    leg = 0.5 * (front + hind)
+    for (prefix, chain), off in zip(
+        (("lf", 3), ("rf", 3), ("lh", 2), ("rh", 2)), g.offsets, strict=True
+    ):
+        ph = two_pi * (phase + off)
+        _put(rot, roles, f"{prefix}_1", _axis_angle("x", -hip * torch.sin(ph)))
+        sign = 1.0 if prefix.endswith("f") else -1.0  # elbows and hocks bend opposite ways
+        _put(
+            rot,
+            roles,
+            f"{prefix}_2",
+            _axis_angle("x", sign * knee * torch.clamp(torch.sin(ph - 1.2), min=0)),
+        )
+        if chain == 3:
+            _put(
+                rot,
+                roles,
+                f"{prefix}_3",
+                _axis_angle("x", -0.4 * knee * torch.clamp(torch.sin(ph - 2.0), min=0)),
             )
-            if chain == 3:
-                put(
-                    f"{prefix}_3",
-                    _axis_angle("x", -0.4 * knee * torch.clamp(torch.sin(ph - 2.0), min=0)),
-                )
-        flex = g.spine * amp * torch.sin(two_pi * phase)
-        put("spine0", _axis_angle("x", flex))
-        put("spine1", _axis_angle("x", -flex))
-        put("neck", _axis_angle("x", 0.5 * flex))
-        put("tail0", _axis_angle("y", 10.0 * torch.sin(two_pi * phase)))
-        put("tail1", _axis_angle("y", 10.0 * torch.sin(two_pi * phase - 1.0)))
-        pelvis = _axis_angle("x", -0.5 * flex)
-        bob = g.bob * leg * torch.cos(2.0 * two_pi * phase)
-        default_speed = 0.0 if gait == "idle" else 4.0 * leg * math.sin(math.radians(hip)) * freq
-        sway = 0.01 * leg * torch.sin(two_pi * phase)
-    spd = default_speed if speed is None else float(speed)
-    heading = torch.deg2rad(torch.as_tensor(turn_rate, dtype=torch.float64) * t)
-    yaw = _axis_angle("y", torch.rad2deg(heading))
-    root_rot = Q.mul(yaw, pelvis)
-    # integrate the heading for the root path
+    flex = g.spine * amp * torch.sin(two_pi * phase)
+    _put(rot, roles, "spine0", _axis_angle("x", flex))
+    _put(rot, roles, "spine1", _axis_angle("x", -flex))
+    _put(rot, roles, "neck", _axis_angle("x", 0.5 * flex))
+    _put(rot, roles, "tail0", _axis_angle("y", 10.0 * torch.sin(two_pi * phase)))
+    _put(rot, roles, "tail1", _axis_angle("y", 10.0 * torch.sin(two_pi * phase - 1.0)))
+    pelvis = _axis_angle("x", -0.5 * flex)
+    bob = g.bob * leg * torch.cos(2.0 * two_pi * phase)
+    default_speed = 0.0 if stride.idle else 4.0 * leg * math.sin(math.radians(hip)) * stride.freq
+    sway = 0.01 * leg * torch.sin(two_pi * phase)
+    return pelvis, bob, default_speed, sway
+
+
+def _root_path(
+    speed: float,
+    turn_rate: float,
+    heading: torch.Tensor,
+    t: torch.Tensor,
+    sway: torch.Tensor,
+    height: torch.Tensor,
+) -> torch.Tensor:
+    """``[T, 3]`` root positions: the heading integrated at ``speed``, plus the sway.
+
+    Args:
+        speed: Forward speed in cm/s.
+        turn_rate: Heading change in degrees per second.
+        heading: ``[T]`` heading in radians.
+        t: ``[T]`` time in seconds.
+        sway: ``[T]`` lateral sway in cm.
+        height: ``[T]`` root height in cm.
+    """
     if abs(turn_rate) > 1e-9:
         w = math.radians(turn_rate)
-        x = spd / w * (1.0 - torch.cos(heading))
-        z = spd / w * torch.sin(heading)
+        x = speed / w * (1.0 - torch.cos(heading))
+        z = speed / w * torch.sin(heading)
     else:
-        x, z = torch.zeros_like(t), spd * t
+        x, z = torch.zeros_like(t), speed * t
     lateral = torch.stack(
         [sway * torch.cos(heading), torch.zeros_like(t), -sway * torch.sin(heading)], dim=-1
     )
-    root = torch.stack([x, sk.offsets[0, 1] + bob, z], dim=-1) + lateral
-    rot[:, 0] = root_rot
-    if noise > 0:
-        animated = sorted(j for r, j in roles.items() if r != "root")
-        gen = torch.Generator().manual_seed(seed)
-        axis = torch.randn(num_frames, len(animated), 3, generator=gen, dtype=torch.float64)
-        ang = torch.randn(num_frames, len(animated), generator=gen, dtype=torch.float64) * noise
-        axis = axis / axis.norm(dim=-1, keepdim=True)
-        half = torch.deg2rad(ang) / 2
-        dq = torch.cat([torch.cos(half)[..., None], torch.sin(half)[..., None] * axis], -1)
-        rot[:, animated] = Q.mul(rot[:, animated], dq)
-    motion = Motion(sk, rot, root, fps, name=f"{kind}_{gait}_{seed}", units="cm")
-    if root_carrier is not None or channels is not None:
-        motion = _export_layout(motion, root_carrier, channels)
-    info = {
-        "kind": kind,
-        "gait": gait,
-        "frequency": float(freq),
-        "phase": phase.to(torch.float32),
-        "speed": float(spd),
-        "seed": seed,
-        "synthetic": True,
-    }
-    return motion, info
+    return torch.stack([x, height, z], dim=-1) + lateral
+
+
+def _add_noise(rot: torch.Tensor, animated: list[int], noise: float, seed: int) -> None:
+    """Compose i.i.d. random rotations (``noise`` degrees std) onto the ``animated`` joints."""
+    num_frames = rot.shape[0]
+    gen = torch.Generator().manual_seed(seed)
+    axis = torch.randn(num_frames, len(animated), 3, generator=gen, dtype=torch.float64)
+    ang = torch.randn(num_frames, len(animated), generator=gen, dtype=torch.float64) * noise
+    axis = axis / axis.norm(dim=-1, keepdim=True)
+    half = torch.deg2rad(ang) / 2
+    dq = torch.cat([torch.cos(half)[..., None], torch.sin(half)[..., None] * axis], -1)
+    rot[:, animated] = Q.mul(rot[:, animated], dq)
 
 
 def dataset(
