@@ -18,11 +18,10 @@ from __future__ import annotations
 
 import importlib
 import sys
-import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
 
-__all__ = ["deprecated_aliases", "lazy_exports"]
+__all__ = ["lazy_exports"]
 
 
 def lazy_exports(
@@ -62,44 +61,3 @@ def lazy_exports(
         return sorted({*vars(sys.modules[package]), *table})
 
     return __getattr__, __dir__
-
-
-def deprecated_aliases(module: str, aliases: Mapping[str, str]) -> Callable[[str], Any]:
-    """Build a module-level ``__getattr__`` that still serves the old names of renamed objects.
-
-    Each access to an old name returns the renamed object and issues a
-    :class:`DeprecationWarning` that names the new one, so code written against
-    the old name keeps working while it is being updated.
-
-    Args:
-        module: The module's ``__name__``.
-        aliases: Old name -> the current name of the object in ``module``.
-
-    Returns:
-        The module's ``__getattr__``.
-
-    Examples:
-        >>> import types, sys, warnings
-        >>> mod = sys.modules["demo_mod"] = types.ModuleType("demo_mod")
-        >>> mod.New = 42
-        >>> mod.__getattr__ = deprecated_aliases("demo_mod", {"Old": "New"})
-        >>> with warnings.catch_warnings(record=True) as caught:
-        ...     warnings.simplefilter("always")
-        ...     value = mod.Old
-        >>> value, str(caught[0].message)
-        (42, 'demo_mod.Old is deprecated; use demo_mod.New')
-        >>> del sys.modules["demo_mod"]
-    """
-    table = dict(aliases)
-
-    def __getattr__(name: str) -> Any:
-        if name not in table:
-            raise AttributeError(f"module {module!r} has no attribute {name!r}")
-        warnings.warn(
-            f"{module}.{name} is deprecated; use {module}.{table[name]}",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return getattr(sys.modules[module], table[name])
-
-    return __getattr__

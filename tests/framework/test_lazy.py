@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
-import re
 import sys
 import types
 
@@ -37,23 +35,3 @@ def test_unknown_names_are_attribute_errors(package):
     with pytest.raises(AttributeError, match="colorsys"):
         _ = package.missing  # listed, but the module does not define it
     assert not hasattr(package, "nope")
-
-
-@pytest.mark.parametrize(
-    ("module", "old", "new"),
-    [
-        ("skelagnostic_vqpae.aligner", "VQPAEAligner", "VqpaeAligner"),
-        ("skelagnostic_vqpae.data", "VQPAEDataModule", "VqpaeDataModule"),
-        ("skelagnostic_pcmrl.recon.aligner", "PcmrlReconstruction", "PcmrlReconAligner"),
-        ("skelagnostic_pcmrl.interp.aligner", "InterpolationAligner", "PcmrlInterpAligner"),
-        ("skelagnostic_pcmrl.interp.data", "InterpolationDataModule", "PcmrlInterpDataModule"),
-    ],
-)
-def test_renamed_aligner_classes_keep_their_old_names_with_a_warning(module, old, new):
-    mod = importlib.import_module(module)
-    message = re.escape(f"{module}.{old} is deprecated; use {module}.{new}")
-    with pytest.warns(DeprecationWarning, match=message):
-        value = getattr(mod, old)
-    assert value is getattr(mod, new)
-    with pytest.raises(AttributeError, match="no attribute 'Nope'"):
-        mod.Nope  # noqa: B018

@@ -44,7 +44,6 @@ from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph
-from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.metrics import ManifoldOverlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
@@ -694,7 +693,3 @@ class VqpaeAligner(Aligner, LendsWork):
         positions = pose.view(len(pose), -1, 3).double().cpu() / UNITS[unit]
         rotations, root = inverse_kinematics(positions, skeleton)
         return Motion(skeleton, rotations, root, latent.fps, units=unit)
-
-
-#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
-__getattr__ = deprecated_aliases(__name__, {"VQPAEAligner": "VqpaeAligner"})

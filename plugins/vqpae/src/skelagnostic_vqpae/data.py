@@ -50,7 +50,6 @@ from skelagnostic.data import (
 from skelagnostic.data.cache import CacheEntry, read_exactly
 from skelagnostic.data.datamodule import STATS_CHUNK_VALUES, check_statistics
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
 
 __all__ = [
@@ -530,7 +529,3 @@ class VqpaeDataModule(MotionDataModule):
             if name in self.representations:
                 self.representations[name].load_normalization_state(stats["input"])
                 self.pose_representations[name].load_normalization_state(stats["pose"])
-
-
-#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
-__getattr__ = deprecated_aliases(__name__, {"VQPAEDataModule": "VqpaeDataModule"})

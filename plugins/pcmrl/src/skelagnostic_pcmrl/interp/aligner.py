@@ -23,7 +23,6 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import MotionError, SkelagnosticError
 from skelagnostic.export import ExportGraph, Method
-from skelagnostic.lazy import deprecated_aliases
 from skelagnostic_pcmrl.interp.keyframes import sign_invariant_l1, window_features, window_heading
 from skelagnostic_pcmrl.interp.network import CITLInterpolator
 from skelagnostic_pcmrl.interp.rpa import bone_tails
@@ -609,7 +608,3 @@ class PcmrlInterpAligner(Aligner):
         grot = Q.mul(latent.z, latent.extras["q0"])
         local = local_from_global(grot, skeleton.parents)
         return Motion(skeleton, local, latent.extras["root"], latent.fps)
-
-
-#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
-__getattr__ = deprecated_aliases(__name__, {"InterpolationAligner": "PcmrlInterpAligner"})

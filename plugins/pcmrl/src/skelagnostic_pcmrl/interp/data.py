@@ -40,7 +40,6 @@ from skelagnostic.data import MotionDataModule
 from skelagnostic.data.cache import CacheEntry, cache_key, read_exactly, slot_key
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.lazy import deprecated_aliases
 from skelagnostic_pcmrl.interp.rpa import (
     RPA_OFFSETS,
     RPA_SOLVES,
@@ -690,7 +689,3 @@ class PcmrlInterpDataModule(MotionDataModule):
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         """Nothing to restore."""
-
-
-#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
-__getattr__ = deprecated_aliases(__name__, {"InterpolationDataModule": "PcmrlInterpDataModule"})

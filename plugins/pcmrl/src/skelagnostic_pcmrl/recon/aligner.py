@@ -31,7 +31,6 @@ from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.export import ExportGraph
-from skelagnostic.lazy import deprecated_aliases
 from skelagnostic.representations import POINT_GROUPS
 from skelagnostic_pcmrl.points import (
     effective_joints,
@@ -691,7 +690,3 @@ class _ReconstructionGraph(torch.nn.Module):
         parents = self.aligner._require_target().parents
         local = Q.normalize(local_from_global(out["rotations"], parents))
         return out["root"], out["rotations"], local, out["positions"]
-
-
-#: Names before the rename to one pattern (``<Method><Part>Aligner``); deprecated.
-__getattr__ = deprecated_aliases(__name__, {"PcmrlReconstruction": "PcmrlReconAligner"})
