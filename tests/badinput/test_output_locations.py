@@ -87,7 +87,7 @@ def test_render_refuses_an_unusable_output_before_drawing(
     import skelagnostic.viz.render as render
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(render, "_Scene", None)  # nothing may be drawn
+    monkeypatch.setattr(render, "Scene", None)  # nothing may be drawn
     names = {**places, "nowhere": tmp_path / "nowhere"}
     words = [str(CLIP), option.format(**names)]
     if not option.startswith("out="):
@@ -304,7 +304,7 @@ def test_render_refuses_sizes_that_cannot_fit_before_drawing(
 ) -> None:
     import skelagnostic.viz.render as render
 
-    monkeypatch.setattr(render, "_Scene", None)  # refused before any figure or frame
+    monkeypatch.setattr(render, "Scene", None)  # refused before any figure or frame
     out = "s.png" if option.startswith("frames") else "a.gif"
     assert cli.main(["render", str(CLIP), option, f"out={tmp_path / out}"]) == 2
     line = one_error(capsys, "render")

@@ -177,6 +177,76 @@ def _lanes(roots: list[np.ndarray], spacing: float) -> tuple[int, list[list[floa
     return axis, offsets
 
 
+def _clip_units(
+    items: list[FigureLike], units: str | Sequence[str | None] | None, count: int
+) -> list[str | None]:
+    """The unit of every clip: given, else the motion's own (``None``: guess later).
+
+    Raises:
+        RenderError: A unit list of the wrong length or an unknown unit.
+    """
+    from skelagnostic.core.motion import UNITS
+
+    if units is None or isinstance(units, str):
+        unit_list: list[str | None] = [units] * count
+    else:
+        unit_list = list(units)
+        if len(unit_list) != count:
+            raise RenderError(f"units: got {len(unit_list)} units for {count} clips")
+    # A Motion knows its units; a StickFigure does not.
+    for k, item in enumerate(items):
+        if unit_list[k] is None:
+            unit_list[k] = getattr(item, "units", None)
+    for unit in unit_list:
+        if unit is not None and unit not in UNITS:
+            raise RenderError(f"units: unknown unit {unit!r}; known: {', '.join(UNITS)}")
+    return unit_list
+
+
+def _clip_entry(
+    k: int, figure: StickFigure, unit: str | None, keys: list[int], switches: list[int]
+) -> tuple[dict[str, Any], np.ndarray]:
+    """The payload entry of clip ``k`` (without its lane offsets) and its ``[T, J, 3]`` metres.
+
+    Raises:
+        RenderError: A key frame or transition outside the clip.
+    """
+    from skelagnostic.core.motion import UNITS
+
+    unit = unit or guess_units(figure)
+    metres = _y_up(figure.positions, figure.up_axis) * UNITS[unit]
+    codes, origin, step = _quantise(metres)
+    joint_names = getattr(figure, "joint_names", None)
+    if joint_names is None:
+        joint_names = [f"joint {j}" for j in range(figure.num_joints)]
+    for label, marks in (("keyframes", keys), ("transitions", switches)):
+        bad = [f for f in marks if not 0 <= f < figure.num_frames]
+        if bad:
+            raise RenderError(
+                f"{label}: frame(s) {bad} are outside clip {figure.name!r} "
+                f"(0..{figure.num_frames - 1})"
+            )
+    colours = clip_colors(k)
+    clip = {
+        "name": figure.name or f"clip {k}",
+        "fps": figure.fps,
+        "frames": figure.num_frames,
+        "units": unit,
+        "height": float(np.ptp(metres[0, :, 1])),
+        "joints": list(joint_names),
+        "parents": list(figure.parents),
+        "groups": list(figure.groups),  # type: ignore[arg-type]
+        "color": colours["spine"],
+        "groupColors": colours,
+        "origin": [float(v) for v in origin],
+        "step": [float(v) for v in step],
+        "positions": base64.b64encode(codes.tobytes()).decode("ascii"),
+        "keyframes": keys,
+        "transitions": switches,
+    }
+    return clip, metres
+
+
 def build_payload(
     motions: FigureLike | Sequence[FigureLike],
     names: Sequence[str] | None = None,
@@ -210,8 +280,6 @@ def build_payload(
     Raises:
         RenderError: On bad arguments; the message names the argument.
     """
-    from skelagnostic.core.motion import UNITS
-
     items = motions if isinstance(motions, Sequence) and not isinstance(motions, str) else [motions]
     figures = to_stick_figures(items, names)  # type: ignore[arg-type]
     if mode not in _MODES:
@@ -219,61 +287,17 @@ def build_payload(
     if not (math.isfinite(speed) and speed > 0):
         raise RenderError(f"speed must be a positive number, got {speed}")
     count = len(figures)
-    if units is None or isinstance(units, str):
-        unit_list: list[str | None] = [units] * count
-    else:
-        unit_list = list(units)
-        if len(unit_list) != count:
-            raise RenderError(f"units: got {len(unit_list)} units for {count} clips")
-    # A Motion knows its units; a StickFigure does not.
-    item_list = list(items)  # type: ignore[arg-type]
-    for k, item in enumerate(item_list):
-        if unit_list[k] is None:
-            unit_list[k] = getattr(item, "units", None)
-    for unit in unit_list:
-        if unit is not None and unit not in UNITS:
-            raise RenderError(f"units: unknown unit {unit!r}; known: {', '.join(UNITS)}")
+    unit_list = _clip_units(list(items), units, count)  # type: ignore[arg-type]
     keys = _as_marks(keyframes, count, "keyframes")
     switches = _as_marks(transitions, count, "transitions")
 
     clips, lowest, heights, roots = [], [], [], []
     for k, figure in enumerate(figures):
-        unit = unit_list[k] or guess_units(figure)
-        metres = _y_up(figure.positions, figure.up_axis) * UNITS[unit]
-        codes, origin, step = _quantise(metres)
+        clip, metres = _clip_entry(k, figure, unit_list[k], keys[k], switches[k])
+        clips.append(clip)
         lowest.append(float(metres[..., 1].min()))
         roots.append(metres[:, 0])
-        heights.append(float(np.ptp(metres[0, :, 1])))
-        joint_names = getattr(figure, "joint_names", None)
-        if joint_names is None:
-            joint_names = [f"joint {j}" for j in range(figure.num_joints)]
-        for label, marks in (("keyframes", keys[k]), ("transitions", switches[k])):
-            bad = [f for f in marks if not 0 <= f < figure.num_frames]
-            if bad:
-                raise RenderError(
-                    f"{label}: frame(s) {bad} are outside clip {figure.name!r} "
-                    f"(0..{figure.num_frames - 1})"
-                )
-        colours = clip_colors(k)
-        clips.append(
-            {
-                "name": figure.name or f"clip {k}",
-                "fps": figure.fps,
-                "frames": figure.num_frames,
-                "units": unit,
-                "height": heights[-1],
-                "joints": list(joint_names),
-                "parents": list(figure.parents),
-                "groups": list(figure.groups),  # type: ignore[arg-type]
-                "color": colours["spine"],
-                "groupColors": colours,
-                "origin": [float(v) for v in origin],
-                "step": [float(v) for v in step],
-                "positions": base64.b64encode(codes.tobytes()).decode("ascii"),
-                "keyframes": keys[k],
-                "transitions": switches[k],
-            }
-        )
+        heights.append(clip["height"])
     tallest = max(max(heights), 0.1)
     axis, offsets = _lanes(roots, spacing=max(1.0, 1.1 * tallest + 0.2))
     for clip, offset, path in zip(clips, offsets, roots, strict=True):

@@ -11,14 +11,14 @@ MP4 encoder, so memory stays flat in the clip length) and atomically
 (:mod:`skelagnostic.io.outputs`: a failed write leaves the previous file as it was).
 Sizes that cannot fit are refused before anything is drawn (:data:`MAX_PANEL_SIDE`,
 :data:`MAX_FRAME_PIXELS`, :data:`MAX_FPS`, :data:`MAX_SHEET_PIXELS`).
+
+The drawing itself is :mod:`skelagnostic.viz.scene`'s; the GIF and MP4 encoders are
+:mod:`skelagnostic.viz.encoders`'.
 """
 
 from __future__ import annotations
 
 import math
-import shutil
-import subprocess
-import tempfile
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,11 +27,18 @@ from typing import Any
 import numpy as np
 
 from skelagnostic.io.outputs import output_path, write_output
-from skelagnostic.viz.camera import Camera, auto_azimuth
+from skelagnostic.viz.encoders import (
+    check_gif_rate,
+    find_ffmpeg,
+    gif_palette,
+    palette_frames,
+    write_gif,
+    write_mp4,
+)
+from skelagnostic.viz.scene import BODY_GROUP_COLORS, Scene
 from skelagnostic.viz.stick import (
     FigureLike,
     RenderError,
-    StickFigure,
     synchronise,
     to_stick_figures,
 )
@@ -52,25 +59,7 @@ __all__ = [
     "write_contact_sheet",
 ]
 
-#: Bone colour of each body group (left side cool, right side warm).
-BODY_GROUP_COLORS: dict[str, str] = {
-    "spine": "#37474f",
-    "left_arm": "#1e88e5",
-    "right_arm": "#e53935",
-    "left_leg": "#43a047",
-    "right_leg": "#fb8c00",
-    "tail": "#8e24aa",
-    "other": "#9e9e9e",
-}
-
-_BACKGROUND = "#ffffff"
-_FLOOR = "#eceff1"
-_GRID = "#cfd8dc"
-#: Joint colour and bone line style per character in overlay mode.
-_OVERLAY_JOINTS = ("#212121", "#6a1b9a", "#00838f", "#c62828", "#2e7d32")
-_OVERLAY_STYLES: tuple[Any, ...] = ("solid", (0, (4, 2)), (0, (1, 1.5)))
 _MODES = ("side", "overlay")
-_MARGIN = 0.08
 
 #: Largest width or height of one panel, in pixels.
 MAX_PANEL_SIDE = 4096
@@ -82,8 +71,6 @@ MAX_FPS = 240.0
 MIN_FPS = 1.0
 #: Largest contact sheet, in pixels.
 MAX_SHEET_PIXELS = 8192 * 8192
-#: Longest delay a GIF frame can hold, in 1/100 s (a 16-bit field).
-_GIF_MAX_TICKS = 65535
 #: Renders of at least this many frames show a progress bar (when asked and on a terminal).
 PROGRESS_FRAMES = 100
 
@@ -228,7 +215,7 @@ def _prepare(
     follow: bool = False,
     time_label: bool = True,
     same_scale: bool | Sequence[int] = False,
-) -> _Scene:
+) -> Scene:
     """Check the arguments of :func:`render_frames` and build the scene (nothing drawn yet)."""
     figures = to_stick_figures(motions, labels)
     if mode not in _MODES:
@@ -272,7 +259,7 @@ def _prepare(
         "time_label": time_label,
         "same_scale": shared,
     }
-    scene = _Scene(figures, groups, clock, (width, height), options)
+    scene = Scene(figures, groups, clock, (width, height), options)
     scene.rate = rate
     return scene
 
@@ -345,21 +332,21 @@ def render_motion(
     if suffix not in (".gif", ".mp4"):
         raise RenderError(f"{key}: unsupported format {out.suffix!r}; use .gif, .mp4 or .png")
     if suffix == ".mp4":
-        _ffmpeg()  # fail before rendering when ffmpeg is missing
+        find_ffmpeg()  # fail before rendering when ffmpeg is missing
     scene = _prepare(motions, **options)
     try:
         if suffix == ".gif":
-            _check_gif_rate(scene.rate)
-            palette = _gif_palette(scene.draw_frame(i)[0] for i in _sample(len(scene.times)))
+            check_gif_rate(scene.rate)
+            palette = gif_palette(scene.draw_frame(i)[0] for i in palette_frames(len(scene.times)))
         frames = _with_progress(
             (frame for frame, _ in scene.iter_frames()), len(scene.times), progress, out.name
         )
         if suffix == ".gif":
-            write_output(out, lambda fh: _write_gif(frames, scene.rate, fh, palette), key)
+            write_output(out, lambda fh: write_gif(frames, scene.rate, fh, palette), key)
         else:
             width, height = scene.canvas.get_width_height()
             with output_path(out, key) as tmp:
-                _write_mp4(frames, scene.rate, (height, width), tmp, out, key)
+                write_mp4(frames, scene.rate, (height, width), tmp, out, key)
     finally:
         scene.close()
     return out
@@ -445,14 +432,14 @@ def write_animation(rendering: Rendering, out: str | Path) -> Path:
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix == ".gif":
-        _check_gif_rate(rendering.fps)
+        check_gif_rate(rendering.fps)
         frames = rendering.frames
-        palette = _gif_palette(frames[i] for i in _sample(len(frames)))
-        write_output(out, lambda fh: _write_gif(iter(frames), rendering.fps, fh, palette), "out")
+        palette = gif_palette(frames[i] for i in palette_frames(len(frames)))
+        write_output(out, lambda fh: write_gif(iter(frames), rendering.fps, fh, palette), "out")
     elif suffix == ".mp4":
         _, h, w, _ = rendering.frames.shape
         with output_path(out, "out") as tmp:
-            _write_mp4(iter(rendering.frames), rendering.fps, (h, w), tmp, out, "out")
+            write_mp4(iter(rendering.frames), rendering.fps, (h, w), tmp, out, "out")
     else:
         raise RenderError(f"out: unsupported animation format {out.suffix!r}; use .gif or .mp4")
     return out
@@ -533,83 +520,6 @@ def _tile(
     return sheet
 
 
-def _sample(count: int) -> np.ndarray:
-    """Indices of up to eight evenly spaced frames (the GIF palette is fitted on them)."""
-    return np.unique(np.linspace(0, count - 1, min(8, count)).astype(int))
-
-
-def _check_gif_rate(fps: float) -> None:
-    if fps > 50.0:
-        raise RenderError(
-            f"fps: a GIF plays at most 50 frames per second, got {fps:g}; lower fps or write .mp4"
-        )
-
-
-def _gif_palette(sample: Iterable[np.ndarray]) -> Any:
-    """One 256-colour palette image fitted on a few frames, shared by every frame."""
-    from PIL import Image
-
-    return Image.fromarray(np.concatenate(list(sample), axis=0)).quantize(
-        colors=256, method=Image.Quantize.MEDIANCUT
-    )
-
-
-def _write_gif(frames: Iterator[np.ndarray], fps: float, fh: Any, palette: Any) -> None:
-    """Encode frames one at a time into an animated GIF (looping, real-time delays).
-
-    Pillow's ``save(save_all=True)`` holds every frame until the end; this writes
-    each frame as it comes with Pillow's GIF block writers (``getheader`` /
-    ``getdata``): the first frame whole, the next ones cropped to what changed
-    (as Pillow does), and an unchanged frame extends the previous one's delay.
-    Only the previous frame is kept in memory.
-    """
-    from PIL import GifImagePlugin, Image, ImageChops
-
-    previous: Any = None
-    pending: tuple[Any, tuple[int, int], int] | None = None  # (image, offset, delay ms)
-    tick = 0  # delays in 1/100 s, rounded on the cumulative clock: playback stays real time
-
-    def flush() -> None:
-        if pending is not None:
-            image, offset, delay = pending
-            for block in GifImagePlugin.getdata(image, offset, duration=delay):
-                fh.write(block)
-
-    for f, frame in enumerate(frames):
-        image = Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE)
-        following = round((f + 1) * 100.0 / fps)
-        delay, tick = min(following - tick, _GIF_MAX_TICKS) * 10, following
-        if previous is None:
-            header, _ = GifImagePlugin.getheader(image, None, {"loop": 0, "optimize": False})
-            for block in header:
-                fh.write(block)
-            pending = (image, (0, 0), delay)
-        else:
-            box = ImageChops.difference(previous, image).getbbox()
-            if box is None and pending is not None:  # unchanged: the last frame stays longer
-                pending = (pending[0], pending[1], min(pending[2] + delay, _GIF_MAX_TICKS * 10))
-                continue
-            flush()
-            box = box or (0, 0, 1, 1)
-            pending = (image.crop(box), box[:2], delay)
-        previous = image
-    flush()
-    fh.write(b";")
-
-
-def _ffmpeg() -> str:
-    import matplotlib
-
-    exe = shutil.which(matplotlib.rcParams["animation.ffmpeg_path"])
-    if exe is None:
-        raise RenderError(
-            "out: writing .mp4 needs ffmpeg, which was not found "
-            f"(matplotlib rcParams['animation.ffmpeg_path'] = "
-            f"{matplotlib.rcParams['animation.ffmpeg_path']!r}); install ffmpeg or write .gif"
-        )
-    return exe
-
-
 def _with_progress(
     frames: Iterator[np.ndarray], count: int, progress: bool, name: str
 ) -> Iterator[np.ndarray]:
@@ -635,410 +545,3 @@ def _with_progress(
         for frame in frames:
             yield frame
             bar.advance(task)
-
-
-def _write_mp4(
-    frames: Iterator[np.ndarray],
-    fps: float,
-    shape: tuple[int, int],
-    path: Path,
-    out: Path,
-    key: str,
-) -> None:
-    """Pipe frames one at a time to ffmpeg, which writes an MP4 at ``path``."""
-    exe = _ffmpeg()
-    h, w = shape
-    # yuv420p (playable everywhere) needs even dimensions: pad by one white row/column.
-    pad_h, pad_w = h % 2, w % 2
-    command = [
-        exe,
-        "-y",
-        "-loglevel",
-        "error",
-        "-f",
-        "rawvideo",
-        "-pix_fmt",
-        "rgb24",
-        "-s",
-        f"{w + pad_w}x{h + pad_h}",
-        "-r",
-        f"{fps:g}",
-        "-i",
-        "-",
-        "-an",
-        "-pix_fmt",
-        "yuv420p",
-        "-f",
-        "mp4",
-        str(path),
-    ]
-    with tempfile.TemporaryFile() as log:
-        process = subprocess.Popen(
-            command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log
-        )
-        assert process.stdin is not None
-        try:
-            for frame in frames:
-                if pad_h or pad_w:
-                    frame = np.pad(frame, ((0, pad_h), (0, pad_w), (0, 0)), constant_values=255)
-                process.stdin.write(np.ascontiguousarray(frame).tobytes())
-        except BrokenPipeError:
-            pass  # ffmpeg stopped: its exit code and message tell why
-        except BaseException:
-            process.kill()
-            process.wait()
-            raise
-        finally:
-            try:
-                process.stdin.close()
-            except BrokenPipeError:
-                pass
-        code = process.wait()
-        if code != 0:
-            log.seek(0)
-            message = " ".join(log.read().decode(errors="replace").split())
-            raise RenderError(f"{key}: ffmpeg failed writing {out} (exit {code}): {message}")
-
-
-def _nice_step(extent: float) -> float:
-    """A 1/2/5 x 10^k grid spacing giving about eight cells over ``extent``."""
-    raw = max(extent, 1e-9) / 8.0
-    base = 10.0 ** math.floor(math.log10(raw))
-    return base * min((m for m in (1.0, 2.0, 5.0, 10.0) if m * base >= raw), default=10.0)
-
-
-class _Panel:
-    """One axes: its camera, floor, and the per-frame horizontal shift of the follow camera."""
-
-    def __init__(self, ax: Any, members: list[int], camera: Camera, shift: np.ndarray) -> None:
-        self.ax = ax
-        self.members = members
-        self.camera = camera
-        self.shift = shift  # [F, 3] subtracted from world positions (zeros: fixed camera)
-        #: Follow camera only: (LineCollection, [N, 2, 3] world lines) of the sliding grid
-        #: and of the root paths, re-projected every frame.
-        self.grid: tuple[Any, np.ndarray] | None = None
-        self.grid_step = 0.0
-        self.paths: list[tuple[Any, np.ndarray]] = []
-        #: ``[N, 2]`` projected points the panel's view must hold (its framing).
-        self.framed = np.zeros((0, 2))
-        #: Share of the panel's height kept free at the top (for its label).
-        self.top = 0.0
-
-
-class _Scene:
-    """Figure, artists and cameras for one rendering; draws frame after frame."""
-
-    def __init__(
-        self,
-        figures: list[StickFigure],
-        groups: list[list[int]],
-        times: np.ndarray,
-        size: tuple[int, int],
-        options: dict[str, Any],
-    ) -> None:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        self.figures = figures
-        self.size = size
-        self.times = times
-        #: Playback rate of the frames (set by :func:`_prepare`).
-        self.rate = 0.0
-        self.background: Any = None
-        self.projected: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self.world = [f.sample(times) for f in figures]  # [F, J, 3] z-up
-        width, height = size
-        dpi = 100.0
-        self.figure = Figure(figsize=(width * len(groups) / dpi, height / dpi), dpi=dpi)
-        self.figure.patch.set_facecolor(_BACKGROUND)
-        self.canvas = FigureCanvasAgg(self.figure)
-        self.scale = height / 320.0
-        self.panels: list[_Panel] = []
-        self.panel_of: dict[int, _Panel] = {}
-        self.bone_artists: dict[int, Any] = {}
-        self.joint_artists: dict[int, Any] = {}
-        self.bone_colors: dict[int, np.ndarray] = {}
-        for p, members in enumerate(groups):
-            ax = self.figure.add_axes((p / len(groups), 0.0, 1.0 / len(groups), 1.0))
-            ax.set_axis_off()
-            panel = self._build_panel(ax, members, options)
-            self.panels.append(panel)
-            self.panel_of.update(dict.fromkeys(members, panel))
-        self._frame_panels(options["same_scale"])
-        self.clock = None
-        if options["time_label"]:
-            ax = self.panels[-1].ax
-            self.clock = ax.text(
-                0.97,
-                0.97,
-                "",
-                transform=ax.transAxes,
-                ha="right",
-                va="top",
-                fontsize=9 * self.scale,
-                color="#455a64",
-                family="monospace",
-                animated=True,
-            )
-
-    def _build_panel(self, ax: Any, members: list[int], options: dict[str, Any]) -> _Panel:
-        from matplotlib.collections import LineCollection
-        from matplotlib.lines import Line2D
-        from matplotlib.patches import Polygon
-
-        world = [self.world[k] for k in members]
-        azim = options["azim"]
-        camera = Camera(auto_azimuth(world) if azim is None else float(azim), options["elev"])
-        ground = min(float(p[..., 2].min()) for p in world)
-        shift = np.zeros((len(self.times), 3))
-        if options["follow"]:
-            shift[:, :2] = np.mean([p[:, 0, :2] for p in world], axis=0)
-        panel = _Panel(ax, members, camera, shift)
-        local = np.concatenate([(p - shift[:, None]).reshape(-1, 3) for p in world])
-        paths = {k: self._root_path(k, ground) for k in members} if options["trajectory"] else {}
-        framed = [local] if options["follow"] else [local, *paths.values()]
-        panel.framed = camera.project(np.concatenate(framed))[0]
-
-        # Floor: the horizontal footprint of what is drawn, with a margin.
-        reach = max(float(np.ptp(local[:, 2])), 1e-6)
-        footprint = np.concatenate([local[:, :2], *(q[:, :2] for q in framed[1:])])
-        lo = footprint.min(axis=0) - 0.25 * reach
-        hi = footprint.max(axis=0) + 0.25 * reach
-        step = _nice_step(float((hi - lo).max()))
-        lo, hi = np.floor(lo / step) * step, np.ceil(hi / step) * step
-        corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-        floor_uv, _ = camera.project(np.column_stack([corners, np.full(4, ground)]))
-        floor = Polygon(floor_uv, closed=True, facecolor=_FLOOR, edgecolor="none", zorder=0)
-        ax.add_patch(floor)
-        if options["follow"]:  # one extra cell each side: the grid slides under the figures
-            lo, hi = lo - step, hi + step
-        xs = np.arange(lo[0], hi[0] + step / 2, step)
-        ys = np.arange(lo[1], hi[1] + step / 2, step)
-        lines = [[(x, lo[1]), (x, hi[1])] for x in xs] + [[(lo[0], y), (hi[0], y)] for y in ys]
-        grid_lines = np.concatenate(
-            [np.asarray(lines), np.full((len(lines), 2, 1), ground)], axis=-1
-        )
-        grid = LineCollection(
-            list(camera.project(grid_lines)[0]),
-            colors=_GRID,
-            linewidths=0.8,
-            zorder=1,
-            animated=options["follow"],
-        )
-        grid.set_clip_path(floor)
-        grid.set_clip_box(ax.bbox)  # the floor may reach past the panel: never into the next
-        ax.add_collection(grid)
-        if options["follow"]:
-            panel.grid, panel.grid_step = (grid, grid_lines), step
-
-        overlay = len(members) > 1
-        handles = []
-        for rank, k in enumerate(members):
-            figure = self.figures[k]
-            joint_color = _OVERLAY_JOINTS[rank % len(_OVERLAY_JOINTS)] if overlay else "#263238"
-            style: Any = _OVERLAY_STYLES[rank % len(_OVERLAY_STYLES)] if overlay else "solid"
-            if k in paths:
-                segments = np.stack([paths[k][:-1], paths[k][1:]], axis=1)
-                path = LineCollection(
-                    list(camera.project(segments)[0]),
-                    colors=joint_color,
-                    alpha=0.6,
-                    linewidths=1.5 * self.scale,
-                    zorder=2,
-                    animated=options["follow"],
-                )
-                path.set_clip_path(floor)
-                path.set_clip_box(ax.bbox)
-                ax.add_collection(path)
-                if options["follow"]:
-                    panel.paths.append((path, segments))
-            groups = list(figure.groups or ())
-            bone_colors = np.array(
-                [_rgba(BODY_GROUP_COLORS[groups[c]]) for _, c in figure.bones]
-            ).reshape(-1, 4)
-            bones = LineCollection(
-                [],
-                linewidths=2.2 * self.scale,
-                linestyles=style,
-                capstyle="round",
-                animated=True,
-                zorder=3,
-            )
-            ax.add_collection(bones)
-            joints = Line2D(
-                [],
-                [],
-                linestyle="none",
-                marker="o",
-                markersize=2.6 * self.scale,
-                color=joint_color,
-                animated=True,
-                zorder=4,
-            )
-            ax.add_line(joints)
-            self.bone_artists[k], self.joint_artists[k] = bones, joints
-            self.bone_colors[k] = bone_colors
-            handles.append(
-                Line2D(
-                    [],
-                    [],
-                    color=BODY_GROUP_COLORS["spine"],
-                    linestyle=style,
-                    marker="o",
-                    markersize=3 * self.scale,
-                    markerfacecolor=joint_color,
-                    markeredgecolor=joint_color,
-                    label=figure.name,
-                )
-            )
-        if overlay:
-            ax.legend(handles=handles, loc="upper left", fontsize=8 * self.scale, frameon=False)
-        elif self.figures[members[0]].name:
-            name = self.figures[members[0]].name
-            fontsize = 9 * self.scale
-            ax.text(
-                0.03,
-                0.97,
-                name,
-                transform=ax.transAxes,
-                ha="left",
-                va="top",
-                fontsize=fontsize,
-                color="#263238",
-            )
-            # the label's lines (points at 100 dpi, with line spacing) stay above the figures
-            lines = name.count("\n") + 1
-            panel.top = min(0.03 + (lines * 1.25 * fontsize * 100 / 72 + 4) / self.size[1], 0.5)
-        return panel
-
-    def _root_path(self, k: int, ground: float) -> np.ndarray:
-        """Root of figure ``k`` on the floor, at all its frames within the drawn time span."""
-        figure = self.figures[k]
-        first = math.floor(float(self.times.min()) * figure.fps)
-        last = math.ceil(float(self.times.max()) * figure.fps)
-        root = figure.z_up()[max(first, 0) : max(last, 0) + 1, 0].copy()
-        root[:, 2] = ground
-        return root if len(root) > 1 else np.concatenate([root, root])
-
-    def _framing(self, panel: _Panel) -> tuple[np.ndarray, np.ndarray]:
-        """Centre and extent of a view of the panel's points with its aspect, under its label.
-
-        The points fill the panel's height but the top ``panel.top``, with a margin;
-        the extent is that of the whole panel (its aspect).
-        """
-        uv = panel.framed
-        lo, hi = uv.min(axis=0), uv.max(axis=0)
-        centre = (lo + hi) / 2.0
-        extent = np.maximum(hi - lo, 1e-6) * (1.0 + 2.0 * _MARGIN)
-        aspect = self.size[0] / (self.size[1] * (1.0 - panel.top))
-        if extent[0] / extent[1] < aspect:
-            extent[0] = extent[1] * aspect
-        else:
-            extent[1] = extent[0] / aspect
-        extent[1] /= 1.0 - panel.top
-        return centre, extent
-
-    def _frame_panels(self, shared: list[int]) -> None:
-        """Set every panel's fixed limits; the panels of ``shared`` get the largest extent.
-
-        Every extent has the panel's aspect, so the element-wise largest one does too:
-        the shared panels show the same length per pixel, each figure centred in the
-        part of its panel under its label.
-        """
-        views = [self._framing(panel) for panel in self.panels]
-        if shared:
-            largest = np.max([views[k][1] for k in shared], axis=0)
-            for k in shared:
-                views[k] = (views[k][0], largest)
-        for panel, (centre, extent) in zip(self.panels, views, strict=True):
-            bottom = centre[1] - extent[1] * (1.0 - panel.top) / 2.0
-            panel.ax.set_xlim(centre[0] - extent[0] / 2.0, centre[0] + extent[0] / 2.0)
-            panel.ax.set_ylim(bottom, bottom + extent[1])
-            panel.ax.set_aspect("auto")
-
-    def panel_scales(self) -> np.ndarray:
-        """Pixels per unit of length of the panel of each character (vertical = horizontal)."""
-        height = self.size[1]
-        scales = np.zeros(len(self.figures))
-        for panel in self.panels:
-            low, high = panel.ax.get_ylim()
-            scales[panel.members] = height / (high - low)
-        return scales
-
-    def panel_rects(self) -> np.ndarray:
-        """Pixel rectangle of the panel of each character."""
-        width, height = self.size
-        rects = np.zeros((len(self.figures), 4))
-        for p, panel in enumerate(self.panels):
-            for k in panel.members:
-                rects[k] = (p * width, 0, (p + 1) * width, height)
-        return rects
-
-    def draw_all(self) -> tuple[np.ndarray, np.ndarray]:
-        """Draw every frame; returns ``[F, H, W, 3]`` frames and ``[F, C, 4]`` boxes."""
-        frames, boxes = [], []
-        for frame, box in self.iter_frames():
-            frames.append(frame)
-            boxes.append(box)
-        return np.stack(frames), np.stack(boxes)
-
-    def iter_frames(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """Draw the frames one after the other: ``([H, W, 3]`` image, ``[C, 4]`` boxes)."""
-        for f in range(len(self.times)):
-            yield self.draw_frame(f)
-
-    def draw_frame(self, f: int) -> tuple[np.ndarray, np.ndarray]:
-        """Draw frame ``f``: its ``[H, W, 3]`` image and the ``[C, 4]`` character boxes."""
-        if self.background is None:
-            self.canvas.draw()
-            self.background = self.canvas.copy_from_bbox(self.figure.bbox)
-            for k, world in enumerate(self.world):
-                panel = self.panel_of[k]
-                self.projected[k] = panel.camera.project(world - panel.shift[:, None])
-        projected = self.projected
-        total_height = self.canvas.get_width_height()[1]
-        boxes = np.zeros((len(self.figures), 4))
-        t = self.times[f]
-        self.canvas.restore_region(self.background)
-        for panel in self.panels:
-            if panel.grid is not None:  # slides by the shift modulo one cell
-                grid, lines = panel.grid
-                offset = np.mod(panel.shift[f], panel.grid_step)
-                grid.set_segments(panel.camera.project(lines - offset)[0])
-                panel.ax.draw_artist(grid)
-            for path, segments in panel.paths:
-                path.set_segments(panel.camera.project(segments - panel.shift[f])[0])
-                panel.ax.draw_artist(path)
-        for k, figure in enumerate(self.figures):
-            uv, depth = projected[k][0][f], projected[k][1][f]
-            ax = self.panel_of[k].ax
-            bones = self.bone_artists[k]
-            if len(figure.bones):
-                order = np.argsort(depth[figure.bones].mean(axis=1))
-                bones.set_segments(uv[figure.bones[order]])
-                bones.set_color(self.bone_colors[k][order])
-                ax.draw_artist(bones)
-            self.joint_artists[k].set_data(uv[:, 0], uv[:, 1])
-            ax.draw_artist(self.joint_artists[k])
-            pixels = ax.transData.transform(uv)
-            boxes[k] = (
-                pixels[:, 0].min(),
-                total_height - pixels[:, 1].max(),
-                pixels[:, 0].max(),
-                total_height - pixels[:, 1].min(),
-            )
-        if self.clock is not None:
-            self.clock.set_text(f"{t:6.2f} s")
-            self.clock.axes.draw_artist(self.clock)
-        return np.asarray(self.canvas.buffer_rgba())[..., :3].copy(), boxes
-
-    def close(self) -> None:
-        """Release the figure."""
-        self.figure.clear()
-
-
-def _rgba(color: str) -> tuple[float, float, float, float]:
-    from matplotlib.colors import to_rgba
-
-    return to_rgba(color)
