@@ -28,11 +28,11 @@ from skelagnostic.io.gltf._common import (
     _NORMALIZE,
     _PATH_WIDTH,
     _SCALE_TOLERANCE,
-    _SNAP,
     _WIDTH,
     _pygltflib,
     _unique,
 )
+from skelagnostic.io.gltf._tracks import Track, mul_xyzw, rotate_xyzw, to_wxyz
 
 __all__ = ["read_gltf"]
 
@@ -47,67 +47,6 @@ def _uniform_scale(scale: np.ndarray) -> float | None:
     if s <= 0 or np.abs(scale - s).max() > _SCALE_TOLERANCE * s:
         return None
     return s
-
-
-def _slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Shortest-arc spherical interpolation of (x, y, z, w) quaternions ``[N, 4]``."""
-    dot = (a * b).sum(-1, keepdims=True)
-    b = np.where(dot < 0, -b, b)
-    dot = np.abs(dot).clip(max=1.0)
-    theta = np.arccos(dot)
-    sin = np.sin(theta)
-    near = sin < 1e-6
-    safe = np.where(near, 1.0, sin)
-    wa = np.where(near, 1.0 - u, np.sin((1.0 - u) * theta) / safe)
-    wb = np.where(near, u, np.sin(u * theta) / safe)
-    out = wa * a + wb * b
-    return out / np.linalg.norm(out, axis=-1, keepdims=True).clip(min=1e-12)
-
-
-class _Track:
-    """The keyframes of one animation channel."""
-
-    def __init__(
-        self, times: np.ndarray, values: np.ndarray, interpolation: str, field: str
-    ) -> None:
-        self.times, self.values, self.interpolation, self.field = (
-            times,
-            values,
-            interpolation,
-            field,
-        )
-
-    def keyframes(self) -> np.ndarray:
-        """The values at the key times (the middle element of CUBICSPLINE triples)."""
-        return self.values[1::3] if self.interpolation == "CUBICSPLINE" else self.values
-
-    def at(self, t: np.ndarray, rotation: bool) -> np.ndarray:
-        """Values at times ``t`` (clamped to the first and last keyframe)."""
-        keys, values = self.times, self.keyframes()
-        if len(keys) == 1:
-            return np.repeat(values[:1], len(t), axis=0)
-        k = (np.searchsorted(keys, t, side="right") - 1).clip(0, len(keys) - 2)
-        t0, t1 = keys[k], keys[k + 1]
-        u = ((t - t0) / (t1 - t0)).clip(0.0, 1.0)
-        u = np.where(u < _SNAP, 0.0, np.where(u > 1.0 - _SNAP, 1.0, u))[:, None]
-        a, b = values[k], values[k + 1]
-        if self.interpolation == "STEP":
-            out = np.where(u < 1.0, a, b)
-        elif self.interpolation == "LINEAR":
-            out = _slerp(a, b, u) if rotation else (1.0 - u) * a + u * b
-        else:  # CUBICSPLINE: Hermite with the file's tangents, scaled by the interval
-            dt = (t1 - t0)[:, None]
-            out_tangent, in_tangent = self.values[3 * k + 2], self.values[3 * (k + 1)]
-            u2, u3 = u * u, u * u * u
-            out = (
-                (2 * u3 - 3 * u2 + 1) * a
-                + (u3 - 2 * u2 + u) * dt * out_tangent
-                + (-2 * u3 + 3 * u2) * b
-                + (u3 - u2) * dt * in_tangent
-            )
-        if rotation:
-            out = out / np.linalg.norm(out, axis=-1, keepdims=True).clip(min=1e-12)
-        return out
 
 
 class _Reader:
@@ -309,7 +248,7 @@ class _Reader:
         return array
 
     # ----------------------------------------------------------------- animation
-    def tracks(self, a: int) -> dict[int, dict[str, _Track]]:
+    def tracks(self, a: int) -> dict[int, dict[str, Track]]:
         """Every node's animated paths of animation ``a``."""
         animation = self.items("animations")[a]
         where = f"animations[{a}]"
@@ -317,8 +256,8 @@ class _Reader:
         channels = animation.channels or []
         if not channels:
             raise self.error("has no channels", where + ".channels")
-        out: dict[int, dict[str, _Track]] = {}
-        cache: dict[int, _Track] = {}
+        out: dict[int, dict[str, Track]] = {}
+        cache: dict[int, Track] = {}
         for c, channel in enumerate(channels):
             field = f"{where}.channels[{c}]"
             target = channel.target
@@ -354,7 +293,7 @@ class _Reader:
             raise self.error("animates no node's translation, rotation or scale", where)
         return out
 
-    def track(self, a: int, s: int) -> _Track:
+    def track(self, a: int, s: int) -> Track:
         field = f"animations[{a}].samplers[{s}]"
         sampler = self.items("animations")[a].samplers[s]
         interpolation = sampler.interpolation or "LINEAR"
@@ -374,7 +313,7 @@ class _Reader:
                 f"({interpolation} needs {expected})",
                 field + ".output",
             )
-        return _Track(times, values, interpolation, field)
+        return Track(times, values, interpolation, field)
 
     def pick_animation(self, animation: int | str) -> int:
         animations = self.items("animations")
@@ -516,15 +455,7 @@ def read_gltf(
     """
     path = Path(path)
     pg = _pygltflib(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise GLTFError("no such file", path) from None
-    except IsADirectoryError:
-        raise GLTFError("is a directory, not a glTF file", path) from None
-    except OSError as exc:
-        raise GLTFError(f"cannot read: {exc.strerror}", path) from None
-    reader = _Reader(pg, raw, path)
+    reader = _Reader(pg, _read_bytes(path), path)
     a = reader.pick_animation(animation)
     nodes = reader.items("nodes")
     parent = reader.parents()
@@ -533,63 +464,14 @@ def read_gltf(
     root, joints, sites = _skeleton_nodes(reader, parent, animated)
     index = {node: j for j, node in enumerate(joints)}
     joint_parents = [-1] + [index[parent[i]] for i in joints[1:]]
-
-    # the transform above the skeleton root: rotation, translation, uniform scale
-    world_r, world_t, world_s = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), 1.0
-    above, k = [], parent[root]
-    while k >= 0:
-        above.append(k)
-        k = parent[k]
-    for k in reversed(above):
-        if k in animated:
-            raise reader.error(
-                "is animated but lies above the skeleton's root; animate the root instead",
-                f"nodes[{k}]",
-            )
-        t, r, s = reader.local(k)
-        uniform = _uniform_scale(s)
-        if uniform is None:
-            raise reader.error("a non-uniform scale is not supported", f"nodes[{k}].scale")
-        world_t = world_t + world_s * _rotate(world_r, t)
-        world_r = _quat_mul(world_r, r)
-        world_s *= uniform
-
-    # frame times
+    world_r, world_t, world_s = _transform_above(reader, parent, root, animated)
     used = [track for i in joints for track in tracks.get(i, {}).values()]
-    meta_fps = _metadata(reader.items("animations")[a]).get("fps")
     if not used:
         raise reader.error(
             f"moves none of the skeleton's {len(joints)} joints (the nodes from {root} down)",
             f"animations[{a}]",
         )
-    keys = used[0].times
-    same = all(len(t.times) == len(keys) and np.array_equal(t.times, keys) for t in used[1:])
-    densest = max(used, key=lambda t: len(t.times)).times
-    span = float(densest[-1] - densest[0])
-    fps = snap_rate((len(densest) - 1) / span) if len(densest) > 1 and span > 0 else 30.0
-    if (
-        isinstance(meta_fps, (int, float))
-        and not isinstance(meta_fps, bool)
-        and math.isfinite(meta_fps)
-        and meta_fps > 0
-    ):
-        fps = float(meta_fps)
-    if same and len(keys) > 1:
-        steps = np.diff(keys)
-        same = bool(np.abs(steps - 1.0 / fps).max() <= 1e-3 / fps)
-    if same:
-        grid = keys
-    else:
-        start = min(float(t.times[0]) for t in used)
-        end = max(float(t.times[-1]) for t in used)
-        count = round((end - start) * fps) + 1
-        if count > _MAX_FRAMES:
-            raise reader.error(
-                f"keys from {start:g} s to {end:g} s at {fps:g} fps would make {count} frames "
-                f"(at most {_MAX_FRAMES})",
-                f"animations[{a}]",
-            )
-        grid = start + np.arange(count) / fps
+    grid, same, fps = _frame_grid(reader, a, used)
     num_frames = len(grid)
 
     def sample(node: int, what: str, rest: np.ndarray) -> np.ndarray:
@@ -608,17 +490,7 @@ def read_gltf(
     cumulative = np.zeros(num_joints)
     for j, node in enumerate(joints):
         t, r, s = reader.local(node)
-        scale_track = tracks.get(node, {}).get("scale")
-        if scale_track is not None:
-            values = scale_track.keyframes()
-            if np.abs(values - values[:1]).max() > _SCALE_TOLERANCE * np.abs(values).max():
-                raise reader.error("animated scale is not supported", scale_track.field)
-            s = values[0]
-        uniform = _uniform_scale(s)
-        if uniform is None:
-            raise reader.error(
-                "a non-uniform or non-positive scale is not supported", f"nodes[{node}].scale"
-            )
+        uniform = _joint_scale(reader, node, s, tracks.get(node, {}).get("scale"))
         above_scale = world_s if j == 0 else cumulative[joint_parents[j]]
         cumulative[j] = above_scale * uniform
         offsets[j] = above_scale * t
@@ -633,10 +505,10 @@ def read_gltf(
     rotations = rotations / norms[..., None]
     # fold the transform above the root into the root
     root_rest = offsets[0] / world_s if world_s else offsets[0]
-    offsets[0] = world_t + world_s * _rotate(world_r, root_rest)
+    offsets[0] = world_t + world_s * rotate_xyzw(world_r, root_rest)
     root_local = moving.get(0, np.repeat(root_rest[None] * world_s, num_frames, axis=0))
-    root_positions = world_t + _rotate(world_r, root_local)
-    rotations[:, 0] = _quat_mul(world_r, rotations[:, 0])
+    root_positions = world_t + rotate_xyzw(world_r, root_local)
+    rotations[:, 0] = mul_xyzw(world_r, rotations[:, 0])
     translations = None
     moved = {j: v for j, v in moving.items() if j > 0 and np.abs(v - offsets[j]).max() > 1e-9}
     if moved:
@@ -644,40 +516,9 @@ def read_gltf(
         translations[:, 0] = root_positions
         for j, v in moved.items():
             translations[:, j] = v
-    end_sites: dict[int, list[list[float]]] = {}
-    for node in sites:
-        if parent[node] in index:
-            j = index[parent[node]]
-            t = reader.local(node)[0]
-            end_sites.setdefault(j, []).append([float(v) for v in cumulative[j] * t])
-
-    names, taken = [], set()
-    for node in joints:
-        name = nodes[node].name
-        name = name if isinstance(name, str) and name else f"node{node}"
-        names.append(_unique(name, taken))
-    meta = _metadata(nodes[root])
-    up_axis = meta.get("up_axis") if meta.get("up_axis") in ("x", "y", "z") else "y"
-    channels = meta.get("channels")
-    if not (isinstance(channels, list) and len(channels) == num_joints):
-        channels = None
-    body_root = meta.get("body_root")
-    body_root = body_root if _is_index(body_root) and 0 <= body_root < num_joints else None
-    units = meta.get("units") if meta.get("units") in UNITS else None
-    try:
-        skeleton = Skeleton(
-            names,
-            joint_parents,
-            offsets,
-            end_sites=end_sites,
-            up_axis=up_axis,
-            name=path.stem,
-            channels=channels,
-            body_root=body_root,
-        )
-    except SkeletonError as exc:
-        raise GLTFError(str(exc), path, f"nodes[{root}]") from None
-    quats = torch.from_numpy(np.ascontiguousarray(rotations[..., [3, 0, 1, 2]]))
+    end_sites = _end_sites(reader, sites, parent, index, cumulative)
+    skeleton, units = _skeleton(reader, nodes, root, joints, joint_parents, offsets, end_sites)
+    quats = to_wxyz(rotations)
     return Motion(
         skeleton,
         Q.continuity(quats, dim=0),
@@ -690,23 +531,165 @@ def read_gltf(
     )
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (x, y, z, w) quaternions (broadcasting)."""
-    ax, ay, az, aw = np.moveaxis(np.broadcast_to(a, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
-    bx, by, bz, bw = np.moveaxis(np.broadcast_to(b, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
-    return np.stack(
-        (
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ),
-        axis=-1,
-    )
+def _read_bytes(path: Path) -> bytes:
+    """The file's bytes, or a :class:`GLTFError` saying why they cannot be read."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise GLTFError("no such file", path) from None
+    except IsADirectoryError:
+        raise GLTFError("is a directory, not a glTF file", path) from None
+    except OSError as exc:
+        raise GLTFError(f"cannot read: {exc.strerror}", path) from None
 
 
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v`` by an (x, y, z, w) quaternion ``q`` (broadcasting)."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+def _transform_above(
+    reader: _Reader, parent: list[int], root: int, animated: set[int]
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The transform of the nodes above the skeleton root.
+
+    Returns:
+        Its (x, y, z, w) rotation, translation and uniform scale.
+
+    Raises:
+        GLTFError: A node above the root is animated or scaled non-uniformly.
+    """
+    world_r, world_t, world_s = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), 1.0
+    above, k = [], parent[root]
+    while k >= 0:
+        above.append(k)
+        k = parent[k]
+    for k in reversed(above):
+        if k in animated:
+            raise reader.error(
+                "is animated but lies above the skeleton's root; animate the root instead",
+                f"nodes[{k}]",
+            )
+        t, r, s = reader.local(k)
+        uniform = _uniform_scale(s)
+        if uniform is None:
+            raise reader.error("a non-uniform scale is not supported", f"nodes[{k}].scale")
+        world_t = world_t + world_s * rotate_xyzw(world_r, t)
+        world_r = mul_xyzw(world_r, r)
+        world_s *= uniform
+    return world_r, world_t, world_s
+
+
+def _frame_grid(reader: _Reader, a: int, used: list[Track]) -> tuple[np.ndarray, bool, float]:
+    """The frame times of animation ``a``, from the tracks it plays on the skeleton.
+
+    Returns:
+        ``(times, keyed, fps)``: ``keyed`` when every track is keyed at exactly
+        these evenly spaced times (no sampling needed).
+
+    Raises:
+        GLTFError: The keys span more than ``_MAX_FRAMES`` frames.
+    """
+    meta_fps = _metadata(reader.items("animations")[a]).get("fps")
+    keys = used[0].times
+    same = all(len(t.times) == len(keys) and np.array_equal(t.times, keys) for t in used[1:])
+    densest = max(used, key=lambda t: len(t.times)).times
+    span = float(densest[-1] - densest[0])
+    fps = snap_rate((len(densest) - 1) / span) if len(densest) > 1 and span > 0 else 30.0
+    if (
+        isinstance(meta_fps, (int, float))
+        and not isinstance(meta_fps, bool)
+        and math.isfinite(meta_fps)
+        and meta_fps > 0
+    ):
+        fps = float(meta_fps)
+    if same and len(keys) > 1:
+        steps = np.diff(keys)
+        same = bool(np.abs(steps - 1.0 / fps).max() <= 1e-3 / fps)
+    if same:
+        return keys, same, fps
+    start = min(float(t.times[0]) for t in used)
+    end = max(float(t.times[-1]) for t in used)
+    count = round((end - start) * fps) + 1
+    if count > _MAX_FRAMES:
+        raise reader.error(
+            f"keys from {start:g} s to {end:g} s at {fps:g} fps would make {count} frames "
+            f"(at most {_MAX_FRAMES})",
+            f"animations[{a}]",
+        )
+    return start + np.arange(count) / fps, same, fps
+
+
+def _joint_scale(reader: _Reader, node: int, rest: np.ndarray, track: Track | None) -> float:
+    """The uniform scale of a joint node (its static scale track's, else its rest scale).
+
+    Raises:
+        GLTFError: The scale is animated, non-uniform or not positive.
+    """
+    if track is not None:
+        values = track.keyframes()
+        if np.abs(values - values[:1]).max() > _SCALE_TOLERANCE * np.abs(values).max():
+            raise reader.error("animated scale is not supported", track.field)
+        rest = values[0]
+    uniform = _uniform_scale(rest)
+    if uniform is None:
+        raise reader.error(
+            "a non-uniform or non-positive scale is not supported", f"nodes[{node}].scale"
+        )
+    return uniform
+
+
+def _end_sites(
+    reader: _Reader,
+    sites: list[int],
+    parent: list[int],
+    index: dict[int, int],
+    cumulative: np.ndarray,
+) -> dict[int, list[list[float]]]:
+    """The End Site offsets of each joint, scaled by the joint's cumulative scale."""
+    end_sites: dict[int, list[list[float]]] = {}
+    for node in sites:
+        if parent[node] in index:
+            j = index[parent[node]]
+            t = reader.local(node)[0]
+            end_sites.setdefault(j, []).append([float(v) for v in cumulative[j] * t])
+    return end_sites
+
+
+def _skeleton(
+    reader: _Reader,
+    nodes: list[Any],
+    root: int,
+    joints: list[int],
+    joint_parents: list[int],
+    offsets: np.ndarray,
+    end_sites: dict[int, list[list[float]]],
+) -> tuple[Skeleton, str | None]:
+    """The skeleton of the joint nodes, with what the root's extras say, and the units.
+
+    Raises:
+        GLTFError: The skeleton is invalid (the message of :class:`SkeletonError`).
+    """
+    names: list[str] = []
+    taken: set[str] = set()
+    for node in joints:
+        name = nodes[node].name
+        name = name if isinstance(name, str) and name else f"node{node}"
+        names.append(_unique(name, taken))
+    meta = _metadata(nodes[root])
+    up_axis = meta.get("up_axis") if meta.get("up_axis") in ("x", "y", "z") else "y"
+    channels = meta.get("channels")
+    if not (isinstance(channels, list) and len(channels) == len(joints)):
+        channels = None
+    body_root = meta.get("body_root")
+    body_root = body_root if _is_index(body_root) and 0 <= body_root < len(joints) else None
+    units = meta.get("units") if meta.get("units") in UNITS else None
+    try:
+        skeleton = Skeleton(
+            names,
+            joint_parents,
+            offsets,
+            end_sites=end_sites,
+            up_axis=up_axis,
+            name=reader.path.stem,
+            channels=channels,
+            body_root=body_root,
+        )
+    except SkeletonError as exc:
+        raise GLTFError(str(exc), reader.path, f"nodes[{root}]") from None
+    return skeleton, units

@@ -161,113 +161,20 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
     pg = _pygltflib(path)
     m = motion.to(dtype=torch.float64, device="cpu")
     sk = m.skeleton
-    num_joints, num_frames = sk.num_joints, m.num_frames
     offsets = sk.offsets.detach().double().cpu().numpy()
-    parents = sk.parents
     blob = _Blob(pg)
-
-    # the node hierarchy: joints first, in joint order, then End Sites
-    nodes = [
-        pg.Node(name=name, translation=[float(v) for v in offsets[j]], children=[])
-        for j, name in enumerate(sk.joint_names)
-    ]
-    for j, p in enumerate(parents):
-        if p >= 0:
-            nodes[p].children.append(j)
-    taken = set(sk.joint_names)
-    sites: list[tuple[int, np.ndarray]] = []
-    for j in sorted(sk.end_sites):
-        for site in sk.end_sites[j]:
-            nodes[j].children.append(len(nodes))
-            nodes.append(
-                pg.Node(
-                    name=_unique(f"{sk.joint_names[j]}_end", taken),
-                    translation=[float(v) for v in site],
-                    extras={_EXTRA: {"end_site": True}},
-                )
-            )
-            sites.append((j, np.asarray(site, dtype=np.float64)))
-    meta: dict[str, Any] = {"up_axis": sk.up_axis, "body_root": sk.body_root}
-    if m.units is not None:
-        meta["units"] = m.units
-    if sk.channels is not None:
-        meta["channels"] = sk.channels
-    nodes[0].extras = {_EXTRA: meta}
-
-    # the animation
-    root_positions = m.root_positions.detach().numpy()
-    translations = None if m.translations is None else m.translations.detach().numpy()
-    times = (np.arange(num_frames, dtype=np.float64) / m.fps).astype(np.float32)
-    time_accessor = blob.add(times, "SCALAR", bounds=True)
-    samplers, channels = [], []
-
-    def channel(node: int, target: str, values: np.ndarray, kind: str) -> None:
-        output = blob.add(values.astype(np.float32), kind)
-        samplers.append(pg.AnimationSampler(input=time_accessor, output=output))
-        channels.append(
-            pg.AnimationChannel(
-                sampler=len(samplers) - 1, target=pg.AnimationChannelTarget(node=node, path=target)
-            )
-        )
-
-    # (w, x, y, z) -> glTF's (x, y, z, w)
-    rotations = m.rotations.detach().numpy()[..., [1, 2, 3, 0]]
-    translated = [0]
-    if translations is not None:
-        moved = np.abs(translations - offsets).max(axis=(0, 2)) > 1e-9
-        translated += [int(j) for j in np.nonzero(moved)[0] if j > 0]
-    for j in range(num_joints):
-        channel(j, "rotation", rotations[:, j], "VEC4")
-        if j == 0:
-            channel(0, "translation", root_positions, "VEC3")
-        elif j in translated:
-            assert translations is not None
-            channel(j, "translation", translations[:, j], "VEC3")
-    animation = pg.Animation(
-        name=m.name or "motion",
-        samplers=samplers,
-        channels=channels,
-        extras={_EXTRA: {"fps": m.fps}},
-    )
-
+    nodes, taken, sites = _nodes(pg, m, offsets)
+    animation = _animation(pg, blob, m, offsets)
     scene_nodes = [0]
     skins, meshes, materials = [], [], []
-    rest = _rest_positions(offsets, parents)
-    segments = [(rest[p], rest[j], p) for j, p in enumerate(parents) if p >= 0]
+    rest = _rest_positions(offsets, sk.parents)
+    segments = [(rest[p], rest[j], p) for j, p in enumerate(sk.parents) if p >= 0]
     segments += [(rest[j], rest[j] + site, j) for j, site in sites]
     positions, joints, weights, indices = _bone_mesh(segments)
     if bones and len(indices):  # a skin needs a mesh: a lone joint gets neither
-        inverse_bind = np.tile(np.eye(4, dtype=np.float32), (num_joints, 1, 1))
-        inverse_bind[:, 3, :3] = -rest  # column-major: the translation is the 4th column
-        skins.append(
-            pg.Skin(
-                inverseBindMatrices=blob.add(inverse_bind.reshape(num_joints, 16), "MAT4"),
-                joints=list(range(num_joints)),
-                skeleton=0,
-            )
-        )
-        attributes = pg.Attributes(
-            POSITION=blob.add(positions, "VEC3", target=pg.ARRAY_BUFFER, bounds=True),
-            JOINTS_0=blob.add(joints, "VEC4", target=pg.ARRAY_BUFFER),
-            WEIGHTS_0=blob.add(weights, "VEC4", target=pg.ARRAY_BUFFER),
-        )
-        primitive = pg.Primitive(
-            attributes=attributes,
-            indices=blob.add(indices, "SCALAR", target=pg.ELEMENT_ARRAY_BUFFER),
-            material=0,
-        )
-        materials.append(
-            pg.Material(
-                name="bone",
-                doubleSided=True,
-                pbrMetallicRoughness=pg.PbrMetallicRoughness(
-                    baseColorFactor=[0.85, 0.55, 0.3, 1.0],
-                    metallicFactor=0.0,
-                    roughnessFactor=0.8,
-                ),
-            )
-        )
-        meshes.append(pg.Mesh(name="bones", primitives=[primitive]))
+        skins.append(_skin(pg, blob, rest))
+        meshes.append(_mesh(pg, blob, positions, joints, weights, indices))
+        materials.append(_bone_material(pg))
         nodes.append(pg.Node(name=_unique("bones", taken), mesh=0, skin=0))
         scene_nodes.append(len(nodes) - 1)
 
@@ -300,3 +207,127 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
         atomic_write(path, content)
     except OSError as exc:
         raise GLTFError(f"cannot write: {exc.strerror or exc}", path) from None
+
+
+def _nodes(
+    pg: ModuleType, m: Motion, offsets: np.ndarray
+) -> tuple[list[Any], set[str], list[tuple[int, np.ndarray]]]:
+    """The node hierarchy: joints first, in joint order, then End Sites.
+
+    Returns:
+        The nodes (the root's ``extras`` hold the skeleton's metadata), the node
+        names taken, and ``(joint, offset)`` of every End Site.
+    """
+    sk = m.skeleton
+    nodes = [
+        pg.Node(name=name, translation=[float(v) for v in offsets[j]], children=[])
+        for j, name in enumerate(sk.joint_names)
+    ]
+    for j, p in enumerate(sk.parents):
+        if p >= 0:
+            nodes[p].children.append(j)
+    taken = set(sk.joint_names)
+    sites: list[tuple[int, np.ndarray]] = []
+    for j in sorted(sk.end_sites):
+        for site in sk.end_sites[j]:
+            nodes[j].children.append(len(nodes))
+            nodes.append(
+                pg.Node(
+                    name=_unique(f"{sk.joint_names[j]}_end", taken),
+                    translation=[float(v) for v in site],
+                    extras={_EXTRA: {"end_site": True}},
+                )
+            )
+            sites.append((j, np.asarray(site, dtype=np.float64)))
+    meta: dict[str, Any] = {"up_axis": sk.up_axis, "body_root": sk.body_root}
+    if m.units is not None:
+        meta["units"] = m.units
+    if sk.channels is not None:
+        meta["channels"] = sk.channels
+    nodes[0].extras = {_EXTRA: meta}
+    return nodes, taken, sites
+
+
+def _animation(pg: ModuleType, blob: _Blob, m: Motion, offsets: np.ndarray) -> Any:
+    """The animation: a rotation channel per joint, translation channels where they move."""
+    root_positions = m.root_positions.detach().numpy()
+    translations = None if m.translations is None else m.translations.detach().numpy()
+    times = (np.arange(m.num_frames, dtype=np.float64) / m.fps).astype(np.float32)
+    time_accessor = blob.add(times, "SCALAR", bounds=True)
+    samplers, channels = [], []
+
+    def channel(node: int, target: str, values: np.ndarray, kind: str) -> None:
+        output = blob.add(values.astype(np.float32), kind)
+        samplers.append(pg.AnimationSampler(input=time_accessor, output=output))
+        channels.append(
+            pg.AnimationChannel(
+                sampler=len(samplers) - 1, target=pg.AnimationChannelTarget(node=node, path=target)
+            )
+        )
+
+    # (w, x, y, z) -> glTF's (x, y, z, w)
+    rotations = m.rotations.detach().numpy()[..., [1, 2, 3, 0]]
+    translated = [0]
+    if translations is not None:
+        moved = np.abs(translations - offsets).max(axis=(0, 2)) > 1e-9
+        translated += [int(j) for j in np.nonzero(moved)[0] if j > 0]
+    for j in range(m.skeleton.num_joints):
+        channel(j, "rotation", rotations[:, j], "VEC4")
+        if j == 0:
+            channel(0, "translation", root_positions, "VEC3")
+        elif j in translated:
+            assert translations is not None
+            channel(j, "translation", translations[:, j], "VEC3")
+    return pg.Animation(
+        name=m.name or "motion",
+        samplers=samplers,
+        channels=channels,
+        extras={_EXTRA: {"fps": m.fps}},
+    )
+
+
+def _skin(pg: ModuleType, blob: _Blob, rest: np.ndarray) -> Any:
+    """The skin of every joint, bound in the rest pose ``rest`` ``[J, 3]``."""
+    num_joints = len(rest)
+    inverse_bind = np.tile(np.eye(4, dtype=np.float32), (num_joints, 1, 1))
+    inverse_bind[:, 3, :3] = -rest  # column-major: the translation is the 4th column
+    return pg.Skin(
+        inverseBindMatrices=blob.add(inverse_bind.reshape(num_joints, 16), "MAT4"),
+        joints=list(range(num_joints)),
+        skeleton=0,
+    )
+
+
+def _mesh(
+    pg: ModuleType,
+    blob: _Blob,
+    positions: np.ndarray,
+    joints: np.ndarray,
+    weights: np.ndarray,
+    indices: np.ndarray,
+) -> Any:
+    """The bone mesh (see :func:`_bone_mesh`), skinned, with material 0."""
+    attributes = pg.Attributes(
+        POSITION=blob.add(positions, "VEC3", target=pg.ARRAY_BUFFER, bounds=True),
+        JOINTS_0=blob.add(joints, "VEC4", target=pg.ARRAY_BUFFER),
+        WEIGHTS_0=blob.add(weights, "VEC4", target=pg.ARRAY_BUFFER),
+    )
+    primitive = pg.Primitive(
+        attributes=attributes,
+        indices=blob.add(indices, "SCALAR", target=pg.ELEMENT_ARRAY_BUFFER),
+        material=0,
+    )
+    return pg.Mesh(name="bones", primitives=[primitive])
+
+
+def _bone_material(pg: ModuleType) -> Any:
+    """The bones' material: matte, double-sided, orange."""
+    return pg.Material(
+        name="bone",
+        doubleSided=True,
+        pbrMetallicRoughness=pg.PbrMetallicRoughness(
+            baseColorFactor=[0.85, 0.55, 0.3, 1.0],
+            metallicFactor=0.0,
+            roughnessFactor=0.8,
+        ),
+    )
