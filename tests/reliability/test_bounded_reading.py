@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from skelagnostic.data import MotionDataModule, ProceduralSource, WindowCache
-from skelagnostic.data import datamodule as datamodule_module
+from skelagnostic.data import window_dataset as window_dataset_module
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions
 
@@ -65,7 +65,7 @@ def test_normalisation_pass_does_not_allocate_with_the_corpus(
     # a chunk of 4 windows' values, so both corpora span many chunks; the clips
     # of the second corpus are 4x longer (4x the windows), as are the per-clip
     # arrays a pass loading a clip at a time would allocate
-    monkeypatch.setattr(datamodule_module, "STATS_CHUNK_VALUES", 4 * 8 * 22 * 3)
+    monkeypatch.setattr(window_dataset_module, "STATS_CHUNK_VALUES", 4 * 8 * 22 * 3)
     small = _normalisation_peak(_module(tmp_path / "a", seconds=10.0), monkeypatch)
     large = _normalisation_peak(_module(tmp_path / "b", seconds=40.0), monkeypatch)
     long_clip = (40 * 30 // 8) * 8 * 22 * 3 * 4  # bytes of one long clip's windows (float32)

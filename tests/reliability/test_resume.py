@@ -16,7 +16,7 @@ from lightning.pytorch.callbacks import ModelCheckpoint
 from torch.utils.data import TensorDataset
 
 from skelagnostic.callbacks import FinalStepValidation, ResumeFromEpochEnd
-from skelagnostic.data.datamodule import ResumableDataLoader, _ResumableSampler
+from skelagnostic.data.loaders import ResumableDataLoader, ResumableSampler
 from skelagnostic.data.sources import ProceduralSource
 
 if TYPE_CHECKING:
@@ -95,7 +95,7 @@ def test_loader_resumes_mid_pass_with_the_same_batches() -> None:
     ds = TensorDataset(torch.arange(10))
 
     def loader() -> ResumableDataLoader:
-        return ResumableDataLoader(ds, 3, _ResumableSampler(ds, 1, 0, True, seed=5))
+        return ResumableDataLoader(ds, 3, ResumableSampler(ds, 1, 0, True, seed=5))
 
     ref = loader()
     ref.sampler.set_epoch(1)
@@ -113,7 +113,7 @@ def test_loader_state_of_a_finished_pass_starts_the_next_epoch_whole() -> None:
     ds = TensorDataset(torch.arange(10))
 
     def loader() -> ResumableDataLoader:
-        return ResumableDataLoader(ds, 3, _ResumableSampler(ds, 1, 0, True, seed=5))
+        return ResumableDataLoader(ds, 3, ResumableSampler(ds, 1, 0, True, seed=5))
 
     done = loader()
     done.sampler.set_epoch(1)
@@ -130,7 +130,7 @@ def test_loader_state_of_a_finished_pass_starts_the_next_epoch_whole() -> None:
 
 def test_ranks_get_disjoint_shards() -> None:
     ds = TensorDataset(torch.arange(10))
-    shards = [list(_ResumableSampler(ds, 2, r, True, seed=0)) for r in (0, 1)]
+    shards = [list(ResumableSampler(ds, 2, r, True, seed=0)) for r in (0, 1)]
     assert sorted(shards[0] + shards[1]) == list(range(10))
 
 

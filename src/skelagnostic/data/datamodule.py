@@ -7,7 +7,7 @@ import hashlib
 import inspect
 import math
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from lightning.pytorch.utilities import CombinedLoader
 from lightning.pytorch.utilities.rank_zero import rank_zero_info, rank_zero_only
-from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
+from torch.utils.data import DataLoader
 
 from skelagnostic.core.paths import expand_path
 from skelagnostic.core.skeleton import Skeleton
@@ -25,11 +25,12 @@ from skelagnostic.data.cache import (
     WindowCache,
     cache_key,
     default_cache_dir,
-    read_exactly,
     slot_key,
 )
+from skelagnostic.data.loaders import ResumableDataLoader, ResumableSampler, TaggedCollate
 from skelagnostic.data.progress import track_clips
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource, flatten_sources
+from skelagnostic.data.window_dataset import WindowDataset, check_statistics
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation
 
@@ -37,131 +38,6 @@ SPLITS = ("train", "val", "test")
 
 #: Highest ``data.fps``: clips are resampled to it, so a huge rate would not fit in memory.
 MAX_FPS = 1000.0
-
-
-#: Values (frames x elements x channels) per chunk of the normalisation pass. The
-#: pass reads the training windows in chunks of this fixed size, so what it
-#: allocates does not depend on the corpus or the clip lengths.
-STATS_CHUNK_VALUES = 1 << 20
-
-
-def check_statistics(
-    dataset: str, representation: MotionRepresentation, label: str = "features"
-) -> None:
-    """Fail loudly if a fitted normalisation statistic is NaN or infinite.
-
-    Non-finite statistics (a training clip with NaN or infinite values, e.g. a
-    corrupt file) would otherwise train to ``loss=nan`` without an error.
-
-    Args:
-        dataset: Name of the dataset, for the message.
-        representation: The representation whose statistics were just fitted.
-        label: What the statistics describe (``features``, ``input``, ``pose``).
-
-    Raises:
-        SkelagnosticError: ``mean`` or ``std`` has a non-finite value (one line
-            naming the dataset and the statistic).
-    """
-    for stat in ("mean", "std"):
-        value = getattr(representation, stat)
-        if value is not None and not bool(torch.isfinite(value).all()):
-            bad = int((~torch.isfinite(value)).sum())
-            raise SkelagnosticError(
-                f"dataset {dataset!r}: the {label} normalisation statistic {stat!r} is not "
-                f"finite ({bad} of {value.numel()} values); a training clip holds NaN or "
-                "infinite values (check the source files, or run 'skelagnostic cache clear')"
-            )
-
-
-class WindowDataset(Dataset):
-    """The cached windows of clips that share one skeleton topology.
-
-    Items are dicts of tensors: ``features`` ``[window, N, C]`` float32 (not
-    normalised), ``clip`` (index into :attr:`clip_ids`), ``start`` (first
-    frame), and the clip's skeleton: ``offsets`` ``[J, 3]``, ``template``
-    ``[J, 3]`` (:meth:`Skeleton.template`) and ``height``. Each item is read
-    from its cache file when asked for (:meth:`CacheEntry.read`, no memory
-    map), so a process holds only the windows of its current batches and the
-    dataset pickles cheaply into workers.
-
-    Args:
-        entries: Cache entries of the clips.
-    """
-
-    def __init__(self, entries: Sequence[CacheEntry]) -> None:
-        self.entries = list(entries)
-        self.clip_ids = [e.meta["clip"] for e in self.entries]
-        self._bounds = np.cumsum([0] + [e.num_windows for e in self.entries])
-        self._skeletons = []
-        for e in self.entries:
-            sk = Skeleton.from_dict(e.meta["skeleton"])
-            self._skeletons.append(
-                (sk.offsets.float(), sk.template().float(), torch.tensor(sk.height()).float())
-            )
-
-    def __len__(self) -> int:
-        return int(self._bounds[-1])
-
-    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        if not 0 <= index < len(self):
-            raise IndexError(f"window index {index} out of range [0, {len(self)})")
-        clip = int(np.searchsorted(self._bounds, index, side="right") - 1)
-        k = index - int(self._bounds[clip])
-        offsets, template, height = self._skeletons[clip]
-        return {
-            "features": torch.from_numpy(self.entries[clip].read(k, k + 1)[0]),
-            "clip": torch.tensor(clip),
-            "start": torch.tensor(self.entries[clip].meta["starts"][k]),
-            "offsets": offsets,
-            "template": template,
-            "height": height,
-        }
-
-    def feature_chunks(self, chunk_values: int | None = None) -> Iterator[torch.Tensor]:
-        """All features as ``[frames, N, C]`` chunks of a fixed size, for statistics.
-
-        The windows of all clips are read from their files one after the
-        other (no memory map), frames packed across window and clip boundaries
-        into chunks of ``max(1, chunk_values // (N * C))`` frames (fewer if the
-        dataset is smaller; the last chunk may be shorter). Each chunk is a new
-        tensor, but all have the same size whatever the clips, so a pass that
-        reduces them (:meth:`MotionRepresentation.fit_normalization`) runs in
-        constant memory: the allocator reuses the freed chunks and temporaries.
-        Variable, large per-clip temporaries were what made glibc's heap grow
-        with the corpus when torch reduced them on several threads.
-
-        Args:
-            chunk_values: Values per chunk (default: :data:`STATS_CHUNK_VALUES`).
-
-        Raises:
-            SkelagnosticError: Two clips' windows have different element or channel counts.
-        """
-        if not self.entries:
-            return
-        item = self.entries[0].layout[1][2:]
-        values = STATS_CHUNK_VALUES if chunk_values is None else chunk_values
-        total = sum(e.layout[1][0] * e.layout[1][1] for e in self.entries)
-        rows = max(1, min(total, values // max(1, math.prod(item))))
-        buf, filled = np.empty((rows, *item), np.float32), 0
-        for entry in self.entries:
-            offset, shape = entry.layout
-            if shape[2:] != item:
-                raise SkelagnosticError(
-                    f"data: clip {entry.meta['clip']!r} has windows of {shape[2:]} values per "
-                    f"frame, clip {self.clip_ids[0]!r} of {item} (cache entry {entry.array})"
-                )
-            remaining = shape[0] * shape[1]
-            with entry.array.open("rb", buffering=0) as fh:
-                fh.seek(offset)
-                while remaining:
-                    n = min(rows - filled, remaining)
-                    read_exactly(fh, buf[filled : filled + n], entry.array)
-                    filled, remaining = filled + n, remaining - n
-                    if filled == rows:
-                        yield torch.from_numpy(buf)
-                        buf, filled = np.empty((rows, *item), np.float32), 0
-        if filled:
-            yield torch.from_numpy(buf[:filled])
 
 
 def _named_after(entry: CacheEntry, source: ClipSource, clip: ClipRef) -> CacheEntry:
@@ -176,97 +52,6 @@ def _named_after(entry: CacheEntry, source: ClipSource, clip: ClipRef) -> CacheE
     named = CacheEntry(entry.array, {**entry.meta, "clip": clip.id, "skeleton": skeleton})
     named.__dict__["layout"] = entry.layout  # the same file: spare a header read
     return named
-
-
-class _ResumableSampler(DistributedSampler):
-    """A :class:`DistributedSampler` (one shard per rank) that can start a pass part-way.
-
-    The order of a pass depends only on ``seed`` and the epoch (never on the
-    global RNG), so a resumed run sees the same windows as an uninterrupted one.
-    """
-
-    def __init__(
-        self, dataset: Dataset, num_replicas: int, rank: int, shuffle: bool, seed: int
-    ) -> None:
-        super().__init__(dataset, num_replicas=num_replicas, rank=rank, shuffle=shuffle, seed=seed)
-        #: Indices to drop from the start of the next pass (set when resuming).
-        self.skip = 0
-
-    def __iter__(self) -> Iterator[int]:
-        indices = list(super().__iter__())[self.skip :]
-        self.skip = 0
-        return iter(indices)
-
-
-class ResumableDataLoader(DataLoader):
-    """A training :class:`DataLoader` whose position is saved in checkpoints.
-
-    Lightning stores :meth:`state_dict` with every checkpoint (``combined_loader``
-    in the fit-loop state) and calls :meth:`load_state_dict` before iterating
-    again, so training resumed from a mid-epoch checkpoint continues with the
-    very next batch of the interrupted pass: exact resume. It counts the
-    batches handed to the training loop (not those prefetched by workers).
-
-    The saved position belongs to the pass of one epoch. It is applied only if
-    the next pass is of that same epoch: a checkpoint taken on the last batch
-    of epoch ``k`` (the pass is over; Lightning resumes with epoch ``k + 1``
-    and sets the sampler's epoch before iterating) starts the next pass at its
-    first batch instead of skipping it whole.
-
-    Args:
-        dataset: The windows.
-        batch_size: Windows per batch.
-        sampler: The pass order.
-        num_workers: Worker processes.
-    """
-
-    def __init__(
-        self, dataset: Dataset, batch_size: int, sampler: _ResumableSampler, num_workers: int = 0
-    ) -> None:
-        super().__init__(
-            dataset,
-            batch_size=batch_size,
-            sampler=sampler,
-            num_workers=num_workers,
-            persistent_workers=num_workers > 0,
-        )
-        self._served = 0
-        #: ``(epoch, batches served)`` of the interrupted pass, set by :meth:`load_state_dict`.
-        self._resume_at: tuple[int, int] | None = None
-
-    def __iter__(self) -> Iterator[Any]:
-        resume, self._resume_at = self._resume_at, None
-        epoch = int(self.sampler.epoch)
-        served = resume[1] if resume is not None and resume[0] == epoch else 0
-        self.sampler.skip = served * int(self.batch_size)
-        self._served = served
-        for batch in super().__iter__():
-            self._served += 1
-            yield batch
-
-    def state_dict(self) -> dict[str, int]:
-        """The epoch of the sampler and the batches served in its current pass."""
-        return {"epoch": int(self.sampler.epoch), "served": self._served}
-
-    def load_state_dict(self, state_dict: dict[str, int]) -> None:
-        """Continue the pass of :meth:`state_dict` with its next batch.
-
-        The sampler is set to the saved epoch; if the epoch is changed before
-        the next pass starts (the saved pass was complete), that pass starts
-        from its beginning.
-        """
-        self.sampler.set_epoch(state_dict["epoch"])
-        self._resume_at = (int(state_dict["epoch"]), int(state_dict["served"]))
-
-
-class _Tagged:
-    """Collate function wrapping the batch as ``{name: batch}`` (picklable for workers)."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-
-    def __call__(self, items: list[dict[str, torch.Tensor]]) -> dict[str, Any]:
-        return {self.name: default_collate(items)}
 
 
 def _split_clips(
@@ -707,7 +492,7 @@ class MotionDataModule(L.LightningDataModule):
             name: ResumableDataLoader(
                 ds,
                 self.batch_size,
-                _ResumableSampler(ds, replicas, rank, True, seed),
+                ResumableSampler(ds, replicas, rank, True, seed),
                 self.num_workers,
             )
             for name, ds in self.datasets["train"].items()
@@ -746,7 +531,7 @@ class MotionDataModule(L.LightningDataModule):
 
         A data module whose datasets return stacked batches overrides it.
         """
-        return _Tagged(name)
+        return TaggedCollate(name)
 
     # -------------------------------------------------------- checkpoint state
     def state_dict(self) -> dict[str, Any]:

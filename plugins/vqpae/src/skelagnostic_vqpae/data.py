@@ -48,7 +48,7 @@ from skelagnostic.data import (
     preset_source,
 )
 from skelagnostic.data.cache import CacheEntry, read_exactly
-from skelagnostic.data.datamodule import STATS_CHUNK_VALUES, check_statistics
+from skelagnostic.data.window_dataset import STATS_CHUNK_VALUES, check_statistics
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
 
