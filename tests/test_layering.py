@@ -147,8 +147,6 @@ KNOWN_CYCLES: set[frozenset[str]] = {
     frozenset({"skelagnostic.cli.app", "skelagnostic.cli.evaluate"}),
     # being removed in #49 (item 8: the plugin manager split)
     frozenset({"skelagnostic.plugins.builtin", "skelagnostic.plugins.manager"}),
-    # being removed in #49 (the matching database builds its window index lazily)
-    frozenset({"skelagnostic.matching.database", "skelagnostic.matching.windows"}),
     # being removed in #49 (came with the safetensors weights: weights.py imports the
     # checkpoint errors lazily from checkpoints.py, which imports weights.py)
     frozenset({"skelagnostic.aligners.checkpoints", "skelagnostic.aligners.weights"}),

@@ -38,12 +38,14 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
 from skelagnostic.matching._errors import MatchingError
-from skelagnostic.matching.database import MotionDatabase
+
+if TYPE_CHECKING:  # annotations only: the database imports this module for its index
+    from skelagnostic.matching.database import MotionDatabase
 
 #: Relative safety margin subtracted from the float32 lower bound (about 10x the
 #: worst-case rounding of a float32 dot product of a few dozen terms).
