@@ -16,15 +16,19 @@ from skelagnostic.callbacks.fit_summary import (
     summary_mode,
 )
 from skelagnostic.callbacks.interrupt import ResumeHint
+from skelagnostic.callbacks.log_interval import AdaptiveLogInterval
 from skelagnostic.callbacks.nonfinite import NonFiniteTrainingError, StopOnNonFinite
 from skelagnostic.callbacks.progress import RichProgress
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
 from skelagnostic.callbacks.resume import ResumeFromEpochEnd
+from skelagnostic.callbacks.split import SPLIT_FILE, RecordSplit
 from skelagnostic.callbacks.stopping import StopReason, stop_reason
 
 __all__ = [
     "QUICK_BELOW_STEPS",
+    "SPLIT_FILE",
     "SUMMARY_MODES",
+    "AdaptiveLogInterval",
     "AtomicCheckpointIO",
     "EMAWeights",
     "FinalStepCheckpoint",
@@ -32,6 +36,7 @@ __all__ = [
     "FitSummary",
     "LatestWithoutValidation",
     "NonFiniteTrainingError",
+    "RecordSplit",
     "RenderSampleSource",
     "RenderSamples",
     "ResumeFromEpochEnd",

@@ -50,8 +50,6 @@ from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.runs import (
     LOCK_FILE,
     SPLIT_FILE,
-    AdaptiveLogInterval,
-    RecordSplit,
     RunDirectoryRefused,
     checkpoint_of,
     chosen_keys,
@@ -541,9 +539,11 @@ def run(cfg: DictConfig, plugin_manager: PluginManager | None = None) -> RunMetr
     stop = None
     if task == "fit":
         from skelagnostic.callbacks import (
+            AdaptiveLogInterval,
             FinalStepCheckpoint,
             FinalStepValidation,
             LatestWithoutValidation,
+            RecordSplit,
             ResumeFromEpochEnd,
             ResumeHint,
             StopOnNonFinite,

@@ -20,7 +20,6 @@ import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
-import lightning as L
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
@@ -28,13 +27,13 @@ from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from skelagnostic.aligners.weights import WEIGHTS_FILE
+from skelagnostic.callbacks.split import SPLIT_FILE
 from skelagnostic.cli.lock import LOCK_FILE, RunDirectoryLock, RunDirectoryRefused
 from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
 
 __all__ = [
     "LOCK_FILE",
-    "RecordSplit",
     "RunDirectoryGuard",
     "RunDirectoryLock",
     "RunDirectoryRefused",
@@ -50,8 +49,6 @@ __all__ = [
 
 #: The resolved config a run writes.
 CONFIG_FILE = "config.yaml"
-#: The clip split a fit writes.
-SPLIT_FILE = "split.json"
 #: Config nodes a later verb takes from the run (unless the command line chooses them).
 REUSED = ("model", "data")
 
@@ -224,30 +221,6 @@ def read_split(run_dir: Path) -> dict[str, str] | None:
         raise SkelagnosticError(f"{path}: not a split file of skelagnostic ({exc})") from exc
 
 
-class RecordSplit(L.Callback):
-    """Writes ``<run_dir>/split.json`` once the data module has split its clips.
-
-    Args:
-        run_dir: The run directory.
-    """
-
-    def __init__(self, run_dir: str | Path) -> None:
-        self.run_dir = Path(run_dir)
-
-    def setup(self, trainer: L.Trainer, pl_module: L.LightningModule, stage: str) -> None:
-        """After the data module's ``setup``: write its ``assigned_splits`` (rank 0)."""
-        assigned = getattr(trainer.datamodule, "assigned_splits", None)
-        if assigned and trainer.is_global_zero:
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-            counts = {
-                part: sum(v == part for v in assigned.values()) for part in ("train", "val", "test")
-            }
-            payload = {"counts": counts, "clips": dict(sorted(assigned.items()))}
-            (self.run_dir / SPLIT_FILE).write_text(
-                json.dumps(payload, indent=1) + "\n", encoding="utf-8"
-            )
-
-
 def summary_table(
     task: str,
     run_dir: Path,
@@ -326,27 +299,6 @@ def quiet_lightning() -> Iterator[None]:
             yield
     finally:
         logger.removeFilter(tips)
-
-
-class AdaptiveLogInterval(L.Callback):
-    """Logs ``train/*`` at least every few steps on short runs.
-
-    At the start of training, ``trainer.log_every_n_steps`` becomes at most
-    the number of batches per epoch and at most a twentieth of ``max_steps``
-    (never below 1), so a 40-step run logs its loss instead of nothing.
-    """
-
-    def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
-        """Shorten the interval to the run's length."""
-        interval = int(trainer.log_every_n_steps)
-        if interval <= 0:
-            return
-        batches = trainer.num_training_batches
-        if isinstance(batches, int) or (isinstance(batches, float) and batches != float("inf")):
-            interval = min(interval, max(1, int(batches)))
-        if trainer.max_steps and trainer.max_steps > 0:
-            interval = min(interval, max(1, trainer.max_steps // 20))
-        trainer.log_every_n_steps = interval
 
 
 def max_steps_overrides(overrides: Sequence[str]) -> list[str]:
