@@ -143,8 +143,6 @@ KNOWN_UPWARD_IN_PLUGINS: dict[tuple[str, str], str] = {}
 #: a set of modules. An entry that no longer matches a cycle fails the test (the set only
 #: shrinks); any other cycle fails it too.
 KNOWN_CYCLES: set[frozenset[str]] = {
-    # being removed in #49 (item 3: one task function per verb)
-    frozenset({"skelagnostic.cli.app", "skelagnostic.cli.evaluate"}),
     # being removed in #49 (item 8: the plugin manager split)
     frozenset({"skelagnostic.plugins.builtin", "skelagnostic.plugins.manager"}),
     # being removed in #49 (came with the safetensors weights: weights.py imports the

@@ -328,12 +328,12 @@ def test_cli_wrong_config(
 def test_wrong_summary_is_refused_before_the_data_is_read(
     site: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
 ) -> None:
-    import skelagnostic.cli.app as app
+    import skelagnostic.cli.tasks as tasks
 
     def never(*args: object, **kwargs: object) -> None:
         raise AssertionError("the data module was built before summary= was checked")
 
-    monkeypatch.setattr(app, "build_datamodule", never)
+    monkeypatch.setattr(tasks, "build_datamodule", never)
     assert fit(tmp_path, "summary=full-ish") == 1
     assert "summary='full-ish': must be one of auto, full, quick, none" in error_line(capsys)
 

@@ -153,7 +153,7 @@ def test_a_run_directory_stands_for_the_checkpoint_its_run_chose(
 def test_a_resumed_fit_continues_from_the_last_checkpoint() -> None:
     from omegaconf import OmegaConf
 
-    from skelagnostic.cli.app import _preferred_checkpoint
+    from skelagnostic.cli.tasks import _preferred_checkpoint
 
     def chosen(**cfg: object) -> str | None:
         return _preferred_checkpoint(OmegaConf.create({"run_checkpoint": None, **cfg}))

@@ -186,7 +186,7 @@ def test_render_html_with_enospc_midway_keeps_the_page(
 
 
 def test_run_files_with_enospc_midway_keep_the_previous_ones(tmp_path: Path, full_disk) -> None:
-    from skelagnostic.cli.app import _save_config
+    from skelagnostic.cli.tasks import _save_config
 
     (tmp_path / "config.yaml").write_text(OLD)
     with pytest.raises(SkelagnosticError, match=r"config\.yaml'?: cannot write \(No space left"):

@@ -31,8 +31,8 @@ VERBS: dict[str, tuple[str, str, str]] = {
     "test": ("skelagnostic.cli.app", "test", "evaluate on the test split"),
     "predict": ("skelagnostic.cli.app", "predict", "aligner outputs -> predictions.pt"),
     "evaluate": (
-        "skelagnostic.cli.evaluate",
-        "main",
+        "skelagnostic.cli.app",
+        "evaluate",
         "a plugin's protocol on held-out clips: model vs baselines -> evaluation.json",
     ),
     "plugins": (

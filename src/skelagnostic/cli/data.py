@@ -75,7 +75,8 @@ def _datamodule(preset: str, root: Path, cache_dir: Path | None, overrides: Sequ
             f"the overrides {' '.join(overrides)} choose an aligner's data module: add "
             "model=NAME (skelagnostic plugins lists them)"
         )
-    from skelagnostic.cli import app
+    from skelagnostic.cli.app import compose
+    from skelagnostic.cli.build import build_datamodule
     from skelagnostic.plugins import get_plugin_manager
 
     extra = []
@@ -85,8 +86,8 @@ def _datamodule(preset: str, root: Path, cache_dir: Path | None, overrides: Sequ
     if cache_dir is not None:
         extra.append(f"data.cache_dir='{cache_dir}'")
     pm = get_plugin_manager()
-    cfg = app.compose([*extra, *overrides], plugin_manager=pm)
-    return app.build_datamodule(cfg, pm)
+    cfg = compose([*extra, *overrides], plugin_manager=pm)
+    return build_datamodule(cfg, pm)
 
 
 def prepare(

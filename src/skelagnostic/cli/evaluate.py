@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import inspect
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,7 @@ from skelagnostic.aligners.checkpoints import load_checkpoint
 from skelagnostic.evaluation import MODEL, EvaluationError, held_out, write_evaluation
 from skelagnostic.plugins import PluginManager
 
-__all__ = ["evaluate_checkpoint", "main", "print_evaluation", "protocols_text"]
+__all__ = ["evaluate_checkpoint", "print_evaluation", "protocols_text"]
 
 
 def evaluate_checkpoint(
@@ -150,17 +150,3 @@ def protocols_text(pm: PluginManager) -> str:
         mark = "*" if e.default else " "
         lines.append(f"  {mark} {e.name:<{width}} model={e.model}: {e.description}")
     return "\n".join(lines) + "\n"
-
-
-def main(argv: Sequence[str]) -> int:
-    """``skelagnostic evaluate ckpt_path=... [protocol=NAME] [overrides]``.
-
-    ``--help`` lists the registered protocols before Hydra's help.
-    """
-    from skelagnostic.cli.app import main as app_main
-
-    if any(a in ("--help", "-h") for a in argv):
-        from skelagnostic.plugins import get_plugin_manager
-
-        print(protocols_text(get_plugin_manager()))
-    return app_main("evaluate", argv)
