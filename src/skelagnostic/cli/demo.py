@@ -147,98 +147,29 @@ def _demo(bvh_files: list[Path], args: dict[str, Any]) -> int:
 
     import skelagnostic as sa
     from skelagnostic.errors import error_line, printable
-    from skelagnostic.io.motion_files import motion_format, read_motion
     from skelagnostic.io.outputs import write_output
-    from skelagnostic.viz import render_motion, to_html
 
     console = Console(stderr=False)
     out: Path = args["out"]
+    gltf_dir = out / "gltf" if args["gltf"] else None
     try:
         out.mkdir(parents=True, exist_ok=True)
-        motions = []
-        if bvh_files:
-            for path in bvh_files:
-                motions.append(read_motion(path, other="bvh"))  # other names: BVH
-            source = ", ".join(sorted({motion_format(p, other="bvh") for p in bvh_files}))
-        else:
-            for i, (kind, gait) in enumerate(_DEFAULT_CLIPS):
-                motion, _ = sa.procedural.generate(
-                    kind, gait, seconds=args["seconds"], fps=args["fps"], seed=args["seed"] + i
-                )
-                motions.append(motion)
-            source = "procedural (synthetic)"
+        motions, source = _motions(bvh_files, args)
         table = Table(title=f"skelagnostic demo: {source}")
         for col in ("motion", "joints", "frames", "fps", "height", "speed/s", "BVH round trip"):
             table.add_column(col)
-        summary = []
         bvh_dir = out / "bvh"
         bvh_dir.mkdir(exist_ok=True)
-        gltf_dir = out / "gltf"
-        if args["gltf"]:
+        if gltf_dir is not None:
             table.add_column("glTF round trip")
             gltf_dir.mkdir(exist_ok=True)
+        summary = []
         for m in motions:
-            pos = m.global_positions()
-            speed = float(m.root_local_velocities()[:, 0, [0, 2]].norm(dim=-1).mean())
-            path = bvh_dir / f"{m.name}.bvh"
-            sa.write_bvh(m, path)
-            back = sa.read_bvh(path)
-            err = float((back.global_positions() - pos).abs().max())
-            row = [
-                str(m.name),
-                str(m.num_joints),
-                str(m.num_frames),
-                f"{m.fps:g}",
-                f"{m.skeleton.height():.1f}",
-                f"{speed:.1f}",
-                f"max |dpos| {err:.1e}",
-            ]
-            entry = {
-                "name": m.name,
-                "joints": m.num_joints,
-                "frames": m.num_frames,
-                "fps": m.fps,
-                "height": m.skeleton.height(),
-                "root_speed": speed,
-                "bvh": str(path),
-                "round_trip_max_position_error": err,
-            }
-            if args["gltf"]:
-                glb = gltf_dir / f"{m.name}.glb"
-                sa.write_gltf(m, glb)
-                gltf_err = float((sa.read_gltf(glb).global_positions() - pos).abs().max())
-                row.append(f"max |dpos| {gltf_err:.1e}")
-                entry["gltf"] = str(glb)
-                entry["gltf_round_trip_max_position_error"] = gltf_err
+            row, entry = _round_trip(m, bvh_dir, gltf_dir)
             table.add_row(*row)
             summary.append(entry)
         console.print(table)
-        labels = [str(m.name) for m in motions]
-        sheet = render_motion(
-            motions,
-            out / "demo.png",
-            labels=labels,
-            sheet_frames=6,
-            columns=3,
-            follow=True,
-            key="out",
-        )
-        outputs = {"contact_sheet": str(sheet)}
-        if args["gif"]:
-            gif = render_motion(
-                motions,
-                out / "demo.gif",
-                labels=labels,
-                max_frames=90,
-                follow=True,
-                progress=True,
-                key="out",
-            )
-            outputs["animation"] = str(gif)
-        if args["html"] is not None:
-            page = out / args["html"]
-            write_output(page, to_html(motions, names=labels), "html")
-            outputs["viewer"] = str(page)
+        outputs = _pictures(motions, out, args)
         write_output(
             out / "summary.json",
             json.dumps({"source": source, "motions": summary, "outputs": outputs}, indent=2),
@@ -249,13 +180,96 @@ def _demo(bvh_files: list[Path], args: dict[str, Any]) -> int:
         return 1
     for kind, path in outputs.items():
         console.print(printable(f"{kind}: {path}"), markup=False, highlight=False)
-    glb = f"  glTF files: {gltf_dir}" if args["gltf"] else ""
+    glb = f"  glTF files: {gltf_dir}" if gltf_dir is not None else ""
     console.print(
         printable(f"BVH files: {bvh_dir}{glb}  summary: {out / 'summary.json'}"),
         markup=False,
         highlight=False,
     )
     return 0
+
+
+def _motions(bvh_files: list[Path], args: dict[str, Any]) -> tuple[list[Any], str]:
+    """The clips of the demo: the files given, else the procedural gaits; and where from."""
+    import skelagnostic as sa
+    from skelagnostic.io.motion_files import motion_format, read_motion
+
+    if bvh_files:
+        motions = [read_motion(path, other="bvh") for path in bvh_files]  # other names: BVH
+        return motions, ", ".join(sorted({motion_format(p, other="bvh") for p in bvh_files}))
+    motions = [
+        sa.procedural.generate(
+            kind, gait, seconds=args["seconds"], fps=args["fps"], seed=args["seed"] + i
+        )[0]
+        for i, (kind, gait) in enumerate(_DEFAULT_CLIPS)
+    ]
+    return motions, "procedural (synthetic)"
+
+
+def _round_trip(m: Any, bvh_dir: Path, gltf_dir: Path | None) -> tuple[list[str], dict[str, Any]]:
+    """Write ``m`` as BVH (and glTF), read it back; its table row and its summary entry."""
+    import skelagnostic as sa
+
+    pos = m.global_positions()
+    speed = float(m.root_local_velocities()[:, 0, [0, 2]].norm(dim=-1).mean())
+    path = bvh_dir / f"{m.name}.bvh"
+    sa.write_bvh(m, path)
+    err = float((sa.read_bvh(path).global_positions() - pos).abs().max())
+    row = [
+        str(m.name),
+        str(m.num_joints),
+        str(m.num_frames),
+        f"{m.fps:g}",
+        f"{m.skeleton.height():.1f}",
+        f"{speed:.1f}",
+        f"max |dpos| {err:.1e}",
+    ]
+    entry = {
+        "name": m.name,
+        "joints": m.num_joints,
+        "frames": m.num_frames,
+        "fps": m.fps,
+        "height": m.skeleton.height(),
+        "root_speed": speed,
+        "bvh": str(path),
+        "round_trip_max_position_error": err,
+    }
+    if gltf_dir is not None:
+        glb = gltf_dir / f"{m.name}.glb"
+        sa.write_gltf(m, glb)
+        gltf_err = float((sa.read_gltf(glb).global_positions() - pos).abs().max())
+        row.append(f"max |dpos| {gltf_err:.1e}")
+        entry["gltf"] = str(glb)
+        entry["gltf_round_trip_max_position_error"] = gltf_err
+    return row, entry
+
+
+def _pictures(motions: list[Any], out: Path, args: dict[str, Any]) -> dict[str, str]:
+    """The contact sheet, and the GIF and HTML viewer when asked; ``kind -> path``."""
+    from skelagnostic.io.outputs import write_output
+    from skelagnostic.viz import render_motion, to_html
+
+    labels = [str(m.name) for m in motions]
+    sheet = render_motion(
+        motions, out / "demo.png", labels=labels, sheet_frames=6, columns=3, follow=True, key="out"
+    )
+    outputs = {"contact_sheet": str(sheet)}
+    if args["gif"]:
+        gif = render_motion(
+            motions,
+            out / "demo.gif",
+            labels=labels,
+            max_frames=90,
+            follow=True,
+            progress=True,
+            key="out",
+        )
+        outputs["animation"] = str(gif)
+    if args["html"] is not None:
+        page = out / args["html"]
+        write_output(page, to_html(motions, names=labels), "html")
+        outputs["viewer"] = str(page)
+    return outputs
 
 
 if __name__ == "__main__":  # pragma: no cover
