@@ -99,6 +99,18 @@ def test_build_datamodule_routes_keys(example_plugin: Path, tmp_path: Path) -> N
         r"data\.source='procedural'",
     ):
         app.build_datamodule(cfg, pm)
+    # the data config, not the constructors' signatures, says where a key goes
+    assert list(cfg.data.source_keys) == [
+        "kinds", "gaits", "clips_per_gait", "seconds", "seed", "name", "test_clips_per_gait"
+    ]  # fmt: skip
+    cfg = app.compose(
+        ["model=example", "run_dir=/tmp/x", "data.source_keys=[kinds,gaits,clips_per_gait]"]
+    )
+    with pytest.raises(app.ConfigError, match=r"data\.seconds is not an option of .* nor of Ex"):
+        app.build_datamodule(cfg, pm)  # seconds now goes to the data module, which refuses it
+    cfg = app.compose(["model=example", "run_dir=/tmp/x", "data.source_keys=kinds"])
+    with pytest.raises(app.ConfigError, match=r"data\.source_keys must be a list"):
+        app.build_datamodule(cfg, pm)
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, str]]:

@@ -40,51 +40,63 @@ __all__ = [
     "config_errors",
     "instantiate_all",
     "model_error",
+    "source_keys",
 ]
 
 #: Trainer options Lightning takes without checking, then divides by.
 _POSITIVE_TRAINER_KEYS = ("accumulate_grad_batches", "check_val_every_n_epoch")
-#: Data-config keys that are not options of the data module or the dataset source.
-_DATA_KEYS = ("source", "representation", "representation_options")
+#: Data-config keys that say where the others go: to neither the source nor the data module.
+ROUTING_KEYS = ("source", "source_keys", "representation", "representation_options")
 
 
 class ConfigError(SkelagnosticError):
     """A run configuration that cannot work (bad task, unknown options, missing packages)."""
 
 
+def source_keys(data: dict[str, Any], spec: AlignerSpec) -> list[str]:
+    """The keys of a data config that are options of its ``source``, as the config says.
+
+    ``data.source_keys`` lists them (each preset of ``conf/data/`` declares its
+    own). Without it (``null``: an aligner's registered default data, a config
+    saved before the key existed), they are the keys of the aligner's default
+    data (``register_aligners(data=...)``). The aligner's ``data_options`` are
+    data-module keys in any case.
+
+    Args:
+        data: The resolved ``cfg.data``.
+        spec: The aligner of ``cfg.model.name``.
+
+    Returns:
+        The source's keys that ``data`` holds, in the config's order.
+    """
+    declared = data.get("source_keys")
+    if declared is None:
+        declared = [k for k in (spec.data or {}) if k != "source"]
+    elif not isinstance(declared, list) or not all(isinstance(k, str) for k in declared):
+        raise ConfigError(f"data.source_keys must be a list of key names, got {declared!r}")
+    module_keys = set(spec.data_options or {})
+    return [k for k in data if k in declared and k not in module_keys and k not in ROUTING_KEYS]
+
+
 def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModule:
     """The data module of ``cfg.model.name`` configured by ``cfg.data``.
 
-    Keys of ``cfg.data`` that the aligner's data module accepts go to it; the
-    others (besides ``source`` and ``representation*``) are the options of the
-    dataset factory registered as ``cfg.data.source``.
+    The data config routes its keys explicitly: ``data.source`` names the dataset
+    and the keys listed in ``data.source_keys`` (:func:`source_keys`) are its
+    options; ``data.representation`` (+ ``representation_options``) names the
+    features; every other key is an option of the aligner's data module.
 
     Raises:
-        ConfigError: A data key is accepted by neither.
+        ConfigError: A data key is accepted by neither its source nor the data
+            module, or has the wrong type.
         PluginError: Unknown aligner, dataset or representation.
     """
     spec = pm.aligner(cfg.model.name)
     data: dict[str, Any] = OmegaConf.to_container(cfg.data, resolve=True)  # type: ignore[assignment]
     dataset = pm.dataset(data["source"])
-    dm_params = datamodule_options(spec.datamodule)  # through the subclass's **kwargs
-    dm_kwargs = {k: data.pop(k) for k in list(data) if k in dm_params and k not in _DATA_KEYS}
-    for owner in dict.fromkeys(dm_params[k] for k in dm_kwargs):  # typed where declared
-        check_options(
-            {k: v for k, v in dm_kwargs.items() if dm_params[k] is owner},
-            owner,
-            "data",
-            spec.datamodule.__name__,
-        )
-    options = {k: v for k, v in data.items() if k not in _DATA_KEYS}
-    factory_params = inspect.signature(dataset.factory).parameters
-    if not any(p.kind is p.VAR_KEYWORD for p in factory_params.values()):
-        unknown = sorted(set(options) - set(factory_params))
-        if unknown:
-            accepted = sorted(set(factory_params) | set(dm_params) - {"sources", "representation"})
-            raise ConfigError(
-                f"data.{unknown[0]} is not an option of data.source={data['source']!r} nor of "
-                f"{spec.datamodule.__name__}; accepted: {', '.join(accepted)}"
-            )
+    options = {k: data[k] for k in source_keys(data, spec)}
+    dm_kwargs = {k: v for k, v in data.items() if k not in options and k not in ROUTING_KEYS}
+    _check_routed(options, dm_kwargs, dataset.factory, spec.datamodule, data["source"])
     representation = None
     if data.get("representation"):
         rep_cls = pm.representation(data["representation"]).cls
@@ -92,6 +104,33 @@ def build_datamodule(cfg: DictConfig, pm: PluginManager) -> L.LightningDataModul
     made = dataset.factory(**options)  # one source, or several (data.paths entries)
     sources = list(made) if isinstance(made, (list, tuple)) else [made]
     return spec.datamodule(sources=sources, representation=representation, **dm_kwargs)
+
+
+def _check_routed(
+    options: dict[str, Any], dm_kwargs: dict[str, Any], factory: Any, datamodule: type, source: str
+) -> None:
+    """Raise :class:`ConfigError` for a routed key its receiver does not take (or cannot type).
+
+    The signatures only check the keys here; where a key goes is the config's choice.
+    """
+    dm_params = datamodule_options(datamodule)  # through the subclass's **kwargs
+    factory_params = inspect.signature(factory).parameters
+    takes_any = any(p.kind is p.VAR_KEYWORD for p in factory_params.values())
+    unknown = sorted(set(dm_kwargs) - set(dm_params))
+    unknown += sorted(k for k in options if not takes_any and k not in factory_params)
+    if unknown:
+        accepted = sorted(set(factory_params) | set(dm_params) - {"sources", "representation"})
+        raise ConfigError(
+            f"data.{unknown[0]} is not an option of data.source={source!r} nor of "
+            f"{datamodule.__name__}; accepted: {', '.join(accepted)}"
+        )
+    for owner in dict.fromkeys(dm_params[k] for k in dm_kwargs):  # typed where declared
+        check_options(
+            {k: v for k, v in dm_kwargs.items() if dm_params[k] is owner},
+            owner,
+            "data",
+            datamodule.__name__,
+        )
 
 
 def build_model(cfg: DictConfig, spec: AlignerSpec) -> tuple[L.LightningModule, dict[str, Any]]:
