@@ -15,6 +15,7 @@ import torch
 
 import skelagnostic as sa
 from skelagnostic import procedural
+from skelagnostic.analysis import foot_contacts
 from skelagnostic.cleanup import contact_runs, foot_lock, leg_chain
 from skelagnostic.core import quaternion as quat
 from skelagnostic.errors import MotionError
@@ -144,3 +145,15 @@ def test_errors():
     head = motion.skeleton.index("Head")
     with pytest.raises(MotionError, match=r"joint 'Head' .* no hip and knee above it in a leg"):
         leg_chain(motion, head)
+
+
+@pytest.mark.data
+def test_contacts_detected_when_not_given(lafan_clip: Path):
+    skating = swayed(sa.read_bvh(lafan_clip).to_metres())
+    contacts, feet = foot_contacts(skating)
+    assert [skating.skeleton.joint_names[j] for j in feet] == ["LeftToe", "RightToe"]
+    locked = foot_lock(skating)  # the same detection inside
+    kw = {"fps": skating.fps, "up_axis": skating.skeleton.up_axis, "feet": feet}
+    before = foot_skate(skating.global_positions(), contacts, **kw)
+    after = foot_skate(locked.global_positions(), contacts, **kw)
+    assert after < 0.3 * before

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 
 import torch
 
+from skelagnostic.analysis import contact_joints, foot_contacts
 from skelagnostic.core import quaternion as quat
 from skelagnostic.core.kinematics import forward_kinematics
 from skelagnostic.core.motion import Motion
@@ -247,8 +248,8 @@ def _solve_leg(
 
 def foot_lock(
     motion: Motion,
-    contacts: torch.Tensor,
-    feet: Sequence[int],
+    contacts: torch.Tensor | None = None,
+    feet: Sequence[int] | None = None,
     *,
     halflife: float = HALFLIFE,
 ) -> Motion:
@@ -257,8 +258,11 @@ def foot_lock(
     Args:
         motion: The motion to clean up (any units, any up axis).
         contacts: ``[T, F]`` boolean contact labels, one column per foot of ``feet``
-            (e.g. from the ground truth or a contact detector).
-        feet: The ``F`` joint indices that touch the ground (toes or ankles).
+            (e.g. from the ground truth); default: detected on ``motion`` by
+            :func:`skelagnostic.analysis.foot_contacts`.
+        feet: The ``F`` joint indices that touch the ground (toes or ankles); default
+            :func:`skelagnostic.analysis.contact_joints` of the skeleton (the feet of
+            every leg, through the body groups).
         halflife: Seconds over which the pinning fades in before and out after a
             contact (the inertialization half-life; > 0).
 
@@ -283,6 +287,10 @@ def foot_lock(
         >>> round(slide(motion), 1), round(slide(locked), 1)
         (21.2, 0.8)
     """
+    if contacts is None:
+        contacts, feet = foot_contacts(motion, joints=None if feet is None else list(feet))
+    elif feet is None:
+        feet = contact_joints(motion.skeleton)
     frames, num = motion.num_frames, len(feet)
     if not isinstance(contacts, torch.Tensor) or contacts.dtype != torch.bool:
         raise MotionError("foot_lock: contacts must be a boolean tensor [T, feet]")
