@@ -87,6 +87,7 @@ ONLY_IN = {
 KNOWN_UPWARD: dict[tuple[str, str], str] = {}
 #: Floors inside each method plugin, bottom first (ARCHITECTURE.md: the model < its
 #: embedding/inference < applications (transfer, retarget) < evaluation protocols < the
+#: public aligner, where the model's class gains what those floors do (VQ-PAE) < the
 #: plugin's wiring): a module may import modules of its own floor or lower ones, never a
 #: higher one (``TYPE_CHECKING`` imports aside). Keys are module names or prefixes (the
 #: longest that matches decides; the plugin's own name matches its ``__init__`` only); a
@@ -99,19 +100,20 @@ PLUGIN_FLOORS: dict[str, dict[str, int]] = {
         "skelagnostic_vqpae.codebook": 0,
         "skelagnostic_vqpae.schedule": 0,
         "skelagnostic_vqpae.data": 0,
-        "skelagnostic_vqpae.aligner": 0,
+        "skelagnostic_vqpae.training": 0,
         "skelagnostic_vqpae.graphs": 0,
         "skelagnostic_vqpae.options": 0,
         "skelagnostic_vqpae.losses": 0,
         "skelagnostic_vqpae.predictions": 0,
-        "skelagnostic_vqpae.lending": 0,
-        "skelagnostic_vqpae.authors": 0,
         "skelagnostic_vqpae.embed": 1,
         "skelagnostic_vqpae.transfer": 2,
         "skelagnostic_vqpae.picture": 2,
         "skelagnostic_vqpae.protocols": 3,
-        "skelagnostic_vqpae.plugin": 4,
-        "skelagnostic_vqpae": 4,
+        # the public aligner: the model with its fit summary and transfer
+        "skelagnostic_vqpae.aligner": 4,
+        "skelagnostic_vqpae.authors": 4,
+        "skelagnostic_vqpae.plugin": 5,
+        "skelagnostic_vqpae": 5,
     },
     "skelagnostic_humot": {
         "skelagnostic_humot.xcit": 0,

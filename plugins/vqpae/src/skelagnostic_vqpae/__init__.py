@@ -4,12 +4,14 @@ Registered as ``model=vqpae`` through the ``skelagnostic`` entry-point group
 (:mod:`skelagnostic_vqpae.plugin`). Modules: :mod:`~skelagnostic_vqpae.model`
 (the periodic autoencoder), :mod:`~skelagnostic_vqpae.codebook` (the shared
 codebook), :mod:`~skelagnostic_vqpae.data` (frame windows, data module),
-:mod:`~skelagnostic_vqpae.aligner` (training and inference),
+:mod:`~skelagnostic_vqpae.training` (training and inference),
 :mod:`~skelagnostic_vqpae.embed` (clip embeddings, retrieval),
 :mod:`~skelagnostic_vqpae.transfer` (frequency-scaled motion matching),
+:mod:`~skelagnostic_vqpae.protocols` (evaluation protocols and the fit summary),
 :mod:`~skelagnostic_vqpae.authors` (runs of the authors' trainer, loaded) and
-:mod:`~skelagnostic_vqpae.protocols` (evaluation protocols and the fit summary).
-Floors import downwards only (model < embed < transfer < protocols < plugin).
+:mod:`~skelagnostic_vqpae.aligner` (:class:`VqpaeAligner`: the model with its fit
+summary and transfer). Floors import downwards only (model < embed < transfer <
+protocols < aligner, authors < plugin).
 Imports are lazy: ``import skelagnostic_vqpae`` loads no model code until one of
 the names below is used.
 """

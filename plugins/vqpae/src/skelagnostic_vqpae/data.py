@@ -127,7 +127,7 @@ class FrameWindows(Dataset):
     later in the same clip (``s`` frames earlier where the clip ends first) as
     ``shifted`` ``[C, T]`` and the signed offset as ``shift`` (0 where the clip is
     shorter than ``T + s`` frames and neither fits), for the phase-rate loss of
-    :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`.
+    :class:`~skelagnostic_vqpae.training.VqpaeModel`.
 
     Args:
         features: ``[F, C]`` normalised features of all clips, concatenated.

@@ -23,9 +23,9 @@ from torch import Tensor
 
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.model import phase_manifold
 from skelagnostic_vqpae.predictions import EMBEDDING_FIELDS, clips_in_frame_order
+from skelagnostic_vqpae.training import VqpaeModel
 
 __all__ = [
     "ClipEmbedding",
@@ -112,7 +112,7 @@ class ClipEmbedding:
             )
 
 
-def embed_clip(aligner: VqpaeAligner, motion: Motion) -> ClipEmbedding:
+def embed_clip(aligner: VqpaeModel, motion: Motion) -> ClipEmbedding:
     """Embed every frame of ``motion`` with the VQ-PAE of its skeleton.
 
     Args:
@@ -137,7 +137,7 @@ def embed_clip(aligner: VqpaeAligner, motion: Motion) -> ClipEmbedding:
 
 @torch.no_grad()
 def embed_datasets(
-    aligner: VqpaeAligner, datasets: Mapping[str, Any], fps: float, batch_size: int = 1024
+    aligner: VqpaeModel, datasets: Mapping[str, Any], fps: float, batch_size: int = 1024
 ) -> dict[str, list[ClipEmbedding]]:
     """Embed every window of a data-module split, grouped into per-clip embeddings.
 
@@ -173,7 +173,7 @@ def embed_datasets(
 
 
 def fit_average_pose(
-    aligner: VqpaeAligner, datamodule: Any, epochs: int = 1, lr: float = 1e-3
+    aligner: VqpaeModel, datamodule: Any, epochs: int = 1, lr: float = 1e-3
 ) -> dict[str, float]:
     """Train every dataset's average-pose MLP on the frozen VQ-PAE (Sec. 5.2, Eq. 10).
 
@@ -279,7 +279,7 @@ def retrieve(
 
 
 def plot_manifold(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     embeddings: Mapping[str, Sequence[ClipEmbedding]],
     out: str | Path | None = None,
     samples: int = 64,

@@ -1,7 +1,7 @@
 """VQ-PAE's networks as export graphs (ONNX / TorchScript): per character, encoder and decoder.
 
-:func:`export_graphs` is :meth:`VqpaeAligner.export_graphs
-<skelagnostic_vqpae.aligner.VqpaeAligner.export_graphs>`; ``skelagnostic export`` calls it.
+:func:`export_graphs` is :meth:`VqpaeModel.export_graphs
+<skelagnostic_vqpae.training.VqpaeModel.export_graphs>`; ``skelagnostic export`` calls it.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from skelagnostic_vqpae.codebook import SharedCodebook
 from skelagnostic_vqpae.model import VQPAE, phase_manifold
 
 if TYPE_CHECKING:
-    from skelagnostic_vqpae.aligner import VqpaeAligner
+    from skelagnostic_vqpae.training import VqpaeModel
 
 __all__ = ["export_graphs"]
 
@@ -24,7 +24,7 @@ __all__ = ["export_graphs"]
 class _PivotEncoder(nn.Module):
     """One character's VQ-PAE encoder as a graph: normalised windows -> pivot embedding.
 
-    The same computation as :meth:`VqpaeAligner.forward_dataset` up to the
+    The same computation as :meth:`VqpaeModel.forward_dataset` up to the
     manifold point at the pivot, where ``Phi = phi + f * 0 = phi``.
     """
 
@@ -49,7 +49,7 @@ class _PivotEncoder(nn.Module):
         return phase, frequency, code, amplitude, point
 
 
-def export_graphs(aligner: VqpaeAligner) -> list[ExportGraph]:
+def export_graphs(aligner: VqpaeModel) -> list[ExportGraph]:
     """Per character: the encoder (phase, frequency, code, amplitude, manifold point).
 
     And, when its average-pose MLP was trained, the decoder from a manifold

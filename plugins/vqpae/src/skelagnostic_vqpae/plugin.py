@@ -31,39 +31,12 @@ DEFAULT_DATA: dict[str, Any] = {
 DATA_OPTIONS: dict[str, Any] = {"fps": 60, "window_seconds": 1.0, "stride": 1}
 
 
-def _fit_summary(aligner: Any, trainer: Any, mode: str = "full") -> Any:
-    """:func:`skelagnostic_vqpae.protocols.summary.fit_summary`, imported when a fit ends."""
-    from skelagnostic_vqpae.protocols.summary import fit_summary
-
-    return fit_summary(aligner, trainer, mode=mode)
-
-
-def _transfer(aligner: Any, motion: Any, targets: Any) -> Any:
-    """:func:`skelagnostic_vqpae.transfer.transfer_clips`, imported when first called."""
-    from skelagnostic_vqpae.transfer import transfer_clips
-
-    return transfer_clips(aligner, motion, targets)
-
-
-def wire() -> None:
-    """Lend the model its fit summary and transfer (:data:`skelagnostic_vqpae.aligner.LENT`).
-
-    The plugin's top floor ties the floors together: the model never imports its
-    embedding, transfer or protocols, and they are imported only when used.
-    """
-    from skelagnostic_vqpae.aligner import VqpaeAligner
-
-    VqpaeAligner.lend("fit_summary", _fit_summary)
-    VqpaeAligner.lend("transfer", _transfer)
-
-
 @hookimpl
 def register_aligners(register: Callable[..., Any]) -> None:
-    """Register ``model=vqpae`` (and :func:`wire` its lent work)."""
+    """Register ``model=vqpae``: :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`."""
     from skelagnostic_vqpae.aligner import VqpaeAligner
     from skelagnostic_vqpae.data import VqpaeDataModule
 
-    wire()
     register(
         "vqpae",
         VqpaeAligner,

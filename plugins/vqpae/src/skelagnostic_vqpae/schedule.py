@@ -156,8 +156,8 @@ class CyclicRestarts(LRScheduler):
 def configure_optimizers(aligner: Any) -> Any:
     """AdamW + the schedule of ``model.schedule`` (per step); pose MLPs in their own group.
 
-    :meth:`VqpaeAligner.configure_optimizers
-    <skelagnostic_vqpae.aligner.VqpaeAligner.configure_optimizers>`.
+    :meth:`VqpaeModel.configure_optimizers
+    <skelagnostic_vqpae.training.VqpaeModel.configure_optimizers>`.
     """
     from skelagnostic.aligners import steps_per_epoch  # Lightning: only when training
 

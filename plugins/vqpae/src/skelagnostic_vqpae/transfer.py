@@ -39,8 +39,8 @@ from skelagnostic.matching import (
     motion_matching,
 )
 from skelagnostic.representations import GlobalPositions
-from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
+from skelagnostic_vqpae.training import VqpaeModel
 
 __all__ = [
     "FREQUENCY_TOLERANCE",
@@ -184,13 +184,13 @@ def _known(rule: Tensor, known: Tensor | None, field: str) -> Tensor:
     return torch.where(torch.isnan(known), rule, known)
 
 
-def _window(aligner: VqpaeAligner, motion: Motion) -> int:
+def _window(aligner: VqpaeModel, motion: Motion) -> int:
     """Frames of the VQ-PAE window of ``motion``'s character."""
     return int(aligner.characters[aligner.dataset_of(motion.skeleton)].pae.window)
 
 
 def build_database(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     motions: Sequence[Motion],
     names: Sequence[str] | None = None,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
@@ -231,7 +231,7 @@ def build_database(
 
 
 def with_known_frequencies(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     target: TransferDatabase,
     frequencies: Sequence[Tensor | None],
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
@@ -256,7 +256,7 @@ def with_known_frequencies(
 
 
 def _assemble(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     motions: Sequence[Motion],
     embeddings: Sequence[ClipEmbedding],
     names: Sequence[str] | None,
@@ -283,7 +283,7 @@ def _assemble(
 
 
 def transfer(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     source: Motion,
     target: TransferDatabase,
     lambda1: float = 0.5,
@@ -384,7 +384,7 @@ def transfer(
 
 
 def transfer_clips(
-    aligner: VqpaeAligner, motion: Motion, targets: Sequence[Motion]
+    aligner: VqpaeModel, motion: Motion, targets: Sequence[Motion]
 ) -> tuple[Motion, list[int]]:
     """The work of :meth:`VqpaeAligner.transfer <skelagnostic_vqpae.aligner.VqpaeAligner.transfer>`.
 
@@ -396,6 +396,3 @@ def transfer_clips(
     """
     result = transfer(aligner, motion, build_database(aligner, list(targets)))
     return result.motion, [seg.start for seg in result.match.segments[1:]]
-
-
-VqpaeAligner.lend("transfer", transfer_clips)

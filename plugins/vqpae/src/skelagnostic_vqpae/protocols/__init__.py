@@ -1,8 +1,9 @@
-"""VQ-PAE's evaluation protocols and fit summary: the plugin's top floor.
+"""VQ-PAE's evaluation protocols and fit summary.
 
-They use the model (:mod:`skelagnostic_vqpae.aligner`), its embeddings
+They use the model (:mod:`skelagnostic_vqpae.training`), its embeddings
 (:mod:`skelagnostic_vqpae.embed`) and its transfer (:mod:`skelagnostic_vqpae.transfer`),
-never the other way round (``tests/test_layering.py``). Modules:
+never the other way round (``tests/test_layering.py``); only the public aligner
+(:mod:`skelagnostic_vqpae.aligner`) and the plugin's wiring sit above them. Modules:
 :mod:`~skelagnostic_vqpae.protocols.manifold` (``vqpae.manifold``),
 :mod:`~skelagnostic_vqpae.protocols.transfer` (``vqpae.transfer``),
 :mod:`~skelagnostic_vqpae.protocols.tables` (the paper's Tables 1 and 2),

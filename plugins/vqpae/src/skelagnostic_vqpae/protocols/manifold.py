@@ -73,7 +73,7 @@ def manifold_protocol(
     """``vqpae.manifold``: Tables 1 and 2 per character, phase linearity, procedural gaits.
 
     Args:
-        aligner: A trained :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`.
+        aligner: A trained :class:`~skelagnostic_vqpae.training.VqpaeModel`.
         held: The run's held-out clips.
         out_dir: Where ``manifold.png`` goes.
         procedural_seeds: Held-out procedural clips per gait and character

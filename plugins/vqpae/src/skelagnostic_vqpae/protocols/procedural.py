@@ -79,7 +79,7 @@ def procedural_gaits(aligner: Any, held: HeldOut, seeds_per_gait: int = 2) -> di
     :data:`PROCEDURAL_SEED` upwards, above every seed a procedural training source of
     the run used (a seed sets the body size, stride frequency and turning, so these
     clips were never seen). The model sees them in metres, as it saw its training
-    clips (:meth:`VqpaeAligner.encode`). Per clip, on the
+    clips (:meth:`VqpaeModel.encode`). Per clip, on the
     frames whose window lies inside the clip: the median of the frequency head
     against the generator's stride frequency, the rate at which the phase advances
     (slope of :func:`phase_line`) against the same, and the phase's R^2.

@@ -33,7 +33,6 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import manifold_overlap
-from skelagnostic_vqpae.aligner import VqpaeAligner
 from skelagnostic_vqpae.embed import embed_datasets, plot_clip_timing, plot_manifold
 from skelagnostic_vqpae.picture import plot_transfer
 from skelagnostic_vqpae.protocols.procedural import procedural_kind
@@ -44,6 +43,7 @@ from skelagnostic_vqpae.protocols.transfer import (
     transfer_rows,
     transition_note,
 )
+from skelagnostic_vqpae.training import VqpaeModel
 from skelagnostic_vqpae.transfer import FREQUENCY_TOLERANCE, HALFLIFE
 
 if TYPE_CHECKING:
@@ -134,7 +134,7 @@ class _Stages:
         self.console.print(f"[bold]fit summary ({self.mode})[/bold] done in {elapsed:.0f} s")
 
 
-def fit_summary(aligner: VqpaeAligner, trainer: L.Trainer, mode: str = "full") -> SummaryContent:
+def fit_summary(aligner: VqpaeModel, trainer: L.Trainer, mode: str = "full") -> SummaryContent:
     """The manifold figures and pictures of the fit summary (:meth:`VqpaeAligner.fit_summary`).
 
     * metrics (in ``vqpae_metrics.json``): the manifold overlap (usage,
@@ -228,7 +228,7 @@ def _codes(embeddings: Mapping[str, list[Any]], names: list[str]) -> dict[str, t
 
 
 def table2_summary(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     held: Mapping[str, list[Any]],
     train: Mapping[str, list[Any]],
 ) -> tuple[dict[str, Any], str]:
@@ -334,7 +334,7 @@ def shared_codes_sentence(source: str, target: str, codes: Mapping[str, list[int
 
 
 def transfer_summary(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     datamodule: Any,
     max_clips: int | None = None,
     *,
@@ -433,7 +433,7 @@ def transfer_summary(
 
 
 def _transfer_clips(
-    aligner: VqpaeAligner, datamodule: Any, plan: SummaryPlan
+    aligner: VqpaeModel, datamodule: Any, plan: SummaryPlan
 ) -> tuple[str, list[Any], list[Any]] | None:
     """``(split, held-out sources of the first character, database of the second)``, or None.
 
@@ -503,7 +503,7 @@ def _transfer_table(
     return "\n".join(lines)
 
 
-def transfer_labels(aligner: VqpaeAligner, source: Any) -> list[str]:
+def transfer_labels(aligner: VqpaeModel, source: Any) -> list[str]:
     r"""The names of the source and its three transfers (the picture's and the animation's).
 
     Args:
@@ -530,7 +530,7 @@ def transfer_labels(aligner: VqpaeAligner, source: Any) -> list[str]:
     ]
 
 
-def transfer_render_options(aligner: VqpaeAligner, source: Any) -> dict[str, Any]:
+def transfer_render_options(aligner: VqpaeModel, source: Any) -> dict[str, Any]:
     """:func:`~skelagnostic.viz.render_motion`'s options for the transfer animation.
 
     Panels of :data:`RENDER_PANEL` pixels at :data:`RENDER_FPS`, a camera travelling
@@ -554,7 +554,7 @@ def transfer_render_options(aligner: VqpaeAligner, source: Any) -> dict[str, Any
 
 
 def transfer_picture(
-    aligner: VqpaeAligner,
+    aligner: VqpaeModel,
     motions: list[Any],
     split: str = "val",
     table: Mapping[str, Any] | None = None,
@@ -613,7 +613,7 @@ def _short(codes: Mapping[str, Any]) -> dict[str, Any]:
     return {n.rsplit("/", 1)[-1]: v for n, v in codes.items()}
 
 
-def overlap_figures(aligner: VqpaeAligner, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
+def overlap_figures(aligner: VqpaeModel, embeddings: Mapping[str, list[Any]]) -> dict[str, Any]:
     """Manifold overlap (Table 2) of per-clip embeddings of every dataset."""
     codes = [
         torch.cat([e.code for e in embeddings.get(n, [])] or [torch.zeros(0, dtype=torch.long)])
@@ -632,6 +632,3 @@ def overlap_figures(aligner: VqpaeAligner, embeddings: Mapping[str, list[Any]]) 
             n: int(c.unique().numel()) for n, c in zip(aligner.dataset_names, codes, strict=True)
         },
     }
-
-
-VqpaeAligner.lend("fit_summary", fit_summary)

@@ -159,7 +159,7 @@ def training_codes(aligner: Any, datamodule: Any) -> dict[str, torch.Tensor]:
     """Code of every training window of every character (no shuffling, no gradient).
 
     Args:
-        aligner: A trained :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`.
+        aligner: A trained :class:`~skelagnostic_vqpae.training.VqpaeModel`.
         datamodule: Its set-up :class:`~skelagnostic_vqpae.data.VqpaeDataModule`.
 
     Returns:
