@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -151,6 +153,31 @@ def test_aligner_transfer_matches_the_module_function(trained: dict) -> None:
     assert all(0 < f < out.num_frames for f in model.last_transitions)
     with pytest.raises(SkelagnosticError, match="empty"):
         model.transfer(source, [])
+
+
+def test_a_script_loading_the_aligner_by_hand_transfers(trained: dict) -> None:
+    """In a fresh interpreter, the aligner's own module is all a script needs.
+
+    No plugin manager, no other import: ``transfer`` and ``fit_summary`` are methods of
+    the class, not work a higher floor must first register.
+    """
+    script = (
+        "from skelagnostic import procedural\n"
+        "from skelagnostic_vqpae.aligner import VqpaeAligner\n"
+        "from skelagnostic_vqpae.training import VqpaeModel\n"
+        f"model = VqpaeAligner.load_from_checkpoint({str(trained['ckpt'])!r}).eval()\n"
+        "dog = procedural.generate('quadruped', 'trot', seconds=2.0, fps=20, seed=3)[0]\n"
+        "human = procedural.generate('biped22', 'walk', seconds=1.0, fps=20, seed=8)[0]\n"
+        "out = model.transfer(human, [dog])\n"
+        "assert out.skeleton is dog.skeleton and out.num_frames == human.num_frames\n"
+        "assert 'fit_summary' in vars(VqpaeAligner) and 'transfer' in vars(VqpaeAligner)\n"
+        "assert not VqpaeModel(num_codes=4).supports('transfer')\n"
+        "print('ok')\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0 and done.stdout.strip().endswith("ok"), done.stderr[-2000:]
 
 
 def test_predict_writes_per_clip_embeddings(trained: dict, tmp_path: Path) -> None:
