@@ -26,7 +26,7 @@ def test_checkpoint_entries_travel_in_the_metadata(
     tmp_path: Path, pcmrl_tiny: dict[str, int]
 ) -> None:
     # PC-MRL keeps its target skeleton in the checkpoint, outside the state_dict
-    from skelagnostic_pcmrl.recon import PcmrlReconAligner
+    from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
 
     torch.manual_seed(0)
     aligner = PcmrlReconAligner(**pcmrl_tiny, target="biped22").eval()
