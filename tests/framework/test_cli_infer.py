@@ -11,9 +11,11 @@ import torch
 
 import skelagnostic as sa
 from skelagnostic import cli
+from skelagnostic.analysis import foot_contacts
 from skelagnostic.cli.infer import keyframes_from_options
 from skelagnostic.core.quaternion import slerp
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.metrics.functional import foot_skate
 from skelagnostic.plugins import LOAD_PLUGINS_ENV
 
 FAST = [
@@ -157,6 +159,27 @@ def test_interpolate_keeps_keys_and_passes_them(
     assert torch.allclose(dot, torch.ones_like(dot), atol=1e-5)
 
 
+@pytest.mark.data
+def test_cleanup_footlock_stops_the_feet_of_an_interpolation_sliding(
+    keyed_plugin: None, trained: Path, lafan_clip: Path, tmp_path: Path, capsys
+) -> None:
+    ckpt = trained / "checkpoints" / "last.ckpt"
+    outs = {}
+    for cleanup in ("none", "footlock"):
+        outs[cleanup] = tmp_path / f"{cleanup}.bvh"
+        words = ["interpolate", str(lafan_clip), f"ckpt={ckpt}", "model=keyed", "every=12"]
+        code = cli.main([*words, f"cleanup={cleanup}", f"out={outs[cleanup]}"])
+        assert code == 0, capsys.readouterr().err
+    plain, locked = (sa.read_bvh(outs[c]) for c in ("none", "footlock"))
+    contacts, feet = foot_contacts(plain)
+    sk = plain.skeleton
+    kw = {"fps": plain.fps, "up_axis": sk.up_axis, "feet": feet}
+    before = foot_skate(plain.global_positions(), contacts, **kw)
+    after = foot_skate(locked.global_positions(), contacts, **kw)
+    assert after < 0.5 * before  # slerp between keys slides the feet; the lock pins them
+    assert torch.equal(locked.root_positions, plain.root_positions)
+
+
 def test_transfer_reads_target_directories(
     keyed_plugin: None, trained: Path, clips, tmp_path: Path, capsys
 ) -> None:
@@ -273,6 +296,10 @@ def test_retarget_html_option(
             "frame(s) [99] are outside the clip",
         ),
         (["interpolate", "{clip}", "ckpt={ckpt}", "out={out}"], "exactly one of every="),
+        (
+            ["retarget", "{clip}", "{clip}", "ckpt={ckpt}", "out={out}", "cleanup=footslide"],
+            "option cleanup='footslide': must be footlock or none",
+        ),
         (
             ["transfer", "{clip}", "{clip}", "ckpt={ckpt}", "out={out}", "speed=2"],
             "unknown option(s) speed=",

@@ -10,7 +10,8 @@ suffix (:mod:`skelagnostic.io.motion_files`). Usage::
 Every verb also takes ``render=OUT.gif`` (or ``.png``/``.mp4``/``.html``) to draw
 the input next to the result, ``html=VIEW.html`` for the interactive 3D viewer
 (keyframes / matching transitions marked on its timeline), plus the rendering
-options of ``skelagnostic render``.
+options of ``skelagnostic render``, and ``cleanup=footlock`` to pin the result's
+planted feet (:func:`skelagnostic.cleanup.foot_lock`).
 
 The aligner is built from a checkpoint written by ``skelagnostic fit``; its name
 comes from ``model=`` or, when omitted, from the run's ``config.yaml`` next to
@@ -50,6 +51,8 @@ _COMMON = {
     "model": "registered aligner name; default: model.name of the run's config.yaml",
     "out": "output motion path (required): .bvh, or .glb/.gltf for glTF 2.0; written atomically",
     "render": "also draw input and result side by side (.gif, .mp4, .png or .html)",
+    "cleanup": "footlock: pin the result's planted feet (contacts detected on the result; "
+    "two-bone IK faded in and out with inertialization); none (default)",
     "units": "length unit of the input motion files (m, cm, mm, inch, ft, cmu); "
     "default: the aligner guesses",
     "threads": THREADS_HELP,
@@ -262,6 +265,7 @@ def _run(
                 f"unknown option(s) {', '.join(k + '=' for k in unknown)}; "
                 f"see 'skelagnostic {verb} --help'"
             )
+        cleanup = _cleanup(options.get("cleanup", "none"))
         low, high = positional
         if len(words) < low or (high is not None and len(words) > high):
             raise SkelagnosticError(
@@ -285,6 +289,7 @@ def _run(
         apply = prepare(paths, options)
         aligner = load_from_checkpoint(options["ckpt"], options.get("model"))
         source, result = apply(aligner)
+        result = cleanup(result)
         rendered: list[Path] = []
         # the renders come first: a render option refused late (fps=1e9) leaves
         # the previous out= in place, never a result without its picture
@@ -302,6 +307,17 @@ def _run(
         print(error_line(f"skelagnostic {verb}", error), file=sys.stderr)
         return 2
     return 0
+
+
+def _cleanup(name: str) -> Callable[[Motion], Motion]:
+    """The clean-up pass ``cleanup=`` names (checked before anything is read)."""
+    if name == "none":
+        return lambda motion: motion
+    if name == "footlock":
+        from skelagnostic.cleanup import foot_lock
+
+        return foot_lock
+    raise SkelagnosticError(f"option cleanup={name!r}: must be footlock or none")
 
 
 def retarget(argv: list[str]) -> int:
