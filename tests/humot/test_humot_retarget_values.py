@@ -24,6 +24,7 @@ from skelagnostic_humot.evaluation.retarget import retarget_protocol
 
 import skelagnostic as sa
 from numpy_reference import global_pose
+from skelagnostic.analysis import foot_contacts
 from skelagnostic.baselines import direction_copy, name_copy, primal_copy
 from skelagnostic.evaluation import HeldOut, mean_rows
 
@@ -46,6 +47,20 @@ def _errors(pred: sa.Motion, truth: sa.Motion) -> dict[str, float]:
         "root_aligned_mpjpe": local,
         "root_aligned_over_height": local / height,
     }
+
+
+def _skate_cm_s(pred: sa.Motion, truth: sa.Motion) -> float:
+    """Mean horizontal speed (cm/s) of the truth's planted feet, numpy loops."""
+    contacts, feet = foot_contacts(truth)  # the library's detector: shared by every method
+    positions = global_pose(pred, 1.0)[1]
+    up = truth.skeleton.up_index
+    speeds = [
+        float(np.linalg.norm(np.delete(positions[t + 1, j] - positions[t, j], up))) * truth.fps
+        for f, j in enumerate(feet)
+        for t in range(min(len(positions), truth.num_frames) - 1)
+        if contacts[t, f] and contacts[t + 1, f]
+    ]
+    return float(np.mean(speeds)) if speeds else float("nan")
 
 
 def _methods(model: HumotAligner) -> dict[str, object]:
@@ -83,6 +98,7 @@ def test_rows_means_and_paired_table_equal_an_independent_computation(
                 there = f(clip, via, "cm", "cm")
                 back = f(there, clip.skeleton, "cm", "cm")
                 expected[clip.name][name] = _errors(back, clip)
+                expected[clip.name][name]["skate"] = _skate_cm_s(back, clip)
         paired = {}
         data = {
             k: sa.procedural.dataset(
@@ -117,6 +133,9 @@ def test_rows_means_and_paired_table_equal_an_independent_computation(
             ), (row["clip"], method)
             assert got["cycle_root_aligned_over_height"] == pytest.approx(
                 want[prefix]["root_aligned_over_height"], rel=1e-6
+            ), (row["clip"], method)
+            assert got["cycle_foot_skate_cm_s"] == pytest.approx(
+                want[prefix]["skate"], rel=1e-6, nan_ok=True
             ), (row["clip"], method)
     mean = mean_rows(out.rows)
     assert mean["model"]["cycle_over_height"] == pytest.approx(

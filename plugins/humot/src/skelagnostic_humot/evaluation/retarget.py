@@ -29,12 +29,14 @@ from pathlib import Path
 from typing import Any
 
 from skelagnostic import procedural
+from skelagnostic.analysis import foot_contacts
 from skelagnostic.baselines import direction_copy, name_copy, primal_copy
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.core.units import infer_units
+from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
+from skelagnostic.metrics.functional import foot_skate
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.evaluation.held_out import (
     HELD_OUT_SEED,
@@ -168,7 +170,28 @@ def cycle_error(
     for method, pred in preds.items():
         for key, value in _motion_error(pred, truth).items():
             results[f"{method}_{key}"] = value
+    results |= _foot_skates(preds, truth, unit)
     return results
+
+
+def _foot_skates(preds: Mapping[str, Motion], truth: Motion, unit: str) -> dict[str, float]:
+    """``<method>_foot_skate`` (cm/s) of each prediction, on the contacts of ``truth``.
+
+    The contacts are detected once on the ground truth (:func:`foot_contacts`), so
+    every method is scored on the same planted frames; the truth's own skate is
+    ``source_foot_skate``, the floor a faithful method reaches.
+    """
+    contacts, feet = foot_contacts(truth)
+    frames = min(truth.num_frames, *(p.num_frames for p in preds.values()))
+    to_cm = 100.0 * UNITS[unit]
+    skates = {}
+    for method, motion in {"source": truth, **preds}.items():
+        positions = motion.global_positions()[:frames].double() * to_cm
+        value = foot_skate(
+            positions, contacts[:frames], truth.fps, up_axis=truth.skeleton.up_axis, feet=feet
+        )
+        skates[f"{method}_foot_skate"] = float(value)
+    return skates
 
 
 def paired_by_method(mean: Mapping[str, float]) -> dict[str, dict[str, float]]:
@@ -216,10 +239,13 @@ def retarget_protocol(
         "cycle: source -> a procedural human rig of another topology -> source, compared "
         "with the source at 30 fps; baselines: name_copy, primal_copy and direction_copy "
         "(skelagnostic.baselines)",
+        "foot skate: on the contacts detected on the source (skelagnostic.analysis); the "
+        "source's own skate is in extra.source_foot_skate_cm_s",
         SEEN_NOTE,
     ]
     humans, trained = protocol_clips(held, notes, extra, extra_units)
     rows: list[dict[str, Any]] = []
+    source_skates: list[float] = []
     for clip in humans:
         via_kind = next(
             k
@@ -227,11 +253,13 @@ def retarget_protocol(
             if procedural.skeleton(k).topology_key() != clip.skeleton.topology_key()
         )
         cyc = cycle_error(aligner, clip, procedural.skeleton(via_kind), via_units="cm")
+        source_skates.append(cyc["source_foot_skate"])
         values = {}
         for method, prefix in ((MODEL, "humot"), *((n, n) for n in BASELINES)):
             values[method] = {
                 "cycle_over_height": cyc[f"{prefix}_mpjpe_over_height"],
                 "cycle_root_aligned_over_height": cyc[f"{prefix}_root_aligned_over_height"],
+                "cycle_foot_skate_cm_s": cyc[f"{prefix}_foot_skate"],
             }
         rows.append(
             {
@@ -247,6 +275,8 @@ def retarget_protocol(
         {
             "cycle_over_height": "MPJPE after the cycle / source height, lower is better",
             "cycle_root_aligned_over_height": "the same with the roots aligned, lower is better",
+            "cycle_foot_skate_cm_s": "horizontal speed of the feet (cm/s) on the frames where "
+            "the source's feet are planted, lower is better",
         },
         rows,
         extra={
@@ -254,6 +284,7 @@ def retarget_protocol(
             "procedural_paired_mean": paired_by_method(paired["mean"]),
             "procedural_topologies": kinds,
             "by_topology": by_topology(rows),
+            "source_foot_skate_cm_s": sum(source_skates) / max(len(source_skates), 1),
         },
         notes=notes,
     )
