@@ -64,7 +64,7 @@ from skelagnostic.cli.tasks import (
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.errors import SkelagnosticError, error_line, printable
 from skelagnostic.plugins import PluginManager, get_plugin_manager, target_of
-from skelagnostic.plugins.manager import config_names
+from skelagnostic.plugins.configs import config_names
 
 __all__ = [
     "MAX_SEED",

@@ -20,9 +20,14 @@ from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from skelagnostic.plugins.configs import read_model_config, target_of
 from skelagnostic.plugins.manager import (
     ENTRY_POINT_GROUP,
     LOAD_PLUGINS_ENV,
+    PluginManager,
+    hookimpl,
+)
+from skelagnostic.plugins.specs import (
     AlignerSpec,
     CheckpointReaderSpec,
     DatasetSpec,
@@ -30,11 +35,7 @@ from skelagnostic.plugins.manager import (
     PluginError,
     PluginInfo,
     PluginLoadWarning,
-    PluginManager,
     RepresentationSpec,
-    hookimpl,
-    read_model_config,
-    target_of,
 )
 
 if TYPE_CHECKING:

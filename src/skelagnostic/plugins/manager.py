@@ -17,26 +17,43 @@ distribution name) keeps the name, and the warning names both.
 from __future__ import annotations
 
 import difflib
-import importlib
-import importlib.util
 import inspect
 import os
-import re
 import signal
 import threading
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
-from importlib import metadata, resources
+from dataclasses import replace
+from importlib import metadata
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 import pluggy
 
-from skelagnostic.errors import SkelagnosticError, printable
+from skelagnostic.errors import printable
 from skelagnostic.plugins import hookspecs
+from skelagnostic.plugins.configs import config_names
+from skelagnostic.plugins.registration import (
+    CHECKPOINT_SCHEME,
+    HOOKS,
+    call_hooks,
+    registered_names,
+)
+from skelagnostic.plugins.specs import (
+    AlignerSpec,
+    CheckpointReaderSpec,
+    Contributions,
+    DatasetSpec,
+    EvaluationSpec,
+    PluginError,
+    PluginInfo,
+    PluginLoadWarning,
+    RepresentationSpec,
+    error_text,
+    first_line,
+)
 
 #: The pluggy project name and the entry-point group plugins register under.
 ENTRY_POINT_GROUP = "skelagnostic"
@@ -48,182 +65,12 @@ BUILTIN_NAME = "skelagnostic"
 #: Marker for hook implementations in plugins: ``@hookimpl def register_aligners(register): ...``.
 hookimpl = pluggy.HookimplMarker(ENTRY_POINT_GROUP)
 
-_HOOKS = (
-    "register_aligners",
-    "register_representations",
-    "register_datasets",
-    "register_config_paths",
-    "register_evaluations",
-    "register_checkpoint_readers",
-)
-
-#: The ``<scheme>`` of ``ckpt=<scheme>:<path>`` (two characters or more, so a Windows drive
-#: letter is never one).
-CHECKPOINT_SCHEME = re.compile(r"[a-z][a-z0-9_]+")
-
-
-class PluginError(SkelagnosticError):
-    """A plugin problem: a name registered twice, or an unknown aligner/representation/dataset.
-
-    Raised by :meth:`PluginManager.register` and the lookups; while plugins load, a
-    name clash is the skipped plugin's ``error`` instead (and a :class:`PluginLoadWarning`).
-    """
-
-
-class PluginLoadWarning(UserWarning):
-    """A plugin was skipped because it failed to import or to register."""
-
-
-@dataclass(frozen=True)
-class PluginInfo:
-    """What ``skelagnostic plugins`` shows about one plugin.
-
-    Attributes:
-        name: Entry-point name (``"skelagnostic"`` for the built-in plugin).
-        version: Version of the distribution providing it.
-        source: ``"built-in"`` or the providing distribution's name.
-        status: ``"loaded"``, ``"failed"`` or ``"disabled"`` (filtered out by
-            ``SKELAGNOSTIC_LOAD_PLUGINS``).
-        error: ``"ExceptionType: message"`` when the plugin failed.
-        hooks: Names of the hooks the plugin implements.
-        provides: What it registered, as ``"kind:name"`` strings: ``aligner``,
-            ``representation``, ``dataset`` (``data.source=``), ``config_path``, and
-            the configs it ships: ``experiment`` (``experiment=``) and ``data_preset``
-            (``data=``).
-        description: First line of the plugin module's docstring, else the
-            distribution's summary.
-    """
-
-    name: str
-    version: str
-    source: str
-    status: str
-    error: str | None = None
-    hooks: tuple[str, ...] = ()
-    provides: tuple[str, ...] = ()
-    description: str = ""
-
-
-@dataclass(frozen=True)
-class AlignerSpec:
-    """An aligner contributed through ``register_aligners``.
-
-    Attributes:
-        name: The ``model=<name>`` of the aligner.
-        module: The :class:`~skelagnostic.aligners.Aligner` subclass.
-        datamodule: The :class:`~skelagnostic.data.MotionDataModule` subclass feeding it.
-        config: Default keyword arguments of ``module`` (the ``model/<name>`` config).
-        description: One line for ``skelagnostic plugins``.
-        plugin: Name of the plugin that registered it.
-        data: The aligner's default data config (stored as ``data/<name>`` and selected
-            when the command line names no ``data=``), or empty for ``data: procedural``.
-        data_options: Data-module keys (e.g. ``window``, ``fps``) the aligner needs
-            whatever the data source; merged over the selected data config, under the
-            command line's overrides.
-        trainer_options: Trainer keys the aligner needs by default (e.g.
-            ``gradient_clip_val``; never a limit such as ``max_time``: those belong in
-            experiments); merged over the selected trainer config, under the command
-            line's overrides.
-    """
-
-    name: str
-    module: type
-    datamodule: type
-    config: Mapping[str, Any] = field(default_factory=dict)
-    description: str = ""
-    plugin: str = ""
-    data: Mapping[str, Any] = field(default_factory=dict)
-    data_options: Mapping[str, Any] = field(default_factory=dict)
-    trainer_options: Mapping[str, Any] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class RepresentationSpec:
-    """A motion representation contributed through ``register_representations``."""
-
-    name: str
-    cls: type
-    plugin: str = ""
-
-
-@dataclass(frozen=True)
-class DatasetSpec:
-    """A dataset reader or preset contributed through ``register_datasets``.
-
-    Attributes:
-        name: The ``data.source=<name>`` of the dataset.
-        factory: ``factory(**options)`` returns a :class:`~skelagnostic.data.ClipSource`.
-        description: One line for ``skelagnostic plugins``.
-        plugin: Name of the plugin that registered it.
-    """
-
-    name: str
-    factory: Callable[..., Any]
-    description: str = ""
-    plugin: str = ""
-
-
-@dataclass(frozen=True)
-class EvaluationSpec:
-    """An evaluation protocol contributed through ``register_evaluations``.
-
-    Attributes:
-        name: The ``protocol=<name>`` of ``skelagnostic evaluate`` (``<method>.<what>``).
-        function: ``function(aligner, held_out, out_dir)`` returning an
-            :class:`~skelagnostic.evaluation.Evaluation`.
-        model: The aligner (``model=<name>``) it evaluates.
-        description: One line for ``skelagnostic plugins`` and the outputs.
-        default: The protocol ``evaluate`` runs for ``model`` when none is named.
-        plugin: Name of the plugin that registered it.
-    """
-
-    name: str
-    function: Callable[..., Any]
-    model: str
-    description: str = ""
-    default: bool = False
-    plugin: str = ""
-
-
-@dataclass(frozen=True)
-class CheckpointReaderSpec:
-    """A reader of ``ckpt=<scheme>:<path>`` contributed through ``register_checkpoint_readers``.
-
-    Attributes:
-        name: The scheme.
-        reader: ``reader(path: str) -> Aligner`` (weights loaded).
-        model: The aligner (``model=<name>``) it builds.
-        description: One line for ``skelagnostic plugins`` and the messages.
-        plugin: Name of the plugin that registered it.
-    """
-
-    name: str
-    reader: Callable[[str], Any]
-    model: str
-    description: str = ""
-    plugin: str = ""
-
-
-@dataclass
-class _Contributions:
-    aligners: list[AlignerSpec] = field(default_factory=list)
-    representations: list[RepresentationSpec] = field(default_factory=list)
-    datasets: list[DatasetSpec] = field(default_factory=list)
-    config_paths: list[tuple[str, str]] = field(default_factory=list)
-    evaluations: list[EvaluationSpec] = field(default_factory=list)
-    checkpoint_readers: list[CheckpointReaderSpec] = field(default_factory=list)
-
 
 def _allowed_plugins() -> frozenset[str] | None:
     value = os.environ.get(LOAD_PLUGINS_ENV)
     if value is None:
         return None
     return frozenset(name.strip() for name in value.split(",") if name.strip())
-
-
-def _error_text(exc: BaseException) -> str:
-    """``"Type: message"`` on one line (control characters escaped, see ``printable``)."""
-    return printable(f"{type(exc).__name__}: {exc}")
 
 
 @contextmanager
@@ -293,7 +140,7 @@ class PluginManager:
         self._pm = pluggy.PluginManager(ENTRY_POINT_GROUP)
         self._pm.add_hookspecs(hookspecs)
         self._infos: dict[str, PluginInfo] = {}
-        self._collected: _Contributions | None = None
+        self._collected: Contributions | None = None
         if builtins:
             from skelagnostic import __version__
             from skelagnostic.plugins import builtin
@@ -339,7 +186,7 @@ class PluginManager:
             raise PluginError(f"plugin {name!r}: {exc}") from exc
         hooks = tuple(h.name for h in self._pm.get_hookcallers(plugin) or ())
         if description is None:
-            description = _first_line(getattr(plugin, "__doc__", None))
+            description = first_line(getattr(plugin, "__doc__", None))
         self._infos[name] = PluginInfo(
             name, version, source, "loaded", hooks=hooks, description=description
         )
@@ -381,7 +228,7 @@ class PluginManager:
             with _user_interrupts() as interrupts:
                 try:
                     plugin = ep.load()
-                    described = _first_line(getattr(plugin, "__doc__", None)) or summary
+                    described = first_line(getattr(plugin, "__doc__", None)) or summary
                     other = self._pm.get_name(plugin)
                     if other is not None:  # the same module under a second entry-point name
                         raise PluginError(
@@ -433,7 +280,7 @@ class PluginManager:
     ) -> None:
         """Warn that plugin ``name`` is skipped; list it as failed under ``key`` (or ``name``)."""
         warnings.warn(
-            printable(f"skelagnostic plugin {name!r} ({source}) skipped: {_error_text(exc)}"),
+            printable(f"skelagnostic plugin {name!r} ({source}) skipped: {error_text(exc)}"),
             PluginLoadWarning,
             stacklevel=3,
         )
@@ -442,7 +289,7 @@ class PluginManager:
         hooks = old.hooks if old is not None else ()
         description = old.description if old is not None else ""
         self._infos[key] = PluginInfo(
-            name, version, source, "failed", _error_text(exc), hooks, description=description
+            name, version, source, "failed", error_text(exc), hooks, description=description
         )
 
     def plugins(self) -> list[PluginInfo]:
@@ -596,10 +443,10 @@ class PluginManager:
         """The dataset registered as ``name``; :class:`PluginError` lists the known ones."""
         return _lookup(self.datasets, name, "dataset")
 
-    def _collect(self) -> _Contributions:
+    def _collect(self) -> Contributions:
         if self._collected is not None:
             return self._collected
-        total = _Contributions()
+        total = Contributions()
         owners: dict[tuple[str, str], str] = {}
         for name, info in list(self._infos.items()):
             if info.status != "loaded":
@@ -607,8 +454,8 @@ class PluginManager:
             plugin = self._pm.get_plugin(name)
             with _user_interrupts() as interrupts:
                 try:
-                    mine = _call_hooks(self._pm, plugin, name)
-                    names = _registered_names(mine, owners, name)
+                    mine = call_hooks(self._pm, plugin, name)
+                    names = registered_names(mine, owners, name)
                 except BaseException as exc:
                     # a plugin whose registration raises, or that registers a name
                     # another plugin holds, is skipped (the first one keeps the name)
@@ -638,64 +485,6 @@ class PluginManager:
         return total
 
 
-def _registered_names(
-    mine: _Contributions, owners: Mapping[tuple[str, str], str], plugin_name: str
-) -> list[tuple[str, str]]:
-    """The ``(kind, name)`` pairs a plugin registered, in order.
-
-    Raises:
-        PluginError: A name is registered by a plugin before this one (the
-            message names both) or twice by this one.
-    """
-    names: list[tuple[str, str]] = []
-    for kind, items in (
-        ("aligner", mine.aligners),
-        ("representation", mine.representations),
-        ("dataset", mine.datasets),
-        ("evaluation", mine.evaluations),
-        ("checkpoint reader", mine.checkpoint_readers),
-    ):
-        for item in items:
-            key = (kind, item.name)
-            if key in owners:
-                raise PluginError(
-                    f"{kind} {item.name!r} is registered by both plugin {owners[key]!r} "
-                    f"and plugin {plugin_name!r} (the first one loaded keeps it)"
-                )
-            if key in names:
-                raise PluginError(f"{kind} {item.name!r} is registered twice by {plugin_name!r}")
-            names.append(key)
-    return names
-
-
-def _first_line(doc: str | None) -> str:
-    """The first line of a docstring, without reStructuredText double backticks."""
-    lines = (doc or "").strip().splitlines()
-    return lines[0].strip().replace("``", "") if lines else ""
-
-
-def config_names(url: str, group: str) -> list[str]:
-    """Names of the ``<group>/*.yaml`` configs under a Hydra search-path URL (sorted).
-
-    Files starting with ``_`` (shared bases) are left out; an unreadable location
-    gives an empty list.
-    """
-    try:
-        if url.startswith("pkg://"):
-            root: Any = resources.files(url[len("pkg://") :].strip("/").replace("/", "."))
-        elif url.startswith("file://"):
-            root = Path(url[len("file://") :])
-        else:
-            return []
-        folder = root.joinpath(group)
-        if not folder.is_dir():
-            return []
-        names = [f.name[:-5] for f in folder.iterdir() if f.name.endswith(".yaml")]
-    except (ImportError, OSError, TypeError, ValueError):
-        return []
-    return sorted(n for n in names if not n.startswith("_"))
-
-
 def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | None:
     """What is wrong with an entry-point plugin's hooks, or ``None``.
 
@@ -720,7 +509,7 @@ def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | 
         for a, f in unmarked.items()
         if any(k.endswith("_impl") for k in getattr(f, "__dict__", {}))
     )
-    undecorated = sorted(a for a in unmarked if a in _HOOKS)
+    undecorated = sorted(a for a in unmarked if a in HOOKS)
     if undecorated or (foreign and not hooks):
         names = undecorated or foreign
         why = " (marked by another project's HookimplMarker)" if set(names) & set(foreign) else ""
@@ -730,110 +519,12 @@ def _hook_problem(plugin: object, target: str, hooks: tuple[str, ...]) -> str | 
         )
     if hooks:
         return None
-    close = sorted(a for a in unmarked if difflib.get_close_matches(a, _HOOKS, n=1, cutoff=0.8))
+    close = sorted(a for a in unmarked if difflib.get_close_matches(a, HOOKS, n=1, cutoff=0.8))
     hint = f" (misspelt hook? {', '.join(close)})" if close else ""
     return (
         f"{target} implements no skelagnostic hook{hint}: decorate functions named "
-        f"{', '.join(_HOOKS)} with @skelagnostic.plugins.hookimpl"
+        f"{', '.join(HOOKS)} with @skelagnostic.plugins.hookimpl"
     )
-
-
-def _config_urls(path: str, plugin_name: str) -> list[str]:
-    """Hydra search-path URLs for a registered config path.
-
-    Hydra's ``pkg://`` source expects a regular package: for a directory without
-    ``__init__.py`` (a namespace package) it warns that the path "is not
-    available" (and whether it still reads the files depends on the Python
-    version and the installation). Such a package is registered as the
-    ``file://`` URL of its directory (or directories) instead.
-
-    Raises:
-        PluginError: A ``pkg://`` URL names no importable package.
-    """
-    if not path.startswith("pkg://"):
-        return [path]
-    package = path[len("pkg://") :].strip("/").replace("/", ".")
-    try:
-        spec = importlib.util.find_spec(package)
-    except (ImportError, ValueError) as exc:
-        spec, error = None, f" ({_error_text(exc)})"
-    else:
-        error = ""
-    if spec is None or spec.submodule_search_locations is None:
-        what = "a module, not a package" if spec is not None else "not importable"
-        raise PluginError(
-            f"plugin {plugin_name!r}: config path {path!r}: {package!r} is {what}{error}; "
-            f"it must be a package directory of YAML files with an __init__.py, "
-            f"shipped as package data"
-        )
-    if spec.origin is not None:  # a regular package: Hydra reads it
-        return [path]
-    return [Path(location).resolve().as_uri() for location in spec.submodule_search_locations]
-
-
-def read_model_config(package: str, name: str) -> dict[str, Any]:
-    """Read ``model/<name>.yaml`` of a plugin's config package: an aligner's defaults.
-
-    The file holds ``_target_`` (the dotted path of the aligner class) and every
-    constructor argument with its default; it is both the Hydra config
-    ``model/<name>`` (when ``package`` is registered with ``register_config_paths``)
-    and the ``config=`` a plugin passes to ``register_aligners``, so the defaults
-    live in one place.
-
-    Args:
-        package: The config package, e.g. ``"skelagnostic_humot.conf"``.
-        name: The aligner name (the file's stem).
-
-    Returns:
-        The file's mapping, ``_target_`` included.
-
-    Raises:
-        PluginError: The file is missing, is not valid YAML, is not a mapping or has
-            no ``_target_``; the message names the file.
-    """
-    from omegaconf import OmegaConf
-    from omegaconf.errors import OmegaConfBaseException
-    from yaml import YAMLError
-
-    where = f"{package}/model/{name}.yaml"
-    try:
-        text = resources.files(package).joinpath("model", f"{name}.yaml").read_text("utf-8")
-    except (ImportError, OSError) as exc:
-        raise PluginError(f"model config {where}: cannot be read ({_error_text(exc)})") from exc
-    try:
-        node = OmegaConf.create(text) if text.strip() else None
-    except (YAMLError, OmegaConfBaseException) as exc:
-        raise PluginError(f"model config {where}: invalid YAML ({_error_text(exc)})") from exc
-    if node is None or not OmegaConf.is_dict(node):
-        raise PluginError(f"model config {where}: expected a mapping of constructor arguments")
-    config: dict[str, Any] = OmegaConf.to_container(node, resolve=False)  # type: ignore[assignment]
-    if not isinstance(config.get("_target_"), str):
-        raise PluginError(
-            f"model config {where}: needs '_target_', the dotted path of the "
-            "aligner class (e.g. 'my_plugin.aligner.MyAligner')"
-        )
-    return config
-
-
-def target_of(cls: type) -> str:
-    """The ``_target_`` naming ``cls``: ``"<module>.<qualname>"``."""
-    return f"{cls.__module__}.{cls.__qualname__}"
-
-
-def _check_target(name: str, target: Any, module: type) -> None:
-    """Raise :class:`PluginError` when a config's ``_target_`` does not name ``module``."""
-    resolved: Any = None
-    if isinstance(target, str) and "." in target:
-        module_name, _, attr = target.rpartition(".")
-        try:
-            resolved = getattr(importlib.import_module(module_name), attr, None)
-        except ImportError:
-            resolved = None
-    if resolved is not module:
-        raise PluginError(
-            f"aligner {name!r}: config _target_={target!r} does not name the "
-            f"registered module {target_of(module)!r}"
-        )
 
 
 def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
@@ -841,136 +532,3 @@ def _lookup(table: Mapping[str, Any], name: str, kind: str) -> Any:
         known = ", ".join(sorted(table)) or "none"
         raise PluginError(f"unknown {kind} {name!r}; registered: {known}")
     return table[name]
-
-
-def _call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> _Contributions:
-    """Call one plugin's registration hooks and return what it registered."""
-    out = _Contributions()
-
-    def register_aligner(
-        name: str,
-        module: type,
-        datamodule: type | None = None,
-        config: Mapping[str, Any] | None = None,
-        description: str = "",
-        data: Mapping[str, Any] | None = None,
-        data_options: Mapping[str, Any] | None = None,
-        trainer_options: Mapping[str, Any] | None = None,
-    ) -> None:
-        from skelagnostic.aligners import Aligner
-        from skelagnostic.data import MotionDataModule
-
-        datamodule = MotionDataModule if datamodule is None else datamodule
-        if not (isinstance(module, type) and issubclass(module, Aligner)):
-            raise PluginError(
-                f"aligner {name!r}: module must be an Aligner subclass, got {module!r}"
-            )
-        if not (isinstance(datamodule, type) and issubclass(datamodule, MotionDataModule)):
-            raise PluginError(
-                f"aligner {name!r}: datamodule must be a MotionDataModule subclass, "
-                f"got {datamodule!r}"
-            )
-        config = dict(config or {})
-        if "_target_" in config:
-            _check_target(name, config.pop("_target_"), module)
-        if "name" in config:
-            raise PluginError(f"aligner {name!r}: config key 'name' is reserved")
-        data = dict(data or {})
-        if data and "source" not in data:
-            raise PluginError(f"aligner {name!r}: data needs a 'source' (a registered dataset)")
-        out.aligners.append(
-            AlignerSpec(
-                name,
-                module,
-                datamodule,
-                MappingProxyType(config),
-                description,
-                plugin_name,
-                MappingProxyType(data),
-                MappingProxyType(dict(data_options or {})),
-                MappingProxyType(dict(trainer_options or {})),
-            )
-        )
-
-    def register_representation(name: str, cls: type) -> None:
-        from skelagnostic.representations import MotionRepresentation
-
-        if not (isinstance(cls, type) and issubclass(cls, MotionRepresentation)):
-            raise PluginError(
-                f"representation {name!r}: cls must be a MotionRepresentation subclass, got {cls!r}"
-            )
-        out.representations.append(RepresentationSpec(name, cls, plugin_name))
-
-    def register_dataset(name: str, factory: Callable[..., Any], description: str = "") -> None:
-        if not callable(factory):
-            raise PluginError(f"dataset {name!r}: factory must be callable, got {factory!r}")
-        out.datasets.append(DatasetSpec(name, factory, description, plugin_name))
-
-    def register_config_path(path: str) -> None:
-        if not isinstance(path, str) or "://" not in path:
-            raise PluginError(
-                f"config path {path!r}: expected a Hydra search-path URL such as "
-                "'pkg://my_plugin.conf' or 'file:///abs/dir'"
-            )
-        for url in _config_urls(path, plugin_name):
-            out.config_paths.append((url, plugin_name))
-
-    def register_evaluation(
-        name: str,
-        function: Callable[..., Any],
-        model: str,
-        description: str = "",
-        default: bool = False,
-    ) -> None:
-        if not callable(function):
-            raise PluginError(f"evaluation {name!r}: function must be callable, got {function!r}")
-        if not isinstance(model, str) or not model:
-            raise PluginError(f"evaluation {name!r}: model must be an aligner name, got {model!r}")
-        if default and any(e.default and e.model == model for e in out.evaluations):
-            raise PluginError(f"evaluation {name!r}: model={model} already has a default protocol")
-        out.evaluations.append(
-            EvaluationSpec(
-                name,
-                function,
-                model,
-                description or _first_line(function.__doc__),
-                bool(default),
-                plugin_name,
-            )
-        )
-
-    def register_checkpoint_reader(
-        scheme: str, reader: Callable[[str], Any], model: str, description: str = ""
-    ) -> None:
-        if not isinstance(scheme, str) or not CHECKPOINT_SCHEME.fullmatch(scheme):
-            raise PluginError(
-                f"checkpoint reader {scheme!r}: the scheme must be a lower-case "
-                "word of two or more letters, digits or underscores"
-            )
-        if not callable(reader):
-            raise PluginError(
-                f"checkpoint reader {scheme!r}: reader must be callable, got {reader!r}"
-            )
-        if not isinstance(model, str) or not model:
-            raise PluginError(
-                f"checkpoint reader {scheme!r}: model must be an aligner name, got {model!r}"
-            )
-        out.checkpoint_readers.append(
-            CheckpointReaderSpec(
-                scheme, reader, model, description or _first_line(reader.__doc__), plugin_name
-            )
-        )
-
-    callbacks = {
-        "register_aligners": register_aligner,
-        "register_checkpoint_readers": register_checkpoint_reader,
-        "register_evaluations": register_evaluation,
-        "register_representations": register_representation,
-        "register_datasets": register_dataset,
-        "register_config_paths": register_config_path,
-    }
-    for hook_name in _HOOKS:
-        for impl in getattr(pm.hook, hook_name).get_hookimpls():
-            if impl.plugin is plugin:
-                impl.function(register=callbacks[hook_name])
-    return out

@@ -1,0 +1,221 @@
+"""The ``register`` callbacks handed to one plugin's hooks, and the check of the names it took.
+
+:func:`call_hooks` calls a plugin's hook implementations, each with the matching
+method of a :class:`Registrar` bound to that plugin; the methods check what they
+are given (a :class:`~skelagnostic.plugins.PluginError` otherwise) and record it,
+so every contribution is attributed to its plugin.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
+from typing import Any
+
+import pluggy
+
+from skelagnostic.plugins.configs import check_target, config_urls
+from skelagnostic.plugins.specs import (
+    AlignerSpec,
+    CheckpointReaderSpec,
+    Contributions,
+    DatasetSpec,
+    EvaluationSpec,
+    PluginError,
+    RepresentationSpec,
+    first_line,
+)
+
+#: The hooks of :mod:`skelagnostic.plugins.hookspecs`, in the order they are called.
+HOOKS = (
+    "register_aligners",
+    "register_representations",
+    "register_datasets",
+    "register_config_paths",
+    "register_evaluations",
+    "register_checkpoint_readers",
+)
+
+#: The ``<scheme>`` of ``ckpt=<scheme>:<path>`` (two characters or more, so a Windows drive
+#: letter is never one).
+CHECKPOINT_SCHEME = re.compile(r"[a-z][a-z0-9_]+")
+
+
+class Registrar:
+    """The ``register`` callbacks of one plugin; :attr:`out` collects what it registered.
+
+    Args:
+        plugin_name: The plugin's name, recorded in every spec.
+    """
+
+    def __init__(self, plugin_name: str) -> None:
+        self.plugin_name = plugin_name
+        self.out = Contributions()
+
+    def callbacks(self) -> dict[str, Callable[..., None]]:
+        """The ``register`` callback of each hook, by hook name."""
+        return {
+            "register_aligners": self.aligner,
+            "register_representations": self.representation,
+            "register_datasets": self.dataset,
+            "register_config_paths": self.config_path,
+            "register_evaluations": self.evaluation,
+            "register_checkpoint_readers": self.checkpoint_reader,
+        }
+
+    def aligner(
+        self,
+        name: str,
+        module: type,
+        datamodule: type | None = None,
+        config: Mapping[str, Any] | None = None,
+        description: str = "",
+        data: Mapping[str, Any] | None = None,
+        data_options: Mapping[str, Any] | None = None,
+        trainer_options: Mapping[str, Any] | None = None,
+    ) -> None:
+        """``register`` of ``register_aligners``."""
+        datamodule = _check_aligner_classes(name, module, datamodule)
+        config = dict(config or {})
+        if "_target_" in config:
+            check_target(name, config.pop("_target_"), module)
+        if "name" in config:
+            raise PluginError(f"aligner {name!r}: config key 'name' is reserved")
+        data = dict(data or {})
+        if data and "source" not in data:
+            raise PluginError(f"aligner {name!r}: data needs a 'source' (a registered dataset)")
+        self.out.aligners.append(
+            AlignerSpec(
+                name,
+                module,
+                datamodule,
+                MappingProxyType(config),
+                description,
+                self.plugin_name,
+                MappingProxyType(data),
+                MappingProxyType(dict(data_options or {})),
+                MappingProxyType(dict(trainer_options or {})),
+            )
+        )
+
+    def representation(self, name: str, cls: type) -> None:
+        """``register`` of ``register_representations``."""
+        from skelagnostic.representations import MotionRepresentation
+
+        if not (isinstance(cls, type) and issubclass(cls, MotionRepresentation)):
+            raise PluginError(
+                f"representation {name!r}: cls must be a MotionRepresentation subclass, got {cls!r}"
+            )
+        self.out.representations.append(RepresentationSpec(name, cls, self.plugin_name))
+
+    def dataset(self, name: str, factory: Callable[..., Any], description: str = "") -> None:
+        """``register`` of ``register_datasets``."""
+        if not callable(factory):
+            raise PluginError(f"dataset {name!r}: factory must be callable, got {factory!r}")
+        self.out.datasets.append(DatasetSpec(name, factory, description, self.plugin_name))
+
+    def config_path(self, path: str) -> None:
+        """``register`` of ``register_config_paths``."""
+        for url in config_urls(path, self.plugin_name):
+            self.out.config_paths.append((url, self.plugin_name))
+
+    def evaluation(
+        self,
+        name: str,
+        function: Callable[..., Any],
+        model: str,
+        description: str = "",
+        default: bool = False,
+    ) -> None:
+        """``register`` of ``register_evaluations``."""
+        if not callable(function):
+            raise PluginError(f"evaluation {name!r}: function must be callable, got {function!r}")
+        _require_model(f"evaluation {name!r}", model)
+        if default and any(e.default and e.model == model for e in self.out.evaluations):
+            raise PluginError(f"evaluation {name!r}: model={model} already has a default protocol")
+        description = description or first_line(function.__doc__)
+        self.out.evaluations.append(
+            EvaluationSpec(name, function, model, description, bool(default), self.plugin_name)
+        )
+
+    def checkpoint_reader(
+        self, scheme: str, reader: Callable[[str], Any], model: str, description: str = ""
+    ) -> None:
+        """``register`` of ``register_checkpoint_readers``."""
+        if not isinstance(scheme, str) or not CHECKPOINT_SCHEME.fullmatch(scheme):
+            raise PluginError(
+                f"checkpoint reader {scheme!r}: the scheme must be a lower-case "
+                "word of two or more letters, digits or underscores"
+            )
+        if not callable(reader):
+            raise PluginError(
+                f"checkpoint reader {scheme!r}: reader must be callable, got {reader!r}"
+            )
+        _require_model(f"checkpoint reader {scheme!r}", model)
+        description = description or first_line(reader.__doc__)
+        self.out.checkpoint_readers.append(
+            CheckpointReaderSpec(scheme, reader, model, description, self.plugin_name)
+        )
+
+
+def _check_aligner_classes(name: str, module: Any, datamodule: Any) -> type:
+    """Check ``module`` and ``datamodule`` of an aligner; the data module (default filled in)."""
+    from skelagnostic.aligners import Aligner
+    from skelagnostic.data import MotionDataModule
+
+    datamodule = MotionDataModule if datamodule is None else datamodule
+    if not (isinstance(module, type) and issubclass(module, Aligner)):
+        raise PluginError(f"aligner {name!r}: module must be an Aligner subclass, got {module!r}")
+    if not (isinstance(datamodule, type) and issubclass(datamodule, MotionDataModule)):
+        raise PluginError(
+            f"aligner {name!r}: datamodule must be a MotionDataModule subclass, got {datamodule!r}"
+        )
+    return datamodule
+
+
+def _require_model(what: str, model: Any) -> None:
+    """Raise :class:`PluginError` unless ``model`` is a non-empty aligner name."""
+    if not isinstance(model, str) or not model:
+        raise PluginError(f"{what}: model must be an aligner name, got {model!r}")
+
+
+def call_hooks(pm: pluggy.PluginManager, plugin: object, plugin_name: str) -> Contributions:
+    """Call one plugin's registration hooks and return what it registered."""
+    registrar = Registrar(plugin_name)
+    callbacks = registrar.callbacks()
+    for hook_name in HOOKS:
+        for impl in getattr(pm.hook, hook_name).get_hookimpls():
+            if impl.plugin is plugin:
+                impl.function(register=callbacks[hook_name])
+    return registrar.out
+
+
+def registered_names(
+    mine: Contributions, owners: Mapping[tuple[str, str], str], plugin_name: str
+) -> list[tuple[str, str]]:
+    """The ``(kind, name)`` pairs a plugin registered, in order.
+
+    Raises:
+        PluginError: A name is registered by a plugin before this one (the
+            message names both) or twice by this one.
+    """
+    names: list[tuple[str, str]] = []
+    for kind, items in (
+        ("aligner", mine.aligners),
+        ("representation", mine.representations),
+        ("dataset", mine.datasets),
+        ("evaluation", mine.evaluations),
+        ("checkpoint reader", mine.checkpoint_readers),
+    ):
+        for item in items:
+            key = (kind, item.name)
+            if key in owners:
+                raise PluginError(
+                    f"{kind} {item.name!r} is registered by both plugin {owners[key]!r} "
+                    f"and plugin {plugin_name!r} (the first one loaded keeps it)"
+                )
+            if key in names:
+                raise PluginError(f"{kind} {item.name!r} is registered twice by {plugin_name!r}")
+            names.append(key)
+    return names
