@@ -27,6 +27,14 @@ from skelagnostic.plugins.manager import (
     PluginManager,
     hookimpl,
 )
+from skelagnostic.plugins.protocols import (
+    RegisterAligner,
+    RegisterCheckpointReader,
+    RegisterConfigPath,
+    RegisterDataset,
+    RegisterEvaluation,
+    RegisterRepresentation,
+)
 from skelagnostic.plugins.specs import (
     AlignerSpec,
     CheckpointReaderSpec,
@@ -52,6 +60,12 @@ __all__ = [
     "PluginInfo",
     "PluginLoadWarning",
     "PluginManager",
+    "RegisterAligner",
+    "RegisterCheckpointReader",
+    "RegisterConfigPath",
+    "RegisterDataset",
+    "RegisterEvaluation",
+    "RegisterRepresentation",
     "RepresentationSpec",
     "get_plugin_manager",
     "hookimpl",

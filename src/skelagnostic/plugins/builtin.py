@@ -6,15 +6,14 @@ loads it (``SKELAGNOSTIC_LOAD_PLUGINS`` only filters entry points).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from functools import partial
-from typing import Any
 
 from skelagnostic.plugins.manager import hookimpl
+from skelagnostic.plugins.protocols import RegisterDataset, RegisterRepresentation
 
 
 @hookimpl
-def register_representations(register: Callable[..., Any]) -> None:
+def register_representations(register: RegisterRepresentation) -> None:
     """Global positions, root-local velocities, local quaternions, FOQ and point clouds."""
     from skelagnostic.representations import BUILTIN_REPRESENTATIONS
 
@@ -23,7 +22,7 @@ def register_representations(register: Callable[..., Any]) -> None:
 
 
 @hookimpl
-def register_datasets(register: Callable[..., Any]) -> None:
+def register_datasets(register: RegisterDataset) -> None:
     """The procedural generator, BVH directories and the dataset presets."""
     from skelagnostic.data.sources import PRESETS, ProceduralSource, bvh_sources, preset_source
 

@@ -11,22 +11,30 @@ found through the ``skelagnostic`` entry-point group::
     example = "skelagnostic_example.plugin"
 
 Built-in components register through these same hooks (see
-:mod:`skelagnostic.plugins.builtin`).
+:mod:`skelagnostic.plugins.builtin`). Each ``register`` is typed by a
+:class:`~typing.Protocol` of :mod:`skelagnostic.plugins.protocols` (``RegisterAligner``,
+``RegisterDataset``, ...): annotate a hook's parameter with it to have its calls checked.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
 import pluggy
+
+from skelagnostic.plugins.protocols import (
+    RegisterAligner,
+    RegisterCheckpointReader,
+    RegisterConfigPath,
+    RegisterDataset,
+    RegisterEvaluation,
+    RegisterRepresentation,
+)
 
 #: Marker for hook specifications (project name ``skelagnostic``).
 hookspec = pluggy.HookspecMarker("skelagnostic")
 
 
 @hookspec
-def register_aligners(register: Callable[..., Any]) -> None:
+def register_aligners(register: RegisterAligner) -> None:
     """Contribute aligners (trainable models) to ``model=<name>``.
 
     Call ``register(name, module, datamodule=MotionDataModule, config=None,
@@ -55,12 +63,13 @@ def register_aligners(register: Callable[..., Any]) -> None:
     ``experiment/`` config.
 
     Args:
-        register: The registration callback.
+        register: The registration callback (its signature: the ``Protocol`` named
+            in the annotation, exported by :mod:`skelagnostic.plugins`).
     """
 
 
 @hookspec
-def register_representations(register: Callable[..., Any]) -> None:
+def register_representations(register: RegisterRepresentation) -> None:
     """Contribute motion representations, selectable with ``data.representation=<name>``.
 
     Call ``register(name, cls)`` once per representation, where ``cls`` is a
@@ -68,12 +77,13 @@ def register_representations(register: Callable[..., Any]) -> None:
     constructor takes keyword options only.
 
     Args:
-        register: The registration callback.
+        register: The registration callback (its signature: the ``Protocol`` named
+            in the annotation, exported by :mod:`skelagnostic.plugins`).
     """
 
 
 @hookspec
-def register_datasets(register: Callable[..., Any]) -> None:
+def register_datasets(register: RegisterDataset) -> None:
     """Contribute dataset readers and presets, selectable with ``data.source=<name>``.
 
     Call ``register(name, factory, description="")`` once per dataset, where
@@ -81,12 +91,13 @@ def register_datasets(register: Callable[..., Any]) -> None:
     (``options`` come from ``data.options`` in the config).
 
     Args:
-        register: The registration callback.
+        register: The registration callback (its signature: the ``Protocol`` named
+            in the annotation, exported by :mod:`skelagnostic.plugins`).
     """
 
 
 @hookspec
-def register_config_paths(register: Callable[..., Any]) -> None:
+def register_config_paths(register: RegisterConfigPath) -> None:
     """Contribute Hydra config search paths (extra ``model/``, ``experiment/``, ... files).
 
     Call ``register(path)`` with a Hydra search-path URL, for example
@@ -94,12 +105,13 @@ def register_config_paths(register: Callable[..., Any]) -> None:
     ``"file:///abs/dir"``.
 
     Args:
-        register: The registration callback.
+        register: The registration callback (its signature: the ``Protocol`` named
+            in the annotation, exported by :mod:`skelagnostic.plugins`).
     """
 
 
 @hookspec
-def register_evaluations(register: Callable[..., Any]) -> None:
+def register_evaluations(register: RegisterEvaluation) -> None:
     """Contribute evaluation protocols, run by ``skelagnostic evaluate protocol=<name>``.
 
     Call ``register(name, function, model, description="", default=False)``
@@ -116,12 +128,13 @@ def register_evaluations(register: Callable[..., Any]) -> None:
     model).
 
     Args:
-        register: The registration callback.
+        register: The registration callback (its signature: the ``Protocol`` named
+            in the annotation, exported by :mod:`skelagnostic.plugins`).
     """
 
 
 @hookspec
-def register_checkpoint_readers(register: Callable[..., Any]) -> None:
+def register_checkpoint_readers(register: RegisterCheckpointReader) -> None:
     """Contribute readers of trained models that ``skelagnostic fit`` did not write.
 
     Call ``register(scheme, reader, model, description="")`` once per reader:
@@ -132,5 +145,6 @@ def register_checkpoint_readers(register: Callable[..., Any]) -> None:
     lower-case word of two or more letters, digits or underscores.
 
     Args:
-        register: The registration callback.
+        register: The registration callback (its signature: the ``Protocol`` named
+            in the annotation, exported by :mod:`skelagnostic.plugins`).
     """

@@ -1,0 +1,113 @@
+"""The signatures of the ``register`` callbacks, one :class:`~typing.Protocol` per hook.
+
+A hook of :mod:`skelagnostic.plugins.hookspecs` receives one of these; annotate
+the hook's parameter with it and a type checker (and an editor) checks the calls::
+
+    from skelagnostic.plugins import RegisterAligner, hookimpl
+
+
+    @hookimpl
+    def register_aligners(register: RegisterAligner) -> None:
+        register("mine", MyAligner, MyDataModule, config={"hidden": 64})
+
+The classes are imported lazily by skelagnostic (the types here are names only),
+so importing this module costs nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    from skelagnostic.aligners import Aligner
+    from skelagnostic.data import ClipSource, MotionDataModule
+    from skelagnostic.representations import MotionRepresentation
+
+
+class RegisterAligner(Protocol):
+    """``register`` of ``register_aligners``: contribute ``model=<name>``."""
+
+    def __call__(
+        self,
+        name: str,
+        module: type[Aligner],
+        datamodule: type[MotionDataModule] | None = None,
+        config: Mapping[str, Any] | None = None,
+        description: str = "",
+        data: Mapping[str, Any] | None = None,
+        data_options: Mapping[str, Any] | None = None,
+        trainer_options: Mapping[str, Any] | None = None,
+    ) -> None:
+        """Register one aligner.
+
+        Args:
+            name: The ``model=<name>`` of the aligner.
+            module: The :class:`~skelagnostic.aligners.Aligner` subclass.
+            datamodule: The :class:`~skelagnostic.data.MotionDataModule` subclass
+                producing its batches (``None``: ``MotionDataModule``).
+            config: Default keyword arguments of ``module`` (see
+                :func:`skelagnostic.plugins.read_model_config`).
+            description: One line for ``skelagnostic plugins``.
+            data: The aligner's default data config (with a ``source``).
+            data_options: Data-module keys the aligner needs whatever the data.
+            trainer_options: Trainer keys it needs by default (never a limit).
+        """
+
+
+class RegisterRepresentation(Protocol):
+    """``register`` of ``register_representations``: contribute ``data.representation=<name>``."""
+
+    def __call__(self, name: str, cls: type[MotionRepresentation]) -> None:
+        """Register one motion representation (its constructor takes keyword options only)."""
+
+
+class RegisterDataset(Protocol):
+    """``register`` of ``register_datasets``: contribute ``data.source=<name>``."""
+
+    def __call__(
+        self, name: str, factory: Callable[..., ClipSource], description: str = ""
+    ) -> None:
+        """Register one dataset: ``factory(**options)`` returns its clips."""
+
+
+class RegisterConfigPath(Protocol):
+    """``register`` of ``register_config_paths``: add a Hydra search path."""
+
+    def __call__(self, path: str) -> None:
+        """Register ``"pkg://my_plugin.conf"`` (a package of YAML files) or ``"file:///abs/dir"``."""
+
+
+class RegisterEvaluation(Protocol):
+    """``register`` of ``register_evaluations``: contribute ``protocol=<name>``."""
+
+    def __call__(
+        self,
+        name: str,
+        function: Callable[..., Any],
+        model: str,
+        description: str = "",
+        default: bool = False,
+    ) -> None:
+        """Register one protocol: ``function(aligner, held_out, out_dir, **options)``.
+
+        Args:
+            name: ``<method>.<what>``, e.g. ``humot.reconstruction``.
+            function: Returns a :class:`~skelagnostic.evaluation.Evaluation`.
+            model: The aligner name the protocol evaluates.
+            description: One line (``None``: the function's first docstring line).
+            default: The protocol ``evaluate`` runs for ``model`` when none is named.
+        """
+
+
+class RegisterCheckpointReader(Protocol):
+    """``register`` of ``register_checkpoint_readers``: accept ``ckpt=<scheme>:<path>``."""
+
+    def __call__(
+        self,
+        scheme: str,
+        reader: Callable[[str], Aligner],
+        model: str,
+        description: str = "",
+    ) -> None:
+        """Register one reader: ``reader(path)`` returns the ``model`` aligner, weights loaded."""
