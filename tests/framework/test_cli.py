@@ -552,7 +552,7 @@ class _LateLayerPlugin:
             def setup(self, stage: str) -> None:
                 self.late = torch.nn.Linear(2, 2)
 
-        register("latelayer", LateLayer, config={"hidden": 8})
+        register("latelayer", LateLayer, config={"model": {"hidden": 8}})
 
 
 def test_ema_names_the_layers_an_aligner_builds_too_late(
@@ -591,10 +591,12 @@ class _DataDefaultsPlugin:
         register(
             "withdata",
             ExampleAligner,
-            config={"hidden": 8},
-            data={"source": "procedural", "kinds": ["biped31"], "seconds": 3.0},
-            data_options={"window": 20, "fps": 25},
-            trainer_options={"max_time": "00:00:01:00", "max_epochs": 3},
+            config={
+                "model": {"hidden": 8},
+                "data": {"source": "procedural", "kinds": ["biped31"], "seconds": 3.0},
+                "data_options": {"window": 20, "fps": 25},
+                "trainer_options": {"max_time": "00:00:01:00", "max_epochs": 3},
+            },
         )
 
 
@@ -645,7 +647,7 @@ def test_aligner_data_defaults_need_a_source(example_plugin: Path) -> None:
         def register_aligners(register) -> None:
             from skelagnostic_example.aligner import ExampleAligner
 
-            register("bad", ExampleAligner, data={"kinds": ["biped31"]})
+            register("bad", ExampleAligner, config={"data": {"kinds": ["biped31"]}})
 
     pm = plugins.PluginManager(load_entrypoints=False)
     pm.register(Bad(), "bad")

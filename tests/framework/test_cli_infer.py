@@ -59,7 +59,7 @@ class Keyed(ExampleAligner):
 
 @hookimpl
 def register_aligners(register):
-    register("keyed", Keyed, ExampleDataModule, config={"hidden": 16, "latent": 4})
+    register("keyed", Keyed, ExampleDataModule, config={"model": {"hidden": 16, "latent": 4}})
 """
 
 

@@ -44,7 +44,7 @@ def nothing(aligner, held_out, out_dir):
 
 @hookimpl
 def register_aligners(register):
-    register("other", Other, ExampleDataModule, config={"hidden": 8, "latent": 4})
+    register("other", Other, ExampleDataModule, config={"model": {"hidden": 8, "latent": 4}})
 
 
 @hookimpl

@@ -1,4 +1,4 @@
-"""One source of truth for aligner defaults: ``conf/model/<name>.yaml`` == constructor defaults.
+"""One source of truth for aligner defaults: ``conf/<name>.yaml``'s model == constructor defaults.
 
 Every registered aligner (the built-ins and the example third-party plugin) reads its
 defaults from the YAML file its plugin ships; the constructor's signature defaults must be
@@ -12,6 +12,7 @@ import importlib
 import inspect
 import sys
 from collections.abc import Iterator
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ from omegaconf import OmegaConf
 
 import skelagnostic.plugins as plugins_api
 from skelagnostic.cli import app
-from skelagnostic.plugins import PluginError, PluginManager, read_model_config, target_of
+from skelagnostic.plugins import PluginError, PluginManager, read_aligner_config, target_of
 
 REPO = Path(__file__).resolve().parents[2]
 PLUGINS = {  # entry-point name -> (source directory, plugin module)
@@ -77,7 +78,7 @@ def test_config_defaults_equal_signature_defaults(pm: PluginManager, name: str) 
 def test_the_yaml_file_is_the_registered_config(pm: PluginManager, name: str) -> None:
     spec = pm.aligner(name)
     package = f"{spec.module.__module__.split('.')[0]}.conf"
-    config = read_model_config(package, name)
+    config = read_aligner_config(files(package) / f"{name}.yaml")["model"]
     assert config.pop("_target_") == target_of(spec.module)
     assert config == dict(spec.config)
 
@@ -107,23 +108,27 @@ def test_load_aligner_builds_the_class_default_network(
 
 
 def test_missing_model_file_names_the_file() -> None:
-    with pytest.raises(PluginError, match=r"skelagnostic\.conf/model/nope\.yaml"):
-        read_model_config("skelagnostic.conf", "nope")
+    with pytest.raises(PluginError, match=r"conf/nope\.yaml: cannot be read"):
+        read_aligner_config(files("skelagnostic.conf") / "nope.yaml")
 
 
 def test_model_file_without_target_is_refused(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     package = tmp_path / "cfgless_plugin_conf"
-    (package / "model").mkdir(parents=True)
+    package.mkdir()
     (package / "__init__.py").write_text("")
-    (package / "model" / "mine.yaml").write_text("hidden: 3\n")
-    (package / "model" / "list.yaml").write_text("- 1\n- 2\n")
+    (package / "mine.yaml").write_text("model:\n  hidden: 3\n")
+    (package / "list.yaml").write_text("- 1\n- 2\n")
+    (package / "flat.yaml").write_text("hidden: 3\n")
     monkeypatch.syspath_prepend(str(tmp_path))
-    with pytest.raises(PluginError, match=r"conf/model/mine\.yaml: needs '_target_'"):
-        read_model_config("cfgless_plugin_conf", "mine")
+    conf = files("cfgless_plugin_conf")
+    with pytest.raises(PluginError, match=r"conf/mine\.yaml: 'model' needs '_target_'"):
+        read_aligner_config(conf / "mine.yaml")
     with pytest.raises(PluginError, match=r"list\.yaml: expected a mapping"):
-        read_model_config("cfgless_plugin_conf", "list")
+        read_aligner_config(conf / "list.yaml")
+    with pytest.raises(PluginError, match=r"unknown section\(s\) 'hidden'.*go under 'model'"):
+        read_aligner_config(conf / "flat.yaml")
 
 
 def test_a_target_naming_another_class_is_refused(pm: PluginManager) -> None:
@@ -132,7 +137,9 @@ def test_a_target_naming_another_class_is_refused(pm: PluginManager) -> None:
     class Plugin:
         @plugins_api.hookimpl
         def register_aligners(self, register: Any) -> None:
-            register("wrong", humot, config={"_target_": "skelagnostic.aligners.Aligner"})
+            register(
+                "wrong", humot, config={"model": {"_target_": "skelagnostic.aligners.Aligner"}}
+            )
 
     other = PluginManager(load_entrypoints=False)
     other.register(Plugin(), "wrong")
@@ -140,14 +147,33 @@ def test_a_target_naming_another_class_is_refused(pm: PluginManager) -> None:
         assert "wrong" not in other.aligners
 
 
+def test_a_plugin_whose_config_file_is_missing_is_reported_and_skipped(
+    pm: PluginManager, tmp_path: Path
+) -> None:
+    humot = pm.aligner("humot").module
+
+    class Plugin:
+        @plugins_api.hookimpl
+        def register_aligners(self, register: Any) -> None:
+            register("gone", humot, config=tmp_path / "gone.yaml")
+
+    other = PluginManager(load_entrypoints=False)
+    other.register(Plugin(), "gone")
+    with pytest.warns(plugins_api.PluginLoadWarning, match=r"gone\.yaml: cannot be read"):
+        assert "gone" not in other.aligners
+    assert other.plugins()[-1].status == "failed"
+
+
 def test_no_model_yaml_sets_trainer_keys() -> None:
     # A model's defaults never set the trainer (issue 48, item 4): limits live in experiments.
-    files = sorted(REPO.glob("plugins/*/src/*/conf/model/*.yaml"))
-    assert len(files) >= len(ALIGNERS)
-    for path in files:
+    paths = sorted(REPO.glob("plugins/*/src/*/conf/*.yaml"))
+    assert len(paths) >= len(ALIGNERS)
+    for path in paths:
         text = path.read_text()
-        assert "@package" not in text, f"{path}: a model file must stay in the model package"
-        assert "trainer" not in OmegaConf.load(path), f"{path} sets trainer keys"
+        assert "@package" not in text, f"{path}: a model section must stay in the model package"
+        config = OmegaConf.load(path)
+        assert "trainer" not in config.model, f"{path} sets trainer keys"
+        assert "trainer_options" not in config, f"{path} sets trainer keys"
 
 
 @pytest.mark.parametrize("name", ALIGNERS)

@@ -28,7 +28,7 @@ def test_files_are_named_after_the_plugin() -> None:
         "src/skelagnostic_tiny_net/plugin.py",
         "src/skelagnostic_tiny_net/aligner.py",
         "src/skelagnostic_tiny_net/conf/__init__.py",
-        "src/skelagnostic_tiny_net/conf/model/tiny_net.yaml",
+        "src/skelagnostic_tiny_net/conf/tiny_net.yaml",
         "src/skelagnostic_tiny_net/conf/experiment/tiny_net_quick.yaml",
         "tests/test_tiny_net.py",
     }
@@ -61,7 +61,7 @@ def test_the_printed_install_command_keeps_the_installed_torch(
 
 def test_generated_model_yaml_equals_the_generated_constructor_defaults() -> None:
     layout = new_plugin.files("tiny_net")
-    config = yaml.safe_load(layout["src/skelagnostic_tiny_net/conf/model/tiny_net.yaml"])
+    config = yaml.safe_load(layout["src/skelagnostic_tiny_net/conf/tiny_net.yaml"])["model"]
     assert config.pop("_target_") == "skelagnostic_tiny_net.aligner.TinyNetAligner"
     tree = ast.parse(layout["src/skelagnostic_tiny_net/aligner.py"])
     (init,) = [

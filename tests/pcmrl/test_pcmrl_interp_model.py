@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from importlib.resources import files
 from pathlib import Path
 
 import lightning as L
@@ -23,7 +24,7 @@ from skelagnostic import Motion, procedural
 from skelagnostic.baselines import lerp_slerp
 from skelagnostic.core import quaternion as Q
 from skelagnostic.errors import MotionError, SkelagnosticError
-from skelagnostic.plugins import read_model_config
+from skelagnostic.plugins import read_aligner_config
 
 TINY = {"dim": 16, "heads": 2, "layers": 1, "ff_mult": 2, "max_relative": 16}
 
@@ -42,7 +43,7 @@ def _tiny(residual: bool = False, window: int = 32, **options: object) -> PcmrlI
 
 
 def test_paper_defaults() -> None:
-    config = read_model_config("skelagnostic_pcmrl.conf", "pcmrl_interp")
+    config = read_aligner_config(files("skelagnostic_pcmrl.conf") / "pcmrl_interp.yaml")["model"]
     assert config["dim"] == 512 and config["heads"] == 8
     assert config["layers"] == 6 and config["lr"] == 1e-4
     assert config["warmup_steps"] == 10000 and config["w_fk"] == 0.1

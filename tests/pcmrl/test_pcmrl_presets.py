@@ -18,6 +18,7 @@ model key, so neither the comments nor the guide can drift from the configs.
 from __future__ import annotations
 
 import re
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ import yaml
 from omegaconf import OmegaConf
 
 from skelagnostic.cli import app
-from skelagnostic.plugins import read_model_config
+from skelagnostic.plugins import read_aligner_config
 
 REPO = Path(__file__).resolve().parents[2]
 EXPERIMENTS = REPO / "plugins" / "pcmrl" / "src" / "skelagnostic_pcmrl" / "conf" / "experiment"
@@ -100,7 +101,7 @@ def test_documented_deviations_are_exactly_the_overrides(pcmrl_pm, tmp_path, pre
     cfg = app.compose(
         [f"model={model}", f"experiment={preset}", f"run_dir={tmp_path}"], plugin_manager=pcmrl_pm
     )
-    defaults = read_model_config("skelagnostic_pcmrl.conf", model)
+    defaults = read_aligner_config(files("skelagnostic_pcmrl.conf") / f"{model}.yaml")["model"]
     composed = OmegaConf.to_container(cfg.model, resolve=False)
     changed = {
         f"model.{k}": v

@@ -7,10 +7,10 @@ or the error in one line, and cleans up after a failed run.
 
 The config tree (the repository's ``conf/``) is installed as the package
 ``skelagnostic.conf``, so an installed ``skelagnostic`` works from any directory.
-Plugin config paths, which hold each aligner's ``model/<name>.yaml``, are added to
-Hydra's search path; :func:`register_model_configs` stores the rest of each aligner's
-configuration in Hydra's ConfigStore. The command is re-entrant from
-``sys.argv`` alone, which Lightning's DDP launcher relies on: it re-executes
+Plugin config paths (experiments, data presets) are added to Hydra's search path;
+:func:`~skelagnostic.cli.model_configs.register_model_configs` stores each aligner's
+configuration, read once from its plugin's file, in Hydra's ConfigStore. The command
+is re-entrant from ``sys.argv`` alone, which Lightning's DDP launcher relies on: it re-executes
 the same command line (plus ``hydra.run.dir=...``) for every extra rank.
 """
 
@@ -24,10 +24,8 @@ import shutil
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
 
 import hydra
-from hydra.core.config_store import ConfigStore
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 from lightning.fabric.utilities.exceptions import MisconfigurationException
@@ -38,6 +36,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from skelagnostic.allocator import kernel_time_hint
 from skelagnostic.cli.build import ConfigError, build_datamodule
+from skelagnostic.cli.model_configs import ALIGNER_GROUP, register_model_configs
 from skelagnostic.cli.runs import (
     LOCK_FILE,
     SPLIT_FILE,
@@ -63,8 +62,7 @@ from skelagnostic.cli.tasks import (
 )
 from skelagnostic.core.paths import expand_home_in_override
 from skelagnostic.errors import SkelagnosticError, error_line, printable
-from skelagnostic.plugins import PluginManager, get_plugin_manager, target_of
-from skelagnostic.plugins.configs import config_names
+from skelagnostic.plugins import PluginManager, get_plugin_manager
 
 __all__ = [
     "MAX_SEED",
@@ -89,60 +87,9 @@ __all__ = [
 CONFIG_MODULE = "skelagnostic.conf"
 #: Set to ``1`` (or pass ``--debug``) for full tracebacks on configuration errors.
 DEBUG_ENV = "SKELAGNOSTIC_DEBUG"
-#: Provider name of the configs this module puts into Hydra's ConfigStore.
-_PROVIDER = "skelagnostic"
-#: Config group of the per-aligner ``model.name``, data and trainer options (internal).
-ALIGNER_GROUP = "_aligner"
 
 
 # ----------------------------------------------------------------- composition
-def register_model_configs(pm: PluginManager) -> None:
-    """Store each registered aligner's configs in Hydra's ConfigStore.
-
-    For every aligner ``<name>``:
-
-    * ``model/<name>``: ``_target_`` and the registered defaults, unless a
-      registered config path ships ``model/<name>.yaml`` (Hydra reads that file,
-      from which the plugin read its defaults);
-    * ``_aligner/<name>`` (global package, selected by ``_aligner: ${model}`` in
-      ``config.yaml``): ``model.name`` and the aligner's ``data_options`` and
-      ``trainer_options``;
-    * ``data/<name>`` (selected by ``data: ${model}`` unless the command line or an
-      experiment names ``data=``): the aligner's default data, else ``procedural``.
-
-    Hydra's ConfigStore is one per process: the entries stored for an earlier
-    plugin manager (tagged with the provider ``skelagnostic``) are removed
-    first, so it lists exactly the aligners of ``pm``.
-    """
-    store = ConfigStore.instance()
-    for group in ("model", "data", ALIGNER_GROUP):
-        nodes = store.repo.get(group, {})
-        for key in [k for k, v in nodes.items() if getattr(v, "provider", None) == _PROVIDER]:
-            del nodes[key]
-    shipped = {name for url in pm.config_paths for name in config_names(url, "model")}
-    for name, spec in pm.aligners.items():
-        if name not in shipped:
-            store.store(
-                group="model",
-                name=name,
-                node={"_target_": target_of(spec.module), **dict(spec.config)},
-                provider=_PROVIDER,
-            )
-        data: dict[str, Any] = dict(spec.data) if spec.data else {}
-        base = "/data_defaults@_here_" if data else "/data/procedural@_here_"
-        store.store(
-            group="data", name=name, node={"defaults": [base, "_self_"], **data}, provider=_PROVIDER
-        )
-        node: dict[str, Any] = {"model": {"name": name}}
-        if spec.data_options:
-            node["data"] = dict(spec.data_options)
-        if spec.trainer_options:
-            node["trainer"] = dict(spec.trainer_options)
-        store.store(
-            group=ALIGNER_GROUP, name=name, node=node, package="_global_", provider=_PROVIDER
-        )
-
-
 def compose(
     overrides: Sequence[str] = (), task: str = "fit", plugin_manager: PluginManager | None = None
 ) -> DictConfig:

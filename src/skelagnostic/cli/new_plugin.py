@@ -69,7 +69,7 @@ $ pytest tests                          # the skelagnostic.testing contract
 so that pip keeps it (an unpinned torch can pull a multi-GB CUDA build).
 
 Edit `src/__PKG__/aligner.py` (the network, losses, `encode`/`decode`); its
-defaults are `src/__PKG__/conf/model/__NAME__.yaml`, which must equal the
+config is `src/__PKG__/conf/__NAME__.yaml`, whose `model` section must equal the
 constructor's default values. See "Write your own aligner" in the
 skelagnostic documentation.
 """
@@ -96,18 +96,17 @@ group ``skelagnostic``). The first line of this docstring is the description
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from importlib.resources import files
 
-from skelagnostic.plugins import hookimpl, read_model_config
+from skelagnostic.plugins import RegisterAligner, RegisterConfigPath, hookimpl
 
-#: The plugin's Hydra configs: ``model/__NAME__.yaml`` (the defaults, ``model.hidden=128``
-#: overrides) and ``experiment/``.
+#: The plugin's configs: ``__NAME__.yaml`` (the aligner's config, read once when it is
+#: registered: its defaults, which ``model.hidden=128`` overrides) and ``experiment/``.
 CONFIG_PACKAGE = "__PKG__.conf"
 
 
 @hookimpl
-def register_aligners(register: Callable[..., Any]) -> None:
+def register_aligners(register: RegisterAligner) -> None:
     """Register ``model=__NAME__``."""
     from __PKG__.aligner import __CLASS__Aligner, __CLASS__DataModule
 
@@ -115,14 +114,14 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "__NAME__",
         __CLASS__Aligner,
         __CLASS__DataModule,
-        config=read_model_config(CONFIG_PACKAGE, "__NAME__"),
+        config=files(CONFIG_PACKAGE) / "__NAME__.yaml",
         description="__NAME__: per-joint MLP autoencoder over root-local positions",
     )
 
 
 @hookimpl
-def register_config_paths(register: Callable[..., Any]) -> None:
-    """Ship ``model/__NAME__`` and ``experiment=__NAME___quick`` (``conf/`` is a package)."""
+def register_config_paths(register: RegisterConfigPath) -> None:
+    """Ship ``experiment=__NAME___quick`` (``conf/`` is a package)."""
     register(f"pkg://{CONFIG_PACKAGE}")
 '''
 
@@ -282,12 +281,15 @@ _CONF_INIT = '''\
 '''
 
 _MODEL = """\
-# model=__NAME__: the defaults of __CLASS__Aligner, every constructor argument with its
-# default value (keep them equal to the signature's).
-_target_: __PKG__.aligner.__CLASS__Aligner
-hidden: 64
-latent: 16
-lr: 0.003
+# The config of model=__NAME__, read once by skelagnostic when the plugin registers it.
+# model: the defaults of __CLASS__Aligner, every constructor argument with its default value
+# (keep them equal to the signature's). Optional sections: data (the default data when the
+# command line names no data=), data_options (data-module keys for any data).
+model:
+  _target_: __PKG__.aligner.__CLASS__Aligner
+  hidden: 64
+  latent: 16
+  lr: 0.003
 """
 
 _EXPERIMENT = """\
@@ -352,7 +354,7 @@ def files(name: str) -> dict[str, str]:
         f"src/{pkg}/plugin.py": _PLUGIN,
         f"src/{pkg}/aligner.py": _ALIGNER,
         f"src/{pkg}/conf/__init__.py": _CONF_INIT,
-        f"src/{pkg}/conf/model/{name}.yaml": _MODEL,
+        f"src/{pkg}/conf/{name}.yaml": _MODEL,
         f"src/{pkg}/conf/experiment/{name}_quick.yaml": _EXPERIMENT,
         f"tests/test_{name}.py": _TEST,
     }

@@ -20,7 +20,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from skelagnostic.plugins.configs import read_model_config, target_of
+from skelagnostic.plugins.configs import read_aligner_config, target_of
 from skelagnostic.plugins.manager import (
     ENTRY_POINT_GROUP,
     LOAD_PLUGINS_ENV,
@@ -28,6 +28,7 @@ from skelagnostic.plugins.manager import (
     hookimpl,
 )
 from skelagnostic.plugins.protocols import (
+    AlignerConfigSource,
     RegisterAligner,
     RegisterCheckpointReader,
     RegisterConfigPath,
@@ -52,6 +53,7 @@ if TYPE_CHECKING:
 __all__ = [
     "ENTRY_POINT_GROUP",
     "LOAD_PLUGINS_ENV",
+    "AlignerConfigSource",
     "AlignerSpec",
     "CheckpointReaderSpec",
     "DatasetSpec",
@@ -73,7 +75,7 @@ __all__ = [
     "list_datasets",
     "list_representations",
     "load_aligner",
-    "read_model_config",
+    "read_aligner_config",
     "target_of",
 ]
 

@@ -1,4 +1,21 @@
-"""Reading plugin configs: an aligner's model YAML file and the Hydra search paths plugins register.
+"""Reading plugin configs: an aligner's YAML file and the Hydra search paths plugins register.
+
+An aligner's configuration lives in one YAML file, which its plugin names when it
+registers the aligner (``register(name, module, datamodule, config=<file>)``);
+skelagnostic reads it once, here, and Hydra's ``model/<name>``, ``data/<name>``
+and ``_aligner/<name>`` configs are made from what was read (see
+:mod:`skelagnostic.cli.model_configs`). The file has up to four sections::
+
+    model:            # model/<name>: _target_ (the aligner class) and every constructor argument
+      _target_: my_plugin.aligner.MyAligner
+      hidden: 64
+    data:             # data/<name>: the default data when the command line names no data=
+      source: procedural
+      kinds: [biped22]
+    data_options:     # data-module keys the aligner needs whatever the data
+      window: 30
+    trainer_options:  # trainer keys it needs by default (never a limit such as max_steps)
+      gradient_clip_val: 1.0
 
 This module imports neither Hydra nor pluggy (OmegaConf reads the YAML).
 """
@@ -7,55 +24,87 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
+from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skelagnostic.plugins.specs import PluginError, error_text
 
+if TYPE_CHECKING:
+    from skelagnostic.plugins.protocols import AlignerConfigSource
 
-def read_model_config(package: str, name: str) -> dict[str, Any]:
-    """Read ``model/<name>.yaml`` of a plugin's config package: an aligner's defaults.
+#: The sections of an aligner's config file, in order.
+ALIGNER_SECTIONS = ("model", "data", "data_options", "trainer_options")
 
-    The file holds ``_target_`` (the dotted path of the aligner class) and every
-    constructor argument with its default; it is both the Hydra config
-    ``model/<name>`` (when ``package`` is registered with ``register_config_paths``)
-    and the ``config=`` a plugin passes to ``register_aligners``, so the defaults
-    live in one place.
+
+def read_aligner_config(source: AlignerConfigSource) -> dict[str, dict[str, Any]]:
+    """Read an aligner's config file: ``model``, ``data``, ``data_options``, ``trainer_options``.
 
     Args:
-        package: The config package, e.g. ``"skelagnostic_humot.conf"``.
-        name: The aligner name (the file's stem).
+        source: The YAML file (a path or an ``importlib.resources`` traversable), or
+            its content as a mapping.
 
     Returns:
-        The file's mapping, ``_target_`` included.
+        Every section (empty when the file leaves it out), unresolved; ``model``
+        keeps its ``_target_``.
 
     Raises:
-        PluginError: The file is missing, is not valid YAML, is not a mapping or has
-            no ``_target_``; the message names the file.
+        PluginError: The file cannot be read, is not valid YAML, is not a mapping of
+            the sections above, or a section is not a mapping; a file's ``model``
+            needs a ``_target_``. The message names the file.
     """
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
     from yaml import YAMLError
 
-    where = f"{package}/model/{name}.yaml"
-    try:
-        text = resources.files(package).joinpath("model", f"{name}.yaml").read_text("utf-8")
-    except (ImportError, OSError) as exc:
-        raise PluginError(f"model config {where}: cannot be read ({error_text(exc)})") from exc
-    try:
-        node = OmegaConf.create(text) if text.strip() else None
-    except (YAMLError, OmegaConfBaseException) as exc:
-        raise PluginError(f"model config {where}: invalid YAML ({error_text(exc)})") from exc
-    if node is None or not OmegaConf.is_dict(node):
-        raise PluginError(f"model config {where}: expected a mapping of constructor arguments")
-    config: dict[str, Any] = OmegaConf.to_container(node, resolve=False)  # type: ignore[assignment]
-    if not isinstance(config.get("_target_"), str):
+    if isinstance(source, Mapping):
+        where, content = "config", OmegaConf.to_container(OmegaConf.create(dict(source)))
+    else:
+        where = f"aligner config {source}"
+        try:
+            text = _read_text(source)
+        except OSError as exc:
+            raise PluginError(f"{where}: cannot be read ({error_text(exc)})") from exc
+        try:
+            node = OmegaConf.create(text) if text.strip() else None
+        except (YAMLError, OmegaConfBaseException) as exc:
+            raise PluginError(f"{where}: invalid YAML ({error_text(exc)})") from exc
+        if node is None or not OmegaConf.is_dict(node):
+            raise PluginError(f"{where}: expected a mapping with a 'model' section")
+        content = OmegaConf.to_container(node, resolve=False)
+    return _sections(content, where, needs_target=not isinstance(source, Mapping))
+
+
+def _read_text(source: Any) -> str:
+    """The text of a path or a traversable."""
+    if hasattr(source, "read_text") and not isinstance(source, (str, os.PathLike)):
+        return str(source.read_text(encoding="utf-8"))
+    return Path(source).read_text(encoding="utf-8")
+
+
+def _sections(content: Any, where: str, *, needs_target: bool) -> dict[str, dict[str, Any]]:
+    """Check the sections of an aligner config; every one present, as a plain dict."""
+    unknown = sorted(set(content) - set(ALIGNER_SECTIONS))
+    if unknown:
         raise PluginError(
-            f"model config {where}: needs '_target_', the dotted path of the "
+            f"{where}: unknown section(s) {', '.join(map(repr, unknown))}; an aligner "
+            f"config has {', '.join(ALIGNER_SECTIONS)} (the constructor's arguments go "
+            "under 'model')"
+        )
+    sections: dict[str, dict[str, Any]] = {}
+    for key in ALIGNER_SECTIONS:
+        value = content.get(key) or {}
+        if not isinstance(value, Mapping):
+            raise PluginError(f"{where}: '{key}' must be a mapping, got {value!r}")
+        sections[key] = dict(value)
+    if needs_target and not isinstance(sections["model"].get("_target_"), str):
+        raise PluginError(
+            f"{where}: 'model' needs '_target_', the dotted path of the "
             "aligner class (e.g. 'my_plugin.aligner.MyAligner')"
         )
-    return config
+    return sections
 
 
 def target_of(cls: type) -> str:

@@ -38,29 +38,25 @@ def register_aligners(register: RegisterAligner) -> None:
     """Contribute aligners (trainable models) to ``model=<name>``.
 
     Call ``register(name, module, datamodule=MotionDataModule, config=None,
-    description="", data=None, data_options=None, trainer_options=None)`` once
-    per aligner, where
-    ``module`` is an :class:`~skelagnostic.aligners.Aligner` subclass,
+    description="")`` once per aligner (:class:`~skelagnostic.plugins.RegisterAligner`),
+    where ``module`` is an :class:`~skelagnostic.aligners.Aligner` subclass,
     ``datamodule`` a :class:`~skelagnostic.data.MotionDataModule` subclass that
-    produces the batches the aligner trains on, and ``config`` a mapping of
-    default keyword arguments for ``module``. ``config`` becomes the Hydra
-    config ``model/<name>``. Keep the defaults in one place: ship them as
-    ``conf/model/<name>.yaml`` in the plugin's config package (``_target_``
-    naming ``module``, then every constructor argument with its default value)
-    and pass ``config=read_model_config("my_plugin.conf", name)``
-    (:func:`skelagnostic.plugins.read_model_config`). A ``_target_`` key is
-    checked against ``module`` and is not a keyword argument.
+    produces the batches the aligner trains on, and ``config`` the aligner's config
+    file, e.g. ``files("my_plugin.conf") / "mine.yaml"``: the one place of its
+    configuration, read once here (:func:`skelagnostic.plugins.read_aligner_config`).
 
-    ``data`` (optional) is the aligner's default data config, with a ``source``
-    key: it becomes ``data/<name>`` and is used when the command line names no
-    ``data=...``. ``data_options`` (optional) are data-module keys the aligner
-    needs whatever the data (e.g. ``{"fps": 30, "window": 30}``): they are
-    merged over the selected data config, and command-line ``data.<key>=...``
-    overrides still win. ``trainer_options`` (optional) do the same for the
-    trainer config (e.g. ``{"gradient_clip_val": 1.0}``). They must not set a limit
-    (``max_time``, ``max_steps``, ``max_epochs``, ...): a model's defaults that end
-    a run would override the user's ``trainer.max_steps``; put budgets in an
-    ``experiment/`` config.
+    Its ``model`` section is the Hydra config ``model/<name>``: ``_target_`` naming
+    ``module``, then every constructor argument with its default value (checked
+    against ``module``; ``name`` is reserved). ``data`` (optional) is the aligner's
+    default data config, with a ``source`` key: it becomes ``data/<name>`` and is
+    used when the command line names no ``data=...``. ``data_options`` (optional)
+    are data-module keys the aligner needs whatever the data (e.g. ``fps: 30``):
+    they are merged over the selected data config, and command-line
+    ``data.<key>=...`` overrides still win. ``trainer_options`` (optional) do the
+    same for the trainer config (e.g. ``gradient_clip_val: 1.0``). They must not set
+    a limit (``max_time``, ``max_steps``, ``max_epochs``, ...): a model's defaults
+    that end a run would override the user's ``trainer.max_steps``; put budgets in
+    an ``experiment/`` config.
 
     Args:
         register: The registration callback (its signature: the ``Protocol`` named

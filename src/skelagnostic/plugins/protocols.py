@@ -8,7 +8,7 @@ the hook's parameter with it and a type checker (and an editor) checks the calls
 
     @hookimpl
     def register_aligners(register: RegisterAligner) -> None:
-        register("mine", MyAligner, MyDataModule, config={"hidden": 64})
+        register("mine", MyAligner, MyDataModule, config=files("my_plugin.conf") / "mine.yaml")
 
 The classes are imported lazily by skelagnostic (the types here are names only),
 so importing this module costs nothing.
@@ -17,12 +17,22 @@ so importing this module costs nothing.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeAlias
 
 if TYPE_CHECKING:
+    import os
+    from importlib.resources.abc import Traversable
+
     from skelagnostic.aligners import Aligner
     from skelagnostic.data import ClipSource, MotionDataModule
     from skelagnostic.representations import MotionRepresentation
+
+
+#: Where an aligner's config comes from: its YAML file (a path, or a
+#: :class:`~importlib.resources.abc.Traversable` such as
+#: ``importlib.resources.files("my_plugin.conf") / "mine.yaml"``), or the same
+#: sections as a mapping (handy for a plugin defined in a test).
+AlignerConfigSource: TypeAlias = "str | os.PathLike[str] | Traversable | Mapping[str, Any]"
 
 
 class RegisterAligner(Protocol):
@@ -33,11 +43,8 @@ class RegisterAligner(Protocol):
         name: str,
         module: type[Aligner],
         datamodule: type[MotionDataModule] | None = None,
-        config: Mapping[str, Any] | None = None,
+        config: AlignerConfigSource | None = None,
         description: str = "",
-        data: Mapping[str, Any] | None = None,
-        data_options: Mapping[str, Any] | None = None,
-        trainer_options: Mapping[str, Any] | None = None,
     ) -> None:
         """Register one aligner.
 
@@ -46,12 +53,12 @@ class RegisterAligner(Protocol):
             module: The :class:`~skelagnostic.aligners.Aligner` subclass.
             datamodule: The :class:`~skelagnostic.data.MotionDataModule` subclass
                 producing its batches (``None``: ``MotionDataModule``).
-            config: Default keyword arguments of ``module`` (see
-                :func:`skelagnostic.plugins.read_model_config`).
+            config: The aligner's config file, read once here: its sections
+                ``model`` (``_target_`` and every constructor argument), ``data``
+                (the default data), ``data_options`` and ``trainer_options``
+                (see :func:`skelagnostic.plugins.read_aligner_config`). ``None``:
+                the constructor's own defaults and ``data=procedural``.
             description: One line for ``skelagnostic plugins``.
-            data: The aligner's default data config (with a ``source``).
-            data_options: Data-module keys the aligner needs whatever the data.
-            trainer_options: Trainer keys it needs by default (never a limit).
         """
 
 

@@ -11,11 +11,11 @@ from __future__ import annotations
 import re
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pluggy
 
-from skelagnostic.plugins.configs import check_target, config_urls
+from skelagnostic.plugins.configs import check_target, config_urls, read_aligner_config
 from skelagnostic.plugins.specs import (
     AlignerSpec,
     CheckpointReaderSpec,
@@ -26,6 +26,9 @@ from skelagnostic.plugins.specs import (
     RepresentationSpec,
     first_line,
 )
+
+if TYPE_CHECKING:
+    from skelagnostic.plugins.protocols import AlignerConfigSource
 
 #: The hooks of :mod:`skelagnostic.plugins.hookspecs`, in the order they are called.
 HOOKS = (
@@ -69,33 +72,30 @@ class Registrar:
         name: str,
         module: type,
         datamodule: type | None = None,
-        config: Mapping[str, Any] | None = None,
+        config: AlignerConfigSource | None = None,
         description: str = "",
-        data: Mapping[str, Any] | None = None,
-        data_options: Mapping[str, Any] | None = None,
-        trainer_options: Mapping[str, Any] | None = None,
     ) -> None:
-        """``register`` of ``register_aligners``."""
+        """``register`` of ``register_aligners``: reads the aligner's config file, once."""
         datamodule = _check_aligner_classes(name, module, datamodule)
-        config = dict(config or {})
-        if "_target_" in config:
-            check_target(name, config.pop("_target_"), module)
-        if "name" in config:
+        sections = read_aligner_config({} if config is None else config)
+        model = sections["model"]
+        if "_target_" in model:
+            check_target(name, model.pop("_target_"), module)
+        if "name" in model:
             raise PluginError(f"aligner {name!r}: config key 'name' is reserved")
-        data = dict(data or {})
-        if data and "source" not in data:
+        if sections["data"] and "source" not in sections["data"]:
             raise PluginError(f"aligner {name!r}: data needs a 'source' (a registered dataset)")
         self.out.aligners.append(
             AlignerSpec(
                 name,
                 module,
                 datamodule,
-                MappingProxyType(config),
+                MappingProxyType(model),
                 description,
                 self.plugin_name,
-                MappingProxyType(data),
-                MappingProxyType(dict(data_options or {})),
-                MappingProxyType(dict(trainer_options or {})),
+                MappingProxyType(sections["data"]),
+                MappingProxyType(sections["data_options"]),
+                MappingProxyType(sections["trainer_options"]),
             )
         )
 

@@ -5,18 +5,23 @@ Hook implementations of the example plugin (the ``skelagnostic`` entry point).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from importlib.resources import files
 from typing import Any
 
-from skelagnostic.plugins import hookimpl, read_model_config
+from skelagnostic.plugins import (
+    RegisterAligner,
+    RegisterConfigPath,
+    RegisterEvaluation,
+    hookimpl,
+)
 
-#: The plugin's Hydra config package: ``model/example.yaml`` (the aligner's defaults,
-#: with ``_target_``) and ``experiment/``.
+#: The plugin's config package: ``example.yaml`` (the aligner's config: its defaults, with
+#: ``_target_``) and ``experiment/``.
 CONFIG_PACKAGE = "skelagnostic_example.conf"
 
 
 @hookimpl
-def register_aligners(register: Callable[..., Any]) -> None:
+def register_aligners(register: RegisterAligner) -> None:
     """Register ``model=example``."""
     from skelagnostic_example.aligner import ExampleAligner, ExampleDataModule
 
@@ -24,13 +29,13 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "example",
         ExampleAligner,
         ExampleDataModule,
-        config=read_model_config(CONFIG_PACKAGE, "example"),
+        config=files(CONFIG_PACKAGE) / "example.yaml",
         description="per-joint GRU autoencoder over root-local positions (tutorial example)",
     )
 
 
 @hookimpl
-def register_config_paths(register: Callable[..., Any]) -> None:
+def register_config_paths(register: RegisterConfigPath) -> None:
     """Ship ``experiment=example_quick``."""
     register(f"pkg://{CONFIG_PACKAGE}")
 
@@ -46,6 +51,6 @@ def reconstruction(aligner: Any, held_out: Any, out_dir: Any) -> Any:
 
 
 @hookimpl
-def register_evaluations(register: Callable[..., Any]) -> None:
+def register_evaluations(register: RegisterEvaluation) -> None:
     """Register ``protocol=example.reconstruction`` (the default of ``model=example``)."""
     register("example.reconstruction", reconstruction, model="example", default=True)

@@ -5,39 +5,23 @@ Hook implementations of the HuMoT plugin (entry point ``humot`` in group ``skela
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from importlib.resources import files
 
-from skelagnostic.plugins import hookimpl, read_model_config
+from skelagnostic.plugins import (
+    RegisterAligner,
+    RegisterConfigPath,
+    RegisterDataset,
+    RegisterEvaluation,
+    hookimpl,
+)
 
-#: The plugin's Hydra config package: ``model/`` (the aligners' defaults, with
-#: ``_target_``), ``experiment/``.
+#: The plugin's config package: ``<aligner>.yaml`` (each aligner's whole config: model
+#: defaults with ``_target_``, default data, data options) and ``experiment/``.
 CONFIG_PACKAGE = "skelagnostic_humot.conf"
-
-#: ``data/humot``, the default data of ``skelagnostic fit model=humot`` (no ``data=``):
-#: procedural humans of three topologies (22, 31 and 17 joints), walking and running, 4 clips
-#: of 2 s per topology (one held out for validation). Sized for the CPU budget of the issue
-#: (under 5 minutes on 2 cores): the trainer's default 10 epochs are 10 steps of the
-#: paper-size network (one batch of 18 chunks per topology; a step of 64 chunks costs
-#: ~0.4 TFLOP). Ten steps show that the pipeline runs end to end (checkpoint, metrics,
-#: rendered retargeting), not a trained model: ``experiment=humot_quick`` is the CPU
-#: configuration that learns (docs/reports/humot.md).
-DEFAULT_DATA: dict[str, Any] = {
-    "source": "procedural",
-    "kinds": ["biped22", "biped31", "biped17"],
-    "gaits": ["walk", "run"],
-    "clips_per_gait": 2,
-    "seconds": 2.0,
-    "seed": 0,
-}
-
-#: Data-module keys of the paper's preprocessing (Sec. 3.4.1), whatever the data:
-#: 30 Hz, 1 s chunks overlapping by 24 frames.
-DATA_OPTIONS: dict[str, Any] = {"fps": 30, "window": 30, "stride": 6}
 
 
 @hookimpl
-def register_aligners(register: Callable[..., Any]) -> None:
+def register_aligners(register: RegisterAligner) -> None:
     """Register ``model=humot``."""
     from skelagnostic_humot.aligner import HumotAligner
     from skelagnostic_humot.data import HumotDataModule
@@ -46,15 +30,13 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "humot",
         HumotAligner,
         HumotDataModule,
-        config=read_model_config(CONFIG_PACKAGE, "humot"),
+        config=files(CONFIG_PACKAGE) / "humot.yaml",
         description="HuMoT: topology-agnostic XCiT autoencoder for human retargeting",
-        data=DEFAULT_DATA,
-        data_options=DATA_OPTIONS,
     )
 
 
 @hookimpl
-def register_datasets(register: Callable[..., Any]) -> None:
+def register_datasets(register: RegisterDataset) -> None:
     """``data.source=humot_mix``: a real human corpus plus procedural humans."""
     from skelagnostic_humot.data import corpus_and_procedural_source
 
@@ -67,13 +49,13 @@ def register_datasets(register: Callable[..., Any]) -> None:
 
 
 @hookimpl
-def register_config_paths(register: Callable[..., Any]) -> None:
+def register_config_paths(register: RegisterConfigPath) -> None:
     """Ship ``data=humot_mix`` and the ``experiment=humot_*`` presets."""
     register(f"pkg://{CONFIG_PACKAGE}")
 
 
 @hookimpl
-def register_evaluations(register: Callable[..., Any]) -> None:
+def register_evaluations(register: RegisterEvaluation) -> None:
     """Register ``humot.reconstruction`` (the default), ``humot.retarget``, ``humot.ablations``."""
     from skelagnostic_humot.ablations import ablation_protocol
     from skelagnostic_humot.evaluation.reconstruction import reconstruction_protocol

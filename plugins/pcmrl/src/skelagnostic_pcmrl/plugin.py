@@ -14,39 +14,22 @@ and one data-module class, so the stages are two names):
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from importlib.resources import files
 
-from skelagnostic.plugins import hookimpl, read_model_config
+from skelagnostic.plugins import (
+    RegisterAligner,
+    RegisterConfigPath,
+    RegisterEvaluation,
+    hookimpl,
+)
 
-#: The plugin's Hydra config package: ``model/`` (the aligners' defaults, with
-#: ``_target_``), ``experiment/``.
+#: The plugin's config package: ``<aligner>.yaml`` (each aligner's whole config: model
+#: defaults with ``_target_``, default data, data options) and ``experiment/``.
 CONFIG_PACKAGE = "skelagnostic_pcmrl.conf"
-
-#: Default data of ``model=pcmrl`` (``skelagnostic fit model=pcmrl`` with no ``data=``):
-#: procedural biped22 clips as the source ...
-DEFAULT_DATA: dict[str, Any] = {
-    "source": "procedural",
-    "kinds": ["biped22"],
-    "gaits": ["walk", "run"],
-    "clips_per_gait": 3,
-    "seconds": 6.0,
-    "seed": 0,
-}
-#: ... and data-module keys for any data: the target skeleton (procedural biped31,
-#: unpaired: no biped31 motion is ever seen), 32-frame windows.
-DATA_OPTIONS: dict[str, Any] = {
-    "target": "biped31",
-    "target_units": None,
-    "source_units": None,
-    "window": 32,
-    "stride": 8,
-    "batch_size": 4,
-}
 
 
 @hookimpl
-def register_aligners(register: Callable[..., Any]) -> None:
+def register_aligners(register: RegisterAligner) -> None:
     """Register ``model=pcmrl`` (stage 1) and ``model=pcmrl_interp`` (stage 2)."""
     from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
     from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule
@@ -55,35 +38,30 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "pcmrl",
         PcmrlReconAligner,
         PcmrlReconDataModule,
-        config=read_model_config(CONFIG_PACKAGE, "pcmrl"),
+        config=files(CONFIG_PACKAGE) / "pcmrl.yaml",
         description="PC-MRL stage 1: unsupervised point-cloud reconstruction onto a target "
         "skeleton (model=pcmrl_interp: stage 2)",
-        data=DEFAULT_DATA,
-        data_options=DATA_OPTIONS,
     )
     from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
     from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
-    from skelagnostic_pcmrl.interp.defaults import INTERP_DATA_DEFAULTS, INTERP_DATA_OPTIONS
 
     register(
         "pcmrl_interp",
         PcmrlInterpAligner,
         PcmrlInterpDataModule,
-        config=read_model_config(CONFIG_PACKAGE, "pcmrl_interp"),
+        config=files(CONFIG_PACKAGE) / "pcmrl_interp.yaml",
         description="PC-MRL stage 2: FOQ keyframe interpolation on the target skeleton",
-        data=INTERP_DATA_DEFAULTS,
-        data_options=INTERP_DATA_OPTIONS,
     )
 
 
 @hookimpl
-def register_config_paths(register: Callable[..., Any]) -> None:
+def register_config_paths(register: RegisterConfigPath) -> None:
     """Ship ``experiment=pcmrl_quick``, ``pcmrl_paper`` and ``pcmrl_lafan1_cmu``."""
     register(f"pkg://{CONFIG_PACKAGE}")
 
 
 @hookimpl
-def register_evaluations(register: Callable[..., Any]) -> None:
+def register_evaluations(register: RegisterEvaluation) -> None:
     """Register ``pcmrl.reconstruction`` and ``pcmrl.interpolation`` (one default per stage)."""
     from skelagnostic_pcmrl.evaluation import interpolation_protocol, reconstruction_protocol
 

@@ -5,34 +5,24 @@ Hook implementations of the ``vqpae`` plugin (entry point ``skelagnostic: vqpae`
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from importlib.resources import files
 
-from skelagnostic.plugins import hookimpl, read_model_config
+from skelagnostic.plugins import (
+    RegisterAligner,
+    RegisterCheckpointReader,
+    RegisterConfigPath,
+    RegisterDataset,
+    RegisterEvaluation,
+    hookimpl,
+)
 
-#: The plugin's Hydra config package: ``model/`` (the aligners' defaults, with
-#: ``_target_``), ``experiment/``, ``data/``.
+#: The plugin's config package: ``<aligner>.yaml`` (each aligner's whole config: model
+#: defaults with ``_target_``, default data, data options), ``experiment/``, ``data/``.
 CONFIG_PACKAGE = "skelagnostic_vqpae.conf"
-
-#: ``data/vqpae``, the default data of ``skelagnostic fit model=vqpae`` (no ``data=``):
-#: procedural humans (LaFAN1-like, 22 joints) and quadrupeds (a dog, 21 joints), one dataset
-#: each, every gait but idle, 4 clips of 8 s per gait (one clip in five held out).
-DEFAULT_DATA: dict[str, Any] = {
-    "source": "procedural",
-    "kinds": ["biped22", "quadruped"],
-    "gaits": None,
-    "clips_per_gait": 4,
-    "seconds": 8.0,
-    "seed": 0,
-}
-
-#: Data-module keys of the authors' preprocessing (supplement 2.2), whatever the data:
-#: 60 fps, 1 s windows (61 frames) centred on every frame.
-DATA_OPTIONS: dict[str, Any] = {"fps": 60, "window_seconds": 1.0, "stride": 1}
 
 
 @hookimpl
-def register_aligners(register: Callable[..., Any]) -> None:
+def register_aligners(register: RegisterAligner) -> None:
     """Register ``model=vqpae``: :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`."""
     from skelagnostic_vqpae.aligner import VqpaeAligner
     from skelagnostic_vqpae.data import VqpaeDataModule
@@ -41,15 +31,13 @@ def register_aligners(register: Callable[..., Any]) -> None:
         "vqpae",
         VqpaeAligner,
         VqpaeDataModule,
-        config=read_model_config(CONFIG_PACKAGE, "vqpae"),
+        config=files(CONFIG_PACKAGE) / "vqpae.yaml",
         description="WalkTheDog VQ-PAE: phase manifold shared across characters (human, dog, ...)",
-        data=DEFAULT_DATA,
-        data_options=DATA_OPTIONS,
     )
 
 
 @hookimpl
-def register_datasets(register: Callable[..., Any]) -> None:
+def register_datasets(register: RegisterDataset) -> None:
     """``data.source=human_dog`` and ``data.source=styles`` (one dataset per part)."""
     from skelagnostic_vqpae.data import human_dog_source, styles_source
 
@@ -58,13 +46,13 @@ def register_datasets(register: Callable[..., Any]) -> None:
 
 
 @hookimpl
-def register_config_paths(register: Callable[..., Any]) -> None:
+def register_config_paths(register: RegisterConfigPath) -> None:
     """Ship ``experiment=vqpae_human_dog`` and ``experiment=vqpae_stylized``."""
     register(f"pkg://{CONFIG_PACKAGE}")
 
 
 @hookimpl
-def register_evaluations(register: Callable[..., Any]) -> None:
+def register_evaluations(register: RegisterEvaluation) -> None:
     """Register ``vqpae.manifold`` (the default of ``model=vqpae``) and ``vqpae.transfer``."""
     from skelagnostic_vqpae.protocols.manifold import manifold_protocol
     from skelagnostic_vqpae.protocols.transfer import transfer_protocol
@@ -89,7 +77,7 @@ def register_evaluations(register: Callable[..., Any]) -> None:
 
 
 @hookimpl
-def register_checkpoint_readers(register: Callable[..., Any]) -> None:
+def register_checkpoint_readers(register: RegisterCheckpointReader) -> None:
     """``ckpt=authors:<dir>``: a run directory of the WalkTheDog authors' ``train_vq.py``."""
     from skelagnostic_vqpae.authors import load_run
 

@@ -30,14 +30,13 @@ skeleton. It follows CITL (Mo et al., CVPR 2023) with PC-MRL's changes:
 
 :class:`~skelagnostic_pcmrl.interp.aligner.PcmrlInterpAligner` wraps it as an
 :class:`~skelagnostic.aligners.Aligner` with ``interpolate(motion, keyframes)``;
-``model/pcmrl_interp.yaml`` holds the authors' settings, ``experiment=pcmrl_interp_cpu``
-a smaller CPU configuration.
+``conf/pcmrl_interp.yaml`` holds the authors' settings and the default data,
+``experiment=pcmrl_interp_cpu`` a smaller CPU configuration.
 
 Modules: :mod:`~skelagnostic_pcmrl.interp.keyframes` (keyframe brackets, LERP/SLERP,
 window features and heading, the sign-invariant loss), :mod:`~skelagnostic_pcmrl.interp.network`
 (the CITL network), :mod:`~skelagnostic_pcmrl.interp.aligner` (the aligner),
 :mod:`~skelagnostic_pcmrl.interp.rpa` (rest pose augmentation and bone tails),
-:mod:`~skelagnostic_pcmrl.interp.data` (data module, keyframe draws),
-:mod:`~skelagnostic_pcmrl.interp.defaults` (the default data of ``model=pcmrl_interp``) and
+:mod:`~skelagnostic_pcmrl.interp.data` (data module, keyframe draws) and
 :mod:`~skelagnostic_pcmrl.interp.evaluation` (the Table 1 protocol).
 """

@@ -1,0 +1,73 @@
+"""Hydra configs of the registered aligners, made from what each plugin registered.
+
+A plugin registers an aligner with its config file; the plugin manager reads it once
+(:func:`skelagnostic.plugins.read_aligner_config`) into the aligner's
+:class:`~skelagnostic.plugins.AlignerSpec`. :func:`register_model_configs` turns each
+spec into the config groups ``model=<name>``, ``data/<name>`` and ``_aligner/<name>``
+that ``conf/config.yaml`` selects, so Hydra never reads the file a second time.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+
+from skelagnostic.plugins import AlignerSpec, PluginManager, target_of
+
+#: Provider name of the configs this module puts into Hydra's ConfigStore.
+PROVIDER = "skelagnostic"
+#: Config group of the per-aligner ``model.name``, data and trainer options (internal).
+ALIGNER_GROUP = "_aligner"
+
+
+def register_model_configs(pm: PluginManager) -> None:
+    """Store each registered aligner's configs in Hydra's ConfigStore.
+
+    For every aligner ``<name>``:
+
+    * ``model/<name>``: ``_target_`` and the registered defaults (the ``model``
+      section of the aligner's config file);
+    * ``_aligner/<name>`` (global package, selected by ``_aligner: ${model}`` in
+      ``config.yaml``): ``model.name`` and the aligner's ``data_options`` and
+      ``trainer_options``;
+    * ``data/<name>`` (selected by ``data: ${model}`` unless the command line or an
+      experiment names ``data=``): the aligner's default data, else ``procedural``.
+
+    Hydra's ConfigStore is one per process: the entries stored for an earlier
+    plugin manager (tagged with the provider ``skelagnostic``) are removed
+    first, so it lists exactly the aligners of ``pm``.
+    """
+    store = ConfigStore.instance()
+    for group in ("model", "data", ALIGNER_GROUP):
+        nodes = store.repo.get(group, {})
+        for key in [k for k, v in nodes.items() if getattr(v, "provider", None) == PROVIDER]:
+            del nodes[key]
+    for name, spec in pm.aligners.items():
+        model = {"_target_": target_of(spec.module), **dict(spec.config)}
+        store.store(group="model", name=name, node=model, provider=PROVIDER)
+        store.store(group="data", name=name, node=_data_node(spec), provider=PROVIDER)
+        store.store(
+            group=ALIGNER_GROUP,
+            name=name,
+            node=_aligner_node(spec),
+            package="_global_",
+            provider=PROVIDER,
+        )
+
+
+def _data_node(spec: AlignerSpec) -> dict[str, Any]:
+    """``data/<name>``: the aligner's default data over the shared keys, else ``procedural``."""
+    data: dict[str, Any] = dict(spec.data) if spec.data else {}
+    base = "/data_defaults@_here_" if data else "/data/procedural@_here_"
+    return {"defaults": [base, "_self_"], **data}
+
+
+def _aligner_node(spec: AlignerSpec) -> dict[str, Any]:
+    """``_aligner/<name>``: ``model.name`` and the aligner's data and trainer options."""
+    node: dict[str, Any] = {"model": {"name": spec.name}}
+    if spec.data_options:
+        node["data"] = dict(spec.data_options)
+    if spec.trainer_options:
+        node["trainer"] = dict(spec.trainer_options)
+    return node
