@@ -144,13 +144,7 @@ KNOWN_UPWARD_IN_PLUGINS: dict[tuple[str, str], str] = {}
 #: Import cycles among the modules of ``src/`` and ``plugins/*/src`` that exist today, each
 #: a set of modules. An entry that no longer matches a cycle fails the test (the set only
 #: shrinks); any other cycle fails it too.
-KNOWN_CYCLES: set[frozenset[str]] = {
-    # being removed in #49 (item 8: the plugin manager split)
-    frozenset({"skelagnostic.plugins.builtin", "skelagnostic.plugins.manager"}),
-    # being removed in #49 (came with the safetensors weights: weights.py imports the
-    # checkpoint errors lazily from checkpoints.py, which imports weights.py)
-    frozenset({"skelagnostic.aligners.checkpoints", "skelagnostic.aligners.weights"}),
-}
+KNOWN_CYCLES: set[frozenset[str]] = set()
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,8 @@ your own by subclassing :class:`Aligner` and registering it through the
 """
 
 from skelagnostic.aligners.base import KNOWN_CAPABILITIES, Aligner, CapabilityError, Latent
-from skelagnostic.aligners.checkpoints import CheckpointError, read_checkpoint
+from skelagnostic.aligners.checkpoint_errors import CheckpointError
+from skelagnostic.aligners.checkpoints import read_checkpoint
 from skelagnostic.aligners.schedule import steps_per_epoch
 from skelagnostic.aligners.trainer import QUIET_TRAINER_OPTIONS, quiet_trainer
 

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import torch
 
+from skelagnostic.aligners.checkpoint_errors import CheckpointError, CheckpointNotFoundError
 from skelagnostic.aligners.weights import (
     is_weights,
     named_tensor_mismatch,
@@ -32,7 +33,6 @@ from skelagnostic.aligners.weights import (
     weights_file,
 )
 from skelagnostic.core.finite import first_non_finite
-from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
     import lightning as L
@@ -50,26 +50,6 @@ ModuleT = TypeVar("ModuleT", bound="L.LightningModule")
 
 #: What :meth:`torch.nn.Module.load_state_dict` says when the weights do not fit.
 _STATE_DICT_ERROR = "Error(s) in loading state_dict"
-
-
-class CheckpointError(SkelagnosticError):
-    """A checkpoint that cannot be loaded, with the file and the cause in one line.
-
-    Attributes:
-        path: The checkpoint file.
-        option: The option or argument that named it (``ckpt_path``, ``ckpt``, ...).
-        reason: The cause, without the location prefix.
-    """
-
-    def __init__(self, path: str | Path, reason: str, option: str = "checkpoint") -> None:
-        self.path = Path(path)
-        self.option = option
-        self.reason = reason
-        super().__init__(f"{option}: {reason}")
-
-
-class CheckpointNotFoundError(CheckpointError, FileNotFoundError):
-    """The checkpoint file does not exist (also a :class:`FileNotFoundError`)."""
 
 
 def read_checkpoint(

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import torch
 
+from skelagnostic.aligners.checkpoint_errors import CheckpointError, CheckpointNotFoundError
 from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
@@ -156,8 +157,6 @@ def save_weights(aligner: L.LightningModule, path: str | Path, model: str) -> Pa
 
 def _field(file: Path, metadata: dict[str, str], name: str, option: str) -> Any:
     """The metadata field ``name`` (JSON decoded for the JSON fields), or a CheckpointError."""
-    from skelagnostic.aligners.checkpoints import CheckpointError
-
     shown = repr(str(file))
     if name not in metadata:
         raise CheckpointError(
@@ -188,8 +187,6 @@ def _open(
         CheckpointNotFoundError: The file does not exist.
         CheckpointError: It is not a readable safetensors file.
     """
-    from skelagnostic.aligners.checkpoints import CheckpointError, CheckpointNotFoundError
-
     st = _import_safetensors()
     shown = repr(str(file))
     if not file.is_file():
@@ -212,8 +209,6 @@ def _open(
 
 def _model(file: Path, metadata: dict[str, str], option: str) -> str:
     """The ``model`` field, after checking the ``format`` field."""
-    from skelagnostic.aligners.checkpoints import CheckpointError
-
     found = _field(file, metadata, "format", option)
     if found != FORMAT:
         raise CheckpointError(
@@ -285,8 +280,6 @@ def named_tensor_mismatch(path: str | Path, option: str = "checkpoint") -> Itera
         CheckpointError: ``'<file>': tensor 'NAME' has shape [..] in the file, the
             model expects [..]`` (or is missing from the file, or is not the model's).
     """
-    from skelagnostic.aligners.checkpoints import CheckpointError
-
     try:
         yield
     except RuntimeError as error:

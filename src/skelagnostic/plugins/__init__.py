@@ -21,11 +21,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from skelagnostic.plugins.configs import read_aligner_config, target_of
+from skelagnostic.plugins.hookspecs import hookimpl
 from skelagnostic.plugins.manager import (
     ENTRY_POINT_GROUP,
     LOAD_PLUGINS_ENV,
     PluginManager,
-    hookimpl,
 )
 from skelagnostic.plugins.protocols import (
     AlignerConfigSource,

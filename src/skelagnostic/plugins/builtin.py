@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from functools import partial
 
-from skelagnostic.plugins.manager import hookimpl
+from skelagnostic.plugins.hookspecs import hookimpl
 from skelagnostic.plugins.protocols import RegisterDataset, RegisterRepresentation
 
 

@@ -31,6 +31,8 @@ from skelagnostic.plugins.protocols import (
 
 #: Marker for hook specifications (project name ``skelagnostic``).
 hookspec = pluggy.HookspecMarker("skelagnostic")
+#: Marker for hook implementations in plugins: ``@hookimpl def register_aligners(register): ...``.
+hookimpl = pluggy.HookimplMarker("skelagnostic")
 
 
 @hookspec

@@ -62,9 +62,6 @@ LOAD_PLUGINS_ENV = "SKELAGNOSTIC_LOAD_PLUGINS"
 #: Name of the built-in plugin (the package's own representations and datasets).
 BUILTIN_NAME = "skelagnostic"
 
-#: Marker for hook implementations in plugins: ``@hookimpl def register_aligners(register): ...``.
-hookimpl = pluggy.HookimplMarker(ENTRY_POINT_GROUP)
-
 
 def _allowed_plugins() -> frozenset[str] | None:
     value = os.environ.get(LOAD_PLUGINS_ENV)
