@@ -230,7 +230,10 @@ def atomic_write(
         temp_suffix=temp_suffix,
         sync_directory=sync_directory,
     ) as (tmp, target):
-        with open(tmp, "wb") as fh:
+        # os.fdopen, as every writer of the package: the reliability tests fill the
+        # disk through it (tests/reliability/test_output_writes.py, full_disk)
+        fd = os.open(tmp, os.O_WRONLY | os.O_TRUNC | getattr(os, "O_BINARY", 0))
+        with os.fdopen(fd, "wb") as fh:
             if callable(data):
                 data(fh)
             else:
