@@ -157,7 +157,7 @@ def config_errors(
 ) -> Iterator[None]:
     """Within the block (the trainer's run): errors caused by a config value name its key.
 
-    A ``ValueError``/``TypeError`` raised by ``torch.optim`` (``model.lr=nan``) names
+    A ``ValueError``/``TypeError`` raised by ``torch.optim`` (``model.optimizer.lr=nan``) names
     the ``model.*`` values; a Lightning misconfiguration that quotes a callback or
     logger option names that option (:func:`config_error_of`).
     """
