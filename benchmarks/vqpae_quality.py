@@ -38,7 +38,11 @@ sys.path.insert(0, str(REPO_ROOT / "plugins" / "vqpae" / "src"))
 
 import lightning as L  # noqa: E402
 import torch  # noqa: E402
-from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner  # noqa: E402
+from skelagnostic_vqpae.aligner import (  # noqa: E402
+    AUTHORS_OPTIMIZER,
+    PREVIOUS_DEFAULTS,
+    VqpaeAligner,
+)
 from skelagnostic_vqpae.data import MultiSource, VqpaeDataModule  # noqa: E402
 from skelagnostic_vqpae.embed import embed_clip  # noqa: E402
 from skelagnostic_vqpae.losses import pivot_mpjpe  # noqa: E402
@@ -49,14 +53,18 @@ from skelagnostic.aligners import quiet_trainer  # noqa: E402
 from skelagnostic.data import BVHSource, ProceduralSource  # noqa: E402
 
 
-def _aligner(**options: Any) -> VqpaeAligner:
+def _aligner(lr: float, restart_period: int, **options: Any) -> VqpaeAligner:
     """The aligner with the settings of the measured runs (docs/reports/vqpae.md).
 
     They predate the authors' defaults of ``model=vqpae``: ``PREVIOUS_DEFAULTS``
     (``experiment=vqpae_plus`` with the paper's frequency head and the cosine
-    schedule), then ``options``.
+    schedule, its first cycle ``restart_period`` epochs), AdamW at ``lr``, then ``options``.
     """
-    return VqpaeAligner(**{**PREVIOUS_DEFAULTS, **options})
+    optimizer = {**AUTHORS_OPTIMIZER, "lr": lr}
+    scheduler = {**PREVIOUS_DEFAULTS["scheduler"], "period": restart_period}
+    return VqpaeAligner(
+        **{**PREVIOUS_DEFAULTS, "optimizer": optimizer, "scheduler": scheduler, **options}
+    )
 
 
 def _train(

@@ -97,6 +97,7 @@ def humot(steps: int) -> dict[str, Any]:
     _plugin("humot")
     import lightning as L
     from skelagnostic_humot import HumotAligner, HumotDataModule
+    from skelagnostic_humot.aligner import PAPER_OPTIMIZER, PAPER_SCHEDULER
     from skelagnostic_humot.evaluation.held_out import HUMAN_KINDS
     from skelagnostic_humot.evaluation.suite import evaluate_procedural
 
@@ -111,7 +112,12 @@ def humot(steps: int) -> dict[str, Any]:
     dm = HumotDataModule([source], batch_size=16, val_fraction=0.0, cache_dir=cache)
     # experiment=humot_quick: the CPU configuration (0.41 M parameters)
     model = HumotAligner(
-        dim=64, latent=64, blocks=2, heads=8, lr_min=1e-4, lr_max=1e-3, lr_period_epochs=40
+        dim=64,
+        latent=64,
+        blocks=2,
+        heads=8,
+        optimizer={**PAPER_OPTIMIZER, "lr": 1e-4},
+        scheduler={**PAPER_SCHEDULER, "max_lr": 1e-3, "period_epochs": 40},
     )
     with tempfile.TemporaryDirectory() as run_dir:
         trainer = quiet_trainer(

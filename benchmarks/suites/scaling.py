@@ -214,7 +214,7 @@ def build(method: str, tiny: bool, clips: Any, batch: int, cache_dir: str) -> tu
         dm = PcmrlReconDataModule(
             clips, target="biped31", fps=30.0, window=window, stride=16, **common
         )
-        model = PcmrlReconAligner(lr=1e-4, **options)
+        model = PcmrlReconAligner(**options)
     elif method == "pcmrl_interp":
         from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
         from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule

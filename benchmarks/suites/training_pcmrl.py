@@ -166,7 +166,6 @@ def setup(
             cache_dir=cache,
             **data_options,
         )
-        options = {"lr": 1e-4, **options}
         options.pop("target", None)
         options.pop("target_units", None)
         return PcmrlReconAligner(**options), dm, data

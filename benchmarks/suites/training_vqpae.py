@@ -58,7 +58,10 @@ AUTHORS_OPTIONS: dict[str, Any] = {
     "decoder_centering": True, "spectrum": "power", "padding_mode": "zeros",
     "frequency_head": "mlp", "phase_kernel": 23, "freq_hidden_elu": True,
     "center_windows": False, "reinit_squared_distance": True, "pose_layers": 8,
-    "lr": 1e-4, "weight_decay": 1e-4, "pose_lr": 1e-3,
+    "pose_lr": 1e-3,
+    "optimizer": {
+        "_target_": "torch.optim.AdamW", "_partial_": True, "lr": 1e-4, "weight_decay": 1e-4,
+    },
 }  # fmt: skip
 #: Row tag -> (pose_mlp, lambda_phase_rate, the authors' --train_phase_decoder or None).
 ROWS: dict[str, tuple[str, float, bool | None]] = {

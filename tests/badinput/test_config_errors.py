@@ -70,8 +70,18 @@ from test_badinput import assert_no_partial_output, documented, error_line, fit
             "(ValueError: input_size must be greater than zero)",
         ),
         (
-            ["model.lr=nan"],
-            "model.lr=nan: the aligner 'example' refuses it "
+            ["+model.optimizer.lrr=1"],
+            "model.optimizer.lrr is not an argument of torch.optim.Adam; accepted: amsgrad, "
+            "betas, capturable, decoupled_weight_decay, differentiable, eps, foreach, fused, lr, "
+            "maximize, weight_decay",
+        ),
+        (
+            ["model.optimizer._target_=torch.optim.Nope"],
+            "model.optimizer._target_='torch.optim.Nope': torch.optim has no 'Nope'",
+        ),
+        (
+            ["model.optimizer.lr=nan"],
+            "model.optimizer.lr=nan: the aligner 'example' refuses it "
             "(ValueError: Invalid learning rate: nan)",
         ),
     ],

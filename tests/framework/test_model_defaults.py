@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -60,8 +60,17 @@ def _signature_defaults(cls: type) -> dict[str, Any]:
         if p.name == "self" or p.kind not in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
             continue
         assert p.default is not p.empty, f"{cls.__qualname__}({p.name}) has no default"
-        out[p.name] = list(p.default) if isinstance(p.default, tuple) else p.default
+        out[p.name] = _yaml_like(p.default)
     return out
+
+
+def _yaml_like(value: Any) -> Any:
+    """``value`` as YAML holds it: mappings (``MappingProxyType`` too) as dicts, tuples as lists."""
+    if isinstance(value, Mapping):
+        return {k: _yaml_like(v) for k, v in value.items()}
+    if isinstance(value, tuple):
+        return [_yaml_like(v) for v in value]
+    return value
 
 
 def test_every_builtin_and_the_example_are_registered(pm: PluginManager) -> None:
@@ -209,7 +218,8 @@ def test_a_checkpoint_keeps_its_own_hyperparameters(
     import lightning as L
 
     monkeypatch.setattr(plugins_api, "get_plugin_manager", lambda: pm)
-    old = {"dim": 16, "temporal_dim": 128, "lr": 1e-3, "target": "biped31"}  # before the YAML
+    optimizer = {"_target_": "torch.optim.AdamW", "_partial_": True, "lr": 1e-3, "weight_decay": 0}
+    old = {"dim": 16, "temporal_dim": 128, "optimizer": optimizer, "target": "biped31"}
     trained = pm.aligner("pcmrl").module(**old)
     path = tmp_path / "old.ckpt"
     checkpoint = {
@@ -220,6 +230,7 @@ def test_a_checkpoint_keeps_its_own_hyperparameters(
     trained.on_save_checkpoint(checkpoint)  # what Lightning adds (PC-MRL: the target skeleton)
     torch.save(checkpoint, path)
     loaded = plugins_api.load_aligner("pcmrl", checkpoint=path)
-    assert (loaded.hparams.dim, loaded.hparams.temporal_dim, loaded.hparams.lr) == (16, 128, 1e-3)
+    hp = loaded.hparams
+    assert (hp.dim, hp.temporal_dim, hp.optimizer["lr"]) == (16, 128, 1e-3)
     for key, value in trained.state_dict().items():
         assert torch.equal(loaded.state_dict()[key], value)

@@ -71,8 +71,19 @@ def test_generated_model_yaml_equals_the_generated_constructor_defaults() -> Non
         for node in cls.body
         if isinstance(node, ast.FunctionDef) and node.name == "__init__"
     ]
+    # module constants (OPTIMIZER = MappingProxyType({...})) stand for their mapping
+    constants = {
+        node.targets[0].id: ast.literal_eval(node.value.args[0])
+        for node in tree.body
+        if isinstance(node, ast.Assign)
+        and isinstance(node.value, ast.Call)
+        and getattr(node.value.func, "id", None) == "MappingProxyType"
+    }
     names = [a.arg for a in init.args.args[1:]]
-    defaults = [ast.literal_eval(d) for d in init.args.defaults]
+    defaults = [
+        constants[d.id] if isinstance(d, ast.Name) else ast.literal_eval(d)
+        for d in init.args.defaults
+    ]
     assert dict(zip(names, defaults, strict=True)) == config
 
 

@@ -376,7 +376,12 @@ def test_plugins_name_shows_capabilities_and_defaults(example_plugin, capsys) ->
         assert line in out
     assert main(["example", "--json"]) == 0
     details = json.loads(capsys.readouterr().out)
-    assert details["config"] == {"hidden": 64, "latent": 16, "lr": 3e-3}
+    assert details["config"] == {
+        "hidden": 64,
+        "latent": 16,
+        "optimizer": {"_target_": "torch.optim.Adam", "_partial_": True, "lr": 3e-3},
+        "scheduler": None,
+    }
     assert details["capabilities"] == {
         "retarget": True,
         "interpolate": False,

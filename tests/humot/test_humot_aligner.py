@@ -3,7 +3,13 @@ import json
 import lightning as L
 import pytest
 import torch
-from skelagnostic_humot.aligner import HumotAligner, infer_units, leg_length
+from skelagnostic_humot.aligner import (
+    PAPER_OPTIMIZER,
+    PAPER_SCHEDULER,
+    HumotAligner,
+    infer_units,
+    leg_length,
+)
 from skelagnostic_humot.data import HumotDataModule
 
 import skelagnostic as sa
@@ -23,8 +29,14 @@ def _datamodule(tmp_path, kinds=("biped22", "biped17"), batch_size=8):
 def test_bad_hyper_parameters_are_named():
     with pytest.raises(SkelagnosticError, match=r"model\.p_major"):
         HumotAligner(p_major=1.5)
-    with pytest.raises(SkelagnosticError, match=r"model\.lr_min"):
-        HumotAligner(lr_min=1e-3, lr_max=1e-4)
+    with pytest.raises(SkelagnosticError, match=r"model\.optimizer\.lrr is not an argument"):
+        HumotAligner(optimizer={"_target_": "torch.optim.Adam", "lrr": 1e-3})
+    with pytest.raises(SkelagnosticError, match=r"model\.scheduler\._target_='nope\.x'"):
+        HumotAligner(scheduler={"_target_": "nope.x"})
+    # the cycle's bounds are checked when the schedule is built, before any step
+    model = HumotAligner(optimizer={**PAPER_OPTIMIZER, "lr": 1e-3})
+    with pytest.raises(SkelagnosticError, match=r"model\.optimizer\.lr=0\.001 must be in"):
+        model.configure_optimizers()
 
 
 def test_training_lowers_the_loss_on_a_batch(humot_small):
@@ -59,7 +71,7 @@ def test_subsampled_loss_is_finite_and_differentiable(humot_small):
 
 
 def test_cyclic_learning_rate(tmp_path, humot_small):
-    model = HumotAligner(**humot_small, lr_period_epochs=2)
+    model = HumotAligner(**humot_small, scheduler={**PAPER_SCHEDULER, "period_epochs": 2})
     dm = _datamodule(tmp_path)
     trainer = L.Trainer(
         max_epochs=4,
@@ -86,7 +98,7 @@ def test_cyclic_learning_rate(tmp_path, humot_small):
 
 def test_cyclic_learning_rate_with_max_steps(tmp_path, humot_small):
     """``max_steps`` without ``max_epochs``: the period still counts the loader's batches."""
-    model = HumotAligner(**humot_small, lr_period_epochs=2)
+    model = HumotAligner(**humot_small, scheduler={**PAPER_SCHEDULER, "period_epochs": 2})
     dm = _datamodule(tmp_path, batch_size=4)
     trainer = L.Trainer(
         max_steps=3,

@@ -32,8 +32,8 @@ def test_small_humot_overfits_two_windows(tmp_path: Path) -> None:
         heads=4,
         kernel_size=3,
         subsampling=False,
-        lr_min=2e-3,
-        lr_max=2e-3,
+        optimizer={"_target_": "torch.optim.Adam", "lr": 2e-3},
+        scheduler=None,
     )
     history: list[float] = []
 

@@ -13,7 +13,7 @@ def test_default_data_is_procedural_humans_of_three_topologies(humot_pm, tmp_pat
     assert (cfg.data.fps, cfg.data.window, cfg.data.stride) == (30, 30, 6)
     assert cfg.data.batch_size == 32
     # the paper's network
-    assert (cfg.model.dim, cfg.model.blocks, cfg.model.lr_max) == (128, 4, 1e-4)
+    assert (cfg.model.dim, cfg.model.blocks, cfg.model.scheduler.max_lr) == (128, 4, 1e-4)
     # no trainer limit from the model (issue 48, item 4): trainer=default's, experiments' own
     assert cfg.trainer.max_time is None and cfg.trainer.max_epochs == 10
 

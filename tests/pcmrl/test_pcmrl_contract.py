@@ -48,7 +48,7 @@ class TestPcmrlInterpContract(AlignerContract):
         "model.heads=2",
         "model.layers=1",
         "model.ff_mult=2",
-        "model.warmup_steps=1",
+        "model.scheduler.steps=1",
         "data.seconds=3",
         "data.clips_per_gait=2",
         "data.window=32",

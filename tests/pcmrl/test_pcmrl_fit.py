@@ -40,7 +40,7 @@ def test_default_config_is_registered(pcmrl_pm, tmp_path) -> None:
     assert cfg.data.source == "procedural" and list(cfg.data.kinds) == ["biped22"]
     assert cfg.data.target == "biped31"
     # the defaults are the paper's sizes; experiment=pcmrl_cpu is the CPU-sized network
-    assert cfg.model.dim == 64 and cfg.model.temporal_dim is None and cfg.model.lr == 1e-4
+    assert cfg.model.dim == 64 and cfg.model.temporal_dim is None and cfg.model.optimizer.lr == 1e-4
     paper = app.compose(
         ["model=pcmrl", "experiment=pcmrl_paper", f"run_dir={tmp_path}"], plugin_manager=pcmrl_pm
     )

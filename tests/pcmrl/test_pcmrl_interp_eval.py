@@ -72,7 +72,12 @@ def _tiny_trained(tmp_path: Path) -> PcmrlInterpAligner:
     L.seed_everything(0)
     dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=8)
     model = PcmrlInterpAligner(
-        dim=16, heads=2, layers=1, ff_mult=2, max_relative=16, warmup_steps=1
+        dim=16,
+        heads=2,
+        layers=1,
+        ff_mult=2,
+        max_relative=16,
+        scheduler={"_target_": "skelagnostic.aligners.optim.linear_warmup", "steps": 1},
     )
     trainer = L.Trainer(
         max_steps=2,

@@ -29,6 +29,14 @@ from skelagnostic.plugins import read_aligner_config
 TINY = {"dim": 16, "heads": 2, "layers": 1, "ff_mult": 2, "max_relative": 16}
 
 
+def _adamw(lr: float) -> dict:
+    return {"_target_": "torch.optim.AdamW", "lr": lr, "weight_decay": 0.0}
+
+
+def _warmup(steps: int) -> dict:
+    return {"_target_": "skelagnostic.aligners.optim.linear_warmup", "steps": steps}
+
+
 def _motion(seconds: float = 2.0, fps: float = 30.0, seed: int = 0) -> Motion:
     motion, _ = procedural.generate("biped31", "walk", seconds=seconds, fps=fps, seed=seed)
     return motion.convert_units("m")
@@ -45,8 +53,8 @@ def _tiny(residual: bool = False, window: int = 32, **options: object) -> PcmrlI
 def test_paper_defaults() -> None:
     config = read_aligner_config(files("skelagnostic_pcmrl.conf") / "pcmrl_interp.yaml")["model"]
     assert config["dim"] == 512 and config["heads"] == 8
-    assert config["layers"] == 6 and config["lr"] == 1e-4
-    assert config["warmup_steps"] == 10000 and config["w_fk"] == 0.1
+    assert config["layers"] == 6 and config["optimizer"]["lr"] == 1e-4
+    assert config["scheduler"]["steps"] == 10000 and config["w_fk"] == 0.1
     assert config["w_quat"] == 0.1 and config["residual"] is False
 
 
@@ -232,7 +240,7 @@ def test_fit_a_few_steps_and_reload(tmp_path: Path) -> None:
         rpa_prob=1.0,
         test_fraction=0.25,
     )
-    model = PcmrlInterpAligner(**TINY, lr=1e-3, warmup_steps=2)
+    model = PcmrlInterpAligner(**TINY, optimizer=_adamw(1e-3), scheduler=_warmup(2))
     trainer = L.Trainer(
         max_epochs=2,
         accelerator="cpu",
@@ -275,7 +283,7 @@ def test_ema_averages_the_network_built_from_the_data(tmp_path: Path) -> None:
         max_keys=8,
         val_fraction=0.0,
     )
-    model = PcmrlInterpAligner(**TINY, residual=True, lr=1e-2, warmup_steps=1)
+    model = PcmrlInterpAligner(**TINY, residual=True, optimizer=_adamw(1e-2), scheduler=_warmup(1))
     trainer = L.Trainer(
         max_epochs=1,
         accelerator="cpu",

@@ -34,7 +34,18 @@ EXPERIMENTS = REPO / "plugins" / "pcmrl" / "src" / "skelagnostic_pcmrl" / "conf"
 GUIDE = REPO / "docs" / "methods" / "pcmrl.md"
 PRESETS = sorted(p.stem for p in EXPERIMENTS.glob("*.yaml"))
 HEADER = re.compile(r"^# Deviations from the paper \(checked against model=(\w+)")
-ENTRY = re.compile(r"^#\s+- ((?:model|data)\.\w+=\S+|callbacks=\w+): \S")
+ENTRY = re.compile(r"^#\s+- ((?:model|data)\.[\w.]+=\S+|callbacks=\w+): \S")
+
+
+def _dotted(mapping: Any, prefix: str) -> dict[str, Any]:
+    """``{"optimizer": {"lr": 1}}`` -> ``{"<prefix>optimizer.lr": 1}`` (nested options by key)."""
+    out: dict[str, Any] = {}
+    for key, value in mapping.items():
+        if isinstance(value, dict) and value:
+            out.update(_dotted(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def deviations(preset: str) -> tuple[str, dict[str, Any], bool]:
@@ -102,12 +113,9 @@ def test_documented_deviations_are_exactly_the_overrides(pcmrl_pm, tmp_path, pre
         [f"model={model}", f"experiment={preset}", f"run_dir={tmp_path}"], plugin_manager=pcmrl_pm
     )
     defaults = read_aligner_config(files("skelagnostic_pcmrl.conf") / f"{model}.yaml")["model"]
-    composed = OmegaConf.to_container(cfg.model, resolve=False)
-    changed = {
-        f"model.{k}": v
-        for k, v in composed.items()  # type: ignore[union-attr]
-        if k in defaults and v != defaults[k]
-    }
+    composed = _dotted(OmegaConf.to_container(cfg.model, resolve=False), "model.")
+    default = _dotted(defaults, "model.")
+    changed = {k: v for k, v in composed.items() if k in default and v != default[k]}
     assert {k: v for k, v in documented.items() if k.startswith("model.")} == changed
     for key, value in documented.items():
         if key.startswith("data."):

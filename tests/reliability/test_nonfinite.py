@@ -48,9 +48,9 @@ def assert_finite_checkpoints(run_dir: Path) -> list[Path]:
 def test_a_learning_rate_that_diverges_stops_the_fit(
     cli_env: dict[str, str], tmp_path: Path
 ) -> None:
-    """The issue's case: model.lr=1e9 used to log NaN every epoch and exit 0."""
+    """The issue's case: model.optimizer.lr=1e9 used to log NaN every epoch and exit 0."""
     run_dir = tmp_path / "run"
-    proc = fit(cli_env, tmp_path, run_dir, "model.lr=1e9", "trainer.max_epochs=3")
+    proc = fit(cli_env, tmp_path, run_dir, "model.optimizer.lr=1e9", "trainer.max_epochs=3")
     assert proc.returncode == 1, proc.stderr[-3000:]
     lines = error_lines(proc.stderr)
     assert len(lines) == 1, proc.stderr[-3000:]

@@ -64,7 +64,12 @@ def make_tiny(root: Path, test_fraction: float) -> tuple[Any, Any]:
     Returns:
         ``(model, held_out(datamodule))``.
     """
-    from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+    from skelagnostic_vqpae.aligner import (
+        AUTHORS_OPTIMIZER,
+        COSINE_SCHEDULER,
+        PREVIOUS_DEFAULTS,
+        VqpaeAligner,
+    )
 
     from skelagnostic.evaluation import held_out
 
@@ -72,7 +77,13 @@ def make_tiny(root: Path, test_fraction: float) -> tuple[Any, Any]:
     dm = make_datamodule(root / "cache")
     dm.test_fraction = test_fraction
     model = VqpaeAligner(
-        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+        num_codes=8,
+        kernel_size=7,
+        **{
+            **PREVIOUS_DEFAULTS,
+            "optimizer": {**AUTHORS_OPTIMIZER, "lr": 1e-3},
+            "scheduler": {**COSINE_SCHEDULER, "period": 1000},
+        },
     )
     make_trainer(root, 3, validate=False).fit(model, datamodule=dm)
     return model.eval(), held_out(dm)
@@ -87,13 +98,24 @@ def helpers() -> dict[str, Callable[..., Any]]:
 @pytest.fixture(scope="session")
 def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """A small aligner trained for 200 steps, its data, validation before/after, checkpoint."""
-    from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+    from skelagnostic_vqpae.aligner import (
+        AUTHORS_OPTIMIZER,
+        COSINE_SCHEDULER,
+        PREVIOUS_DEFAULTS,
+        VqpaeAligner,
+    )
 
     root = tmp_path_factory.mktemp("vqpae-train")
     L.seed_everything(0, verbose=False)
     dm = make_datamodule(root / "cache")
     model = VqpaeAligner(
-        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+        num_codes=8,
+        kernel_size=7,
+        **{
+            **PREVIOUS_DEFAULTS,
+            "optimizer": {**AUTHORS_OPTIMIZER, "lr": 1e-3},
+            "scheduler": {**COSINE_SCHEDULER, "period": 1000},
+        },
     )
     before = make_trainer(root, 1).validate(model, datamodule=dm, verbose=False)[0]
     from skelagnostic.callbacks import FitSummary
@@ -127,7 +149,12 @@ def tiny_fit(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 
     Returns ``model``, ``trainer``, ``root`` and the data module ``dm``.
     """
-    from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+    from skelagnostic_vqpae.aligner import (
+        AUTHORS_OPTIMIZER,
+        COSINE_SCHEDULER,
+        PREVIOUS_DEFAULTS,
+        VqpaeAligner,
+    )
 
     from skelagnostic.callbacks import FitSummary
 
@@ -135,7 +162,13 @@ def tiny_fit(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     L.seed_everything(0, verbose=False)
     dm = make_datamodule(root / "cache")
     model = VqpaeAligner(
-        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+        num_codes=8,
+        kernel_size=7,
+        **{
+            **PREVIOUS_DEFAULTS,
+            "optimizer": {**AUTHORS_OPTIMIZER, "lr": 1e-3},
+            "scheduler": {**COSINE_SCHEDULER, "period": 1000},
+        },
     )
     trainer = make_trainer(root, 3, validate=False)
     trainer.callbacks.append(FitSummary(name="vqpae", dirpath=root / "auto"))  # as `fit` does

@@ -346,13 +346,15 @@ def test_experiment_presets_compose(vqpae_pm, experiment: str, codes: int, sourc
     assert cfg.model.num_codes == codes
     assert cfg.data.source == source
     assert cfg.data.fps == 60 and cfg.data.stride == 1 and cfg.data.batch_size == 32
-    assert cfg.model.lr == 1e-4 and cfg.model.weight_decay == 1e-4
+    assert cfg.model.optimizer.lr == 1e-4 and cfg.model.optimizer.weight_decay == 1e-4
     # the paper's objective: the phase-rate loss (on in vqpae_plus) slows code sharing
     assert cfg.model.lambda_phase_rate == 0.0
     assert cfg.data.pair_seconds == 0.0  # so no partner windows are gathered
     # the settings they were measured with: the previous defaults
     for key, value in PREVIOUS_DEFAULTS.items():
-        if key != "lambda_phase_rate":
+        if key == "scheduler":  # the cosine schedule, at the preset's own period
+            assert cfg.model.scheduler._target_ == value["_target_"]
+        elif key != "lambda_phase_rate":
             assert cfg.model[key] == value, key
     if Path(str(cfg.data.get("root", cfg.data.get("human_root")))).exists():
         dm = build_datamodule(cfg, vqpae_pm)

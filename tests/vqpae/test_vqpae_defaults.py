@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 import torch
 from skelagnostic_vqpae.aligner import PLUS_OPTIONS, PREVIOUS_DEFAULTS, VqpaeAligner
-from skelagnostic_vqpae.schedule import AUTHORS_MIN_LR, CyclicRestarts, cyclic_restart_factors
+from skelagnostic_vqpae.schedule import (
+    AUTHORS_MIN_LR,
+    CyclicRestarts,
+    authors_restarts,
+    cyclic_restart_factors,
+)
 
 from skelagnostic.errors import SkelagnosticError
 
@@ -25,10 +30,18 @@ AUTHORS = {
     "amp_layers": 5,  # --n_layers_state
     "beta": 0.25,  # --beta
     "lambda_vq": 1.0,  # --lambda_vq
-    "lr": 1e-4,  # --learning_rate
-    "weight_decay": 1e-4,  # --weight_decay
-    "restart_period": 10,  # --restart_period
-    "restart_mult": 2,  # --restart_mult
+    "optimizer": {
+        "_target_": "torch.optim.AdamW",
+        "_partial_": True,
+        "lr": 1e-4,  # --learning_rate
+        "weight_decay": 1e-4,  # --weight_decay
+    },
+    "scheduler": {
+        "_target_": "skelagnostic_vqpae.schedule.authors_restarts",  # CyclicLRWithRestarts
+        "_partial_": True,
+        "period": 10,  # --restart_period
+        "mult": 2,  # --restart_mult
+    },
     "pose_layers": 8,  # --n_layers_phase_decoder
     "pose_lr": 1e-3,  # --lr_phase_decoder
     "lambda_phase_rate": 0.0,  # not in their objective
@@ -38,7 +51,6 @@ AUTHORS = {
     "decoder_centering": True,  # LN_v3 after the first deconvolution
     "center_windows": False,  # MSE(yPred, pae_input)
     "reinit_squared_distance": True,  # softmax over the squared distances
-    "schedule": "authors",  # CyclicLRWithRestarts
     "pose_mlp": "joint",  # the phase decoder's loss is in loss_total
     "frequency_head": "mlp",
 }
@@ -107,8 +119,12 @@ def test_schedule_leaves_later_groups_alone_and_checks_its_arguments() -> None:
     assert length == 2 and eta == pytest.approx(0.5 * (1 + math.cos(math.pi * 0.5 / 2)))
     with pytest.raises(SkelagnosticError, match="no batch"):
         cyclic_restart_factors(0, 16, 32, 1, 2)
-    with pytest.raises(SkelagnosticError, match=r"model\.schedule"):
-        VqpaeAligner(schedule="linear")
+    with pytest.raises(SkelagnosticError, match=r"model\.scheduler\.periodd is not an argument"):
+        VqpaeAligner(
+            scheduler={"_target_": "skelagnostic_vqpae.schedule.cosine_restarts", "periodd": 3}
+        )
+    with pytest.raises(SkelagnosticError, match=r"model\.scheduler\.period must be positive"):
+        authors_restarts(torch.optim.AdamW([a], lr=1e-4), None, period=0)
 
 
 def test_training_uses_the_authors_epoch(cache_dir: Path, tmp_path: Path, helpers: dict) -> None:

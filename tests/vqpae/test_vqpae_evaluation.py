@@ -7,7 +7,12 @@ import math
 import lightning as L
 import pytest
 import torch
-from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+from skelagnostic_vqpae.aligner import (
+    AUTHORS_OPTIMIZER,
+    COSINE_SCHEDULER,
+    PREVIOUS_DEFAULTS,
+    VqpaeAligner,
+)
 from skelagnostic_vqpae.protocols.manifold import manifold_protocol
 from skelagnostic_vqpae.protocols.tables import code_overlap, phase_line
 
@@ -37,7 +42,13 @@ def test_manifold_protocol_on_held_out_clips(helpers, tmp_path) -> None:
     dm = helpers["datamodule"](tmp_path / "cache")
     dm.test_fraction = 0.25
     model = VqpaeAligner(
-        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+        num_codes=8,
+        kernel_size=7,
+        **{
+            **PREVIOUS_DEFAULTS,
+            "optimizer": {**AUTHORS_OPTIMIZER, "lr": 1e-3},
+            "scheduler": {**COSINE_SCHEDULER, "period": 1000},
+        },
     )
     helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
     model.eval()

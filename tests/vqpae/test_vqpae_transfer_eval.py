@@ -10,7 +10,12 @@ from pathlib import Path
 import lightning as L
 import pytest
 import torch
-from skelagnostic_vqpae.aligner import PREVIOUS_DEFAULTS, VqpaeAligner
+from skelagnostic_vqpae.aligner import (
+    AUTHORS_OPTIMIZER,
+    COSINE_SCHEDULER,
+    PREVIOUS_DEFAULTS,
+    VqpaeAligner,
+)
 from skelagnostic_vqpae.protocols.transfer import OWN_RATE, UNSCALED, transfer_protocol
 
 from skelagnostic import procedural
@@ -89,7 +94,13 @@ def tiny_run(helpers, tmp_path):
     dm = helpers["datamodule"](tmp_path / "cache")
     dm.test_fraction = 0.3
     model = VqpaeAligner(
-        num_codes=8, kernel_size=7, lr=1e-3, restart_period=1000, **PREVIOUS_DEFAULTS
+        num_codes=8,
+        kernel_size=7,
+        **{
+            **PREVIOUS_DEFAULTS,
+            "optimizer": {**AUTHORS_OPTIMIZER, "lr": 1e-3},
+            "scheduler": {**COSINE_SCHEDULER, "period": 1000},
+        },
     )
     helpers["trainer"](tmp_path, 3, validate=False).fit(model, datamodule=dm)
     return model.eval(), held_out(dm)
@@ -181,12 +192,18 @@ def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
     cfg = compose(
         ["model=vqpae", "experiment=vqpae_main", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm
     )
-    assert cfg.model.num_codes == 16 and cfg.model.lr == 1e-3 and cfg.model.pose_mlp == "none"
+    assert (
+        cfg.model.num_codes == 16
+        and cfg.model.optimizer.lr == 1e-3
+        and cfg.model.pose_mlp == "none"
+    )
     assert cfg.data.source == "procedural" and cfg.data.fps == 30 and cfg.threads == 1
     assert cfg.trainer.max_time == "00:00:04:15" and cfg.trainer.max_epochs == -1
     # the settings it was measured with: the previous defaults (vqpae_plus, the paper's head)
     for key, value in PREVIOUS_DEFAULTS.items():
-        if key != "pose_mlp":
+        if key == "scheduler":  # the cosine schedule, at the preset's own period
+            assert cfg.model.scheduler._target_ == value["_target_"]
+        elif key != "pose_mlp":
             assert cfg.model[key] == value, key
     assert cfg.data.pair_seconds == 0.1
     default = compose(["model=vqpae", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm)

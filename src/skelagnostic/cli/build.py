@@ -17,7 +17,7 @@ import traceback
 import types
 import typing
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, Literal, Union
 
@@ -157,7 +157,7 @@ def config_errors(
 ) -> Iterator[None]:
     """Within the block (the trainer's run): errors caused by a config value name its key.
 
-    A ``ValueError``/``TypeError`` raised by ``torch.optim`` (``model.lr=nan``) names
+    A ``ValueError``/``TypeError`` raised by ``torch.optim`` (``model.optimizer.lr=nan``) names
     the ``model.*`` values; a Lightning misconfiguration that quotes a callback or
     logger option names that option (:func:`config_error_of`).
     """
@@ -242,10 +242,12 @@ def model_error(
 
     The ``model.*`` keys the command line sets are named (only those whose value
     the message quotes, if any); without any, those that differ from the aligner's
-    defaults (an experiment's), else ``model=<name>``.
+    defaults (an experiment's), else ``model=<name>``. Nested options are named by
+    their dotted key (``model.optimizer.lr``).
     """
     from hydra.core.hydra_config import HydraConfig
 
+    options, defaults = _dotted(options), _dotted(defaults)
     given = {k: v for k, v in options.items() if k not in defaults or defaults[k] != v}
     if HydraConfig.initialized():
         keys = {o.partition("=")[0].lstrip("+~") for o in HydraConfig.get().overrides.task}
@@ -257,6 +259,17 @@ def model_error(
     given = quoted or given
     where = ", ".join(f"model.{k}={v!r}" for k, v in given.items()) or f"model={name}"
     return ConfigError(f"{where}: the aligner {name!r} refuses it ({_describe(exc)})")
+
+
+def _dotted(options: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"optimizer": {"lr": 1}}`` -> ``{"optimizer.lr": 1}`` (mappings only; lists stay)."""
+    out: dict[str, Any] = {}
+    for key, value in options.items():
+        if isinstance(value, Mapping) and value:
+            out.update(_dotted(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def _mentioned(text: str, options: dict[str, Any]) -> str | None:

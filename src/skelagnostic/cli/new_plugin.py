@@ -139,10 +139,12 @@ heading travel in ``Latent.extras``.
 
 from __future__ import annotations
 
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import torch
 from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
@@ -159,21 +161,38 @@ class __CLASS__DataModule(MotionDataModule):
         return GlobalPositions(frame="root")
 
 
+#: model.optimizer and model.scheduler by default (conf/__NAME__.yaml holds the same values).
+OPTIMIZER = MappingProxyType({"_target_": "torch.optim.Adam", "_partial_": True, "lr": 3e-3})
+SCHEDULER = MappingProxyType(
+    {"_target_": "skelagnostic.aligners.optim.cosine_lr", "_partial_": True, "min_lr": 0.0}
+)
+
+
 class __CLASS__Aligner(Aligner):
     """Per-joint MLP autoencoder with a per-frame latent.
 
     Args:
         hidden: Width of the MLPs.
         latent: Size of the per-frame latent.
-        lr: Adam learning rate.
+        optimizer: ``model.optimizer``: a ``_partial_`` spec (``conf/__NAME__.yaml``) or a
+            callable taking the parameters; ``model.optimizer.lr`` is the learning rate.
+        scheduler: ``model.scheduler``: the schedule (``None``: a constant rate); given
+            the optimizer and, if it names them, ``steps_per_epoch``/``total_steps``.
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset(
         {"encode", "decode", "retarget", "unseen_topology", "quadruped"}
     )
 
-    def __init__(self, hidden: int = 64, latent: int = 16, lr: float = 3e-3) -> None:
+    def __init__(
+        self,
+        hidden: int = 64,
+        latent: int = 16,
+        optimizer: OptimizerSpec = OPTIMIZER,
+        scheduler: OptimizerSpec | None = SCHEDULER,
+    ) -> None:
         super().__init__()
+        optimizer, scheduler = check_specs(optimizer, scheduler)  # a wrong key fails here
         # Every size the network depends on must be an argument saved here: a checkpoint
         # rebuilds the network from these hyper-parameters (load_aligner).
         self.save_hyperparameters()
@@ -232,13 +251,11 @@ class __CLASS__Aligner(Aligner):
         """Logs ``test/loss``."""
         return self._step(batch, "test")
 
-    def configure_optimizers(self) -> dict[str, Any]:
-        """Adam, its learning rate decayed by a cosine over the run."""
-        optimizer = torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
-        steps = max(1, int(self.trainer.estimated_stepping_batches))
-        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=steps)
-        return {"optimizer": optimizer,
-                "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+    def configure_optimizers(self) -> Any:
+        """``model.optimizer`` and ``model.scheduler`` (Adam, a cosine decay over the run)."""
+        hp = self.hparams
+        return configure_optimization(hp.optimizer, hp.scheduler, self.parameters(),
+                                      self._trainer)
 
     # ------------------------------------------------------------------ aligner
     @torch.no_grad()
@@ -289,7 +306,15 @@ model:
   _target_: __PKG__.aligner.__CLASS__Aligner
   hidden: 64
   latent: 16
-  lr: 0.003
+  # model.optimizer.lr=... sets the rate; model.optimizer._target_=torch.optim.AdamW another one
+  optimizer:
+    _target_: torch.optim.Adam
+    _partial_: true
+    lr: 0.003
+  scheduler:
+    _target_: skelagnostic.aligners.optim.cosine_lr
+    _partial_: true
+    min_lr: 0.0
 """
 
 _EXPERIMENT = """\

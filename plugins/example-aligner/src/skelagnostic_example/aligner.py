@@ -14,12 +14,14 @@ become rotations by inverse kinematics (no bone twist).
 from __future__ import annotations
 
 from itertools import pairwise
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import torch
 from torch import nn
 
 from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
@@ -46,21 +48,34 @@ def _mlp(sizes: list[int]) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+#: Adam at 3e-3: what ``model.optimizer`` defaults to (``conf/example.yaml`` says the same).
+OPTIMIZER = MappingProxyType({"_target_": "torch.optim.Adam", "_partial_": True, "lr": 3e-3})
+
+
 class ExampleAligner(Aligner):
     """Per-joint MLP + GRU autoencoder with a topology-agnostic per-frame latent.
 
     Args:
         hidden: Width of the joint MLPs and the GRU.
         latent: Size of the per-frame latent.
-        lr: Adam learning rate.
+        optimizer: ``model.optimizer``: a ``_partial_`` spec or a callable taking the
+            parameters (:mod:`skelagnostic.aligners.optim`); Adam at 3e-3 by default.
+        scheduler: ``model.scheduler`` (``None``: a constant rate).
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset(
         {"encode", "decode", "retarget", "unseen_topology", "quadruped"}
     )
 
-    def __init__(self, hidden: int = 64, latent: int = 16, lr: float = 3e-3) -> None:
+    def __init__(
+        self,
+        hidden: int = 64,
+        latent: int = 16,
+        optimizer: OptimizerSpec = OPTIMIZER,
+        scheduler: OptimizerSpec | None = None,
+    ) -> None:
         super().__init__()
+        optimizer, scheduler = check_specs(optimizer, scheduler)  # a wrong key fails here
         self.save_hyperparameters()
         self.joint_encoder = _mlp([6, hidden, hidden])
         self.temporal = nn.GRU(2 * hidden, hidden, batch_first=True)
@@ -156,9 +171,10 @@ class ExampleAligner(Aligner):
             "output": rep.decode(rec[0].double().cpu(), skeleton, fps),
         }
 
-    def configure_optimizers(self) -> torch.optim.Optimizer:
-        """Adam."""
-        return torch.optim.Adam(self.parameters(), lr=self.hparams.lr)
+    def configure_optimizers(self) -> Any:
+        """``model.optimizer`` and ``model.scheduler``."""
+        hp = self.hparams
+        return configure_optimization(hp.optimizer, hp.scheduler, self.parameters(), self._trainer)
 
     # ------------------------------------------------------------------- export
     def export_graphs(self) -> list[ExportGraph]:

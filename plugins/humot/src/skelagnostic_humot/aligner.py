@@ -3,9 +3,11 @@
 Training (Sec. 3.4, App. A.4-A.5): each step takes one batch of chunks per
 topology; every chunk gets two independent joint subsets, the first is
 encoded with its template and decoded with the second's template, and the
-loss ``L_rec + lambda_blc * L_blc`` is computed on the second subset. Adam
-(0.9, 0.999) with a triangular cyclic learning rate between ``lr_min`` and
-``lr_max`` whose full period is ``lr_period_epochs`` epochs.
+loss ``L_rec + lambda_blc * L_blc`` is computed on the second subset. The
+optimizer and its schedule are config (``model.optimizer``, ``model.scheduler``,
+:mod:`skelagnostic.aligners.optim`); the defaults are the paper's: Adam (0.9,
+0.999) with a triangular cyclic learning rate from 1e-5 up to 1e-4 and back
+over 10 epochs.
 
 Inference works on whole motions of any length: the motion is resampled to
 30 fps, converted to metres, cut into ``chunk``-frame windows every
@@ -21,12 +23,13 @@ no twist about the bone axis, since positions do not determine it).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import torch
 
-from skelagnostic.aligners import Aligner, Latent, steps_per_epoch
+from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
@@ -68,6 +71,21 @@ def _chunk_starts(frames: int, chunk: int, hop: int) -> list[int]:
     return starts
 
 
+#: The paper's optimizer (App. A.5): Adam (0.9, 0.999), starting at the cycle's lower bound.
+PAPER_OPTIMIZER = MappingProxyType(
+    {"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-5, "betas": (0.9, 0.999)}
+)
+#: The paper's schedule: a triangular cycle from 1e-5 up to 1e-4 and back in 10 epochs.
+PAPER_SCHEDULER = MappingProxyType(
+    {
+        "_target_": "skelagnostic.aligners.optim.cyclic_lr",
+        "_partial_": True,
+        "max_lr": 1e-4,
+        "period_epochs": 10.0,
+    }
+)
+
+
 class HumotAligner(Aligner):
     """HuMoT: topology-agnostic transformer autoencoder for human motion.
 
@@ -84,10 +102,12 @@ class HumotAligner(Aligner):
         subsampling: Stochastic joint subsampling (paper: on; off = "no SJS" ablation).
         p_major: Drop probability of major joints (paper: 0.1).
         p_other: Drop probability of other joints (paper: 0.5).
-        lr_min: Lower bound of the cyclic learning rate (paper: 1e-5).
-        lr_max: Upper bound (paper: 1e-4).
-        lr_period_epochs: Full period of the triangular cycle in epochs (paper: 10).
-        betas: Adam betas (paper: 0.9, 0.999).
+        optimizer: ``model.optimizer``, a ``_partial_`` spec or a callable taking the
+            parameters (:mod:`skelagnostic.aligners.optim`); paper: Adam, betas (0.9,
+            0.999), from the cycle's lower bound ``lr`` = 1e-5.
+        scheduler: ``model.scheduler`` (``None``: a constant rate); paper: a
+            triangular cycle (:func:`~skelagnostic.aligners.optim.cyclic_lr`) up to
+            ``max_lr`` = 1e-4 and back over ``period_epochs`` = 10, stepped per batch.
         chunk: Frames per chunk at inference (paper's training chunks: 30).
         fast_path: Compute the network on the valid joints of each chunk only (packed
             tokens); ``False`` runs the padded computation, same values and gradients to
@@ -114,10 +134,8 @@ class HumotAligner(Aligner):
         subsampling: bool = True,
         p_major: float = 0.1,
         p_other: float = 0.5,
-        lr_min: float = 1e-5,
-        lr_max: float = 1e-4,
-        lr_period_epochs: float = 10.0,
-        betas: Sequence[float] = (0.9, 0.999),
+        optimizer: OptimizerSpec = PAPER_OPTIMIZER,
+        scheduler: OptimizerSpec | None = PAPER_SCHEDULER,
         chunk: int = 30,
         fast_path: bool = True,
     ) -> None:
@@ -127,14 +145,13 @@ class HumotAligner(Aligner):
             ("lambda_blc", lambda_blc >= 0, ">= 0"),
             ("p_major", 0 <= p_major < 1, "in [0, 1)"),
             ("p_other", 0 <= p_other < 1, "in [0, 1)"),
-            ("lr_min", 0 < lr_min <= lr_max, "in (0, lr_max]"),
-            ("lr_period_epochs", lr_period_epochs > 0, "> 0"),
             ("chunk", chunk > 0, "> 0"),
             ("kernel_size", kernel_size % 2 == 1, "odd"),
         )
         for name, ok, what in checks:
             if not ok:
                 raise SkelagnosticError(f"model.{name} must be {what}, got {locals()[name]!r}")
+        optimizer, scheduler = check_specs(optimizer, scheduler)
         self.save_hyperparameters()
         self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
         self._topologies: dict[tuple[Any, ...], Topology] = {}
@@ -250,24 +267,10 @@ class HumotAligner(Aligner):
             out[name] = self.net.encoder(pos, tmpl)
         return out
 
-    def configure_optimizers(self) -> dict[str, Any]:
-        """Adam with a per-step triangular cyclic learning rate (Smith 2017)."""
+    def configure_optimizers(self) -> Any:
+        """``model.optimizer`` and ``model.scheduler`` (the paper's: Adam, cyclic rate per step)."""
         hp = self.hparams
-        optimizer = torch.optim.Adam(self.parameters(), lr=hp.lr_min, betas=tuple(hp.betas))
-        per_epoch = steps_per_epoch(self._trainer)
-        half = max(1, round(hp.lr_period_epochs * per_epoch / 2))
-        scheduler = torch.optim.lr_scheduler.CyclicLR(
-            optimizer,
-            base_lr=hp.lr_min,
-            max_lr=hp.lr_max,
-            step_size_up=half,
-            mode="triangular",
-            cycle_momentum=False,
-        )
-        return {
-            "optimizer": optimizer,
-            "lr_scheduler": {"scheduler": scheduler, "interval": "step"},
-        }
+        return configure_optimization(hp.optimizer, hp.scheduler, self.parameters(), self._trainer)
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Any]:

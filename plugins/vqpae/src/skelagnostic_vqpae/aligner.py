@@ -15,7 +15,14 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, ClassVar
 
 from skelagnostic.core.motion import Motion
-from skelagnostic_vqpae.options import PLUS_OPTIONS, PREVIOUS_DEFAULTS, SCHEDULES, DatasetSpec
+from skelagnostic_vqpae.options import (
+    AUTHORS_OPTIMIZER,
+    AUTHORS_SCHEDULER,
+    COSINE_SCHEDULER,
+    PLUS_OPTIONS,
+    PREVIOUS_DEFAULTS,
+    DatasetSpec,
+)
 from skelagnostic_vqpae.protocols.summary import fit_summary
 from skelagnostic_vqpae.training import VqpaeModel
 from skelagnostic_vqpae.transfer import transfer_clips
@@ -26,9 +33,11 @@ if TYPE_CHECKING:
     from skelagnostic.callbacks import SummaryContent
 
 __all__ = [
+    "AUTHORS_OPTIMIZER",
+    "AUTHORS_SCHEDULER",
+    "COSINE_SCHEDULER",
     "PLUS_OPTIONS",
     "PREVIOUS_DEFAULTS",
-    "SCHEDULES",
     "DatasetSpec",
     "VqpaeAligner",
     "VqpaeModel",

@@ -67,6 +67,7 @@ from torch import Tensor
 
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic_vqpae.aligner import VqpaeAligner
+from skelagnostic_vqpae.options import AUTHORS_OPTIMIZER, AUTHORS_SCHEDULER
 
 __all__ = [
     "authors_state_order",
@@ -326,11 +327,16 @@ def load_run(run_dir: str | Path, epoch: int | None = None) -> VqpaeAligner:
         lambda_vq=_option(args, "lambda_vq", float, args_path, default=1.0),
         lambda_phase_rate=0.0,
         reinit_squared_distance=True,
-        lr=_option(args, "learning_rate", float, args_path, default=1e-4),
-        weight_decay=_option(args, "weight_decay", float, args_path, default=1e-4),
-        restart_period=_option(args, "restart_period", int, args_path, default=10),
-        restart_mult=_option(args, "restart_mult", int, args_path, default=2),
-        schedule="authors",
+        optimizer={
+            **AUTHORS_OPTIMIZER,
+            "lr": _option(args, "learning_rate", float, args_path, default=1e-4),
+            "weight_decay": _option(args, "weight_decay", float, args_path, default=1e-4),
+        },
+        scheduler={
+            **AUTHORS_SCHEDULER,
+            "period": _option(args, "restart_period", int, args_path, default=10),
+            "mult": _option(args, "restart_mult", int, args_path, default=2),
+        },
         pose_mlp="joint" if decoders else "none",
         pose_layers=pose_layers,
         pose_lr=_option(args, "lr_phase_decoder", float, args_path, default=1e-3),

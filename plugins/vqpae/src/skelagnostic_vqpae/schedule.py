@@ -1,4 +1,4 @@
-r"""The WalkTheDog authors' learning-rate and weight-decay schedule (``model.schedule=authors``).
+r"""The WalkTheDog authors' learning-rate and weight-decay schedule: VQ-PAE's ``model.scheduler``.
 
 Their ``train_vq.py`` trains with AdamW and ``CyclicLRWithRestarts`` (Loshchilov &
 Hutter, "Decoupled weight decay regularization", policy ``cosine``). Per
@@ -18,7 +18,9 @@ of batches) and ``P`` the cycle length in epochs:
   restart epoch still belongs to the ending cycle (``t = P``: the minimum rate and no
   weight decay), as in their scheduler.
 
-Their epoch is one pass over the smallest dataset.
+Their epoch is one pass over the smallest dataset. :func:`authors_restarts` builds it
+for ``model.scheduler`` (the default); :func:`cosine_restarts` is PyTorch's cosine
+annealing with warm restarts over the data module's epochs, on every group.
 """
 
 from __future__ import annotations
@@ -36,7 +38,9 @@ __all__ = [
     "AUTHORS_MIN_LR",
     "CyclicRestarts",
     "authors_epoch",
+    "authors_restarts",
     "configure_optimizers",
+    "cosine_restarts",
     "cyclic_restart_factors",
 ]
 
@@ -153,18 +157,68 @@ class CyclicRestarts(LRScheduler):
         return rates
 
 
+def authors_restarts(
+    optimizer: Optimizer, trainer: Any = None, period: int = 10, mult: int = 2
+) -> CyclicRestarts:
+    """The authors' ``CyclicLRWithRestarts`` on the first parameter group (the VQ-PAE).
+
+    The ``model.scheduler`` target of ``model=vqpae``; the pose MLPs' group keeps
+    its constant rate (the authors train them with their own Adam).
+
+    Args:
+        optimizer: The AdamW of :func:`configure_optimizers`.
+        trainer: The run's trainer (given by the run): its data sets the epoch.
+        period: Epochs of the first cycle (``--restart_period``, 10).
+        mult: Cycle growth (``--restart_mult``, 2).
+
+    Returns:
+        The schedule, stepped per optimizer step.
+    """
+    _check_period(period, mult)
+    epoch_size, batch_size = authors_epoch(trainer)
+    return CyclicRestarts(optimizer, epoch_size, batch_size, period, mult, groups=1)
+
+
+def cosine_restarts(
+    optimizer: Optimizer, steps_per_epoch: int = 1, period: int = 10, mult: int = 2
+) -> torch.optim.lr_scheduler.CosineAnnealingWarmRestarts:
+    """PyTorch's cosine annealing with warm restarts every ``period`` epochs, on every group.
+
+    Args:
+        optimizer: The optimizer.
+        steps_per_epoch: Optimizer steps per epoch (given by the run).
+        period: Epochs of the first cycle.
+        mult: Growth of the cycle length at each restart.
+
+    Returns:
+        ``CosineAnnealingWarmRestarts``, stepped per optimizer step.
+    """
+    _check_period(period, mult)
+    return torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
+        optimizer, T_0=max(1, period * steps_per_epoch), T_mult=mult
+    )
+
+
+def _check_period(period: int, mult: int) -> None:
+    for name, value in (("period", period), ("mult", mult)):
+        if not value > 0:
+            raise SkelagnosticError(f"model.scheduler.{name} must be positive, got {value}")
+
+
 def configure_optimizers(aligner: Any) -> Any:
-    """AdamW + the schedule of ``model.schedule`` (per step); pose MLPs in their own group.
+    """``model.optimizer`` + ``model.scheduler`` (per step); pose MLPs in their own group.
 
     :meth:`VqpaeModel.configure_optimizers
-    <skelagnostic_vqpae.training.VqpaeModel.configure_optimizers>`.
+    <skelagnostic_vqpae.training.VqpaeModel.configure_optimizers>`. The first group
+    (the VQ-PAEs and the codebook) takes the optimizer's rate and weight decay; the
+    pose MLPs' group has ``model.pose_lr`` and no weight decay.
     """
-    from skelagnostic.aligners import steps_per_epoch  # Lightning: only when training
+    from skelagnostic.aligners.optim import configure_optimization
 
     hp = aligner.hparams
     book = aligner._require_built()
     main = [p for c in aligner.characters for p in c.pae.parameters()] + [book.weight]
-    groups = [{"params": main, "lr": hp.lr, "weight_decay": hp.weight_decay}]
+    groups: list[dict[str, Any]] = [{"params": main}]
     if hp.pose_mlp != "none":
         groups.append(
             {
@@ -176,21 +230,9 @@ def configure_optimizers(aligner: Any) -> Any:
     # the fused kernel is 3-4x faster than foreach on this model's ~60 small tensors
     # (1.0 vs 3.4 ms per step on one CPU core); it exists for CPU and CUDA only
     fused = all(p.device.type in ("cpu", "cuda") for p in main)
-    optimizer = torch.optim.AdamW(groups, fused=fused, foreach=None if fused else True)
-    if hp.schedule == "authors":
-        epoch_size, batch_size = authors_epoch(aligner._trainer)
-        scheduler: Any = CyclicRestarts(
-            optimizer, epoch_size, batch_size, hp.restart_period, hp.restart_mult, groups=1
-        )
-    else:
-        steps = steps_per_epoch(aligner._trainer)
-        scheduler = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(
-            optimizer, T_0=max(1, hp.restart_period * steps), T_mult=hp.restart_mult
-        )
-    return {
-        "optimizer": optimizer,
-        "lr_scheduler": {"scheduler": scheduler, "interval": "step"},
-    }
+    speed = {"fused": True} if fused else {"foreach": True}
+    trainer = aligner._trainer
+    return configure_optimization(hp.optimizer, hp.scheduler, groups, trainer, prefer=speed)
 
 
 def authors_epoch(trainer: Any) -> tuple[int, int]:

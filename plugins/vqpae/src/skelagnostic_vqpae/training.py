@@ -10,14 +10,16 @@ not reach the VQ-PAE, equivalent to the paper's separate training) or jointly
 The codebook is re-initialised in ``on_before_optimizer_step`` (after the
 backward pass, before the optimiser step, as in the paper).
 
-Optimiser: AdamW (lr 1e-4, weight decay 1e-4) with cosine annealing and warm
-restarts every ``restart_period`` epochs (period doubling, ``restart_mult`` 2),
-stepped per batch. ``schedule="authors"`` (default) is the authors'
-``CyclicLRWithRestarts`` (:mod:`~skelagnostic_vqpae.schedule`: an epoch is one pass
-over the smallest dataset, a 1e-7 floor, normalised weight decay annealed with
-the rate) and keeps the pose MLPs' rate constant (lr 1e-3, no weight decay: the
-authors' separate Adam); ``"cosine"`` is PyTorch's ``CosineAnnealingWarmRestarts``
-over the data module's epochs, on every group.
+Optimiser (``model.optimizer``, ``model.scheduler``: config, see
+:mod:`skelagnostic.aligners.optim`): AdamW (lr 1e-4, weight decay 1e-4) with the
+authors' ``CyclicLRWithRestarts``
+(:func:`~skelagnostic_vqpae.schedule.authors_restarts`: cosine cycles of 10
+epochs doubling at each restart, an epoch is one pass over the smallest dataset,
+a 1e-7 floor, normalised weight decay annealed with the rate), stepped per
+batch; the pose MLPs keep a constant rate (``pose_lr`` 1e-3, no weight decay:
+the authors' separate Adam).
+:func:`~skelagnostic_vqpae.schedule.cosine_restarts` is PyTorch's
+``CosineAnnealingWarmRestarts`` over the data module's epochs, on every group.
 
 The defaults are the authors' training (``train_vq.py``);
 :data:`~skelagnostic_vqpae.options.PLUS_OPTIONS` are skelagnostic's changes, enabled together
@@ -40,6 +42,7 @@ from lightning.pytorch.utilities import rank_zero_info
 from torch import Tensor, nn
 
 from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners.optim import OptimizerSpec, check_specs
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import UNITS, infer_units
@@ -56,10 +59,11 @@ from skelagnostic_vqpae.model import (
     phase_manifold,
 )
 from skelagnostic_vqpae.options import (
+    AUTHORS_OPTIMIZER,
+    AUTHORS_SCHEDULER,
     PHASE_RATE_GRADS,
     POSE_MODES,
     PREVIOUS_DEFAULTS,
-    SCHEDULES,
     DatasetSpec,
 )
 from skelagnostic_vqpae.predictions import write_embeddings
@@ -127,12 +131,15 @@ class VqpaeModel(Aligner):
         reinit_squared_distance: Draw targets with the squared distance (default
             ``True``, the authors' code; the paper's Eq. 6 has the distance).
         seed: Seed of the re-initialisation generator.
-        lr: AdamW learning rate (1e-4).
-        weight_decay: AdamW weight decay (1e-4).
-        restart_period: Epochs of the first cosine cycle (10).
-        restart_mult: Growth of the cycle length at each restart (2).
-        schedule: ``"authors"`` (default) or ``"cosine"`` (see the module docstring).
-            Checkpoints saved before this option existed resume with ``"cosine"``.
+        optimizer: ``model.optimizer``, a ``_partial_`` spec or a callable taking the
+            parameter groups (:mod:`skelagnostic.aligners.optim`); the authors':
+            AdamW, ``lr`` 1e-4, ``weight_decay`` 1e-4
+            (:data:`~skelagnostic_vqpae.options.AUTHORS_OPTIMIZER`).
+        scheduler: ``model.scheduler`` (``None``: constant); the authors'
+            :func:`~skelagnostic_vqpae.schedule.authors_restarts` (``period`` 10
+            epochs, ``mult`` 2), or
+            :func:`~skelagnostic_vqpae.schedule.cosine_restarts`. Checkpoints
+            saved without it resume with the cosine one.
         pose_mlp: ``"none"``, ``"detached"`` or ``"joint"`` (default: the authors'
             phase decoders train with the VQ-PAE; see the module docstring).
         pose_layers: Layers of the average-pose MLP (8).
@@ -168,11 +175,8 @@ class VqpaeModel(Aligner):
         reinit_eps: float = 1e-3,
         reinit_squared_distance: bool = True,
         seed: int = 0,
-        lr: float = 1e-4,
-        weight_decay: float = 1e-4,
-        restart_period: int = 10,
-        restart_mult: int = 2,
-        schedule: str = "authors",
+        optimizer: OptimizerSpec = AUTHORS_OPTIMIZER,
+        scheduler: OptimizerSpec | None = AUTHORS_SCHEDULER,
         pose_mlp: str = "joint",
         pose_layers: int = 8,
         pose_lr: float = 1e-3,
@@ -181,8 +185,6 @@ class VqpaeModel(Aligner):
         super().__init__()
         if pose_mlp not in POSE_MODES:
             raise SkelagnosticError(f"model.pose_mlp must be one of {POSE_MODES}, got {pose_mlp!r}")
-        if schedule not in SCHEDULES:
-            raise SkelagnosticError(f"model.schedule must be one of {SCHEDULES}, got {schedule!r}")
         if phase_rate_grad not in PHASE_RATE_GRADS:
             raise SkelagnosticError(
                 f"model.phase_rate_grad must be one of {PHASE_RATE_GRADS}, got {phase_rate_grad!r}"
@@ -194,12 +196,10 @@ class VqpaeModel(Aligner):
         for arg, value in (
             ("latent", latent),
             ("num_codes", num_codes),
-            ("lr", lr),
-            ("restart_period", restart_period),
-            ("restart_mult", restart_mult),
         ):
             if value <= 0:
                 raise SkelagnosticError(f"model.{arg} must be positive, got {value}")
+        optimizer, scheduler = check_specs(optimizer, scheduler)
         self.save_hyperparameters()
         self.dataset_names: list[str] = []
         self.characters = nn.ModuleList()
@@ -451,7 +451,7 @@ class VqpaeModel(Aligner):
             self.predictions_path = path
 
     def configure_optimizers(self) -> Any:
-        """AdamW + the schedule of ``model.schedule`` (per step); pose MLPs in their own group.
+        """``model.optimizer`` + ``model.scheduler`` (per step); pose MLPs in their own group.
 
         See :func:`skelagnostic_vqpae.schedule.configure_optimizers`.
         """

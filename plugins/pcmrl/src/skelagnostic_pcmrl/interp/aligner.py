@@ -11,12 +11,14 @@ import itertools
 import logging
 import math
 from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import torch
 from torch import Tensor
 
 from skelagnostic.aligners.base import Aligner, Latent
+from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.kinematics import fk_from_global, global_from_local, local_from_global
 from skelagnostic.core.motion import Motion
@@ -30,6 +32,16 @@ from skelagnostic_pcmrl.layouts import LAYOUTS
 from skelagnostic_pcmrl.points import group_of_joints
 
 log = logging.getLogger(__name__)
+
+
+#: The paper's optimizer: rate 1e-4; AdamW without decay, as the authors' Adam.
+PAPER_OPTIMIZER = MappingProxyType(
+    {"_target_": "torch.optim.AdamW", "_partial_": True, "lr": 1e-4, "weight_decay": 0.0}
+)
+#: The paper's schedule: a 10,000-step linear warm-up (then constant here).
+PAPER_SCHEDULER = MappingProxyType(
+    {"_target_": "skelagnostic.aligners.optim.linear_warmup", "_partial_": True, "steps": 10000}
+)
 
 
 class PcmrlInterpAligner(Aligner):
@@ -66,11 +78,13 @@ class PcmrlInterpAligner(Aligner):
             turn the result back (not in the paper; off by default). Makes the
             model exactly heading-equivariant, so it need not learn every heading
             from data; in measured 15-minute CPU runs it did not change the result.
-        lr: AdamW learning rate (paper 1e-4).
-        weight_decay: AdamW weight decay (0: the authors' ``train_inpainter.py`` uses Adam,
-            without decay).
-        warmup_steps: Linear warm-up steps (paper 10000). The learning rate then stays
-            at ``lr``; the authors' decays linearly to 0 at the last step.
+        optimizer: ``model.optimizer``, a ``_partial_`` spec or a callable taking the
+            parameters (:mod:`skelagnostic.aligners.optim`): AdamW with ``lr`` 1e-4 (the
+            paper's) and ``weight_decay`` 0 (the authors' ``train_inpainter.py`` uses
+            Adam, without decay).
+        scheduler: ``model.scheduler``: a linear warm-up over ``steps`` = 10000 (the
+            paper's; :func:`~skelagnostic.aligners.optim.linear_warmup`). The rate then
+            stays at ``lr``; the authors' decays linearly to 0 at the last step.
         w_root: Weight of L1(root).
         w_foq: Weight of L1(FOQ).
         w_fk: Weight of L1(FK positions) (paper 0.1).
@@ -105,9 +119,8 @@ class PcmrlInterpAligner(Aligner):
         residual_space: str = "foq",
         interm_tokens: str = "zero",
         canonical_heading: bool = False,
-        lr: float = 1e-4,
-        weight_decay: float = 0.0,
-        warmup_steps: int = 10000,
+        optimizer: OptimizerSpec = PAPER_OPTIMIZER,
+        scheduler: OptimizerSpec | None = PAPER_SCHEDULER,
         w_root: float = 1.0,
         w_foq: float = 1.0,
         w_fk: float = 0.1,
@@ -125,13 +138,11 @@ class PcmrlInterpAligner(Aligner):
             ("layers", layers),
             ("ff_mult", ff_mult),
             ("max_relative", max_relative),
-            ("lr", lr),
             ("window", window),
         ):
             if value <= 0:
                 raise SkelagnosticError(f"model.{arg} must be positive, got {value}")
-        if warmup_steps < 0:
-            raise SkelagnosticError(f"model.warmup_steps must be >= 0, got {warmup_steps}")
+        optimizer, scheduler = check_specs(optimizer, scheduler)
         if residual_space not in ("foq", "local"):
             raise SkelagnosticError(
                 f"model.residual_space must be 'foq' or 'local', got {residual_space!r}"
@@ -339,12 +350,9 @@ class PcmrlInterpAligner(Aligner):
             self.log(f"test/{name}", value, batch_size=size, sync_dist=True)
 
     def configure_optimizers(self) -> Any:
-        """AdamW with a linear warm-up to ``lr`` over ``warmup_steps``, then constant."""
+        """``model.optimizer`` and ``model.scheduler`` (the paper's: AdamW, linear warm-up)."""
         hp = self.hparams
-        opt = torch.optim.AdamW(self.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
-        warm = max(int(hp.warmup_steps), 1)
-        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: min(1.0, (s + 1) / warm))
-        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "step"}}
+        return configure_optimization(hp.optimizer, hp.scheduler, self.parameters(), self._trainer)
 
     # ------------------------------------------------------------------ inference
     def _check_motion(self, motion: Motion) -> Skeleton:

@@ -19,12 +19,14 @@ zero-length bones are not observable and stay at their parent's, Sec. 5).
 
 from __future__ import annotations
 
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import torch
 
 from skelagnostic.aligners import Aligner
 from skelagnostic.aligners.base import Latent
+from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.kinematics import fk_from_global, forward_kinematics, local_from_global
 from skelagnostic.core.motion import UNITS, Motion
@@ -53,6 +55,10 @@ from skelagnostic_pcmrl.recon.temporal import AUTHORS_POSITION_DIM, TemporalTran
 __all__ = ["PcmrlReconAligner", "end_effector_pairs"]
 
 _AXES = {"x": 0, "y": 1, "z": 2}
+#: The authors' optimizer: AdamW at their ``config.json`` rate, torch's default weight decay.
+AUTHORS_OPTIMIZER = MappingProxyType(
+    {"_target_": "torch.optim.AdamW", "_partial_": True, "lr": 1e-4, "weight_decay": 0.01}
+)
 
 
 def _batch_size(batch: dict[str, Any]) -> int:
@@ -101,8 +107,11 @@ class PcmrlReconAligner(Aligner):
             frame: the same minimum at another scale, relative to ``lambda_q``).
         lambda_q: Weight of the unit-norm penalty (0.01).
         lambda_end: Weight of the end-effector loss (0: off; the paper's loss is optional).
-        lr: AdamW learning rate (1e-4, the authors' ``config.json``; the paper gives none).
-        weight_decay: AdamW weight decay (0.01, the default of the authors' ``torch.optim.AdamW``).
+        optimizer: ``model.optimizer``, a ``_partial_`` spec or a callable taking the
+            parameters (:mod:`skelagnostic.aligners.optim`): AdamW with ``lr`` 1e-4 (the
+            authors' ``config.json``; the paper gives none) and ``weight_decay`` 0.01 (the
+            default of the authors' ``torch.optim.AdamW``).
+        scheduler: ``model.scheduler``: ``None`` (a constant rate, as the authors).
         centre: Subtract the source cloud's (horizontal) centroid in every frame before
             encoding and add it back to the root (horizontal translation invariance:
             the network predicts the root relative to the cloud's centroid, so clips
@@ -159,8 +168,8 @@ class PcmrlReconAligner(Aligner):
         knn_reduction: str = "sum",
         lambda_q: float = 0.01,
         lambda_end: float = 0.0,
-        lr: float = 1e-4,
-        weight_decay: float = 0.01,
+        optimizer: OptimizerSpec = AUTHORS_OPTIMIZER,
+        scheduler: OptimizerSpec | None = None,
         centre: bool = True,
         centre_up: bool = False,
         canonical_yaw: bool = False,
@@ -192,6 +201,7 @@ class PcmrlReconAligner(Aligner):
             raise SkelagnosticError(f"model.sigma must be non-negative, got {sigma}")
         if yaw_window < 1:
             raise SkelagnosticError(f"model.yaw_window must be at least 1 frame, got {yaw_window}")
+        optimizer, scheduler = check_specs(optimizer, scheduler)
         self.save_hyperparameters()
         self.encoder = PointTransformerEncoder(
             len(POINT_GROUPS),
@@ -554,11 +564,10 @@ class PcmrlReconAligner(Aligner):
         self.log("test/loss", loss, sync_dist=True, batch_size=_batch_size(batch))
         return loss
 
-    def configure_optimizers(self) -> torch.optim.Optimizer:
-        """AdamW."""
-        return torch.optim.AdamW(
-            self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay
-        )
+    def configure_optimizers(self) -> Any:
+        """``model.optimizer`` (the authors' AdamW) and ``model.scheduler`` (none by default)."""
+        hp = self.hparams
+        return configure_optimization(hp.optimizer, hp.scheduler, self.parameters(), self._trainer)
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Motion]:
