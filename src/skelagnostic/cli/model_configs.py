@@ -44,7 +44,7 @@ def register_model_configs(pm: PluginManager) -> None:
         for key in [k for k, v in nodes.items() if getattr(v, "provider", None) == PROVIDER]:
             del nodes[key]
     for name, spec in pm.aligners.items():
-        model = {"_target_": target_of(spec.module), **dict(spec.config)}
+        model = {"_target_": spec.target, **dict(spec.config)}
         store.store(group="model", name=name, node=model, provider=PROVIDER)
         store.store(group="data", name=name, node=_data_node(spec), provider=PROVIDER)
         store.store(

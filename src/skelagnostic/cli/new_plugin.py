@@ -77,13 +77,24 @@ skelagnostic documentation.
 _INIT = '''\
 """__NAME__: a skelagnostic aligner plugin (``model=__NAME__``)."""
 
-from skelagnostic.version import distribution_version
+from typing import TYPE_CHECKING
 
-from __PKG__.aligner import __CLASS__Aligner, __CLASS__DataModule
+from skelagnostic.lazy import lazy_exports
+from skelagnostic.version import distribution_version
 
 __all__ = ["__CLASS__Aligner", "__CLASS__DataModule"]
 #: Version of the distribution that ships this plugin (pyproject.toml is the one source).
 __version__ = distribution_version("skelagnostic-__NAME__")
+
+# The classes are imported on first access, so loading the plugin (skelagnostic plugins,
+# --help) imports neither them nor Lightning.
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {"__CLASS__Aligner": "__PKG__.aligner", "__CLASS__DataModule": "__PKG__.aligner"},
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from __PKG__.aligner import __CLASS__Aligner, __CLASS__DataModule
 '''
 
 _PLUGIN = '''\
@@ -107,13 +118,11 @@ CONFIG_PACKAGE = "__PKG__.conf"
 
 @hookimpl
 def register_aligners(register: RegisterAligner) -> None:
-    """Register ``model=__NAME__``."""
-    from __PKG__.aligner import __CLASS__Aligner, __CLASS__DataModule
-
+    """Register ``model=__NAME__`` by reference: the classes are imported when first used."""
     register(
         "__NAME__",
-        __CLASS__Aligner,
-        __CLASS__DataModule,
+        "__PKG__.aligner:__CLASS__Aligner",
+        "__PKG__.aligner:__CLASS__DataModule",
         config=files(CONFIG_PACKAGE) / "__NAME__.yaml",
         description="__NAME__: per-joint MLP autoencoder over root-local positions",
     )

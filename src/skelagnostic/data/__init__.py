@@ -8,7 +8,6 @@ Examples:
 """
 
 from skelagnostic.data.cache import CacheEntry, WindowCache, default_cache_dir
-from skelagnostic.data.datamodule import MotionDataModule, WindowDataset, datamodule_options
 from skelagnostic.data.sources import (
     DATA_ROOT_ENV,
     MANN_DOG_TEST,
@@ -50,3 +49,16 @@ __all__ = [
     "flatten_sources",
     "preset_source",
 ]
+
+# The data module needs Lightning: imported on first use, so that reading clips (and
+# `skelagnostic plugins`, which lists the dataset presets) does not import it.
+from skelagnostic.lazy import lazy_exports  # noqa: E402
+
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "MotionDataModule": "skelagnostic.data.datamodule",
+        "WindowDataset": "skelagnostic.data.datamodule",
+        "datamodule_options": "skelagnostic.data.datamodule",
+    },
+)

@@ -41,8 +41,8 @@ class RegisterAligner(Protocol):
     def __call__(
         self,
         name: str,
-        module: type[Aligner],
-        datamodule: type[MotionDataModule] | None = None,
+        module: type[Aligner] | str,
+        datamodule: type[MotionDataModule] | str | None = None,
         config: AlignerConfigSource | None = None,
         description: str = "",
     ) -> None:
@@ -50,9 +50,12 @@ class RegisterAligner(Protocol):
 
         Args:
             name: The ``model=<name>`` of the aligner.
-            module: The :class:`~skelagnostic.aligners.Aligner` subclass.
+            module: The :class:`~skelagnostic.aligners.Aligner` subclass, or a
+                reference ``"package.module:Class"`` imported when first used (so
+                ``skelagnostic plugins`` and ``--help`` import no model and no
+                Lightning); the config's ``_target_`` must name the same class.
             datamodule: The :class:`~skelagnostic.data.MotionDataModule` subclass
-                producing its batches (``None``: ``MotionDataModule``).
+                producing its batches, or a reference (``None``: ``MotionDataModule``).
             config: The aligner's config file, read once here: its sections
                 ``model`` (``_target_`` and every constructor argument), ``data``
                 (the default data), ``data_options`` and ``trainer_options``
@@ -65,17 +68,23 @@ class RegisterAligner(Protocol):
 class RegisterRepresentation(Protocol):
     """``register`` of ``register_representations``: contribute ``data.representation=<name>``."""
 
-    def __call__(self, name: str, cls: type[MotionRepresentation]) -> None:
-        """Register one motion representation (its constructor takes keyword options only)."""
+    def __call__(self, name: str, cls: type[MotionRepresentation] | str) -> None:
+        """Register one motion representation (its constructor takes keyword options only).
+
+        ``cls`` may be a reference ``"package.module:Class"``, imported when first used.
+        """
 
 
 class RegisterDataset(Protocol):
     """``register`` of ``register_datasets``: contribute ``data.source=<name>``."""
 
     def __call__(
-        self, name: str, factory: Callable[..., ClipSource], description: str = ""
+        self, name: str, factory: Callable[..., ClipSource] | str, description: str = ""
     ) -> None:
-        """Register one dataset: ``factory(**options)`` returns its clips."""
+        """Register one dataset: ``factory(**options)`` returns its clips.
+
+        ``factory`` may be a reference ``"package.module:function"``, imported when first used.
+        """
 
 
 class RegisterConfigPath(Protocol):
@@ -91,7 +100,7 @@ class RegisterEvaluation(Protocol):
     def __call__(
         self,
         name: str,
-        function: Callable[..., Any],
+        function: Callable[..., Any] | str,
         model: str,
         description: str = "",
         default: bool = False,
@@ -100,9 +109,11 @@ class RegisterEvaluation(Protocol):
 
         Args:
             name: ``<method>.<what>``, e.g. ``humot.reconstruction``.
-            function: Returns a :class:`~skelagnostic.evaluation.Evaluation`.
+            function: Returns a :class:`~skelagnostic.evaluation.Evaluation`; or a
+                reference ``"package.module:function"``, imported when first used.
             model: The aligner name the protocol evaluates.
-            description: One line (``None``: the function's first docstring line).
+            description: One line (empty: the function's first docstring line, for
+                a function given as an object).
             default: The protocol ``evaluate`` runs for ``model`` when none is named.
         """
 
@@ -113,8 +124,11 @@ class RegisterCheckpointReader(Protocol):
     def __call__(
         self,
         scheme: str,
-        reader: Callable[[str], Aligner],
+        reader: Callable[[str], Aligner] | str,
         model: str,
         description: str = "",
     ) -> None:
-        """Register one reader: ``reader(path)`` returns the ``model`` aligner, weights loaded."""
+        """Register one reader: ``reader(path)`` returns the ``model`` aligner, weights loaded.
+
+        ``reader`` may be a reference ``"package.module:function"``, imported when first used.
+        """

@@ -23,8 +23,11 @@ from skelagnostic.plugins.specs import (
     DatasetSpec,
     EvaluationSpec,
     PluginError,
+    Ref,
     RepresentationSpec,
     first_line,
+    is_ref,
+    ref_target,
 )
 
 if TYPE_CHECKING:
@@ -70,17 +73,25 @@ class Registrar:
     def aligner(
         self,
         name: str,
-        module: type,
-        datamodule: type | None = None,
+        module: Ref,
+        datamodule: Ref = None,
         config: AlignerConfigSource | None = None,
         description: str = "",
     ) -> None:
         """``register`` of ``register_aligners``: reads the aligner's config file, once."""
-        datamodule = _check_aligner_classes(name, module, datamodule)
+        _check_aligner_classes(name, module, datamodule)
         sections = read_aligner_config({} if config is None else config)
         model = sections["model"]
         if "_target_" in model:
-            check_target(name, model.pop("_target_"), module)
+            target = model.pop("_target_")
+            if is_ref(module):  # compared as text: nothing is imported
+                if target != ref_target(module):
+                    raise PluginError(
+                        f"aligner {name!r}: config _target_={target!r} does not name the "
+                        f"registered module {ref_target(module)!r}"
+                    )
+            else:
+                check_target(name, target, module)
         if "name" in model:
             raise PluginError(f"aligner {name!r}: config key 'name' is reserved")
         if sections["data"] and "source" not in sections["data"]:
@@ -99,19 +110,16 @@ class Registrar:
             )
         )
 
-    def representation(self, name: str, cls: type) -> None:
+    def representation(self, name: str, cls: Ref) -> None:
         """``register`` of ``register_representations``."""
-        from skelagnostic.representations import MotionRepresentation
+        spec = RepresentationSpec(name, _ref_or(cls, "representation", name), self.plugin_name)
+        if not is_ref(cls):
+            spec.cls  # noqa: B018 - an object is checked now (a reference when first used)
+        self.out.representations.append(spec)
 
-        if not (isinstance(cls, type) and issubclass(cls, MotionRepresentation)):
-            raise PluginError(
-                f"representation {name!r}: cls must be a MotionRepresentation subclass, got {cls!r}"
-            )
-        self.out.representations.append(RepresentationSpec(name, cls, self.plugin_name))
-
-    def dataset(self, name: str, factory: Callable[..., Any], description: str = "") -> None:
+    def dataset(self, name: str, factory: Ref, description: str = "") -> None:
         """``register`` of ``register_datasets``."""
-        if not callable(factory):
+        if not (is_ref(factory) or callable(factory)):
             raise PluginError(f"dataset {name!r}: factory must be callable, got {factory!r}")
         self.out.datasets.append(DatasetSpec(name, factory, description, self.plugin_name))
 
@@ -123,24 +131,24 @@ class Registrar:
     def evaluation(
         self,
         name: str,
-        function: Callable[..., Any],
+        function: Ref,
         model: str,
         description: str = "",
         default: bool = False,
     ) -> None:
         """``register`` of ``register_evaluations``."""
-        if not callable(function):
+        if not (is_ref(function) or callable(function)):
             raise PluginError(f"evaluation {name!r}: function must be callable, got {function!r}")
         _require_model(f"evaluation {name!r}", model)
         if default and any(e.default and e.model == model for e in self.out.evaluations):
             raise PluginError(f"evaluation {name!r}: model={model} already has a default protocol")
-        description = description or first_line(function.__doc__)
+        description = description or first_line(getattr(function, "__doc__", None))
         self.out.evaluations.append(
             EvaluationSpec(name, function, model, description, bool(default), self.plugin_name)
         )
 
     def checkpoint_reader(
-        self, scheme: str, reader: Callable[[str], Any], model: str, description: str = ""
+        self, scheme: str, reader: Ref, model: str, description: str = ""
     ) -> None:
         """``register`` of ``register_checkpoint_readers``."""
         if not isinstance(scheme, str) or not CHECKPOINT_SCHEME.fullmatch(scheme):
@@ -148,30 +156,41 @@ class Registrar:
                 f"checkpoint reader {scheme!r}: the scheme must be a lower-case "
                 "word of two or more letters, digits or underscores"
             )
-        if not callable(reader):
+        if not (is_ref(reader) or callable(reader)):
             raise PluginError(
                 f"checkpoint reader {scheme!r}: reader must be callable, got {reader!r}"
             )
         _require_model(f"checkpoint reader {scheme!r}", model)
-        description = description or first_line(reader.__doc__)
+        description = description or first_line(getattr(reader, "__doc__", None))
         self.out.checkpoint_readers.append(
             CheckpointReaderSpec(scheme, reader, model, description, self.plugin_name)
         )
 
 
-def _check_aligner_classes(name: str, module: Any, datamodule: Any) -> type:
-    """Check ``module`` and ``datamodule`` of an aligner; the data module (default filled in)."""
-    from skelagnostic.aligners import Aligner
-    from skelagnostic.data import MotionDataModule
+def _check_aligner_classes(name: str, module: Any, datamodule: Any) -> None:
+    """Check ``module`` and ``datamodule`` of an aligner now when they are objects.
 
-    datamodule = MotionDataModule if datamodule is None else datamodule
-    if not (isinstance(module, type) and issubclass(module, Aligner)):
-        raise PluginError(f"aligner {name!r}: module must be an Aligner subclass, got {module!r}")
-    if not (isinstance(datamodule, type) and issubclass(datamodule, MotionDataModule)):
+    A reference (``"package.module:Class"``) is checked when it is first used,
+    so registering it imports nothing.
+    """
+    spec = AlignerSpec(
+        name, _ref_or(module, "aligner", name), _ref_or(datamodule, "aligner", name, none=True)
+    )
+    if not is_ref(module):
+        spec.module  # noqa: B018 - the check is the property's
+    if datamodule is not None and not is_ref(datamodule):
+        spec.datamodule  # noqa: B018
+
+
+def _ref_or(obj: Any, kind: str, name: str, none: bool = False) -> Any:
+    """``obj``, unless it is a string that is not a reference (a clear error then)."""
+    if isinstance(obj, str) and not is_ref(obj):
         raise PluginError(
-            f"aligner {name!r}: datamodule must be a MotionDataModule subclass, got {datamodule!r}"
+            f"{kind} {name!r}: {obj!r} is neither an object nor a reference 'package.module:name'"
         )
-    return datamodule
+    if obj is None and not none:
+        raise PluginError(f"{kind} {name!r}: got None")
+    return obj
 
 
 def _require_model(what: str, model: Any) -> None:

@@ -22,13 +22,14 @@ CONFIG_PACKAGE = "skelagnostic_example.conf"
 
 @hookimpl
 def register_aligners(register: RegisterAligner) -> None:
-    """Register ``model=example``."""
-    from skelagnostic_example.aligner import ExampleAligner, ExampleDataModule
+    """Register ``model=example`` by reference: the classes are imported when first used.
 
+    So ``skelagnostic plugins`` and ``--help`` import neither them nor Lightning.
+    """
     register(
         "example",
-        ExampleAligner,
-        ExampleDataModule,
+        "skelagnostic_example.aligner:ExampleAligner",
+        "skelagnostic_example.aligner:ExampleDataModule",
         config=files(CONFIG_PACKAGE) / "example.yaml",
         description="per-joint GRU autoencoder over root-local positions (tutorial example)",
     )

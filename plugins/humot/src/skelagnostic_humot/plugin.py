@@ -22,14 +22,11 @@ CONFIG_PACKAGE = "skelagnostic_humot.conf"
 
 @hookimpl
 def register_aligners(register: RegisterAligner) -> None:
-    """Register ``model=humot``."""
-    from skelagnostic_humot.aligner import HumotAligner
-    from skelagnostic_humot.data import HumotDataModule
-
+    """Register ``model=humot`` (by reference: imported when first used)."""
     register(
         "humot",
-        HumotAligner,
-        HumotDataModule,
+        "skelagnostic_humot.aligner:HumotAligner",
+        "skelagnostic_humot.data:HumotDataModule",
         config=files(CONFIG_PACKAGE) / "humot.yaml",
         description="HuMoT: topology-agnostic XCiT autoencoder for human retargeting",
     )
@@ -38,11 +35,9 @@ def register_aligners(register: RegisterAligner) -> None:
 @hookimpl
 def register_datasets(register: RegisterDataset) -> None:
     """``data.source=humot_mix``: a real human corpus plus procedural humans."""
-    from skelagnostic_humot.data import corpus_and_procedural_source
-
     register(
         "humot_mix",
-        corpus_and_procedural_source,
+        "skelagnostic_humot.data:corpus_and_procedural_source",
         "a human dataset preset (with its test split) + procedural humans of other "
         "topologies (HuMoT)",
     )
@@ -57,13 +52,9 @@ def register_config_paths(register: RegisterConfigPath) -> None:
 @hookimpl
 def register_evaluations(register: RegisterEvaluation) -> None:
     """Register ``humot.reconstruction`` (the default), ``humot.retarget``, ``humot.ablations``."""
-    from skelagnostic_humot.ablations import ablation_protocol
-    from skelagnostic_humot.evaluation.reconstruction import reconstruction_protocol
-    from skelagnostic_humot.evaluation.retarget import retarget_protocol
-
     register(
         "humot.reconstruction",
-        reconstruction_protocol,
+        "skelagnostic_humot.evaluation.reconstruction:reconstruction_protocol",
         model="humot",
         default=True,
         description="Table 2 reconstruction of held-out clips beside mean-pose baselines; "
@@ -71,14 +62,14 @@ def register_evaluations(register: RegisterEvaluation) -> None:
     )
     register(
         "humot.retarget",
-        retarget_protocol,
+        "skelagnostic_humot.evaluation.retarget:retarget_protocol",
         model="humot",
         description="cycle retargeting error of held-out clips via another rig beside "
         "name-copy and primal-copy baselines; paired procedural retargeting",
     )
     register(
         "humot.ablations",
-        ablation_protocol,
+        "skelagnostic_humot.ablations:ablation_protocol",
         model="humot",
         description="the paper's ablations (no joint subsampling, no bone-length loss) and the "
         "full model retrained at an equal budget (+protocol_options.steps=N, default 200) on the "

@@ -30,25 +30,19 @@ CONFIG_PACKAGE = "skelagnostic_pcmrl.conf"
 
 @hookimpl
 def register_aligners(register: RegisterAligner) -> None:
-    """Register ``model=pcmrl`` (stage 1) and ``model=pcmrl_interp`` (stage 2)."""
-    from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
-    from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule
-
+    """Register ``model=pcmrl`` (stage 1) and ``model=pcmrl_interp`` (stage 2), by reference."""
     register(
         "pcmrl",
-        PcmrlReconAligner,
-        PcmrlReconDataModule,
+        "skelagnostic_pcmrl.recon.aligner:PcmrlReconAligner",
+        "skelagnostic_pcmrl.recon.data:PcmrlReconDataModule",
         config=files(CONFIG_PACKAGE) / "pcmrl.yaml",
         description="PC-MRL stage 1: unsupervised point-cloud reconstruction onto a target "
         "skeleton (model=pcmrl_interp: stage 2)",
     )
-    from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
-    from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
-
     register(
         "pcmrl_interp",
-        PcmrlInterpAligner,
-        PcmrlInterpDataModule,
+        "skelagnostic_pcmrl.interp.aligner:PcmrlInterpAligner",
+        "skelagnostic_pcmrl.interp.data:PcmrlInterpDataModule",
         config=files(CONFIG_PACKAGE) / "pcmrl_interp.yaml",
         description="PC-MRL stage 2: FOQ keyframe interpolation on the target skeleton",
     )
@@ -63,11 +57,9 @@ def register_config_paths(register: RegisterConfigPath) -> None:
 @hookimpl
 def register_evaluations(register: RegisterEvaluation) -> None:
     """Register ``pcmrl.reconstruction`` and ``pcmrl.interpolation`` (one default per stage)."""
-    from skelagnostic_pcmrl.evaluation import interpolation_protocol, reconstruction_protocol
-
     register(
         "pcmrl.reconstruction",
-        reconstruction_protocol,
+        "skelagnostic_pcmrl.evaluation:reconstruction_protocol",
         model="pcmrl",
         default=True,
         description="Table 2: temporal KNN and end-effector error of held-out clips "
@@ -75,7 +67,7 @@ def register_evaluations(register: RegisterEvaluation) -> None:
     )
     register(
         "pcmrl.interpolation",
-        interpolation_protocol,
+        "skelagnostic_pcmrl.evaluation:interpolation_protocol",
         model="pcmrl_interp",
         default=True,
         description="Table 1: L2P, L2Q, NPSS at keyframe gaps 5/15/30 of held-out clips, "

@@ -23,14 +23,11 @@ CONFIG_PACKAGE = "skelagnostic_vqpae.conf"
 
 @hookimpl
 def register_aligners(register: RegisterAligner) -> None:
-    """Register ``model=vqpae``: :class:`~skelagnostic_vqpae.aligner.VqpaeAligner`."""
-    from skelagnostic_vqpae.aligner import VqpaeAligner
-    from skelagnostic_vqpae.data import VqpaeDataModule
-
+    """Register ``model=vqpae`` (by reference: imported when first used)."""
     register(
         "vqpae",
-        VqpaeAligner,
-        VqpaeDataModule,
+        "skelagnostic_vqpae.aligner:VqpaeAligner",
+        "skelagnostic_vqpae.data:VqpaeDataModule",
         config=files(CONFIG_PACKAGE) / "vqpae.yaml",
         description="WalkTheDog VQ-PAE: phase manifold shared across characters (human, dog, ...)",
     )
@@ -39,10 +36,16 @@ def register_aligners(register: RegisterAligner) -> None:
 @hookimpl
 def register_datasets(register: RegisterDataset) -> None:
     """``data.source=human_dog`` and ``data.source=styles`` (one dataset per part)."""
-    from skelagnostic_vqpae.data import human_dog_source, styles_source
-
-    register("human_dog", human_dog_source, "a human dataset preset + the MANN dog (VQ-PAE)")
-    register("styles", styles_source, "one dataset per motion style of a BVH directory (VQ-PAE)")
+    register(
+        "human_dog",
+        "skelagnostic_vqpae.data:human_dog_source",
+        "a human dataset preset + the MANN dog (VQ-PAE)",
+    )
+    register(
+        "styles",
+        "skelagnostic_vqpae.data:styles_source",
+        "one dataset per motion style of a BVH directory (VQ-PAE)",
+    )
 
 
 @hookimpl
@@ -54,12 +57,9 @@ def register_config_paths(register: RegisterConfigPath) -> None:
 @hookimpl
 def register_evaluations(register: RegisterEvaluation) -> None:
     """Register ``vqpae.manifold`` (the default of ``model=vqpae``) and ``vqpae.transfer``."""
-    from skelagnostic_vqpae.protocols.manifold import manifold_protocol
-    from skelagnostic_vqpae.protocols.transfer import transfer_protocol
-
     register(
         "vqpae.manifold",
-        manifold_protocol,
+        "skelagnostic_vqpae.protocols.manifold:manifold_protocol",
         model="vqpae",
         default=True,
         description="shared codes (vs chance), phase linearity and average-pose error "
@@ -68,7 +68,7 @@ def register_evaluations(register: RegisterEvaluation) -> None:
     )
     register(
         "vqpae.transfer",
-        transfer_protocol,
+        "skelagnostic_vqpae.protocols.transfer:transfer_protocol",
         model="vqpae",
         description="held-out clips of the first character re-enacted by the second "
         "(frequency-scaled motion matching): gait-frequency error and ratio, foot-contact "
@@ -79,11 +79,9 @@ def register_evaluations(register: RegisterEvaluation) -> None:
 @hookimpl
 def register_checkpoint_readers(register: RegisterCheckpointReader) -> None:
     """``ckpt=authors:<dir>``: a run directory of the WalkTheDog authors' ``train_vq.py``."""
-    from skelagnostic_vqpae.authors import load_run
-
     register(
         "authors",
-        load_run,
+        "skelagnostic_vqpae.authors:load_run",
         model="vqpae",
         description="a run directory of the WalkTheDog authors' train_vq.py "
         "(skelagnostic_vqpae.authors.load_run)",
