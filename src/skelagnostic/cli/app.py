@@ -34,7 +34,7 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
-from skelagnostic.allocator import kernel_time_hint
+from skelagnostic.cli.allocator import kernel_time_hint
 from skelagnostic.cli.build import ConfigError, build_datamodule
 from skelagnostic.cli.model_configs import ALIGNER_GROUP, register_model_configs
 from skelagnostic.cli.runs import (

@@ -27,11 +27,11 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import torch
 
 from skelagnostic.aligners import Aligner, Latent, steps_per_epoch
+from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.export import ExportGraph, Method
 from skelagnostic.representations import inverse_kinematics
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks, sample_keep
 from skelagnostic_humot.model import HuMoT, bone_length_consistency_loss, reconstruction_loss
