@@ -34,7 +34,12 @@ from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import inverse_kinematics
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks, sample_keep
-from skelagnostic_humot.model import HuMoT, bone_length_consistency_loss, reconstruction_loss
+from skelagnostic_humot.model import (
+    HuMoT,
+    HuMoTConfig,
+    bone_length_consistency_loss,
+    reconstruction_loss,
+)
 from skelagnostic_humot.template import from_model_frame, major_joints, to_model_frame
 
 if TYPE_CHECKING:
@@ -136,7 +141,9 @@ class HumotAligner(Aligner):
             if not ok:
                 raise SkelagnosticError(f"model.{name} must be {what}, got {locals()[name]!r}")
         self.save_hyperparameters()
-        self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
+        self.net = HuMoT(
+            HuMoTConfig(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
+        )
         self._topologies: dict[tuple[Any, ...], Topology] = {}
 
     # ----------------------------------------------------------------- topology
