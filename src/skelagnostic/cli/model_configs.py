@@ -4,7 +4,8 @@ A plugin registers an aligner with its config file; the plugin manager reads it 
 (:func:`skelagnostic.plugins.read_aligner_config`) into the aligner's
 :class:`~skelagnostic.plugins.AlignerSpec`. :func:`register_model_configs` turns each
 spec into the config groups ``model=<name>``, ``data/<name>`` and ``_aligner/<name>``
-that ``conf/config.yaml`` selects, so Hydra never reads the file a second time.
+that ``model=<name>`` brings along, so Hydra never reads the file a second time and
+``conf/config.yaml`` names no aligner setting.
 """
 
 from __future__ import annotations
@@ -27,12 +28,12 @@ def register_model_configs(pm: PluginManager) -> None:
     For every aligner ``<name>``:
 
     * ``model/<name>``: ``_target_`` and the registered defaults (the ``model``
-      section of the aligner's config file);
-    * ``_aligner/<name>`` (global package, selected by ``_aligner: ${model}`` in
-      ``config.yaml``): ``model.name`` and the aligner's ``data_options`` and
-      ``trainer_options``;
-    * ``data/<name>`` (selected by ``data: ${model}`` unless the command line or an
-      experiment names ``data=``): the aligner's default data, else ``procedural``.
+      section of the aligner's config file), with a defaults list that selects the
+      two below (:func:`_model_defaults`);
+    * ``_aligner/<name>`` (global package): ``model.name`` and the aligner's
+      ``data_options`` and ``trainer_options``;
+    * ``data/<name>`` (chosen for ``data`` unless the command line or an experiment
+      names ``data=``): the aligner's default data, else ``procedural``.
 
     Hydra's ConfigStore is one per process: the entries stored for an earlier
     plugin manager (tagged with the provider ``skelagnostic``) are removed
@@ -44,7 +45,11 @@ def register_model_configs(pm: PluginManager) -> None:
         for key in [k for k, v in nodes.items() if getattr(v, "provider", None) == PROVIDER]:
             del nodes[key]
     for name, spec in pm.aligners.items():
-        model = {"_target_": target_of(spec.module), **dict(spec.config)}
+        model = {
+            "defaults": _model_defaults(name),
+            "_target_": target_of(spec.module),
+            **dict(spec.config),
+        }
         store.store(group="model", name=name, node=model, provider=PROVIDER)
         store.store(group="data", name=name, node=_data_node(spec), provider=PROVIDER)
         store.store(
@@ -54,6 +59,21 @@ def register_model_configs(pm: PluginManager) -> None:
             package="_global_",
             provider=PROVIDER,
         )
+
+
+def _model_defaults(name: str) -> list[Any]:
+    """The defaults list of ``model/<name>``: its aligner options, then its default data.
+
+    ``_aligner/<name>`` is merged after the model (so its ``data_options`` win over any
+    data, and an experiment or the command line wins over them); ``override /data``
+    makes ``data/<name>`` the data unless the command line or an experiment names one
+    (Hydra wants overrides last in a defaults list).
+    """
+    return [
+        "_self_",
+        {f"/{ALIGNER_GROUP}@_global_": name},
+        {"override /data@_global_.data": name},
+    ]
 
 
 def _data_node(spec: AlignerSpec) -> dict[str, Any]:
