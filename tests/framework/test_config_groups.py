@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from hydra.errors import ConfigCompositionException
 
+from skelagnostic import cli
 from skelagnostic.cli import app
 
 REPO = Path(__file__).resolve().parents[2]
@@ -131,6 +132,19 @@ def test_a_file_named_like_a_registered_aligner_is_refused(
     (tmp_path / "model" / "example.yaml").write_text("hidden: 40\n")
     with pytest.raises(ConfigCompositionException, match="'model/example'"):
         app.compose([f"hydra.searchpath=[file://{tmp_path}]", "model=example", "run_dir=/x"])
+
+
+def test_the_command_names_the_same_named_file_and_the_fix(
+    example_plugin: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    (tmp_path / "model").mkdir()
+    (tmp_path / "model" / "example.yaml").write_text("hidden: 40\n")
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["fit", "model=example", f"hydra.searchpath=[file://{tmp_path}]"]) == 1
+    err = capsys.readouterr().err
+    assert "model/example.yaml on the config search path is named like the registered" in err
+    assert "'defaults: [example, _self_]'" in err and "Hydra 1.1" not in err
+    assert not (tmp_path / "runs").exists()
 
 
 def test_a_data_file_named_like_a_shipped_one_is_not_used(

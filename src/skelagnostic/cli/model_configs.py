@@ -10,6 +10,7 @@ that ``model=<name>`` brings along, so Hydra never reads the file a second time 
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from hydra.core.config_store import ConfigStore
@@ -20,6 +21,11 @@ from skelagnostic.plugins import AlignerSpec, PluginManager, target_of
 PROVIDER = "skelagnostic"
 #: Config group of the per-aligner ``model.name``, data and trainer options (internal).
 ALIGNER_GROUP = "_aligner"
+#: Hydra's refusal of a file ``model/<name>.yaml`` named like a registered aligner.
+_SHADOWED = re.compile(
+    r"'model/(?P<name>[^']+)' is validated against ConfigStore schema with the same name.*"
+    r"(?:See https://\S+ for migration instructions\.)?"
+)
 
 
 def register_model_configs(pm: PluginManager) -> None:
@@ -91,3 +97,36 @@ def _aligner_node(spec: AlignerSpec) -> dict[str, Any]:
     if spec.trainer_options:
         node["trainer"] = dict(spec.trainer_options)
     return node
+
+
+def explain_shadowed_model(message: str) -> str:
+    """``message`` with Hydra's refusal of a same-named ``model/<name>.yaml`` made plain.
+
+    A file of the user's on the search path named like a registered aligner cannot be
+    merged over its config (which has a defaults list, :func:`_model_defaults`); Hydra
+    says so in terms of its own schema matching. The plain message names the file and
+    the fix (a variant under a new name, docs/configuration.md).
+
+    Args:
+        message: An error message, Hydra's lines joined.
+
+    Returns:
+        The message, that part rewritten when present.
+
+    Examples:
+        >>> text = explain_shadowed_model(
+        ...     "'model/humot' is validated against ConfigStore schema with the same name."
+        ... )
+        >>> text.startswith("model/humot.yaml on the config search path is named like")
+        True
+    """
+    return _SHADOWED.sub(
+        lambda m: (
+            f"model/{m['name']}.yaml on the config search path is named like the registered "
+            f"aligner {m['name']!r}, whose config it cannot replace: rename it (e.g. "
+            f"model/{m['name']}_mine.yaml, used as model={m['name']}_mine) and start it with "
+            f"'defaults: [{m['name']}, _self_]' (see docs/configuration.md)"
+        ),
+        message,
+        count=1,
+    )
