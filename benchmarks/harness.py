@@ -379,7 +379,7 @@ def _ram_bytes() -> int | None:
 
 def machine_info() -> dict[str, Any]:
     """CPU count, platform, processor and RAM of this machine, and the memory allocator."""
-    from skelagnostic.allocator import active_allocator
+    from skelagnostic.cli.allocator import active_allocator
 
     processor = platform.processor()
     cpuinfo = Path("/proc/cpuinfo")

@@ -24,7 +24,7 @@ module-level ``plot(report, out_dir, date, size)``) as PNG files into ``DIR``.
 
 ``--allocator NAME`` restarts the run on that memory allocator (as
 ``SKELAGNOSTIC_ALLOCATOR=NAME`` does for the ``skelagnostic`` command; see
-:mod:`skelagnostic.allocator`), so every suite and its children measure with it;
+:mod:`skelagnostic.cli.allocator`), so every suite and its children measure with it;
 ``machine["allocator"]`` in the JSON records the one in use.
 
 The JSON (read by external tooling; keep the format stable) is::
@@ -147,7 +147,7 @@ RESTARTED_ENV = "SKELAGNOSTIC_BENCH_ALLOCATOR_SET"
 
 def _restart_on(allocator: str, parser: argparse.ArgumentParser, argv: list[str]) -> None:
     """Replace this process by the same run on ``allocator`` unless it already runs on it."""
-    from skelagnostic.allocator import (
+    from skelagnostic.cli.allocator import (
         SYSTEM,
         AllocatorError,
         active_allocator,

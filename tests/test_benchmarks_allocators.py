@@ -96,7 +96,7 @@ def test_run_restarts_on_the_allocator_it_is_given(tmp_path: Path) -> None:
     import json
     import subprocess
 
-    from skelagnostic.allocator import AllocatorError, find_allocator
+    from skelagnostic.cli.allocator import AllocatorError, find_allocator
 
     try:
         find_allocator("tcmalloc")

@@ -12,9 +12,9 @@ fresh process per allocator:
 * ``system``: the C library's ``malloc`` (no ``LD_PRELOAD``), the **baseline**
   of every row;
 * ``tcmalloc`` and ``jemalloc``: the libraries
-  :func:`skelagnostic.allocator.find_allocator` finds, preloaded as
+  :func:`skelagnostic.cli.allocator.find_allocator` finds, preloaded as
   ``SKELAGNOSTIC_ALLOCATOR`` does (jemalloc with
-  :data:`skelagnostic.allocator.JEMALLOC_CONF` unless ``MALLOC_CONF`` is set).
+  :data:`skelagnostic.cli.allocator.JEMALLOC_CONF` unless ``MALLOC_CONF`` is set).
   An allocator that is not installed has no rows (a message says so), never an
   estimate.
 
@@ -26,7 +26,7 @@ process's ``<method>_peak_rss_mib_b<B>_<allocator>`` (baselines: ``system``), an
 ``<method>_same_weights_b<B>_<allocator>``: 1 when the weights after the timed steps
 are bit for bit those of the ``system`` run (same seed, data and steps), else 0.
 Each child checks that it runs on the allocator it was started with
-(:func:`skelagnostic.allocator.active_allocator`).
+(:func:`skelagnostic.cli.allocator.active_allocator`).
 """
 
 from __future__ import annotations
@@ -60,13 +60,13 @@ def batches(method: str, size: str) -> tuple[int, ...]:
 def environment(allocator: str, environ: dict[str, str] | None = None) -> dict[str, str]:
     """The environment of a child on ``allocator``, whatever this process runs on.
 
-    :func:`skelagnostic.allocator.allocator_environment`, without ``SKELAGNOSTIC_ALLOCATOR``
+    :func:`skelagnostic.cli.allocator.allocator_environment`, without ``SKELAGNOSTIC_ALLOCATOR``
     (the children are not the ``skelagnostic`` command).
 
     Raises:
-        skelagnostic.allocator.AllocatorError: The allocator is not installed.
+        skelagnostic.cli.allocator.AllocatorError: The allocator is not installed.
     """
-    from skelagnostic.allocator import ALLOCATOR_ENV, allocator_environment
+    from skelagnostic.cli.allocator import ALLOCATOR_ENV, allocator_environment
 
     env = allocator_environment(allocator, environ)
     env.pop(ALLOCATOR_ENV, None)
@@ -87,7 +87,7 @@ def measure(
     import torch
 
     from benchmarks.suites.steptime import time_fit
-    from skelagnostic.allocator import active_allocator
+    from skelagnostic.cli.allocator import active_allocator
 
     scaling._import_everything()
     torch.set_num_threads(1)
@@ -127,7 +127,7 @@ def measure_all(size: str) -> dict[str, dict[str, dict[str, Any]]]:
     Returns:
         ``{method: {"b<B>_<allocator>": figures + peak_rss_mib}}``.
     """
-    from skelagnostic.allocator import AllocatorError
+    from skelagnostic.cli.allocator import AllocatorError
 
     found = scaling.corpus(2)
     files = found[1] if found else None

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from skelagnostic import allocator
-from skelagnostic.allocator import (
+from skelagnostic.cli import allocator
+from skelagnostic.cli.allocator import (
     ALLOCATOR_ENV,
     AllocatorError,
     active_allocator,
@@ -84,7 +84,7 @@ def test_preload_environment(tmp_path: Path) -> None:
 
 
 def test_switching_allocators_takes_the_preloaded_one_out(tmp_path: Path) -> None:
-    from skelagnostic.allocator import allocator_environment
+    from skelagnostic.cli.allocator import allocator_environment
 
     jemalloc = fake_library(tmp_path / "lib", "libjemalloc.so.2")
     environ = {
@@ -139,7 +139,7 @@ def test_active_allocator_reads_the_loaded_library(name: str) -> None:
     library = installed(name)
     if library is None:
         pytest.skip(f"{name} is not installed")
-    code = "from skelagnostic.allocator import active_allocator; print(active_allocator())"
+    code = "from skelagnostic.cli.allocator import active_allocator; print(active_allocator())"
     env = preload_environment(name, active="system")
     assert env is not None
     env.pop(ALLOCATOR_ENV, None)
@@ -203,7 +203,7 @@ def test_cli_in_process_never_restarts(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_kernel_time_hint_only_for_long_kernel_heavy_runs_on_the_system_allocator() -> None:
-    from skelagnostic.allocator import kernel_time_hint
+    from skelagnostic.cli.allocator import kernel_time_hint
 
     hint = kernel_time_hint(60.0, 40.0, "system")
     assert hint is not None and hint.startswith("40 % of this run's CPU time")

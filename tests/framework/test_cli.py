@@ -225,7 +225,7 @@ def test_usage_lists_the_verbs(capsys: pytest.CaptureFixture[str]) -> None:
 def test_usage_lists_the_environment_variables_the_modules_read(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from skelagnostic.allocator import ALLOCATOR_ENV
+    from skelagnostic.cli.allocator import ALLOCATOR_ENV
     from skelagnostic.data.cache import CACHE_ENV
     from skelagnostic.data.sources import DATA_ROOT_ENV
     from skelagnostic.plugins.manager import LOAD_PLUGINS_ENV

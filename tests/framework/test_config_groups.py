@@ -7,7 +7,9 @@ from importlib import resources
 from pathlib import Path
 
 import pytest
+from hydra.errors import ConfigCompositionException
 
+from skelagnostic import cli
 from skelagnostic.cli import app
 
 REPO = Path(__file__).resolve().parents[2]
@@ -103,6 +105,56 @@ def test_a_user_config_folder_on_the_search_path(example_plugin: Path, tmp_path:
         [f"hydra.searchpath=[file://{folder}]", "experiment=example_quick", "run_dir=/tmp/x"]
     )
     assert cfg.model.hidden == 32
+
+
+def test_a_model_variant_of_ones_own_extends_the_registered_aligner(
+    example_plugin: Path, tmp_path: Path
+) -> None:
+    # docs/configuration.md: model/<new name>.yaml with ``defaults: [example, _self_]``
+    (tmp_path / "model").mkdir()
+    (tmp_path / "model" / "wide.yaml").write_text(
+        "defaults:\n  - example\n  - _self_\nhidden: 40\n"
+    )
+    plain = app.compose(["model=example", "run_dir=/tmp/x"])
+    cfg = app.compose([f"hydra.searchpath=[file://{tmp_path}]", "model=wide", "run_dir=/tmp/x"])
+    assert cfg.model.hidden == 40 and cfg.model.latent == plain.model.latent
+    # the registered aligner's name, default data and data options come along
+    assert cfg.model.name == "example"
+    assert cfg.data == plain.data
+
+
+def test_a_file_named_like_a_registered_aligner_is_refused(
+    example_plugin: Path, tmp_path: Path
+) -> None:
+    # the registered model/example carries the aligner's data and options in its defaults
+    # list, so Hydra cannot merge a same-named file over it: the command names the file
+    (tmp_path / "model").mkdir()
+    (tmp_path / "model" / "example.yaml").write_text("hidden: 40\n")
+    with pytest.raises(ConfigCompositionException, match="'model/example'"):
+        app.compose([f"hydra.searchpath=[file://{tmp_path}]", "model=example", "run_dir=/x"])
+
+
+def test_the_command_names_the_same_named_file_and_the_fix(
+    example_plugin: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    (tmp_path / "model").mkdir()
+    (tmp_path / "model" / "example.yaml").write_text("hidden: 40\n")
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["fit", "model=example", f"hydra.searchpath=[file://{tmp_path}]"]) == 1
+    err = capsys.readouterr().err
+    assert "model/example.yaml on the config search path is named like the registered" in err
+    assert "'defaults: [example, _self_]'" in err and "Hydra 1.1" not in err
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_data_file_named_like_a_shipped_one_is_not_used(
+    example_plugin: Path, tmp_path: Path
+) -> None:
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "procedural.yaml").write_text("seconds: 123.0\n")
+    search = f"hydra.searchpath=[file://{tmp_path}]"
+    cfg = app.compose([search, "model=example", "data=procedural", "run_dir=/tmp/x"])
+    assert cfg.data.seconds != 123.0
 
 
 def test_local_default_is_applied_last_but_under_the_command_line(

@@ -27,9 +27,9 @@ from omegaconf import OmegaConf
 
 import skelagnostic as sa
 from skelagnostic import cli
+from skelagnostic.aligners.export import ExportError, export_aligner
 from skelagnostic.aligners.weights import WEIGHTS_FILE
 from skelagnostic.cli.app import ConfigError
-from skelagnostic.export import ExportError, export_aligner
 
 ort = pytest.importorskip("onnxruntime")
 

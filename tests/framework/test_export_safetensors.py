@@ -16,8 +16,8 @@ from skelagnostic.aligners.checkpoints import (
     CheckpointNotFoundError,
     load_checkpoint,
 )
+from skelagnostic.aligners.export import ExportError, export_aligner
 from skelagnostic.aligners.weights import read_weights, weights_model
-from skelagnostic.export import ExportError, export_aligner
 
 st = pytest.importorskip("safetensors.torch")
 

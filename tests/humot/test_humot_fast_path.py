@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.data import Topology, gather_subset, sample_keep
 from skelagnostic_humot.model import HuMoT
 from skelagnostic_humot.xcit import TokenLayout
@@ -28,8 +29,8 @@ TOLERANCE = {torch.float64: 1e-10, torch.float32: 1e-4}
 
 def _twins(small: dict[str, int], dtype: torch.dtype = torch.float32) -> tuple[HuMoT, HuMoT]:
     torch.manual_seed(0)
-    fast = HuMoT(**small, fast_path=True).to(dtype)
-    slow = HuMoT(**small, fast_path=False).to(dtype)
+    fast = HumotAligner(**small, fast_path=True).net.to(dtype)
+    slow = HumotAligner(**small, fast_path=False).net.to(dtype)
     slow.load_state_dict(fast.state_dict())
     return fast, slow
 

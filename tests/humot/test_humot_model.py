@@ -1,25 +1,31 @@
+from dataclasses import MISSING, fields
+from importlib.resources import files
+
 import pytest
 import torch
+from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.model import (
     HuMoT,
+    HuMoTConfig,
     bone_length_consistency_loss,
     reconstruction_loss,
     temporal_positional_encoding,
 )
 
 from skelagnostic.metrics.functional import bone_length_consistency
+from skelagnostic.plugins import read_aligner_config
 
 PAPER_PARAMETERS = 2_475_511
 
 
 def test_parameter_count_matches_the_paper_within_ten_percent():
-    count = sum(p.numel() for p in HuMoT().parameters())
+    count = sum(p.numel() for p in HumotAligner().net.parameters())
     assert abs(count - PAPER_PARAMETERS) / PAPER_PARAMETERS < 0.10
 
 
 @pytest.mark.parametrize(("src", "dst"), [(22, 31), (31, 17), (17, 17)])
 def test_shapes_with_different_joint_counts(src, dst, humot_small):
-    net = HuMoT(**humot_small)
+    net = HumotAligner(**humot_small).net
     z = net.encoder(torch.randn(2, 30, src, 3), torch.randn(2, src, 3))
     assert z.shape == (2, 30, humot_small["latent"])
     assert net.decoder(z, torch.randn(2, dst, 3)).shape == (2, 30, dst, 3)
@@ -27,7 +33,7 @@ def test_shapes_with_different_joint_counts(src, dst, humot_small):
 
 def test_latent_is_independent_of_padding(humot_small):
     torch.manual_seed(0)
-    net = HuMoT(**humot_small).eval()
+    net = HumotAligner(**humot_small).net.eval()
     x, t = torch.randn(1, 12, 5, 3), torch.randn(1, 5, 3)
     xp = torch.cat([x, torch.randn(1, 12, 2, 3)], dim=2)
     tp = torch.cat([t, torch.randn(1, 2, 3)], dim=1)
@@ -40,7 +46,7 @@ def test_latent_is_independent_of_padding(humot_small):
 
 
 def test_mask_must_put_valid_joints_first(humot_small):
-    net = HuMoT(**humot_small)
+    net = HumotAligner(**humot_small).net
     with pytest.raises(ValueError, match="first"):
         net.encoder(torch.randn(1, 4, 3, 3), torch.randn(1, 3, 3), torch.tensor([[1, 0, 1]]))
 
@@ -48,7 +54,7 @@ def test_mask_must_put_valid_joints_first(humot_small):
 def test_joint_order_matters_only_through_local_interaction(humot_small):
     """XCA and the joint-wise layers are order-free; the LPI convs see joint neighbours."""
     torch.manual_seed(0)
-    net = HuMoT(**humot_small).eval()
+    net = HumotAligner(**humot_small).net.eval()
     x, t = torch.randn(1, 10, 6, 3), torch.randn(1, 6, 3)
     perm = torch.tensor([5, 4, 3, 2, 1, 0])
     z = net.encoder(x, t)
@@ -63,7 +69,7 @@ def test_joint_order_matters_only_through_local_interaction(humot_small):
 
 def test_gradients_reach_every_parameter(humot_small):
     torch.manual_seed(0)
-    net = HuMoT(**humot_small)
+    net = HumotAligner(**humot_small).net
     x, t = torch.randn(2, 8, 5, 3), torch.randn(2, 5, 3)
     mask = torch.tensor([[True] * 5, [True] * 3 + [False] * 2])
     pred = net(x, t, t[:, :4], mask, torch.tensor([[True] * 4, [True] * 2 + [False] * 2]))
@@ -123,3 +129,15 @@ class TestLosses:
             preds, target, bones, torch.tensor([[True, True, False]])
         )
         assert loss.item() == 0.0
+
+
+def test_the_network_sizes_have_one_source():
+    """``HuMoTConfig`` lists the sizes without defaults; the aligner fills them from its YAML."""
+    assert all(f.default is MISSING for f in fields(HuMoTConfig))
+    yaml = read_aligner_config(files("skelagnostic_humot.conf") / "humot.yaml")["model"]
+    config = HumotAligner().net.config
+    assert {f.name: getattr(config, f.name) for f in fields(config)} == {
+        f.name: yaml[f.name] for f in fields(config)
+    }
+    with pytest.raises(TypeError):
+        HuMoT()

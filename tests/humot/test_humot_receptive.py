@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 from omegaconf import OmegaConf
-from skelagnostic_humot import HuMoT, HumotAligner, receptive_field
+from skelagnostic_humot import HumotAligner, receptive_field
 from skelagnostic_humot.data import Topology, prepare_chunks
 from skelagnostic_humot.template import major_joints
 from torch import nn
@@ -83,7 +83,7 @@ def test_major_joints_are_humot_major_joints(skeleton):
 def test_humot_ratios_match_an_independent_jacobian(skeleton):
     """On a small HuMoT encoder, the full Jacobian by torch.autograd.functional gives the ratios."""
     torch.manual_seed(0)
-    net = HuMoT(dim=16, latent=8, blocks=1, heads=2, kernel_size=3)
+    net = HumotAligner(dim=16, latent=8, blocks=1, heads=2, kernel_size=3).net
     net.train()
     frames, frame = 16, 7
     gen = torch.Generator().manual_seed(1)

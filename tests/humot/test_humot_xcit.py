@@ -65,7 +65,7 @@ def test_lpi_mixes_neighbours_only():
 class TestBlock:
     def test_padded_sample_equals_unpadded(self):
         torch.manual_seed(0)
-        block = XCiTBlock(32, 4)
+        block = XCiTBlock(32, 4, mlp_ratio=4.0, layer_scale=1.0)
         x = torch.randn(1, 6, 10, 32)
         padded = torch.cat([x, torch.randn(1, 3, 10, 32)], dim=1)
         mask = torch.arange(9)[None] < 6
@@ -77,7 +77,7 @@ class TestBlock:
 
     def test_mixed_batch_equals_per_sample(self):
         torch.manual_seed(0)
-        block = XCiTBlock(32, 4).eval()
+        block = XCiTBlock(32, 4, mlp_ratio=4.0, layer_scale=1.0).eval()
         a, b = torch.randn(1, 4, 8, 32), torch.randn(1, 7, 8, 32)
         batch = torch.cat([torch.cat([a, torch.zeros(1, 3, 8, 32)], 1), b])
         mask = torch.tensor([[True] * 4 + [False] * 3, [True] * 7])

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from skelagnostic.allocator import ALLOCATOR_ENV, AllocatorError, find_allocator
+from skelagnostic.cli.allocator import ALLOCATOR_ENV, AllocatorError, find_allocator
 
 REPO = Path(__file__).resolve().parents[2]
 TROUBLESHOOTING = REPO / "docs" / "troubleshooting.md"

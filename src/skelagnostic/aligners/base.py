@@ -13,10 +13,10 @@ import torch
 from skelagnostic.errors import SkelagnosticError
 
 if TYPE_CHECKING:
+    from skelagnostic.aligners.export import ExportGraph
     from skelagnostic.callbacks.fit_summary import SummaryContent
     from skelagnostic.core.motion import Motion
     from skelagnostic.core.skeleton import Skeleton
-    from skelagnostic.export import ExportGraph
 
 #: Capability names with an agreed meaning; aligners may declare others.
 KNOWN_CAPABILITIES = frozenset(
@@ -167,7 +167,7 @@ class Aligner(L.LightningModule, ABC):
         """The networks an engine needs, for ``skelagnostic export`` (ONNX / TorchScript).
 
         The default exports nothing. Aligners that can be exported override this
-        and return one :class:`~skelagnostic.export.ExportGraph` per network: a
+        and return one :class:`~skelagnostic.aligners.export.ExportGraph` per network: a
         module taking and returning tensors only, example inputs, input/output
         names, the axes that may change size at run time, and sidecar metadata
         (normalisation statistics, skeleton). See ``docs/export.md``.

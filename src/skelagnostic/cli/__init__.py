@@ -15,7 +15,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
 from skelagnostic._shadow import ShadowedPackageError, check_not_shadowed
-from skelagnostic.allocator import ALLOCATOR_ENV, reexec_with_allocator
+from skelagnostic.cli.allocator import ALLOCATOR_ENV, reexec_with_allocator
 from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated, sigterm_raises
 from skelagnostic.errors import SkelagnosticError, error_line, printable
 
@@ -170,7 +170,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     When ``argv`` is ``None`` (a new process) and ``SKELAGNOSTIC_ALLOCATOR`` names a
     memory allocator that is not loaded, the command first restarts itself on it
-    (:func:`skelagnostic.allocator.reexec_with_allocator`). Output into a closed pipe
+    (:func:`skelagnostic.cli.allocator.reexec_with_allocator`). Output into a closed pipe
     (``skelagnostic --help | head``) ends the command quietly with exit code 1, as
     Python's documentation recommends (the note on SIGPIPE in :mod:`signal`): the rest
     of the output goes to ``os.devnull`` instead of a ``BrokenPipeError`` traceback.

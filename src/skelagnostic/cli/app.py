@@ -34,9 +34,13 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
-from skelagnostic.allocator import kernel_time_hint
+from skelagnostic.cli.allocator import kernel_time_hint
 from skelagnostic.cli.build import ConfigError, build_datamodule
-from skelagnostic.cli.model_configs import ALIGNER_GROUP, register_model_configs
+from skelagnostic.cli.model_configs import (
+    ALIGNER_GROUP,
+    explain_shadowed_model,
+    register_model_configs,
+)
 from skelagnostic.cli.runs import (
     LOCK_FILE,
     SPLIT_FILE,
@@ -351,7 +355,7 @@ def _one_line(exc: BaseException) -> str:
         text = str(exc)
     else:
         text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-        text = text.split(" Config search path:")[0]
+        text = explain_shadowed_model(text.split(" Config search path:")[0])
     cause = exc.__cause__
     if isinstance(cause, OmegaConfBaseException) and str(cause).splitlines()[0] not in text:
         text += f" ({str(cause).splitlines()[0]})"

@@ -62,9 +62,9 @@ def main(argv: list[str]) -> int:
         print(_USAGE)
         return 0 if argv else 2
     try:
+        from skelagnostic.aligners.export import FORMATS, export_aligner
         from skelagnostic.cli.infer import load_from_checkpoint
         from skelagnostic.cli.render import apply_threads, parse_arguments
-        from skelagnostic.export import FORMATS, export_aligner
         from skelagnostic.io.outputs import check_output_dir
 
         words, options = parse_arguments(argv)

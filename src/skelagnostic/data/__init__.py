@@ -52,7 +52,7 @@ __all__ = [
 
 # The data module needs Lightning: imported on first use, so that reading clips (and
 # `skelagnostic plugins`, which lists the dataset presets) does not import it.
-from skelagnostic.lazy import lazy_exports  # noqa: E402
+from skelagnostic.lazy import lazy_exports
 
 __getattr__, __dir__ = lazy_exports(
     __name__,

@@ -21,13 +21,13 @@ import torch
 from torch import nn
 
 from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import MotionDataModule
 from skelagnostic.errors import MotionError
-from skelagnostic.export import ExportGraph, Method
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, inverse_kinematics
 
 
@@ -181,7 +181,7 @@ class ExampleAligner(Aligner):
         """The encoder and the decoder, each over any batch, frame and joint count.
 
         This is the pattern for a third-party aligner: wrap the tensor-only
-        methods with :class:`~skelagnostic.export.Method`, give example inputs
+        methods with :class:`~skelagnostic.aligners.export.Method`, give example inputs
         whose dynamic axes have distinct sizes, name every input and output,
         and describe in ``metadata`` what the runtime does before and after.
         """

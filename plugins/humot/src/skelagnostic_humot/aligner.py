@@ -29,15 +29,20 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import torch
 
 from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import infer_units
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.export import ExportGraph, Method
 from skelagnostic.representations import inverse_kinematics
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks, sample_keep
-from skelagnostic_humot.model import HuMoT, bone_length_consistency_loss, reconstruction_loss
+from skelagnostic_humot.model import (
+    HuMoT,
+    HuMoTConfig,
+    bone_length_consistency_loss,
+    reconstruction_loss,
+)
 from skelagnostic_humot.template import from_model_frame, major_joints, to_model_frame
 
 if TYPE_CHECKING:
@@ -153,7 +158,9 @@ class HumotAligner(Aligner):
                 raise SkelagnosticError(f"model.{name} must be {what}, got {locals()[name]!r}")
         optimizer, scheduler = check_specs(optimizer, scheduler)
         self.save_hyperparameters()
-        self.net = HuMoT(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
+        self.net = HuMoT(
+            HuMoTConfig(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
+        )
         self._topologies: dict[tuple[Any, ...], Topology] = {}
 
     # ----------------------------------------------------------------- topology

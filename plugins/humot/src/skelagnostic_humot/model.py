@@ -6,7 +6,7 @@ Shapes: motions are ``[B, F, J, 3]`` joint positions (frames first, like
 valid joints come first (padding last); padded joints do not influence the
 valid ones (see :mod:`skelagnostic_humot.xcit`).
 
-With ``fast_path=True`` (the default) the XCiT blocks, and the decoder's
+With ``fast_path=True`` (the aligner's default) the XCiT blocks, and the decoder's
 output layers, compute on the valid tokens only (packed, see
 :class:`~skelagnostic_humot.xcit.TokenLayout`); ``fast_path=False`` keeps the
 padded computation. Both give the same values and gradients (to float
@@ -17,6 +17,7 @@ counts, which stochastic joint subsampling makes about a fifth of the grid.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from itertools import pairwise
 
 import torch
@@ -26,6 +27,7 @@ from skelagnostic_humot.xcit import TokenLayout, XCiTBlock
 
 __all__ = [
     "HuMoT",
+    "HuMoTConfig",
     "HuMoTDecoder",
     "HuMoTEncoder",
     "bone_length_consistency_loss",
@@ -80,6 +82,44 @@ def _check_mask(mask: torch.Tensor | None, batch: int, joints: int) -> torch.Ten
     return mask
 
 
+@dataclass(frozen=True)
+class HuMoTConfig:
+    """The sizes of a HuMoT network, all required.
+
+    Their defaults are those of :class:`~skelagnostic_humot.aligner.HumotAligner`'s
+    constructor, which are ``conf/humot.yaml``'s (the paper's, App. A.3): one place,
+    checked by ``tests/framework/test_model_defaults.py``.
+
+    Attributes:
+        dim: Token channels.
+        latent: Latent channels ``Z``.
+        blocks: XCiT blocks in the encoder and in the decoder.
+        heads: Attention heads.
+        kernel_size: Temporal kernel of the Conv1d layers (not given by the paper).
+        mlp_ratio: XCiT MLP width ratio.
+        layer_scale: Initial XCiT layer scale.
+        fast_path: Compute on the valid (unpadded) tokens only; ``False`` keeps the padded
+            computation (same values, slower on batches of mixed joint counts).
+    """
+
+    dim: int
+    latent: int
+    blocks: int
+    heads: int
+    kernel_size: int
+    mlp_ratio: float
+    layer_scale: float
+    fast_path: bool
+
+
+def _xcit_blocks(config: HuMoTConfig) -> list[XCiTBlock]:
+    """The ``config.blocks`` XCiT blocks of an encoder or a decoder."""
+    return [
+        XCiTBlock(config.dim, config.heads, config.mlp_ratio, config.layer_scale)
+        for _ in range(config.blocks)
+    ]
+
+
 class HuMoTEncoder(nn.Module):
     """``E(X | T)``: motion + its skeleton template -> latent code ``[B, F, Z]``.
 
@@ -92,39 +132,22 @@ class HuMoTEncoder(nn.Module):
     is kept and projected to ``latent`` channels.
 
     Args:
-        dim: Token channels (paper: 128).
-        latent: Latent channels ``Z`` (paper: 128).
-        blocks: XCiT blocks (paper: 4).
-        heads: Attention heads (paper: 8).
-        kernel_size: Temporal kernel of the Conv1d layers (not given by the paper).
-        mlp_ratio: XCiT MLP width ratio.
-        layer_scale: Initial XCiT layer scale.
-        fast_path: Compute the blocks on the valid tokens only (same values).
+        config: The network's sizes (:class:`HuMoTConfig`); ``fast_path`` computes the
+            blocks on the valid tokens only (same values).
     """
 
-    def __init__(
-        self,
-        dim: int = 128,
-        latent: int = 128,
-        blocks: int = 4,
-        heads: int = 8,
-        kernel_size: int = 5,
-        mlp_ratio: float = 4.0,
-        layer_scale: float = 1.0,
-        fast_path: bool = True,
-    ) -> None:
+    def __init__(self, config: HuMoTConfig) -> None:
         super().__init__()
+        dim = config.dim
         self.dim = dim
-        self.fast_path = fast_path
+        self.fast_path = config.fast_path
         self.template_mlp = _mlp([3, 16, 32, 64], nn.ELU, last_act=True)
-        self.motion_cnn = _conv_stack([3, 3, 16, 32, 64], kernel_size)
+        self.motion_cnn = _conv_stack([3, 3, 16, 32, 64], config.kernel_size)
         self.motion_mlp = _mlp([64, 64, 64, 64], nn.ELU, last_act=True)
         self.merge = nn.Linear(128, dim)
         self.latent_token = nn.Parameter(torch.randn(dim) * 0.02)
-        self.blocks = nn.ModuleList(
-            XCiTBlock(dim, heads, mlp_ratio, layer_scale) for _ in range(blocks)
-        )
-        self.to_latent = nn.Linear(dim, latent)
+        self.blocks = nn.ModuleList(_xcit_blocks(config))
+        self.to_latent = nn.Linear(dim, config.latent)
 
     def forward(
         self, motion: torch.Tensor, template: torch.Tensor, mask: torch.Tensor | None = None
@@ -188,40 +211,24 @@ class HuMoTDecoder(nn.Module):
     ``dim``) and 3 linear layers (``dim``, ``dim``, 3), ELU after each but the last.
 
     Args:
-        dim: Token channels (paper: 128).
-        latent: Latent channels ``Z`` (paper: 128).
-        blocks: Style-modulated XCiT blocks (paper: 4).
-        heads: Attention heads (paper: 8).
-        kernel_size: Temporal kernel of the Conv1d layers (not given by the paper).
-        mlp_ratio: XCiT MLP width ratio.
-        layer_scale: Initial XCiT layer scale.
-        fast_path: Compute the blocks and output layers on the valid joints only (same values).
+        config: The network's sizes (:class:`HuMoTConfig`; ``blocks`` style-modulated
+            XCiT blocks); ``fast_path`` computes the blocks and output layers on the
+            valid joints only (same values).
     """
 
-    def __init__(
-        self,
-        dim: int = 128,
-        latent: int = 128,
-        blocks: int = 4,
-        heads: int = 8,
-        kernel_size: int = 5,
-        mlp_ratio: float = 4.0,
-        layer_scale: float = 1.0,
-        fast_path: bool = True,
-    ) -> None:
+    def __init__(self, config: HuMoTConfig) -> None:
         super().__init__()
+        dim, kernel_size = config.dim, config.kernel_size
         self.dim = dim
-        self.fast_path = fast_path
+        self.fast_path = config.fast_path
         self.template_mlp = _mlp([3, 16, 32, 64, dim], nn.ReLU, last_act=False)
-        self.latent_cnn = _conv_stack([latent, dim, dim, dim], kernel_size)
+        self.latent_cnn = _conv_stack([config.latent, dim, dim, dim], kernel_size)
         self.latent_linear = nn.Sequential(nn.Linear(dim, dim), nn.ELU())
         self.styles = nn.ModuleList(
             nn.Sequential(nn.Linear(dim, dim), nn.ReLU(), nn.Linear(dim, dim))
-            for _ in range(blocks)
+            for _ in range(config.blocks)
         )
-        self.blocks = nn.ModuleList(
-            XCiTBlock(dim, heads, mlp_ratio, layer_scale) for _ in range(blocks)
-        )
+        self.blocks = nn.ModuleList(_xcit_blocks(config))
         self.output_cnn = _conv_stack([dim, dim, dim, dim], kernel_size)
         self.output_mlp = _mlp([dim, dim, dim, 3], nn.ELU, last_act=False)
 
@@ -291,39 +298,25 @@ class HuMoT(nn.Module):
     """The autoencoder: ``D(E(X | T_src) | T_dst)``.
 
     Args:
-        dim: Token channels.
-        latent: Latent channels.
-        blocks: XCiT blocks in the encoder and in the decoder.
-        heads: Attention heads.
-        kernel_size: Temporal Conv1d kernel size.
-        mlp_ratio: XCiT MLP width ratio.
-        layer_scale: Initial XCiT layer scale.
-        fast_path: Compute on the valid (unpadded) tokens only; ``False`` keeps the padded
-            computation (same values, slower on batches of mixed joint counts).
+        config: The sizes of the encoder and of the decoder (:class:`HuMoTConfig`).
+
+    Attributes:
+        config: The sizes it was built with.
 
     Example:
         >>> import torch
-        >>> net = HuMoT()
+        >>> from skelagnostic_humot.aligner import HumotAligner
+        >>> net = HumotAligner().net  # the paper's sizes, conf/humot.yaml
         >>> z = net.encoder(torch.randn(2, 30, 22, 3), torch.randn(2, 22, 3))
         >>> tuple(z.shape), tuple(net.decoder(z, torch.randn(2, 31, 3)).shape)
         ((2, 30, 128), (2, 30, 31, 3))
     """
 
-    def __init__(
-        self,
-        dim: int = 128,
-        latent: int = 128,
-        blocks: int = 4,
-        heads: int = 8,
-        kernel_size: int = 5,
-        mlp_ratio: float = 4.0,
-        layer_scale: float = 1.0,
-        fast_path: bool = True,
-    ) -> None:
+    def __init__(self, config: HuMoTConfig) -> None:
         super().__init__()
-        args = (dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
-        self.encoder = HuMoTEncoder(*args)
-        self.decoder = HuMoTDecoder(*args)
+        self.config = config
+        self.encoder = HuMoTEncoder(config)
+        self.decoder = HuMoTDecoder(config)
 
     def forward(
         self,

@@ -131,9 +131,9 @@ def receptive_field(
 
     Example:
         >>> import torch, skelagnostic as sa
-        >>> from skelagnostic_humot import HuMoT, receptive_field
+        >>> from skelagnostic_humot import HumotAligner, receptive_field
         >>> _ = torch.manual_seed(0)
-        >>> net = HuMoT(dim=16, latent=16, blocks=1, heads=2, kernel_size=3)
+        >>> net = HumotAligner(dim=16, latent=16, blocks=1, heads=2, kernel_size=3).net
         >>> rf = receptive_field(net, sa.procedural.skeleton("biped22"), frames=14)
         >>> len(rf.ratios), len(rf.major)
         (22, 12)

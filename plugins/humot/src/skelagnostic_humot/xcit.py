@@ -161,7 +161,7 @@ class XCA(nn.Module):
         qkv_bias: Bias of the q/k/v projection.
     """
 
-    def __init__(self, dim: int = 128, heads: int = 8, qkv_bias: bool = True) -> None:
+    def __init__(self, dim: int, heads: int, qkv_bias: bool = True) -> None:
         super().__init__()
         if dim % heads:
             raise ValueError(f"heads ({heads}) must divide dim ({dim})")
@@ -287,7 +287,7 @@ class LocalPatchInteraction(nn.Module):
         kernel_size: Size of the (square) depthwise kernels.
     """
 
-    def __init__(self, dim: int = 128, kernel_size: int = 3) -> None:
+    def __init__(self, dim: int, kernel_size: int = 3) -> None:
         super().__init__()
         pad = kernel_size // 2
         self.conv1 = nn.Conv2d(dim, dim, kernel_size, padding=pad, groups=dim)
@@ -352,10 +352,10 @@ class XCiTBlock(nn.Module):
 
     def __init__(
         self,
-        dim: int = 128,
-        heads: int = 8,
-        mlp_ratio: float = 4.0,
-        layer_scale: float = 1.0,
+        dim: int,
+        heads: int,
+        mlp_ratio: float,
+        layer_scale: float,
         lpi_kernel: int = 3,
     ) -> None:
         super().__init__()

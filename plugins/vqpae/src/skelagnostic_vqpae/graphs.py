@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor, nn
 
-from skelagnostic.export import ExportGraph, Method
+from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic_vqpae.codebook import SharedCodebook
 from skelagnostic_vqpae.model import VQPAE, phase_manifold
 

@@ -42,12 +42,12 @@ from lightning.pytorch.utilities import rank_zero_info
 from torch import Tensor, nn
 
 from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners.export import ExportGraph
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.export import ExportGraph
 from skelagnostic.metrics import ManifoldOverlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook

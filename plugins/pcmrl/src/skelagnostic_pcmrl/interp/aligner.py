@@ -18,13 +18,13 @@ import torch
 from torch import Tensor
 
 from skelagnostic.aligners.base import Aligner, Latent
+from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.kinematics import fk_from_global, global_from_local, local_from_global
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import MotionError, SkelagnosticError
-from skelagnostic.export import ExportGraph, Method
 from skelagnostic_pcmrl.interp.keyframes import sign_invariant_l1, window_features, window_heading
 from skelagnostic_pcmrl.interp.network import CITLInterpolator
 from skelagnostic_pcmrl.interp.rpa import bone_tails

@@ -26,13 +26,13 @@ import torch
 
 from skelagnostic.aligners import Aligner
 from skelagnostic.aligners.base import Latent
+from skelagnostic.aligners.export import ExportGraph
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.kinematics import fk_from_global, forward_kinematics, local_from_global
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.export import ExportGraph
 from skelagnostic.representations import POINT_GROUPS
 from skelagnostic_pcmrl.points import (
     effective_joints,

@@ -1,45 +1,8 @@
-"""A reusable contract test for aligners: what ``skelagnostic fit`` and users rely on.
+"""The contract's checks as plain functions, for pytest and other test runners.
 
-Subclass :class:`AlignerContract` in a pytest module of your plugin and name
-your aligner; pytest then runs five tests against it, at the sizes you give::
-
-    from skelagnostic.testing import AlignerContract
-
-    class TestMyAligner(AlignerContract):
-        aligner = "mine"                      # the model=<name> you register
-        overrides = ("model.hidden=8",)       # Hydra overrides: keep it tiny and fast
-
-The tests share one short training run (``experiment=smoke``, :attr:`~AlignerContract.steps`
-optimizer steps, one validation pass, CPU) made through the same
-:func:`skelagnostic.cli.app.compose` and :func:`~skelagnostic.cli.app.run` as
-``skelagnostic fit``:
-
-* ``test_fit_a_few_steps``: the run logs a finite ``train/loss`` and ``val/loss``,
-  changes the weights and writes ``checkpoints/last.ckpt``;
-* ``test_checkpoint_round_trip``: :func:`skelagnostic.plugins.load_aligner` rebuilds
-  the network from the checkpoint alone (sizes that depend on the data must be
-  saved in the hyper-parameters) with exactly the saved weights, and encodes
-  like the trained model;
-* ``test_encode_decode_shapes``: ``encode`` a clip of the training data and
-  ``decode`` it (and ``retarget``, if declared) onto :meth:`~AlignerContract.target_skeleton`:
-  a finite :class:`~skelagnostic.core.motion.Motion` of that skeleton with the
-  clip's length and frame rate;
-* ``test_encode_ignores_the_length_unit``: the same clip in metres and in
-  centimetres (and in centimetres with its unit left to the height guess, as
-  ``read_bvh`` leaves a file's) encodes to the same latent: models train on the
-  data sources' metres, and users pass files in any unit;
-* ``test_logging_is_ddp_safe``: every ``self.log`` in a step passes an explicit
-  ``batch_size`` (batches are dicts of datasets, which Lightning cannot size),
-  and every epoch-level value logged in a step (validation, test, ``on_epoch=True``)
-  passes ``sync_dist=True`` so that DDP ranks agree; torchmetrics ``Metric``
-  objects are exempt (they synchronise themselves), and so are values logged in
-  epoch-end hooks (compute them from synchronised state).
-
-The same checks are plain functions (:func:`fit_for_contract`,
-:func:`check_fit`, :func:`check_checkpoint_round_trip`,
-:func:`check_encode_decode`, :func:`check_length_units`, :func:`check_logging`) for
-other test runners.
-This module imports pytest: use it from tests.
+:func:`fit_for_contract` makes the short training run (a :class:`ContractRun`);
+each ``check_*`` function asserts one promise of the contract on it (see
+:mod:`skelagnostic.testing`). This module imports pytest: use it from tests.
 """
 
 from __future__ import annotations
@@ -49,9 +12,8 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any
 
-import pytest
 import torch
 
 from skelagnostic._shadow import check_not_shadowed
@@ -64,19 +26,11 @@ if TYPE_CHECKING:
     from skelagnostic.core.skeleton import Skeleton
     from skelagnostic.plugins import PluginManager
 
-__all__ = [
-    "AlignerContract",
-    "ContractRun",
-    "LogCall",
-    "check_checkpoint_round_trip",
-    "check_encode_decode",
-    "check_fit",
-    "check_logging",
-    "fit_for_contract",
-]
 
 #: Lightning hooks whose ``self.log`` is per batch (``batch_size`` matters there).
 _STEP_HOOKS = ("training_step", "validation_step", "test_step")
+
+
 #: Step hooks where ``on_epoch`` defaults to ``True`` in ``LightningModule.log``.
 _EPOCH_DEFAULT_HOOKS = ("validation_step", "test_step")
 
@@ -384,68 +338,3 @@ def check_logging(run: ContractRun) -> None:
     assert any(c.hook == "validation_step" and c.name == "val/loss" for c in run.logs), (
         f"{type(run.model).__name__}.validation_step must log 'val/loss' (checkpoint monitor)"
     )
-
-
-class AlignerContract:
-    """Base class of a pytest test class that runs the aligner contract (see the module).
-
-    Attributes:
-        aligner: The registered ``model=<name>`` to test.
-        overrides: Hydra overrides after ``experiment=smoke`` (tiny sizes, data).
-        steps: Training steps of the shared run.
-    """
-
-    aligner: ClassVar[str] = ""
-    overrides: ClassVar[Sequence[str]] = ()
-    steps: ClassVar[int] = 4
-
-    def plugin_manager(self) -> PluginManager | None:
-        """Where the aligner is registered; ``None`` (the default): the process-wide manager."""
-        return None
-
-    def motion(self, run: ContractRun) -> Motion:
-        """The clip to encode (default: :func:`contract_motion`)."""
-        return contract_motion(run)
-
-    def target_skeleton(self, run: ContractRun, motion: Motion) -> Skeleton:
-        """The skeleton to decode onto (default: the clip's own)."""
-        return motion.skeleton
-
-    @staticmethod
-    @pytest.fixture(scope="class")
-    def contract_run(
-        request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-    ) -> ContractRun:
-        """One short training run shared by the tests of the class.
-
-        A static method on the test class (``request.cls``): pytest deprecates
-        class-scoped fixtures defined as instance methods (``PytestRemovedIn10Warning``),
-        since the instance they would see is not the tests' one.
-        """
-        cls: type[AlignerContract] = request.cls
-        assert cls.aligner, f"{cls.__name__}: set the class attribute 'aligner'"
-        root = tmp_path_factory.mktemp(f"contract-{cls.aligner}")
-        return fit_for_contract(
-            cls.aligner, root / "run", cls.overrides, cls.steps, cls().plugin_manager()
-        )
-
-    def test_fit_a_few_steps(self, contract_run: ContractRun) -> None:
-        """Losses logged and finite, weights updated, a checkpoint written."""
-        check_fit(contract_run)
-
-    def test_checkpoint_round_trip(self, contract_run: ContractRun) -> None:
-        """``load_aligner`` rebuilds the same network from the checkpoint."""
-        check_checkpoint_round_trip(contract_run, self.motion(contract_run))
-
-    def test_encode_decode_shapes(self, contract_run: ContractRun) -> None:
-        """``encode``/``decode`` (and ``retarget``) shapes, fps and finiteness."""
-        motion = self.motion(contract_run)
-        check_encode_decode(contract_run, motion, self.target_skeleton(contract_run, motion))
-
-    def test_encode_ignores_the_length_unit(self, contract_run: ContractRun) -> None:
-        """A clip in metres, centimetres or an unstated unit encodes the same."""
-        check_length_units(contract_run, self.motion(contract_run))
-
-    def test_logging_is_ddp_safe(self, contract_run: ContractRun) -> None:
-        """``batch_size`` in step logs, ``sync_dist`` for epoch-level values."""
-        check_logging(contract_run)

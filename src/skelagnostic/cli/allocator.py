@@ -16,7 +16,7 @@ same. Only Linux (and glibc-based systems) is supported; elsewhere the
 variable is an error.
 
 Example:
-    >>> from skelagnostic.allocator import active_allocator
+    >>> from skelagnostic.cli.allocator import active_allocator
     >>> active_allocator() in ("system", "tcmalloc", "jemalloc")
     True
 """

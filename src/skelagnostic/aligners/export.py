@@ -39,7 +39,7 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.io.outputs import OutputError, output_path
 
 if TYPE_CHECKING:
-    from skelagnostic.aligners import Aligner
+    from skelagnostic.aligners.base import Aligner
 
 __all__ = [
     "FORMATS",

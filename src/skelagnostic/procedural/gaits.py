@@ -1,22 +1,8 @@
-"""Procedural motion: synthetic, parametric gaits on several skeletons.
+"""Gaits played on the procedural rigs: :func:`generate` one clip, :func:`dataset` many.
 
-This is the embedded default data of skelagnostic: demos, the default training
-data of every method and the fast tests use it, so nothing needs downloading.
-It is **synthetic**: joint angles are smooth periodic functions of a gait phase,
-not motion capture. Its value is that the truth is known (gait frequency,
-phase, speed) and that the same gait can be played on different topologies.
-
-Skeletons (all in centimetres, Y up, facing +Z, left +X):
-
-* ``biped22``: LaFAN1-like, 22 joints (``Hips``, ``LeftUpLeg``, ... ``RightHand``).
-* ``biped31``: CMU-like, 31 joints with zero-length hip/back joints, fingers and
-  thumbs (Xia/MotionBuilder names).
-* ``biped17``: Human3.6M-like, 17 joints with short names (``RHip``, ``LKnee``, ...).
-* ``quadruped``: a dog, 21 joints with a tail and human-style names
-  (``LeftArm`` is a front leg), like the MANN dog data.
-
-Gaits: ``walk``, ``run``, ``idle`` for bipeds; ``walk`` (lateral sequence),
-``trot`` (diagonal pairs), ``gallop`` (rotary) and ``idle`` for the quadruped.
+Joint angles are smooth periodic functions of a gait phase (``walk``, ``run``,
+``idle`` for bipeds; ``walk``, ``trot``, ``gallop``, ``idle`` for the quadruped),
+so the gait frequency, phase and speed of every clip are known.
 """
 
 from __future__ import annotations
@@ -32,155 +18,7 @@ from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
-
-__all__ = ["GAITS", "KINDS", "dataset", "generate", "skeleton"]
-
-# (name, parent, offset in cm, role). Roles drive the animation; joints without
-# a role (fingers, zero-length helpers) keep their rest rotation.
-_Spec = list[tuple[str, str | None, tuple[float, float, float], str | None]]
-
-
-def _mirror(spec: _Spec, prefixes: tuple[tuple[str, str], ...] = (("Left", "Right"),)) -> _Spec:
-    """The right-side copy of a left limb: names renamed by prefix, X negated, roles l* -> r*."""
-
-    def rename(name: str | None) -> str | None:
-        if name is None:
-            return None
-        for left, right in prefixes:
-            if name.startswith(left):
-                return right + name[len(left) :]
-        return name
-
-    return [
-        (
-            str(rename(name)),
-            rename(parent),
-            (-off[0], off[1], off[2]),
-            None if role is None else "r" + role[1:],
-        )
-        for name, parent, off, role in spec
-    ]
-
-
-_B22_LEFT_LEG: _Spec = [
-    ("LeftUpLeg", "Hips", (9.0, -5.0, 0.0), "l_hip"),
-    ("LeftLeg", "LeftUpLeg", (0.0, -42.0, 0.0), "l_knee"),
-    ("LeftFoot", "LeftLeg", (0.0, -42.0, 0.0), "l_ankle"),
-    ("LeftToe", "LeftFoot", (0.0, -6.0, 13.0), "l_toe"),
-]
-_B22_LEFT_ARM: _Spec = [
-    ("LeftShoulder", "Spine2", (3.0, 11.0, 0.0), "l_clavicle"),
-    ("LeftArm", "LeftShoulder", (15.0, 0.0, 0.0), "l_shoulder"),
-    ("LeftForeArm", "LeftArm", (28.0, 0.0, 0.0), "l_elbow"),
-    ("LeftHand", "LeftForeArm", (26.0, 0.0, 0.0), "l_wrist"),
-]
-_BIPED22: _Spec = [
-    ("Hips", None, (0.0, 95.0, 0.0), "root"),
-    *_B22_LEFT_LEG,
-    *_mirror(_B22_LEFT_LEG),
-    ("Spine", "Hips", (0.0, 10.0, 0.0), "spine0"),
-    ("Spine1", "Spine", (0.0, 12.0, 0.0), "spine1"),
-    ("Spine2", "Spine1", (0.0, 12.0, 0.0), "spine2"),
-    ("Neck", "Spine2", (0.0, 16.0, 0.0), "neck"),
-    ("Head", "Neck", (0.0, 10.0, 0.0), "head"),
-    *_B22_LEFT_ARM,
-    *_mirror(_B22_LEFT_ARM),
-]
-
-_B31_LEFT_LEG: _Spec = [
-    ("LHipJoint", "Hips", (0.0, 0.0, 0.0), None),
-    ("LeftUpLeg", "LHipJoint", (9.5, -6.0, 1.0), "l_hip"),
-    ("LeftLeg", "LeftUpLeg", (0.0, -43.0, 0.0), "l_knee"),
-    ("LeftFoot", "LeftLeg", (0.0, -41.0, 0.0), "l_ankle"),
-    ("LeftToeBase", "LeftFoot", (0.0, -5.0, 13.5), "l_toe"),
-]
-_B31_LEFT_ARM: _Spec = [
-    ("LeftShoulder", "Spine1", (3.5, 10.0, 0.0), "l_clavicle"),
-    ("LeftArm", "LeftShoulder", (16.0, 0.0, 0.0), "l_shoulder"),
-    ("LeftForeArm", "LeftArm", (27.0, 0.0, 0.0), "l_elbow"),
-    ("LeftHand", "LeftForeArm", (24.0, 0.0, 0.0), "l_wrist"),
-    ("LeftFingerBase", "LeftHand", (4.0, 0.0, 0.0), None),
-    ("LeftHandIndex1", "LeftFingerBase", (4.0, 0.0, 0.0), None),
-    ("LThumb", "LeftHand", (2.0, 0.0, 3.0), None),
-]
-_BIPED31: _Spec = [
-    ("Hips", None, (0.0, 96.0, 0.0), "root"),
-    *_B31_LEFT_LEG,
-    *_mirror(_B31_LEFT_LEG, (("Left", "Right"), ("LHip", "RHip"))),
-    ("LowerBack", "Hips", (0.0, 0.0, 0.0), None),
-    ("Spine", "LowerBack", (0.0, 12.0, 0.0), "spine0"),
-    ("Spine1", "Spine", (0.0, 12.0, 0.0), "spine1"),
-    ("Neck", "Spine1", (0.0, 11.0, 0.0), "neck"),
-    ("Neck1", "Neck", (0.0, 7.0, 0.0), None),
-    ("Head", "Neck1", (0.0, 7.0, 0.0), "head"),
-    *_B31_LEFT_ARM,
-    *_mirror(_B31_LEFT_ARM, (("Left", "Right"), ("LThumb", "RThumb"))),
-]
-
-_B17_LEFT_LEG: _Spec = [
-    ("LHip", "Hip", (12.0, 0.0, 0.0), "l_hip"),
-    ("LKnee", "LHip", (0.0, -44.0, 0.0), "l_knee"),
-    ("LFoot", "LKnee", (0.0, -44.0, 0.0), "l_ankle"),
-]
-_B17_LEFT_ARM: _Spec = [
-    ("LShoulder", "Thorax", (16.0, 0.0, 0.0), "l_shoulder"),
-    ("LElbow", "LShoulder", (27.0, 0.0, 0.0), "l_elbow"),
-    ("LWrist", "LElbow", (25.0, 0.0, 0.0), "l_wrist"),
-]
-_BIPED17: _Spec = [
-    ("Hip", None, (0.0, 87.0, 0.0), "root"),
-    *_mirror(_B17_LEFT_LEG, (("L", "R"),)),
-    *_B17_LEFT_LEG,
-    ("Spine", "Hip", (0.0, 23.0, 0.0), "spine0"),
-    ("Thorax", "Spine", (0.0, 25.0, 0.0), "spine2"),
-    ("Neck", "Thorax", (0.0, 9.0, 0.0), "neck"),
-    ("Head", "Neck", (0.0, 11.0, 0.0), "head"),
-    *_B17_LEFT_ARM,
-    *_mirror(_B17_LEFT_ARM, (("L", "R"),)),
-]
-
-_Q_LEFT_FRONT: _Spec = [
-    ("LeftShoulder", "Spine1", (6.0, -4.0, 4.0), "lf_0"),
-    ("LeftArm", "LeftShoulder", (0.0, -14.0, 0.0), "lf_1"),
-    ("LeftForeArm", "LeftArm", (0.0, -15.0, 0.0), "lf_2"),
-    ("LeftHand", "LeftForeArm", (0.0, -11.0, 3.0), "lf_3"),
-]
-_Q_LEFT_HIND: _Spec = [
-    ("LeftUpLeg", "Hips", (6.0, -4.0, -4.0), "lh_0"),
-    ("LeftLeg", "LeftUpLeg", (0.0, -17.0, 3.0), "lh_1"),
-    ("LeftFoot", "LeftLeg", (0.0, -18.0, -5.0), "lh_2"),
-]
-_QUADRUPED: _Spec = [
-    ("Hips", None, (0.0, 43.0, 0.0), "root"),
-    ("Spine", "Hips", (0.0, 2.0, 18.0), "spine0"),
-    ("Spine1", "Spine", (0.0, 0.0, 18.0), "spine1"),
-    ("Neck", "Spine1", (0.0, 8.0, 8.0), "neck"),
-    ("Head", "Neck", (0.0, 8.0, 8.0), "head"),
-    *_Q_LEFT_FRONT,
-    *_mirror(_Q_LEFT_FRONT),
-    *_Q_LEFT_HIND,
-    *_mirror(_Q_LEFT_HIND),
-    ("Tail", "Hips", (0.0, 3.0, -10.0), "tail0"),
-    ("Tail1", "Tail", (0.0, -3.0, -12.0), "tail1"),
-]
-
-_END_SITES = {
-    "Head": (0.0, 12.0, 0.0),
-    "LeftToe": (0.0, 0.0, 5.0),
-    "RightToe": (0.0, 0.0, 5.0),
-    "LeftHand": (8.0, 0.0, 0.0),
-    "RightHand": (-8.0, 0.0, 0.0),
-}
-
-_SPECS: dict[str, _Spec] = {
-    "biped22": _BIPED22,
-    "biped31": _BIPED31,
-    "biped17": _BIPED17,
-    "quadruped": _QUADRUPED,
-}
-
-#: Skeleton kinds the generator knows.
-KINDS: tuple[str, ...] = tuple(_SPECS)
+from skelagnostic.procedural.rigs import KINDS, joint_roles, skeleton
 
 #: Gaits per morphology.
 GAITS: dict[str, tuple[str, ...]] = {
@@ -206,6 +44,8 @@ _BIPED_GAITS = {
     "run": _Gait(1.4, 38.0, 75.0, 0.05, 35.0, 85.0, 7.0),
     "idle": _Gait(0.25, 1.5, 2.0, 0.004, 2.0, 8.0, 1.5),
 }
+
+
 _QUAD_GAITS = {
     # phase offsets of (left front, right front, left hind, right hind)
     "walk": _Gait(1.0, 20.0, 30.0, 0.02, 0.0, 0.0, 3.0, (0.25, 0.75, 0.0, 0.5)),
@@ -223,39 +63,16 @@ def _axis_angle(axis: str, degrees: torch.Tensor) -> torch.Tensor:
     return q
 
 
-def skeleton(kind: str, scale: float = 1.0) -> Skeleton:
-    """The rest skeleton of a procedural kind (see :data:`KINDS`).
-
-    Args:
-        kind: ``"biped22"``, ``"biped31"``, ``"biped17"`` or ``"quadruped"``.
-        scale: Multiplies every offset (body size variation).
-
-    Raises:
-        SkelagnosticError: For an unknown kind.
-    """
-    if kind not in _SPECS:
-        raise SkelagnosticError(f"unknown procedural skeleton {kind!r}; known: {', '.join(KINDS)}")
-    spec = _SPECS[kind]
-    names = [s[0] for s in spec]
-    index = {n: i for i, n in enumerate(names)}
-    parents = [-1 if s[1] is None else index[s[1]] for s in spec]
-    offsets = torch.tensor([s[2] for s in spec], dtype=torch.float64) * scale
-    end_sites: dict[int, list[list[float]]] = {}
-    for j, n in enumerate(names):
-        if not any(p == j for p in parents):
-            site = _END_SITES.get(n)
-            if site is None:  # continue the last bone a little
-                d = offsets[j] / offsets[j].norm().clamp_min(1e-9)
-                site = tuple((d * 5.0 * scale).tolist())
-            end_sites[j] = [[c * (scale if n in _END_SITES else 1.0) for c in site]]
-    morphology = "quadruped" if kind == "quadruped" else "biped"
-    return Skeleton(names, parents, offsets, end_sites=end_sites, name=kind, morphology=morphology)
-
-
 #: Values of ``generate(root_carrier=...)`` and ``generate(channels=...)``.
 _ROOT_CARRIERS = (None, "static")
+
+
 _CHANNEL_LAYOUTS = (None, "all6")
+
+
 _SIX = ["Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"]
+
+
 _THREE = _SIX[3:]
 
 
@@ -380,7 +197,7 @@ def generate(
     amp = jitter(0.10)
     phase0 = float(rng.random())
     sk = skeleton(kind, body)
-    roles = {s[3]: j for j, s in enumerate(_SPECS[kind]) if s[3] is not None}
+    roles = joint_roles(kind)
     num_frames = math.floor(seconds * fps + 1e-9) + 1
     t = torch.arange(num_frames, dtype=torch.float64) / fps
     phase = torch.remainder(phase0 + freq * t, 1.0)
@@ -425,7 +242,7 @@ def _check_arguments(
     Raises:
         SkelagnosticError: As :func:`generate` says.
     """
-    if kind not in _SPECS:
+    if kind not in KINDS:
         raise SkelagnosticError(f"unknown procedural skeleton {kind!r}; known: {', '.join(KINDS)}")
     morph = "quadruped" if kind == "quadruped" else "biped"
     table = _QUAD_GAITS if morph == "quadruped" else _BIPED_GAITS
