@@ -9,6 +9,7 @@ Examples:
 
 from skelagnostic.data.cache import CacheEntry, WindowCache, default_cache_dir
 from skelagnostic.data.datamodule import MotionDataModule, WindowDataset, datamodule_options
+from skelagnostic.data.loaders import SkeletonCollate
 from skelagnostic.data.sources import (
     DATA_ROOT_ENV,
     MANN_DOG_TEST,
@@ -41,6 +42,7 @@ __all__ = [
     "MotionDataModule",
     "MultiSource",
     "ProceduralSource",
+    "SkeletonCollate",
     "WindowCache",
     "WindowDataset",
     "bvh_sources",
