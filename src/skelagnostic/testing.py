@@ -1,7 +1,7 @@
 """A reusable contract test for aligners: what ``skelagnostic fit`` and users rely on.
 
 Subclass :class:`AlignerContract` in a pytest module of your plugin and name
-your aligner; pytest then runs five tests against it, at the sizes you give::
+your aligner; pytest then runs six tests against it, at the sizes you give::
 
     from skelagnostic.testing import AlignerContract
 
@@ -28,6 +28,12 @@ optimizer steps, one validation pass, CPU) made through the same
   centimetres (and in centimetres with its unit left to the height guess, as
   ``read_bvh`` leaves a file's) encodes to the same latent: models train on the
   data sources' metres, and users pass files in any unit;
+* ``test_steps_without_a_trainer``: the aligner rebuilt from the checkpoint, attached
+  to no Trainer (``self.trainer`` raises), runs ``training_step`` (a finite loss whose
+  gradient is finite and not zero) and ``validation_step`` on the first batches of the
+  run's data module: a batch carries the skeleton information its model needs
+  (``batch["skeleton"]``, :func:`~skelagnostic.aligners.batch_skeleton`), so a model
+  runs without a Trainer or a data module;
 * ``test_logging_is_ddp_safe``: every ``self.log`` in a step passes an explicit
   ``batch_size`` (batches are dicts of datasets, which Lightning cannot size),
   and every epoch-level value logged in a step (validation, test, ``on_epoch=True``)
@@ -37,7 +43,8 @@ optimizer steps, one validation pass, CPU) made through the same
 
 The same checks are plain functions (:func:`fit_for_contract`,
 :func:`check_fit`, :func:`check_checkpoint_round_trip`,
-:func:`check_encode_decode`, :func:`check_length_units`, :func:`check_logging`) for
+:func:`check_encode_decode`, :func:`check_length_units`,
+:func:`check_steps_without_trainer`, :func:`check_logging`) for
 other test runners.
 This module imports pytest: use it from tests.
 """
@@ -72,6 +79,7 @@ __all__ = [
     "check_encode_decode",
     "check_fit",
     "check_logging",
+    "check_steps_without_trainer",
     "fit_for_contract",
 ]
 
@@ -362,6 +370,56 @@ def check_length_units(run: ContractRun, motion: Motion) -> None:
         )
 
 
+def _first_batch(loader: Any) -> Any:
+    """The first batch of a data module's loader (a ``CombinedLoader`` too), or None."""
+    from lightning.pytorch.utilities import CombinedLoader
+
+    if isinstance(loader, CombinedLoader):
+        return next(iter(loader), (None,))[0]
+    return next(iter(loader), None)
+
+
+def check_steps_without_trainer(run: ContractRun) -> None:
+    """``training_step`` and ``validation_step`` run on the data's batches without a Trainer.
+
+    The aligner rebuilt from the checkpoint is attached to no Trainer (its
+    ``self.trainer`` raises) and gets the first training batch of the run's data
+    module, then its first validation batch (the training batch when there is no
+    validation data). The training loss must be finite and back-propagate to a
+    finite gradient that is not zero everywhere. ``self.log`` without a Trainer
+    only warns (Lightning's own rule for testing steps), so that warning is silenced.
+
+    Args:
+        run: The contract run.
+    """
+    import warnings
+
+    name = type(run.model).__name__
+    model = _load(run)
+    assert model._trainer is None, f"{name}: the reloaded model is attached to a Trainer"
+    train = _first_batch(run.datamodule.train_dataloader())
+    assert train is not None, f"aligner {run.aligner!r}: the training loader gave no batch"
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*self.log.*", category=UserWarning)
+        model.train()
+        model.zero_grad()
+        loss = model.training_step(train, 0)
+        loss = loss["loss"] if isinstance(loss, dict) else loss
+        assert isinstance(loss, torch.Tensor) and bool(torch.isfinite(loss)), (
+            f"{name}.training_step without a Trainer: the loss is not a finite tensor ({loss})"
+        )
+        loss.backward()
+        grads = [p.grad for p in model.parameters() if p.grad is not None]
+        assert grads and all(bool(torch.isfinite(g).all()) for g in grads), (
+            f"{name}.training_step without a Trainer: no finite gradient"
+        )
+        assert any(bool(g.abs().sum() > 0) for g in grads), f"{name}: the gradient is zero"
+        val = _first_batch(run.datamodule.val_dataloader())
+        model.eval()
+        with torch.no_grad():
+            model.validation_step(train if val is None else val, 0)
+
+
 def check_logging(run: ContractRun) -> None:
     """Explicit ``batch_size`` in step logs; ``sync_dist=True`` for epoch-level step values.
 
@@ -445,6 +503,10 @@ class AlignerContract:
     def test_encode_ignores_the_length_unit(self, contract_run: ContractRun) -> None:
         """A clip in metres, centimetres or an unstated unit encodes the same."""
         check_length_units(contract_run, self.motion(contract_run))
+
+    def test_steps_without_a_trainer(self, contract_run: ContractRun) -> None:
+        """Training and validation steps on the data's batches, no Trainer attached."""
+        check_steps_without_trainer(contract_run)
 
     def test_logging_is_ddp_safe(self, contract_run: ContractRun) -> None:
         """``batch_size`` in step logs, ``sync_dist`` for epoch-level values."""
