@@ -131,6 +131,21 @@ def test_equality_hash_scaling_and_serialisation():
         sa.Skeleton.from_dict({"joint_names": ["A"], "offsets": [[0, 0, 0]]})
 
 
+def test_unpickling_does_not_infer_the_groups_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Groups given in full (``from_dict``, unpickling a batch's skeleton) are not re-inferred."""
+    s = sa.Skeleton(NAMES, PARENTS, torch.randn(7, 3))
+    data = pickle.dumps(s)
+
+    def refuse(*args: object, **kwargs: object) -> list[str]:
+        raise AssertionError("infer_body_groups called")
+
+    monkeypatch.setattr("skelagnostic.core.skeleton.infer_body_groups", refuse)
+    clone = pickle.loads(data)
+    assert clone == s and clone.body_groups == s.body_groups
+    with pytest.raises(AssertionError, match="infer_body_groups called"):
+        sa.Skeleton(NAMES, PARENTS, torch.randn(7, 3), body_groups={"Head": "spine"})
+
+
 @pytest.mark.data
 @pytest.mark.parametrize(
     ("rel", "left_arm_joint", "left_leg_joint", "effectors"),

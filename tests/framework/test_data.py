@@ -10,6 +10,7 @@ import pytest
 import torch
 
 import skelagnostic as sa
+from skelagnostic.aligners import batch_skeleton
 from skelagnostic.core.motion import reroot
 from skelagnostic.data import (
     PRESETS,
@@ -56,6 +57,26 @@ def test_datamodule_batches_one_per_skeleton(tmp_path: Path) -> None:
     rep = dm.representations["procedural/biped22"]
     assert rep.is_fitted and rep.mean.shape == (22, 3)
     assert set(dm.state_dict()) == set(dm.dataset_names)
+
+
+def test_every_batch_carries_its_dataset_skeleton_and_fps(tmp_path: Path) -> None:
+    """Train, validation and predict batches (workers too) carry ``skeleton`` and ``fps``."""
+    dm = MotionDataModule(
+        small_source(), window=16, stride=8, batch_size=4, num_workers=1, cache_dir=tmp_path
+    )
+    dm.prepare_data()
+    dm.setup("fit")
+    train, _, _ = next(iter(dm.train_dataloader()))
+    val, _, _ = next(iter(dm.val_dataloader()))
+    predict, _, _ = next(iter(dm.predict_dataloader()))
+    for batch in (train, val, predict):
+        for name, b in batch.items():
+            assert batch_skeleton(b, name) == dm.skeletons[name]  # offsets too
+            assert batch_skeleton(b).joint_names == dm.skeletons[name].joint_names
+            assert b["fps"] == 30.0 and b["features"].shape[0] == 4
+    assert set(train) == set(dm.dataset_names) and set(predict) == {dm.dataset_names[0]}
+    with pytest.raises(SkelagnosticError, match="dataset 'mine' carries no 'skeleton'"):
+        batch_skeleton({"features": train[dm.dataset_names[0]]["features"]}, "mine")
 
 
 def test_split_is_by_clip_and_deterministic(tmp_path: Path) -> None:

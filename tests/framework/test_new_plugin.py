@@ -160,4 +160,4 @@ def test_generated_package_installs_fits_and_passes_its_test(tmp_path: Path) -> 
     assert version.stdout.strip() == "0.1.0", version.stderr[-2000:]
     own = run(py, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(tmp_path / "pkg" / "tests"))
     assert own.returncode == 0, own.stdout[-3000:]
-    assert "5 passed" in own.stdout  # the five contract tests
+    assert "6 passed" in own.stdout  # the six contract tests

@@ -514,3 +514,18 @@ def test_interpolate_batches_chunks_like_one_at_a_time() -> None:
     model.interpolate_batch = 1  # one chunk per call: the same motion
     single = model.interpolate(motion, keys)
     assert torch.allclose(single.rotations, batched.rotations, atol=1e-10)
+
+
+def test_a_batch_of_another_skeleton_is_refused_by_name() -> None:
+    """The batch carries its skeleton; the model checks it against its own hierarchy."""
+    dm = PcmrlInterpDataModule(fps=30, window=32, batch_size=4, samples_per_epoch=4, rpa_prob=0.0)
+    dm.setup("fit")
+    batch = next(iter(dm.train_dataloader()))
+    assert batch["skeleton"] == dm.skeleton and batch["fps"] == 30.0
+    model = PcmrlInterpAligner(**TINY, skeleton=dm.skeleton.to_dict(), fps=30.0, window=32)
+    assert torch.isfinite(model._losses(batch)[0])
+    other = {**batch, "skeleton": procedural.skeleton("biped22")}
+    with pytest.raises(SkelagnosticError, match="another hierarchy than the model's"):
+        model._losses(other)
+    with pytest.raises(SkelagnosticError, match="carries no 'skeleton'"):
+        model._losses({k: v for k, v in batch.items() if k != "skeleton"})

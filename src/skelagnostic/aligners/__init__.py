@@ -5,7 +5,13 @@ your own by subclassing :class:`Aligner` and registering it through the
 ``register_aligners`` hook.
 """
 
-from skelagnostic.aligners.base import KNOWN_CAPABILITIES, Aligner, CapabilityError, Latent
+from skelagnostic.aligners.base import (
+    KNOWN_CAPABILITIES,
+    Aligner,
+    CapabilityError,
+    Latent,
+    batch_skeleton,
+)
 from skelagnostic.aligners.checkpoint_errors import CheckpointError
 from skelagnostic.aligners.checkpoints import read_checkpoint
 from skelagnostic.aligners.schedule import steps_per_epoch
@@ -18,6 +24,7 @@ __all__ = [
     "CapabilityError",
     "CheckpointError",
     "Latent",
+    "batch_skeleton",
     "quiet_trainer",
     "read_checkpoint",
     "steps_per_epoch",

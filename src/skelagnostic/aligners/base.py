@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import lightning as L
 import torch
@@ -54,6 +54,38 @@ class Latent:
     extras: dict[str, torch.Tensor] = field(default_factory=dict)
 
 
+def batch_skeleton(batch: Mapping[str, Any], name: str | None = None) -> Skeleton:
+    """The skeleton one dataset's batch carries (``batch["skeleton"]``).
+
+    The data modules attach it to every batch
+    (:class:`~skelagnostic.data.loaders.SkeletonCollate`), with the frame rate as
+    ``batch["fps"]``, so a model reads the topology of what it trains on from the
+    batch, not from ``self.trainer.datamodule``, and runs without either.
+
+    Args:
+        batch: One dataset's batch (a value of the step's ``{dataset: batch}``).
+        name: The dataset's name, for the message.
+
+    Returns:
+        The dataset's :class:`~skelagnostic.core.skeleton.Skeleton`.
+
+    Raises:
+        SkelagnosticError: The batch carries no skeleton (its loader did not collate
+            with the data module's :meth:`~skelagnostic.data.MotionDataModule.collate`).
+    """
+    from skelagnostic.core.skeleton import Skeleton
+
+    skeleton = batch.get("skeleton")
+    if not isinstance(skeleton, Skeleton):
+        label = f" of dataset {name!r}" if name is not None else ""
+        raise SkelagnosticError(
+            f"the batch{label} carries no 'skeleton' (keys: {', '.join(map(str, batch))}); "
+            "build its loader with the data module's collate function "
+            "(MotionDataModule.collate, skelagnostic.data.loaders.SkeletonCollate)"
+        )
+    return skeleton
+
+
 class Aligner(L.LightningModule, ABC):
     """Abstract LightningModule for skeleton-agnostic models.
 
@@ -65,6 +97,9 @@ class Aligner(L.LightningModule, ABC):
       during training a ``dict`` with one batch per dataset (skeleton), during
       validation/test a ``dict`` where exhausted datasets map to ``None``, during
       predict a one-entry ``dict`` (``predict_step`` also gets ``dataloader_idx``);
+    * each dataset's batch carries its ``skeleton`` and ``fps`` next to the tensors
+      (read it with :func:`batch_skeleton`): a step needs no Trainer and no data
+      module, so a model runs on batches from any loader built like the data module's;
     * ``validation_step`` logs ``"val/loss"`` (the default checkpoint monitor)
       and ``training_step`` logs ``"train/loss"``.
 

@@ -152,7 +152,7 @@ from types import MappingProxyType
 from typing import Any, ClassVar
 
 import torch
-from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners import Aligner, Latent, batch_skeleton
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
@@ -234,6 +234,9 @@ class __CLASS__Aligner(Aligner):
     # ---------------------------------------------------------------- lightning
     def _step(self, batch: dict[str, Any], stage: str) -> torch.Tensor:
         # One batch per dataset (skeleton); validation marks exhausted datasets with None.
+        # Each carries its tensors (features, template, height, offsets) plus the dataset's
+        # skeleton and fps: read the topology there (batch_skeleton), not from a data
+        # module, so the model runs without a Trainer.
         parts = {name: b for name, b in batch.items() if b is not None}
         losses = []
         for name, b in parts.items():
@@ -259,6 +262,21 @@ class __CLASS__Aligner(Aligner):
     def test_step(self, batch: dict[str, Any], batch_idx: int) -> torch.Tensor:
         """Logs ``test/loss``."""
         return self._step(batch, "test")
+
+    @torch.no_grad()
+    def render_sample(self, batch: dict[str, Any]) -> dict[str, Motion]:
+        """Input and reconstruction of the first window (for ``callbacks=render``)."""
+        name, b = next((n, b) for n, b in batch.items() if b is not None)
+        base = batch_skeleton(b, name)  # the dataset's skeleton; the window's own offsets:
+        skeleton = Skeleton(base.joint_names, base.parents, b["offsets"][0].cpu(),
+                            up_axis=base.up_axis, morphology=base.morphology)
+        scale = b["height"][:1].view(-1, 1, 1, 1)
+        template = b["template"][:1] / scale[:, 0]
+        z = self.encode_positions(b["features"][:1] / scale, template)
+        rec = self.decode_positions(z, template) * scale
+        rep, fps = GlobalPositions(frame="root"), float(b["fps"])
+        return {"input": rep.decode(b["features"][0].double().cpu(), skeleton, fps),
+                "output": rep.decode(rec[0].double().cpu(), skeleton, fps)}
 
     def configure_optimizers(self) -> Any:
         """``model.optimizer`` and ``model.scheduler`` (Adam, a cosine decay over the run)."""

@@ -147,21 +147,20 @@ class Skeleton:
     def _resolve_groups(self, given: Sequence[str] | Mapping[str, str] | None) -> list[str]:
         """The body groups: inferred, then overridden by ``given`` (all, or some by name)."""
         names = self._names
-        inferred = infer_body_groups(
-            names, self._parents, self.rest_offsets(), lateral_axis=self._lateral_axis()
-        )
-        if given is None:
-            groups = inferred
-        elif isinstance(given, Mapping):
-            groups = list(inferred)
-            for jn, g in given.items():
-                groups[self.index(jn)] = g
-        else:
-            groups = list(given)
+        if given is not None and not isinstance(given, Mapping):
+            groups = list(given)  # all given: no inference (unpickling, from_dict)
             if len(groups) != len(names):
                 raise SkeletonError(
                     f"body_groups has {len(groups)} entries for {len(names)} joints"
                 )
+        else:
+            groups = list(
+                infer_body_groups(
+                    names, self._parents, self.rest_offsets(), lateral_axis=self._lateral_axis()
+                )
+            )
+            for jn, g in (given or {}).items():
+                groups[self.index(jn)] = g
         for jn, g in zip(names, groups, strict=True):
             if g not in BODY_GROUPS:
                 raise SkeletonError(

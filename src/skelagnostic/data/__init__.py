@@ -40,6 +40,7 @@ __all__ = [
     "MotionDataModule",
     "MultiSource",
     "ProceduralSource",
+    "SkeletonCollate",
     "WindowCache",
     "WindowDataset",
     "bvh_sources",
@@ -60,5 +61,6 @@ __getattr__, __dir__ = lazy_exports(
         "MotionDataModule": "skelagnostic.data.datamodule",
         "WindowDataset": "skelagnostic.data.datamodule",
         "datamodule_options": "skelagnostic.data.datamodule",
+        "SkeletonCollate": "skelagnostic.data.loaders",
     },
 )

@@ -27,7 +27,12 @@ from skelagnostic.data.cache import (
     default_cache_dir,
     slot_key,
 )
-from skelagnostic.data.loaders import ResumableDataLoader, ResumableSampler, TaggedCollate
+from skelagnostic.data.loaders import (
+    ResumableDataLoader,
+    ResumableSampler,
+    SkeletonCollate,
+    TaggedCollate,
+)
 from skelagnostic.data.progress import track_clips
 from skelagnostic.data.sources import ClipRef, ClipSource, ProceduralSource, flatten_sources
 from skelagnostic.data.window_dataset import WindowDataset, check_statistics
@@ -147,13 +152,16 @@ class MotionDataModule(L.LightningDataModule):
     dataset per step (shorter datasets cycle); validation and test yield the
     same dict with ``None`` for datasets already exhausted; predict yields
     one-entry dicts, dataset after dataset. Each batch is a dict of stacked
-    :class:`WindowDataset` items.
+    :class:`WindowDataset` items plus the dataset's ``skeleton``
+    (:attr:`skeletons`) and ``fps`` (:meth:`collate`), so a model needs no data
+    module to read the topology of its batches.
 
     Extension points (public hooks, see the "Data modules of a method" section
     of ``docs/data.md``): :meth:`default_representation` (what most subclasses
     override), :meth:`cache_entry` (what is cached per clip),
     :meth:`add_dataset` (how one topology's clips become datasets and
-    statistics) and :meth:`loaders` (the data loaders of a split). A subclass
+    statistics), :meth:`loaders` (the data loaders of a split) and
+    :meth:`collate` (how a dataset's items become a batch). A subclass
     declares only its own constructor arguments and forwards the others with
     ``**kwargs``; :func:`datamodule_options` lists what a subclass accepts.
 
@@ -451,8 +459,8 @@ class MotionDataModule(L.LightningDataModule):
 
         Validation, test and (with ``trainer.overfit_batches``) training use
         them; the resumable training loaders of :meth:`train_dataloader` and
-        the predict loaders are built apart. Override it to change the loader
-        options (VQ-PAE gathers its batches itself: ``collate_fn``).
+        the predict loaders are built apart. All of them collate with
+        :meth:`collate`. Override it to change the loader options.
 
         Args:
             split: ``"train"``, ``"val"`` or ``"test"``.
@@ -468,9 +476,26 @@ class MotionDataModule(L.LightningDataModule):
                 shuffle=shuffle,
                 num_workers=self.num_workers,
                 persistent_workers=self.num_workers > 0,
+                collate_fn=self.collate(name),
             )
             for name, ds in self.datasets[split].items()
         }
+
+    def collate(self, name: str) -> Callable[[Any], dict[str, Any]]:
+        """How the items of dataset ``name`` become a batch (a hook).
+
+        The items stacked, with the dataset's skeleton (:attr:`skeletons`) and
+        frame rate as ``skeleton`` and ``fps`` (:class:`SkeletonCollate`). Every
+        loader of the data module uses it. Override it when the datasets gather
+        their batches themselves (VQ-PAE: ``SkeletonCollate(..., stacked=True)``).
+
+        Args:
+            name: The dataset.
+
+        Returns:
+            A picklable collate function.
+        """
+        return SkeletonCollate(self.skeletons[name], self.fps)
 
     def train_dataloader(self) -> CombinedLoader:
         """One batch per dataset per step (``max_size_cycle``), resumable mid-epoch.
@@ -494,6 +519,7 @@ class MotionDataModule(L.LightningDataModule):
                 self.batch_size,
                 ResumableSampler(ds, replicas, rank, True, seed),
                 self.num_workers,
+                self.collate(name),
             )
             for name, ds in self.datasets["train"].items()
         }
@@ -529,9 +555,9 @@ class MotionDataModule(L.LightningDataModule):
     def predict_collate(self, name: str) -> Callable[[Any], dict[str, Any]]:
         """Collate function of dataset ``name``'s predict loader: ``{name: collated batch}``.
 
-        A data module whose datasets return stacked batches overrides it.
+        The batch is :meth:`collate`'s, put under the dataset's name.
         """
-        return TaggedCollate(name)
+        return TaggedCollate(name, self.collate(name))
 
     # -------------------------------------------------------- checkpoint state
     def state_dict(self) -> dict[str, Any]:

@@ -1,17 +1,21 @@
 """Training loaders that resume mid-epoch: a sharded sampler and a loader saved in checkpoints.
 
-Also the collate function that tags a batch with its dataset's name.
+Also the collate functions of a dataset's loaders: :class:`SkeletonCollate` attaches
+the dataset's skeleton and frame rate to every batch (what a model reads the
+topology from), :class:`TaggedCollate` puts a batch under its dataset's name.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING, Any
 
-import torch
 from torch.utils.data import DataLoader, Dataset, DistributedSampler, default_collate
 
-__all__ = ["ResumableDataLoader", "ResumableSampler", "TaggedCollate"]
+if TYPE_CHECKING:
+    from skelagnostic.core.skeleton import Skeleton
+
+__all__ = ["ResumableDataLoader", "ResumableSampler", "SkeletonCollate", "TaggedCollate"]
 
 
 class ResumableSampler(DistributedSampler):
@@ -54,10 +58,16 @@ class ResumableDataLoader(DataLoader):
         batch_size: Windows per batch.
         sampler: The pass order.
         num_workers: Worker processes.
+        collate_fn: How items become a batch (default: torch's ``default_collate``).
     """
 
     def __init__(
-        self, dataset: Dataset, batch_size: int, sampler: ResumableSampler, num_workers: int = 0
+        self,
+        dataset: Dataset,
+        batch_size: int,
+        sampler: ResumableSampler,
+        num_workers: int = 0,
+        collate_fn: Callable[[Any], Any] | None = None,
     ) -> None:
         super().__init__(
             dataset,
@@ -65,6 +75,7 @@ class ResumableDataLoader(DataLoader):
             sampler=sampler,
             num_workers=num_workers,
             persistent_workers=num_workers > 0,
+            collate_fn=collate_fn,
         )
         self._served = 0
         #: ``(epoch, batches served)`` of the interrupted pass, set by :meth:`load_state_dict`.
@@ -95,12 +106,49 @@ class ResumableDataLoader(DataLoader):
         self._resume_at = (int(state_dict["epoch"]), int(state_dict["served"]))
 
 
+class SkeletonCollate:
+    """Collate function of one dataset's loaders: its items stacked, plus its skeleton and fps.
+
+    Every batch gets ``skeleton`` (the dataset's
+    :class:`~skelagnostic.core.skeleton.Skeleton`: joint names, parents, up axis,
+    body groups) and ``fps`` (a float) next to its tensors, so a model reads the
+    topology from the batch and runs without a Trainer or a data module. They are
+    attached once per batch, not per item, and stay on the CPU when Lightning moves
+    the batch to a device (neither is a tensor); the per-window tensors derived from
+    each clip's skeleton (``offsets``, ``template``, ``height``) are items of their
+    own. Picklable, so it goes to data-loader workers with the loader.
+
+    Args:
+        skeleton: The dataset's skeleton.
+        fps: Frame rate of the dataset's windows.
+        stacked: The dataset gathers whole batches itself (``__getitems__``): the
+            batch is passed through, not collated.
+    """
+
+    def __init__(self, skeleton: Skeleton, fps: float, stacked: bool = False) -> None:
+        self.skeleton = skeleton
+        self.fps = float(fps)
+        self.stacked = stacked
+
+    def __call__(self, items: Any) -> dict[str, Any]:
+        """The batch of ``items`` with ``skeleton`` and ``fps``."""
+        batch = items if self.stacked else default_collate(items)
+        return {**batch, "skeleton": self.skeleton, "fps": self.fps}
+
+
 class TaggedCollate:
-    """Collate function wrapping the batch as ``{name: batch}`` (picklable for workers)."""
+    """Collate function wrapping the batch as ``{name: batch}`` (picklable for workers).
 
-    def __init__(self, name: str) -> None:
+    Args:
+        name: The dataset's name.
+        collate: How the items become the batch (default: torch's ``default_collate``;
+            a data module passes its :class:`SkeletonCollate`).
+    """
+
+    def __init__(self, name: str, collate: Callable[[Any], Any] | None = None) -> None:
         self.name = name
+        self.collate = collate
 
-    def __call__(self, items: list[dict[str, torch.Tensor]]) -> dict[str, Any]:
+    def __call__(self, items: Any) -> dict[str, Any]:
         """Collate ``items`` and put the batch under the dataset's name."""
-        return {self.name: default_collate(items)}
+        return {self.name: (self.collate or default_collate)(items)}

@@ -1,7 +1,7 @@
 """A reusable contract test for aligners: what ``skelagnostic fit`` and users rely on.
 
 Subclass :class:`AlignerContract` in a pytest module of your plugin and name
-your aligner; pytest then runs five tests against it, at the sizes you give::
+your aligner; pytest then runs six tests against it, at the sizes you give::
 
     from skelagnostic.testing import AlignerContract
 
@@ -28,6 +28,12 @@ optimizer steps, one validation pass, CPU) made through the same
   centimetres (and in centimetres with its unit left to the height guess, as
   ``read_bvh`` leaves a file's) encodes to the same latent: models train on the
   data sources' metres, and users pass files in any unit;
+* ``test_steps_without_a_trainer``: the aligner rebuilt from the checkpoint, attached
+  to no Trainer (``self.trainer`` raises), runs ``training_step`` (a finite loss whose
+  gradient is finite and not zero) and ``validation_step`` on the first batches of the
+  run's data module: a batch carries the skeleton information its model needs
+  (``batch["skeleton"]``, :func:`~skelagnostic.aligners.batch_skeleton`), so a model
+  runs without a Trainer or a data module;
 * ``test_logging_is_ddp_safe``: every ``self.log`` in a step passes an explicit
   ``batch_size`` (batches are dicts of datasets, which Lightning cannot size),
   and every epoch-level value logged in a step (validation, test, ``on_epoch=True``)
@@ -37,7 +43,8 @@ optimizer steps, one validation pass, CPU) made through the same
 
 The same checks are plain functions (:func:`fit_for_contract`,
 :func:`check_fit`, :func:`check_checkpoint_round_trip`,
-:func:`check_encode_decode`, :func:`check_length_units`, :func:`check_logging`) for
+:func:`check_encode_decode`, :func:`check_length_units`,
+:func:`check_steps_without_trainer`, :func:`check_logging`) for
 other test runners.
 The package imports pytest: use it from tests.
 
@@ -54,6 +61,7 @@ from skelagnostic.testing.checks import (
     check_fit,
     check_length_units,
     check_logging,
+    check_steps_without_trainer,
     contract_motion,
     fit_for_contract,
 )
@@ -68,6 +76,7 @@ __all__ = [
     "check_fit",
     "check_length_units",
     "check_logging",
+    "check_steps_without_trainer",
     "contract_motion",
     "fit_for_contract",
 ]

@@ -316,6 +316,56 @@ def check_length_units(run: ContractRun, motion: Motion) -> None:
         )
 
 
+def _first_batch(loader: Any) -> Any:
+    """The first batch of a data module's loader (a ``CombinedLoader`` too), or None."""
+    from lightning.pytorch.utilities import CombinedLoader
+
+    if isinstance(loader, CombinedLoader):
+        return next(iter(loader), (None,))[0]
+    return next(iter(loader), None)
+
+
+def check_steps_without_trainer(run: ContractRun) -> None:
+    """``training_step`` and ``validation_step`` run on the data's batches without a Trainer.
+
+    The aligner rebuilt from the checkpoint is attached to no Trainer (its
+    ``self.trainer`` raises) and gets the first training batch of the run's data
+    module, then its first validation batch (the training batch when there is no
+    validation data). The training loss must be finite and back-propagate to a
+    finite gradient that is not zero everywhere. ``self.log`` without a Trainer
+    only warns (Lightning's own rule for testing steps), so that warning is silenced.
+
+    Args:
+        run: The contract run.
+    """
+    import warnings
+
+    name = type(run.model).__name__
+    model = _load(run)
+    assert model._trainer is None, f"{name}: the reloaded model is attached to a Trainer"
+    train = _first_batch(run.datamodule.train_dataloader())
+    assert train is not None, f"aligner {run.aligner!r}: the training loader gave no batch"
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*self.log.*", category=UserWarning)
+        model.train()
+        model.zero_grad()
+        loss = model.training_step(train, 0)
+        loss = loss["loss"] if isinstance(loss, dict) else loss
+        assert isinstance(loss, torch.Tensor) and bool(torch.isfinite(loss)), (
+            f"{name}.training_step without a Trainer: the loss is not a finite tensor ({loss})"
+        )
+        loss.backward()
+        grads = [p.grad for p in model.parameters() if p.grad is not None]
+        assert grads and all(bool(torch.isfinite(g).all()) for g in grads), (
+            f"{name}.training_step without a Trainer: no finite gradient"
+        )
+        assert any(bool(g.abs().sum() > 0) for g in grads), f"{name}: the gradient is zero"
+        val = _first_batch(run.datamodule.val_dataloader())
+        model.eval()
+        with torch.no_grad():
+            model.validation_step(train if val is None else val, 0)
+
+
 def check_logging(run: ContractRun) -> None:
     """Explicit ``batch_size`` in step logs; ``sync_dist=True`` for epoch-level step values.
 

@@ -14,6 +14,7 @@ from skelagnostic.testing.checks import (
     check_fit,
     check_length_units,
     check_logging,
+    check_steps_without_trainer,
     contract_motion,
     fit_for_contract,
 )
@@ -83,6 +84,10 @@ class AlignerContract:
     def test_encode_ignores_the_length_unit(self, contract_run: ContractRun) -> None:
         """A clip in metres, centimetres or an unstated unit encodes the same."""
         check_length_units(contract_run, self.motion(contract_run))
+
+    def test_steps_without_a_trainer(self, contract_run: ContractRun) -> None:
+        """Training and validation steps on the data's batches, no Trainer attached."""
+        check_steps_without_trainer(contract_run)
 
     def test_logging_is_ddp_safe(self, contract_run: ContractRun) -> None:
         """``batch_size`` in step logs, ``sync_dist`` for epoch-level values."""

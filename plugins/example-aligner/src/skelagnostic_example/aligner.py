@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
-from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners import Aligner, Latent, batch_skeleton
 from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
@@ -147,9 +147,13 @@ class ExampleAligner(Aligner):
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Motion]:
-        """Input and reconstruction of the first window (for ``callbacks=render``)."""
+        """Input and reconstruction of the first window (for ``callbacks=render``).
+
+        The batch carries its dataset's skeleton and frame rate (``skeleton``,
+        ``fps``); the window's own bone lengths are its ``offsets``.
+        """
         name, b = next((n, b) for n, b in batch.items() if b is not None)
-        base = self.trainer.datamodule.skeletons[name]
+        base = batch_skeleton(b, name)
         skeleton = Skeleton(
             base.joint_names,
             base.parents,
@@ -165,7 +169,7 @@ class ExampleAligner(Aligner):
             )
             * scale
         )
-        rep, fps = GlobalPositions(frame="root"), self.trainer.datamodule.fps
+        rep, fps = GlobalPositions(frame="root"), float(b["fps"])
         return {
             "input": rep.decode(b["features"][0].double().cpu(), skeleton, fps),
             "output": rep.decode(rec[0].double().cpu(), skeleton, fps),

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import torch
 
-from skelagnostic.aligners import Aligner, Latent
+from skelagnostic.aligners import Aligner, Latent, batch_skeleton
 from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core.motion import UNITS, Motion
@@ -171,9 +171,6 @@ class HumotAligner(Aligner):
             self._topologies[key] = Topology.of(skeleton)
         return self._topologies[key]
 
-    def _dataset_topology(self, name: str) -> Topology:
-        return self.topology(self.trainer.datamodule.skeletons[name])
-
     # ------------------------------------------------------------------ losses
     def chunk_loss(
         self,
@@ -234,10 +231,10 @@ class HumotAligner(Aligner):
 
     def _step(self, batch: dict[str, Any], stage: str) -> torch.Tensor:
         parts = {n: b for n, b in batch.items() if b is not None}
-        dm = self.trainer.datamodule
+        skeletons = [batch_skeleton(b, n) for n, b in parts.items()]
         out = [
-            self.chunk_loss(b["features"], self._dataset_topology(n), dm.skeletons[n].up_axis)
-            for n, b in parts.items()
+            self.chunk_loss(b["features"], self.topology(sk), sk.up_axis)
+            for b, sk in zip(parts.values(), skeletons, strict=True)
         ]
         size = sum(len(b["features"]) for b in parts.values())
         metrics = {k: torch.stack([o[k] for o in out]).mean() for k in out[0]}
@@ -267,9 +264,9 @@ class HumotAligner(Aligner):
         """Per dataset, the latent codes ``[B, F, Z]`` of the (full-skeleton) chunks."""
         out = {}
         for name, b in batch.items():
-            topo = self._dataset_topology(name)
+            skeleton = batch_skeleton(b, name)
             pos, tmpl = prepare_chunks(
-                b["features"].float(), topo, self.trainer.datamodule.skeletons[name].up_axis
+                b["features"].float(), self.topology(skeleton), skeleton.up_axis
             )
             out[name] = self.net.encoder(pos, tmpl)
         return out
@@ -281,26 +278,28 @@ class HumotAligner(Aligner):
 
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Any]:
-        """Input chunk, its reconstruction and its retargeting to another topology."""
+        """Input chunk, its reconstruction and its retargeting to another topology.
+
+        The first dataset of ``batch`` gives the chunk; the retargeting goes to the
+        skeleton of the next dataset in ``batch`` (none with one dataset).
+        """
         from skelagnostic.viz import StickFigure
 
-        dm = self.trainer.datamodule
-        names = [n for n, b in batch.items() if b is not None]
-        src = names[0]
-        topo = self._dataset_topology(src)
-        pos, tmpl = prepare_chunks(
-            batch[src]["features"][:1].float(), topo, dm.skeletons[src].up_axis
-        )
+        parts = {n: b for n, b in batch.items() if b is not None}
+        (src, first), others = next(iter(parts.items())), [n for n in parts][1:]
+        source = batch_skeleton(first, src)
+        topo = self.topology(source)
+        pos, tmpl = prepare_chunks(first["features"][:1].float(), topo, source.up_axis)
         z = self.net.encoder(pos, tmpl)
         figs = {"input": (pos[0], topo), "reconstruction": (self.net.decoder(z, tmpl)[0], topo)}
-        others = [n for n in dm.skeletons if n != src]
         if others:
-            dst = self._dataset_topology(others[0])
+            dst = self.topology(batch_skeleton(parts[others[0]], others[0]))
             dst_tmpl = dst.templates(dst.skeleton.bone_lengths().float())[None].to(z)
             figs[f"retarget -> {others[0]}"] = (self.net.decoder(z, dst_tmpl)[0], dst)
+        fps = float(first["fps"])
         return {
             k: StickFigure(
-                p.cpu(), t.skeleton.parents, t.skeleton.body_groups, fps=dm.fps, name=k, up_axis="z"
+                p.cpu(), t.skeleton.parents, t.skeleton.body_groups, fps=fps, name=k, up_axis="z"
             )
             for k, (p, t) in figs.items()
         }
@@ -310,12 +309,17 @@ class HumotAligner(Aligner):
 
         A validation chunk (input; a training chunk without validation data),
         its reconstruction and its retargeting onto another topology of the
-        data, side by side (see :meth:`render_sample`).
+        data, side by side (see :meth:`render_sample`, given the first window of
+        every dataset: of its validation split, else of its training split).
         """
         dm = trainer.datamodule
         split = "val" if dm.datasets["val"] else "train"
-        name, dataset = next(iter(dm.datasets[split].items()))
-        batch = {name: {"features": dataset[0]["features"][None].to(self.device)}}
+        first = next(iter(dm.datasets[split]))
+        batch = {}
+        for name in [first, *(n for n in dm.datasets["train"] if n != first)]:
+            dataset = dm.datasets["val" if name in dm.datasets["val"] else "train"][name]
+            window = dm.collate(name)([dataset[0]])
+            batch[name] = {**window, "features": window["features"].to(self.device)}
         return {"renders": {"retarget": list(self.render_sample(batch).values())}}
 
     # ------------------------------------------------------------------- export

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import torch
 from torch import Tensor
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import Dataset
 
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.data import (
@@ -48,6 +48,7 @@ from skelagnostic.data import (
     preset_source,
 )
 from skelagnostic.data.cache import CacheEntry, read_exactly
+from skelagnostic.data.loaders import SkeletonCollate
 from skelagnostic.data.window_dataset import STATS_CHUNK_VALUES, check_statistics
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
@@ -333,21 +334,6 @@ def _frame_chunks(
                 yield torch.from_numpy(buf[..., channels])
 
 
-def _passthrough(batch: dict[str, Tensor]) -> dict[str, Tensor]:
-    """Collate function for batches already stacked by ``__getitems__``."""
-    return batch
-
-
-class _Tagged:
-    """Collate function wrapping a stacked batch as ``{name: batch}`` (predict loaders)."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-
-    def __call__(self, batch: dict[str, Tensor]) -> dict[str, Any]:
-        return {self.name: batch}
-
-
 class VqpaeDataModule(MotionDataModule):
     """Multi-dataset windows for the VQ-PAE (see the module docstring).
 
@@ -488,30 +474,9 @@ class VqpaeDataModule(MotionDataModule):
         """Input channels ``C = J * 3`` of dataset ``name``."""
         return self.skeletons[name].num_joints * len(self.representation.channels)
 
-    def loaders(self, split: str, shuffle: bool) -> dict[str, DataLoader]:
-        """The base class's loaders, with batches gathered by the datasets (``collate_fn``)."""
-        return {
-            name: DataLoader(
-                ds,
-                batch_size=self.batch_size,
-                shuffle=shuffle,
-                num_workers=self.num_workers,
-                persistent_workers=self.num_workers > 0,
-                collate_fn=_passthrough,
-            )
-            for name, ds in self.datasets[split].items()
-        }
-
-    def train_dataloader(self) -> Any:
-        """The base class's resumable, rank-sharded loaders, with batches gathered in one go."""
-        combined = super().train_dataloader()
-        for loader in combined.iterables.values():
-            loader.collate_fn = _passthrough
-        return combined
-
-    def predict_collate(self, name: str) -> Callable[[Any], dict[str, Any]]:
-        """The predict loaders' collate: windows come stacked (``__getitems__``), only tagged."""
-        return _Tagged(name)
+    def collate(self, name: str) -> Callable[[Any], dict[str, Any]]:
+        """Batches come stacked from the datasets (``__getitems__``); the skeleton and fps added."""
+        return SkeletonCollate(self.skeletons[name], self.fps, stacked=True)
 
     def state_dict(self) -> dict[str, Any]:
         """Velocity and pose normalisation statistics per dataset."""

@@ -255,7 +255,9 @@ class VqpaeModel(Aligner):
         """
         if self.codebook is not None:  # built already, or from a checkpoint's hyperparameters
             return
-        dm = self.trainer.datamodule
+        dm = getattr(self._trainer, "datamodule", None)
+        if dm is None:
+            self._require_built()  # no data module to build from: say what to pass
         fn = self.trainer.state.fn
         dm.setup(fn.value if fn is not None else "fit")
         specs = {

@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 import torch
 from torch import Tensor
 
-from skelagnostic.aligners.base import Aligner, Latent
+from skelagnostic.aligners.base import Aligner, Latent, batch_skeleton
 from skelagnostic.aligners.export import ExportGraph, Method
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
 from skelagnostic.core import quaternion as Q
@@ -210,7 +210,9 @@ class PcmrlInterpAligner(Aligner):
         """
         if self.net is not None:  # built already, or from a checkpoint's hyperparameters
             return
-        dm = self.trainer.datamodule
+        dm = getattr(self._trainer, "datamodule", None)
+        if dm is None:
+            self._require_net()  # no data module to build from: say what to pass
         fn = self.trainer.state.fn
         dm.setup(fn.value if fn is not None else "fit")
         skeleton = dm.skeleton
@@ -301,8 +303,20 @@ class PcmrlInterpAligner(Aligner):
         )
         return feats, pred, pos
 
-    def _losses(self, batch: Mapping[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
+    def _check_batch(self, batch: Mapping[str, Any]) -> None:
+        """Refuse a batch of another skeleton than the one the network was built for."""
+        self._require_net()
+        given, own = batch_skeleton(batch, "target"), self.skeleton
+        assert own is not None  # built together with the network
+        if given.parents != own.parents:
+            raise SkelagnosticError(
+                f"PcmrlInterpAligner: the batch's skeleton {given!r} has another hierarchy than "
+                f"the model's {own!r} ({given.num_joints} vs {own.num_joints} joints)"
+            )
+
+    def _losses(self, batch: Mapping[str, Any]) -> tuple[Tensor, dict[str, Tensor]]:
         hp = self.hparams
+        self._check_batch(batch)
         feats, pred, pos = self.predict_batch(batch)
         parts = {
             "root": (pred["root"] - feats["root"]).abs().mean(),

@@ -663,12 +663,18 @@ class PcmrlInterpDataModule(MotionDataModule):
             shuffle=False,
             num_workers=self.num_workers,
             drop_last=True,
+            collate_fn=self.collate("target"),
         )
 
     def _fixed(self, split: str) -> DataLoader:
         self.setup(split)
         windows = FixedWindows(self.clips[split], self.window, self.stride, self.val_gap)
-        return DataLoader(windows, batch_size=self.batch_size, num_workers=self.num_workers)
+        return DataLoader(
+            windows,
+            batch_size=self.batch_size,
+            num_workers=self.num_workers,
+            collate_fn=self.collate("target"),
+        )
 
     def val_dataloader(self) -> DataLoader | list:
         """Fixed windows of the validation clips (empty when there are none)."""

@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 import torch
 
-from skelagnostic.aligners import Aligner
+from skelagnostic.aligners import Aligner, batch_skeleton
 from skelagnostic.aligners.base import Latent
 from skelagnostic.aligners.export import ExportGraph
 from skelagnostic.aligners.optim import OptimizerSpec, check_specs, configure_optimization
@@ -294,8 +294,8 @@ class PcmrlReconAligner(Aligner):
             self.set_target(dm.target_skeleton, dm.target_units)
             if self.window is None:
                 self.window = int(dm.window)
-            for name in getattr(dm, "skeletons", {}):
-                warn_zero_length_bones(dm.skeletons[name], f"source skeleton {name!r}")
+            for name, source in getattr(dm, "skeletons", {}).items():
+                warn_zero_length_bones(source, f"source skeleton {name!r}")
         self._require_target()
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
@@ -493,12 +493,11 @@ class PcmrlReconAligner(Aligner):
     ) -> torch.Tensor:
         hp = self.hparams
         target = self._require_target()
-        dm = self.trainer.datamodule
         losses = []
         for name, sub in batch.items():
             if sub is None:
                 continue
-            source = dm.skeletons[name]
+            source = batch_skeleton(sub, name)
             feats = sub["features"].float()
             size = feats.shape[0]
             rot_l, trans = Q.normalize(feats[..., :4]), feats[..., 4:]
@@ -572,11 +571,11 @@ class PcmrlReconAligner(Aligner):
     @torch.no_grad()
     def render_sample(self, batch: dict[str, Any]) -> dict[str, Motion]:
         """The first validation window and its reconstruction (``callbacks=render``)."""
-        dm = self.trainer.datamodule
         name, sub = next((n, b) for n, b in batch.items() if b is not None)
         feats = sub["features"][0].float().cpu()
-        source = dm.skeletons[name]
-        motion = Motion(source, Q.normalize(feats[..., :4]), feats[:, 0, 4:], dm.fps, units="m")
+        source = batch_skeleton(sub, name)
+        rotations = Q.normalize(feats[..., :4])
+        motion = Motion(source, rotations, feats[:, 0, 4:], float(sub["fps"]), units="m")
         result = self.decode(self.encode(motion), self._require_target())
         return {"source": motion, "pcmrl": result}
 
