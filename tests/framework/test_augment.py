@@ -9,17 +9,20 @@ augmented; a bad ``data.augment`` value is refused naming its field.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import pytest
 import torch
+from test_config_groups import SMALL
 from torch.utils.data import DataLoader
 
 import skelagnostic as sa
 from skelagnostic import procedural
 from skelagnostic.analysis import foot_contacts
 from skelagnostic.cli import app
+from skelagnostic.cli.cache import info as cache_info
 from skelagnostic.data import MotionDataModule, ProceduralSource
 from skelagnostic.data.augment import (
     Augmentation,
@@ -238,13 +241,19 @@ def test_validation_windows_are_never_augmented(tmp_path: Path) -> None:
     )
 
 
-def test_motion_entries_are_shared_by_representations(tmp_path: Path) -> None:
+def test_motion_entries_are_shared_by_representations(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     a = _module(tmp_path, FULL)
     b = _module(tmp_path, FULL, representation=RootLocalVelocities())
     assert a.motion_entries and {e.array for e in a.motion_entries.values()} == {
         e.array for e in b.motion_entries.values()
     }
     assert not _module(tmp_path, None).motion_entries  # built only when augmenting
+    cache_info(a.cache, verbose=True)
+    listed = capsys.readouterr().out
+    assert listed.count("(motion for augmentation)") == len(a.motion_entries)
+    assert listed.count("windows)") == 2 * len(a.motion_entries)  # two representations
 
 
 @pytest.mark.parametrize(
@@ -296,3 +305,24 @@ def test_data_modules_of_other_methods_refuse_augmentation() -> None:
         with pytest.raises(SkelagnosticError, match=rf"data\.augment: {cls.__name__} .*{reason}"):
             cls(augment={"mirror": 0.5})
         assert not cls(augment={"mirror": 0.0}).augmentation.enabled
+
+
+def test_a_fit_trains_on_augmented_windows(example_plugin: Path, tmp_path: Path) -> None:
+    cfg = app.compose(
+        [
+            "model=example",
+            f"run_dir={tmp_path / 'run'}",
+            f"data.cache_dir={tmp_path / 'cache'}",
+            "threads=1",
+            "callbacks=none",
+            "data.augment.mirror=0.5",
+            "data.augment.yaw=45",
+            "data.augment.speed=[0.8,1.25]",
+            *SMALL,
+        ]
+    )
+    metrics = app.run(cfg)
+    assert math.isfinite(metrics["train/loss"]) and math.isfinite(metrics["val/loss"])
+    sidecars = (tmp_path / "cache" / "windows").glob("*/*.json")
+    kinds = [json.loads(path.read_text()).get("kind") for path in sidecars]
+    assert kinds.count("motion") >= 2  # the windows were cut from the cached motion
