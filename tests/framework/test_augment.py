@@ -326,3 +326,21 @@ def test_a_fit_trains_on_augmented_windows(example_plugin: Path, tmp_path: Path)
     sidecars = (tmp_path / "cache" / "windows").glob("*/*.json")
     kinds = [json.loads(path.read_text()).get("kind") for path in sidecars]
     assert kinds.count("motion") >= 2  # the windows were cut from the cached motion
+
+
+def test_data_modules_that_keep_the_base_datasets_augment(tmp_path: Path) -> None:
+    from skelagnostic_humot.data import HumotDataModule
+    from skelagnostic_pcmrl.recon.data import PcmrlReconDataModule
+
+    source = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=2, seconds=3.0)
+    for cls in (HumotDataModule, PcmrlReconDataModule):
+        dm = cls(source, cache_dir=tmp_path, augment=FULL)
+        dm.prepare_data()
+        dm.setup("fit")
+        (train,) = dm.datasets["train"].values()
+        assert train.augmenter is not None
+        augmenter, train.augmenter = train.augmenter, None
+        cached = train[0]["features"]
+        train.augmenter = augmenter
+        augmented = train[(0, 3, 0)]["features"]
+        assert augmented.shape == cached.shape and not torch.equal(augmented, cached)
