@@ -17,6 +17,7 @@ from skelagnostic.callbacks.fit_summary import (
 )
 from skelagnostic.callbacks.interrupt import ResumeHint
 from skelagnostic.callbacks.log_interval import AdaptiveLogInterval
+from skelagnostic.callbacks.loggers import LocalMLFlowLogger, log_image
 from skelagnostic.callbacks.nonfinite import NonFiniteTrainingError, StopOnNonFinite
 from skelagnostic.callbacks.progress import RichProgress
 from skelagnostic.callbacks.render import RenderSamples, RenderSampleSource
@@ -35,6 +36,7 @@ __all__ = [
     "FinalStepValidation",
     "FitSummary",
     "LatestWithoutValidation",
+    "LocalMLFlowLogger",
     "NonFiniteTrainingError",
     "RecordSplit",
     "RenderSampleSource",
@@ -45,6 +47,7 @@ __all__ = [
     "StopOnNonFinite",
     "StopReason",
     "SummaryContent",
+    "log_image",
     "newest_checkpoint",
     "stop_reason",
     "summary_mode",

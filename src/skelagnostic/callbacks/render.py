@@ -16,6 +16,7 @@ import torch
 from lightning.pytorch.utilities import rank_zero_warn
 from PIL import Image
 
+from skelagnostic.callbacks.loggers import log_image
 from skelagnostic.io.outputs import write_output
 from skelagnostic.viz.html import to_html
 from skelagnostic.viz.render import contact_sheet, render_frames, write_animation
@@ -56,9 +57,10 @@ class RenderSamples(pl.Callback):
     validation batch to ``pl_module.render_sample(batch)`` (see
     :class:`RenderSampleSource`) and writes ``epoch{N:04d}.gif`` and a contact
     sheet ``epoch{N:04d}.png`` (and with ``html=True`` the 3D viewer page
-    ``epoch{N:04d}.html``) to ``dirpath``. Every attached logger whose
-    ``experiment`` has ``add_image`` (TensorBoard's ``SummaryWriter``,
-    tensorboardX) also receives the contact sheet under ``tag``. Only global
+    ``epoch{N:04d}.html``) to ``dirpath``. Every attached logger that takes
+    images (TensorBoard, tensorboardX, Weights & Biases, MLflow:
+    :func:`~skelagnostic.callbacks.loggers.log_image`) also receives the contact
+    sheet under ``tag``. Only global
     rank 0 renders; the sanity check is skipped. A module without
     ``render_sample`` gets one warning and no renders.
 
@@ -167,9 +169,4 @@ class RenderSamples(pl.Callback):
         if self.html:
             self.last_html = directory / f"{stem}.html"
             to_html(sample, names=labels, out=self.last_html, mode=self.mode)
-        for logger in trainer.loggers:
-            experiment: Any = getattr(logger, "experiment", None)
-            if hasattr(experiment, "add_image"):
-                experiment.add_image(
-                    self.tag, sheet, global_step=trainer.global_step, dataformats="HWC"
-                )
+        log_image(trainer.loggers, self.tag, sheet, trainer.global_step)

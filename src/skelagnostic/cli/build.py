@@ -45,6 +45,12 @@ __all__ = [
 
 #: Trainer options Lightning takes without checking, then divides by.
 _POSITIVE_TRAINER_KEYS = ("accumulate_grad_batches", "check_val_every_n_epoch")
+#: Classes a config group may name that need an optional extra of the distribution.
+OPTIONAL_EXTRAS = {
+    "lightning.pytorch.loggers.WandbLogger": "wandb",
+    "lightning.pytorch.loggers.MLFlowLogger": "mlflow",
+    "skelagnostic.callbacks.LocalMLFlowLogger": "mlflow",
+}
 #: Data-config keys that say where the others go: to neither the source nor the data module.
 ROUTING_KEYS = ("source", "source_keys", "representation", "representation_options")
 
@@ -190,7 +196,9 @@ def instantiate_all(group: DictConfig | None, what: str) -> list[Any]:
         except Exception as exc:
             cause = exc.__cause__ or exc
             if isinstance(cause, (ImportError, ModuleNotFoundError)):
-                raise ConfigError(f"{what}.{name}: {cause}") from exc
+                extra = OPTIONAL_EXTRAS.get(str(node.get("_target_")))
+                hint = f"; install it with pip install 'skelagnostic[{extra}]'" if extra else ""
+                raise ConfigError(f"{what}.{name}: {cause}{hint}") from exc
             options = {k: v for k, v in node.items() if k != "_target_"}
             key = _mentioned(str(cause), options)
             where = f"{what}.{name}" if key is None else f"{what}.{name}.{key}={options[key]!r}"

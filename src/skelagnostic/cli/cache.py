@@ -34,7 +34,9 @@ def info(cache: WindowCache, verbose: bool) -> int:
             what = (
                 "(unreadable metadata)"
                 if meta is None
-                else (f"{meta.get('clip', '?')} ({len(meta.get('starts', []))} windows)")
+                else f"{meta.get('clip', '?')} (motion for augmentation)"
+                if meta.get("kind") == "motion"
+                else f"{meta.get('clip', '?')} ({len(meta.get('starts', []))} windows)"
             )
             print(printable(f"  {key[:12]}  {_size(size):>10}  {what}"))
     return 0

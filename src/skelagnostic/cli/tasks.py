@@ -349,6 +349,8 @@ def _run_trainer(
     Returns:
         The trainer's final ``callback_metrics`` as floats.
     """
+    from skelagnostic.callbacks.loggers import finished_runs
+
     pm = plugin_manager or get_plugin_manager()
     prepared = _prepare(cfg, task, pm)
     spec, ckpt, run_dir = prepared.spec, prepared.ckpt, Path(cfg.run_dir)
@@ -367,6 +369,7 @@ def _run_trainer(
     # weights_only=True: a checkpoint is never unpickled into code (what skelagnostic's
     # aligners, callbacks and data loaders save is tensors and plain data).
     with (
+        finished_runs(trainer.loggers),
         config_errors(cfg, spec, model_kwargs),
         architecture_mismatch(ckpt or "", saved, dict(model.hparams), "ckpt_path"),
     ):

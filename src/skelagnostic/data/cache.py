@@ -195,6 +195,31 @@ class CacheEntry:
             read_exactly(fh, out, self.array)
         return out
 
+    def read_frames(self, start: int, stop: int) -> np.ndarray:
+        """Frames ``start:stop`` of an entry holding one ``[1, T, ...]`` array (a whole clip).
+
+        A positioned read of those frames only (no memory map), as :meth:`read` does
+        for windows.
+
+        Returns:
+            ``[stop - start, ...]`` float32.
+
+        Raises:
+            SkelagnosticError: The entry holds several windows, or the range is out of
+                bounds (names the file).
+        """
+        offset, shape = self.layout
+        if len(shape) < 2 or shape[0] != 1 or not 0 <= start <= stop <= shape[1]:
+            raise SkelagnosticError(
+                f"cache entry {self.array}: cannot read frames {start}:{stop} of an array of "
+                f"{shape} (one clip of [1, T, ...] frames expected)"
+            )
+        out = np.empty((stop - start, *shape[2:]), np.float32)
+        with self._opened(0) as fh:
+            fh.seek(offset + start * 4 * math.prod(shape[2:]))
+            read_exactly(fh, out, self.array)
+        return out
+
 
 def _read_npy_header(fh: Any) -> tuple[int, tuple[int, ...], np.dtype]:
     """``(data offset, shape, dtype)`` of the ``.npy`` file open at its start."""

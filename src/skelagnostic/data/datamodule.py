@@ -7,9 +7,9 @@ import hashlib
 import inspect
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import lightning as L
 import numpy as np
@@ -18,8 +18,10 @@ from lightning.pytorch.utilities import CombinedLoader
 from lightning.pytorch.utilities.rank_zero import rank_zero_info, rank_zero_only
 from torch.utils.data import DataLoader
 
+from skelagnostic.core.motion import Motion
 from skelagnostic.core.paths import expand_path
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.data.augment import MOTION_LAYOUT, Augmentation, WindowAugmenter, motion_frames
 from skelagnostic.data.cache import (
     CacheEntry,
     WindowCache,
@@ -180,10 +182,18 @@ class MotionDataModule(L.LightningDataModule):
         cache_dir: Window cache directory (default:
             :func:`~skelagnostic.data.cache.default_cache_dir`).
         per_element_stats: Normalisation per (element, channel) rather than per channel.
+        augment: Augmentation of the training windows (``data.augment.*``:
+            :class:`~skelagnostic.data.augment.Augmentation`); default none.
 
     Raises:
-        SkelagnosticError: An argument is out of range (the message names it).
+        SkelagnosticError: An argument is out of range (the message names it), or
+            ``augment`` is on for a data module that refuses it (:attr:`no_augmentation`).
     """
+
+    #: Why ``data.augment.*`` is refused, or None (the training windows take it): a
+    #: subclass whose training datasets are not the base class's augmented
+    #: :class:`WindowDataset` says why here.
+    no_augmentation: ClassVar[str | None] = None
 
     def __init__(
         self,
@@ -199,8 +209,15 @@ class MotionDataModule(L.LightningDataModule):
         split_seed: int = 0,
         cache_dir: str | Path | None = None,
         per_element_stats: bool = True,
+        augment: Augmentation | Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__()
+        self.augmentation = Augmentation.parse(augment)
+        if self.augmentation.enabled and self.no_augmentation:
+            raise SkelagnosticError(
+                f"data.augment: {type(self).__name__} does not augment its windows: "
+                f"{self.no_augmentation}; remove the data.augment.* settings"
+            )
         for arg, value, low in (
             ("fps", fps, 0),
             ("window", window, 0),
@@ -247,6 +264,8 @@ class MotionDataModule(L.LightningDataModule):
         self.assigned_splits: dict[str, str] = {}
         #: A recorded ``clip id -> split`` to keep (a run's ``split.json``), or None.
         self.recorded_splits: dict[str, str] | None = None
+        #: With augmentation: window cache entry path -> the clip's raw motion entry.
+        self.motion_entries: dict[Path, CacheEntry] = {}
 
     def default_representation(self) -> MotionRepresentation:
         """The representation used when none is given (world joint positions)."""
@@ -300,11 +319,42 @@ class MotionDataModule(L.LightningDataModule):
             self.cache.track(slot_key(os.path.abspath(clip.id), self.preprocessing()), key)
         return entry
 
+    def motion_entry(self, source: ClipSource, clip: ClipRef) -> CacheEntry:
+        """The clip's resampled motion as one cache entry, built when missing.
+
+        What augmented training windows are cut from (the window cache holds
+        encoded features): ``[1, T, R, 4]`` rows of
+        :func:`~skelagnostic.data.augment.motion_frames`, keyed by the clip's
+        content, ``fps`` and the source's loading options (not the
+        representation), so representations share it. Built only with
+        ``data.augment.*`` on.
+        """
+        pre = {"layout": MOTION_LAYOUT, "fps": self.fps, "loading": source.loading()}
+        key = cache_key(clip.key, pre)
+        entry = self.cache.get(key)
+        if entry is None:
+            motion = self._load(source, clip)
+            meta = {
+                "kind": "motion",
+                "clip": clip.id,
+                "skeleton": motion.skeleton.to_dict(),
+                "starts": [0],
+                "fps": self.fps,
+                "units": motion.units,
+            }
+            entry = self.cache.put(key, motion_frames(motion), meta)
+        if os.path.isfile(clip.id):
+            self.cache.track(slot_key(os.path.abspath(clip.id), pre), key)
+        return entry
+
+    def _load(self, source: ClipSource, clip: ClipRef) -> Motion:
+        """``clip`` read from ``source`` and resampled to ``fps``."""
+        motion = source.load(clip)
+        return motion.resample(self.fps) if motion.fps != self.fps else motion
+
     def _encode(self, source: ClipSource, clip: ClipRef) -> tuple[np.ndarray, dict[str, Any]]:
         """Load, resample and encode ``clip``: its ``(windows, metadata)`` for the cache."""
-        motion = source.load(clip)
-        if motion.fps != self.fps:
-            motion = motion.resample(self.fps)
+        motion = self._load(source, clip)
         starts = list(range(0, motion.num_frames - self.window + 1, self.stride))
         rep = self.representation
         if not starts:
@@ -338,6 +388,8 @@ class MotionDataModule(L.LightningDataModule):
         clips = [(source, clip) for source in self.sources for clip in source.clips()]
         for source, clip in track_clips(clips, "data: caching windows", rank_zero_only.rank == 0):
             self.cache_entry(source, clip)
+            if self.augmentation.enabled:
+                self.motion_entry(source, clip)
 
     # -------------------------------------------------------------------- setup
     def setup(self, stage: str | None = None) -> None:
@@ -365,6 +417,8 @@ class MotionDataModule(L.LightningDataModule):
                     )
                 topo = (tuple(sk["joint_names"]), tuple(sk["parents"]))
                 groups.setdefault(topo, []).append((clip, entry))
+                if self.augmentation.enabled:
+                    self.motion_entries[entry.array] = self.motion_entry(source, clip)
             for members in groups.values():
                 name = self._dataset_name(source, members, len(groups))
                 self.add_dataset(name, members)
@@ -447,11 +501,32 @@ class MotionDataModule(L.LightningDataModule):
             if clips:
                 self.datasets[part][name] = WindowDataset([entries[c.id] for c in clips])
         train = self.datasets["train"][name]
+        train.augmenter = self.window_augmenter(name, train.entries)
         self.skeletons[name] = Skeleton.from_dict(train.entries[0].meta["skeleton"])
         rep = copy.deepcopy(self.representation)
         rep.fit_normalization(train.feature_chunks(), per_element=self.per_element_stats)
         check_statistics(name, rep)
         self.representations[name] = rep
+
+    def window_augmenter(self, name: str, entries: list[CacheEntry]) -> WindowAugmenter | None:
+        """The augmenter of dataset ``name``'s training windows (None without ``data.augment``).
+
+        A skeleton without left/right pairs is not mirrored (logged once).
+        """
+        if not self.augmentation.enabled:
+            return None
+        augmenter = WindowAugmenter(
+            self.augmentation,
+            copy.deepcopy(self.representation),
+            [self.motion_entries[e.array] for e in entries],
+            self.window,
+        )
+        if self.augmentation.mirror and not all(augmenter.mirrorable):
+            rank_zero_info(
+                f"data: dataset {name!r}: data.augment.mirror skips its clips of a skeleton "
+                "without left/right joint pairs"
+            )
+        return augmenter
 
     # -------------------------------------------------------------- dataloaders
     def loaders(self, split: str, shuffle: bool) -> dict[str, DataLoader]:
@@ -517,7 +592,7 @@ class MotionDataModule(L.LightningDataModule):
             name: ResumableDataLoader(
                 ds,
                 self.batch_size,
-                ResumableSampler(ds, replicas, rank, True, seed),
+                ResumableSampler(ds, replicas, rank, True, seed, keyed=_augments(ds)),
                 self.num_workers,
                 self.collate(name),
             )
@@ -569,6 +644,11 @@ class MotionDataModule(L.LightningDataModule):
         for name, stats in state_dict.items():
             if name in self.representations:
                 self.representations[name].load_normalization_state(stats)
+
+
+def _augments(dataset: Any) -> bool:
+    """Whether ``dataset`` is a :class:`WindowDataset` that augments its windows."""
+    return isinstance(dataset, WindowDataset) and dataset.augmenter is not None
 
 
 def datamodule_options(cls: type) -> dict[str, type]:

@@ -23,18 +23,30 @@ class ResumableSampler(DistributedSampler):
 
     The order of a pass depends only on ``seed`` and the epoch (never on the
     global RNG), so a resumed run sees the same windows as an uninterrupted one.
+    A ``keyed`` sampler yields ``(seed, epoch, index)`` instead of ``index``: what
+    an augmenting :class:`~skelagnostic.data.WindowDataset` draws its transform
+    from, the same in every worker and on every rank.
     """
 
     def __init__(
-        self, dataset: Dataset, num_replicas: int, rank: int, shuffle: bool, seed: int
+        self,
+        dataset: Dataset,
+        num_replicas: int,
+        rank: int,
+        shuffle: bool,
+        seed: int,
+        keyed: bool = False,
     ) -> None:
         super().__init__(dataset, num_replicas=num_replicas, rank=rank, shuffle=shuffle, seed=seed)
         #: Indices to drop from the start of the next pass (set when resuming).
         self.skip = 0
+        self.keyed = keyed
 
-    def __iter__(self) -> Iterator[int]:
+    def __iter__(self) -> Iterator[Any]:
         indices = list(super().__iter__())[self.skip :]
         self.skip = 0
+        if self.keyed:
+            return iter([(self.seed, self.epoch, i) for i in indices])
         return iter(indices)
 
 

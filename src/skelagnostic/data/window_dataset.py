@@ -9,6 +9,7 @@ when a value is not finite.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterator, Sequence
 
 import numpy as np
@@ -16,6 +17,7 @@ import torch
 from torch.utils.data import Dataset
 
 from skelagnostic.core.skeleton import Skeleton
+from skelagnostic.data.augment import WindowAugmenter
 from skelagnostic.data.cache import CacheEntry, read_exactly
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import MotionRepresentation
@@ -68,12 +70,23 @@ class WindowDataset(Dataset):
     map), so a process holds only the windows of its current batches and the
     dataset pickles cheaply into workers.
 
+    With an ``augmenter`` (training windows with ``data.augment.*``), every
+    item is encoded from the clip's cached motion after the transform drawn for
+    it (:class:`~skelagnostic.data.augment.WindowAugmenter`); the index is then
+    a window index (epoch 0, the seed of ``$PL_GLOBAL_SEED``) or the ``(seed,
+    epoch, window index)`` a keyed :class:`~skelagnostic.data.loaders.ResumableSampler`
+    yields, so the transform depends on those only.
+
     Args:
         entries: Cache entries of the clips.
+        augmenter: Augments the windows (default: none, the cached features).
     """
 
-    def __init__(self, entries: Sequence[CacheEntry]) -> None:
+    def __init__(
+        self, entries: Sequence[CacheEntry], augmenter: WindowAugmenter | None = None
+    ) -> None:
         self.entries = list(entries)
+        self.augmenter = augmenter
         self.clip_ids = [e.meta["clip"] for e in self.entries]
         self._bounds = np.cumsum([0] + [e.num_windows for e in self.entries])
         self._skeletons = []
@@ -86,16 +99,26 @@ class WindowDataset(Dataset):
     def __len__(self) -> int:
         return int(self._bounds[-1])
 
-    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+    def __getitem__(self, key: int | tuple[int, int, int]) -> dict[str, torch.Tensor]:
+        if isinstance(key, tuple):
+            seed, epoch, index = (int(v) for v in key)
+        else:
+            seed, epoch, index = int(os.environ.get("PL_GLOBAL_SEED", "0")), 0, int(key)
         if not 0 <= index < len(self):
             raise IndexError(f"window index {index} out of range [0, {len(self)})")
         clip = int(np.searchsorted(self._bounds, index, side="right") - 1)
         k = index - int(self._bounds[clip])
         offsets, template, height = self._skeletons[clip]
+        start = self.entries[clip].meta["starts"][k]
+        if self.augmenter is None:
+            features = torch.from_numpy(self.entries[clip].read(k, k + 1)[0])
+        else:
+            draw = self.augmenter.options.draw(seed, epoch, index)
+            features, start = self.augmenter.features(clip, start, draw)
         return {
-            "features": torch.from_numpy(self.entries[clip].read(k, k + 1)[0]),
+            "features": features,
             "clip": torch.tensor(clip),
-            "start": torch.tensor(self.entries[clip].meta["starts"][k]),
+            "start": torch.tensor(start),
             "offsets": offsets,
             "template": template,
             "height": height,

@@ -359,8 +359,13 @@ class VqpaeDataModule(MotionDataModule):
 
     Raises:
         SkelagnosticError: The window length is even or not positive, another argument is
-            out of range, or ``per_element_stats`` is given.
+            out of range, or ``per_element_stats`` or ``augment`` is given.
     """
+
+    no_augmentation = (
+        "its frame windows are read from cached per-frame features, not from the motion, "
+        "and the authors train on their data as it is"
+    )
 
     def __init__(
         self,

@@ -403,6 +403,11 @@ class PcmrlInterpDataModule(MotionDataModule):
             lengths that are not in metres.
     """
 
+    no_augmentation = (
+        "PC-MRL's interpolation has its own augmentation: rest-pose augmentation "
+        "(data.rpa_*) and mirrored clips (data.mirror=true)"
+    )
+
     def __init__(
         self,
         sources: ClipSource | Sequence[ClipSource] | None = None,
