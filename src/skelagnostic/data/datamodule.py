@@ -109,10 +109,12 @@ def _keep_recorded(
 def describe_dataset(
     name: str, members: Sequence[tuple[ClipRef, CacheEntry]], assigned: dict[str, str]
 ) -> str:
-    """One log line on a dataset: clips per split, joints, standing height and its unit.
+    """One log line on a dataset: clips per split, joints, standing height and its unit, axes.
 
     The unit is what a wrong ``data.units`` (or a wrong guess) would show
-    first: a person 171 m tall, or a dog of 0.6 m logged as centimetres.
+    first: a person 171 m tall, or a dog of 0.6 m logged as centimetres. The
+    files' axes (``data.up``, ``data.forward``) follow, with those that
+    ``"auto"`` detected marked, and a count per frame when the clips differ.
     """
     from skelagnostic.core.units import infer_units
 
@@ -135,8 +137,24 @@ def describe_dataset(
     splits = ", ".join(f"{part} {parts.count(part)}" for part in SPLITS if part in parts)
     return (
         f"data: dataset {name!r}: {len(members)} clip(s) ({splits}), "
-        f"{skeleton.num_joints} joints, {size}"
+        f"{skeleton.num_joints} joints, {size}{_describe_axes(members)}"
     )
+
+
+def _describe_axes(members: Sequence[tuple[ClipRef, CacheEntry]]) -> str:
+    """``", file axes up z, forward -y (detected)"``: the axes the clips were read with."""
+    counts: dict[str, int] = {}
+    for _, entry in members:
+        axes = entry.meta.get("axes")
+        if not isinstance(axes, dict):
+            continue
+        detected = axes.get("detected") or []
+        text = f"up {axes.get('up')}, forward {axes.get('forward')}"
+        text += f" ({' and '.join(detected)} detected)" if detected else ""
+        counts[text] = counts.get(text, 0) + 1
+    if len(counts) <= 1:
+        return "".join(f", file axes {text}" for text in counts)
+    return ", file axes " + "; ".join(f"{text}: {n} clip(s)" for text, n in counts.items())
 
 
 class MotionDataModule(L.LightningDataModule):
@@ -377,6 +395,8 @@ class MotionDataModule(L.LightningDataModule):
             "fps": self.fps,
             "units": motion.units,
         }
+        if (axes := source.axes(clip)) is not None:
+            meta["axes"] = axes
         return windows, meta
 
     def prepare_data(self) -> None:

@@ -25,6 +25,7 @@ from typing import Any
 
 import torch
 
+from skelagnostic.core.axes import AxesError, axes_matrix, parse_axis, to_canonical
 from skelagnostic.core.motion import UNITS, Motion, reroot
 from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
@@ -88,6 +89,15 @@ class ClipSource(ABC):
         values. The default: none.
         """
         return {}
+
+    def axes(self, clip: ClipRef) -> dict[str, Any] | None:
+        """The file axes the last :meth:`load` of ``clip`` found, for the dataset's log line.
+
+        ``{"up": ..., "forward": ..., "detected": [...]}`` (the names of the axes
+        that ``"auto"`` detected), or ``None`` (the default: a source without file
+        axes, such as the procedural generator).
+        """
+        return None
 
 
 def _to_metres(motion: Motion, units: str | None) -> Motion:
@@ -153,6 +163,12 @@ class MultiSource(ClipSource):
         """The loading options of every part, by part name."""
         return {p.name: p.loading() for p in self.parts}
 
+    def axes(self, clip: ClipRef) -> dict[str, Any] | None:
+        """The file axes its part found for ``clip``."""
+        part, _, inner = clip.id.partition(":")
+        found = [p.axes(ClipRef(inner, clip.key, clip.split)) for p in self.parts if p.name == part]
+        return found[0] if found else None
+
 
 class MetresSource(ClipSource):
     """Wraps a clip source so that every clip comes in metres.
@@ -184,6 +200,10 @@ class MetresSource(ClipSource):
     def loading(self) -> dict[str, Any]:
         """The inner source's loading options plus the fallback unit."""
         return {**self.inner.loading(), "metres": True, "fallback_units": self.units}
+
+    def axes(self, clip: ClipRef) -> dict[str, Any] | None:
+        """The inner source's file axes of ``clip``."""
+        return self.inner.axes(clip)
 
 
 def flatten_sources(sources: ClipSource | Sequence[ClipSource] | None) -> list[ClipSource]:
@@ -222,9 +242,15 @@ class BVHSource(ClipSource):
             <skelagnostic.Skeleton.body_root>`) is re-rooted at its body root, any
             other file is kept as it is; give the file root's name to keep a carrier.
         name: Label of the source.
+        up: The files' up axis (``x, y, z, -x, -y, -z``) or ``"auto"`` (detected per
+            clip, see :mod:`skelagnostic.core.axes`); every clip is turned into the
+            canonical frame (+Y up, facing +Z). ``None``: ``"y"``.
+        forward: The files' forward axis, ``"auto"``, or ``None`` (the usual one
+            for ``up``: ``"-y"`` for Blender's Z up).
 
     Raises:
-        SkelagnosticError: A path does not exist, the units are unknown, or no file matches.
+        SkelagnosticError: A path does not exist, the units are unknown, an axis is
+            not one, or no file matches.
     """
 
     paths: Sequence[str | Path]
@@ -233,11 +259,23 @@ class BVHSource(ClipSource):
     units: str | None = None
     root_joint: str | None = None
     name: str = "bvh"
+    up: str | None = None
+    forward: str | None = None
     _files: list[Path] = field(default_factory=list, init=False, repr=False)
+    _axes: dict[str, dict[str, Any]] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if isinstance(self.paths, (str, Path)):
             self.paths = [self.paths]
+        if self.up is not None:
+            self.up = parse_axis(self.up, "data.up", auto=True)
+        if self.forward is not None:
+            self.forward = parse_axis(self.forward, "data.forward", auto=True)
+        if self.up not in (None, "auto") and self.forward not in (None, "auto"):
+            try:
+                axes_matrix(self.up, self.forward)
+            except AxesError as exc:
+                raise AxesError(f"data.up, data.forward: {exc}") from None
         if self.units is not None and self.units not in UNITS:
             raise SkelagnosticError(
                 f"data.units: unknown unit {self.units!r}; known: {', '.join(UNITS)}"
@@ -268,20 +306,34 @@ class BVHSource(ClipSource):
         ]
 
     def loading(self) -> dict[str, Any]:
-        """``units``, ``root_joint`` and the carrier rule: they change the loaded motion."""
-        return {"units": self.units, "root_joint": self.root_joint, "carrier": "body_root"}
+        """``units``, ``root_joint``, the carrier rule and the axes: they change the motion."""
+        options = {"units": self.units, "root_joint": self.root_joint, "carrier": "body_root"}
+        if (self.up, self.forward) != (None, None):  # keeps the keys of earlier caches
+            options.update(up=self.up, forward=self.forward)
+        return options
 
     def load(self, clip: ClipRef) -> Motion:
-        """Read the BVH file of ``clip`` (re-rooted, see ``root_joint``)."""
+        """Read the BVH file of ``clip`` in the canonical frame (re-rooted, see ``root_joint``)."""
         from skelagnostic.io.bvh import read_bvh
 
-        motion = read_bvh(clip.id)
+        motion, found = to_canonical(
+            read_bvh(clip.id), self.up, self.forward, prefix="data.", where=clip.id
+        )
+        self._axes[clip.id] = {
+            "up": found.up,
+            "forward": found.forward,
+            "detected": [name for name, how in found.how if how.startswith("detected")],
+        }
         root = self.root_joint if self.root_joint is not None else motion.skeleton.body_root
         return _to_metres(reroot(motion, root), self.units)
 
+    def axes(self, clip: ClipRef) -> dict[str, Any] | None:
+        """The axes the last load of ``clip`` found (``None`` before one)."""
+        return self._axes.get(clip.id)
+
 
 #: Keys of a mapping entry of ``data.paths`` (besides ``path``/``paths``).
-_ENTRY_KEYS = ("units", "name", "pattern", "test_pattern", "root_joint")
+_ENTRY_KEYS = ("units", "name", "pattern", "test_pattern", "root_joint", "up", "forward")
 
 
 def bvh_sources(
@@ -291,6 +343,8 @@ def bvh_sources(
     units: str | None = None,
     root_joint: str | None = None,
     name: str = "bvh",
+    up: str | None = None,
+    forward: str | None = None,
 ) -> list[BVHSource]:
     """The sources of ``data=bvh``: plain paths share the options, mappings bring their own.
 
@@ -301,8 +355,9 @@ def bvh_sources(
         data.paths=[{path: ~/cmu, units: cmu, name: human}, {path: ~/dog, units: cm, name: dog}]
 
     Its keys are ``path`` (or ``paths``, a list) and any of ``units``,
-    ``name``, ``pattern``, ``test_pattern``, ``root_joint``; what it leaves out
-    comes from the top-level options. Plain entries form one source with the
+    ``name``, ``pattern``, ``test_pattern``, ``root_joint``, ``up``,
+    ``forward`` (a Blender export among Y-up files: ``{path: ~/blender, up: z}``);
+    what it leaves out comes from the top-level options. Plain entries form one source with the
     top-level options.
 
     Raises:
@@ -317,6 +372,8 @@ def bvh_sources(
         "pattern": pattern,
         "test_pattern": test_pattern,
         "root_joint": root_joint,
+        "up": up,
+        "forward": forward,
     }
     plain = [p for p in paths if not isinstance(p, Mapping)]
     sources = [BVHSource(plain, **defaults)] if plain else []
@@ -577,12 +634,19 @@ def dataset_root(preset: str, root: str | Path | None = None) -> Path:
     return expand_path(base) / directory
 
 
-def preset_source(preset: str, root: str | Path | None = None) -> BVHSource:
+def preset_source(
+    preset: str,
+    root: str | Path | None = None,
+    up: str | None = None,
+    forward: str | None = None,
+) -> BVHSource:
     """The :class:`BVHSource` of a dataset preset below ``root``.
 
     Args:
         preset: A key of :data:`PRESETS`.
         root: Folder of the files; ``None``: ``$SKELAGNOSTIC_DATA/<preset>``.
+        up: The files' up axis or ``"auto"`` (``None``: ``"y"``, as every preset's).
+        forward: The files' forward axis or ``"auto"`` (``None``: the usual one).
 
     Raises:
         SkelagnosticError: Unknown preset, no root, or ``root`` missing or without
@@ -598,4 +662,6 @@ def preset_source(preset: str, root: str | Path | None = None) -> BVHSource:
         p.units,
         p.root_joint,
         name=p.name,
+        up=up,
+        forward=forward,
     )

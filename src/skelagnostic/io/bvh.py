@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.axes import from_canonical, to_canonical
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import BVHError, SkeletonError, printable
@@ -242,13 +243,24 @@ def _build_motion(
     )
 
 
-def read_bvh(path: str | Path, dtype: torch.dtype = torch.float64) -> Motion:
+def read_bvh(
+    path: str | Path,
+    dtype: torch.dtype = torch.float64,
+    up: str | None = None,
+    forward: str | None = None,
+) -> Motion:
     """Read a BVH file.
 
     Args:
         path: The ``.bvh`` file.
         dtype: Float dtype of the tensors (float64 keeps the file's precision for
             round trips; call :meth:`Motion.float` for training).
+        up: The file's up axis (``x, y, z, -x, -y, -z``; ``"auto"`` detects it from
+            the motion); the motion is turned into the canonical frame (+Y up,
+            facing +Z). ``None``: ``"y"``, as BVH files usually are
+            (:mod:`skelagnostic.core.axes`).
+        forward: The file's forward axis, or ``"auto"``; ``None``: the usual one
+            for ``up`` (``"z"`` for Y up, ``"-y"`` for Blender's Z up).
 
     Returns:
         The :class:`~skelagnostic.Motion`, its skeleton named after the file stem
@@ -257,6 +269,8 @@ def read_bvh(path: str | Path, dtype: torch.dtype = torch.float64) -> Motion:
     Raises:
         BVHError: If the file is missing, unreadable or malformed; the message names
             the file and line.
+        AxesError: A bad ``up``/``forward``, or axes ``"auto"`` cannot tell; the
+            message names the file and the argument.
 
     Examples:
         >>> import skelagnostic as sa, tempfile, os
@@ -265,6 +279,10 @@ def read_bvh(path: str | Path, dtype: torch.dtype = torch.float64) -> Motion:
         >>> sa.write_bvh(motion, path)
         >>> sa.read_bvh(path).num_frames
         16
+        >>> sa.write_bvh(motion, path, up="z")  # Blender's frame: Z up, facing -Y
+        >>> z_up = sa.read_bvh(path, up="z")
+        >>> bool((z_up.global_positions() - motion.global_positions()).abs().max() < 1e-5)
+        True
     """
     path = Path(path)
     try:
@@ -275,7 +293,8 @@ def read_bvh(path: str | Path, dtype: torch.dtype = torch.float64) -> Motion:
         raise BVHError("is a directory, not a BVH file", path) from None
     except OSError as exc:
         raise BVHError(f"cannot read: {exc.strerror}", path) from None
-    return parse_bvh(data, path=path, dtype=dtype, name=path.stem)
+    motion = parse_bvh(data, path=path, dtype=dtype, name=path.stem)
+    return to_canonical(motion, up, forward, where=path)[0]
 
 
 def _channels_for(motion: Motion) -> list[list[str]]:
@@ -303,7 +322,13 @@ def _channels_for(motion: Motion) -> list[list[str]]:
     return channels
 
 
-def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
+def write_bvh(
+    motion: Motion,
+    path: str | Path,
+    precision: int = 6,
+    up: str | None = None,
+    forward: str | None = None,
+) -> None:
     """Write a motion as a BVH file (atomically: the file appears only when complete).
 
     The channel layout read from a BVH file is kept; other motions get position
@@ -319,14 +344,19 @@ def write_bvh(motion: Motion, path: str | Path, precision: int = 6) -> None:
         motion: The motion.
         path: Target file.
         precision: Decimals written for every value.
+        up: The file's up axis (``x, y, z, -x, -y, -z``; ``None``: ``"y"``): the
+            motion is turned from the canonical frame into the file's
+            (:func:`~skelagnostic.core.axes.from_canonical`).
+        forward: The file's forward axis (``None``: the usual one for ``up``).
 
     Raises:
         BVHError: If the file cannot be written (missing or read-only directory, full
             disk, symbolic link loop, ...); the target is then left untouched.
+        AxesError: A bad ``up``/``forward`` (nothing is written).
     """
     path = Path(path)
-    sk = motion.skeleton
-    m = motion.double()
+    m = from_canonical(motion, up, forward).double()
+    sk = m.skeleton
     channels = _channels_for(m)
     offsets = sk.offsets.double().numpy()
     fmt = f"%.{precision}f"

@@ -56,7 +56,11 @@ def motion_format(path: str | Path, other: str | None = None) -> str:
 
 
 def read_motion(
-    path: str | Path, dtype: torch.dtype | None = None, other: str | None = None
+    path: str | Path,
+    dtype: torch.dtype | None = None,
+    other: str | None = None,
+    up: str | None = None,
+    forward: str | None = None,
 ) -> Motion:
     """Read a ``.bvh``, ``.glb`` or ``.gltf`` file.
 
@@ -68,13 +72,17 @@ def read_motion(
         other: ``"bvh"`` or ``"gltf"``: how to read a file with any other suffix
             (``None``: such a file is an error). The renderers read any name that
             is not ``.glb``/``.gltf`` as BVH, as they always have.
+        up: The file's up axis (``x, y, z, -x, -y, -z`` or ``"auto"``; ``None``: the
+            reader's default); the motion comes in the canonical frame, +Y up,
+            facing +Z (:mod:`skelagnostic.core.axes`).
+        forward: The file's forward axis, ``"auto"`` or ``None``.
 
     Returns:
         The motion.
 
     Raises:
         SkelagnosticError: An unknown suffix, or the reader's ``BVHError`` /
-            ``GLTFError``.
+            ``GLTFError`` / ``AxesError``.
     """
     import torch
 
@@ -82,29 +90,35 @@ def read_motion(
     if motion_format(path, other) == "bvh":
         from skelagnostic.io.bvh import read_bvh
 
-        return read_bvh(path, dtype=dtype)
+        return read_bvh(path, dtype=dtype, up=up, forward=forward)
     from skelagnostic.io.gltf import read_gltf
 
-    return read_gltf(path, dtype=dtype)
+    return read_gltf(path, dtype=dtype, up=up, forward=forward)
 
 
-def write_motion(motion: Motion, path: str | Path) -> None:
+def write_motion(
+    motion: Motion, path: str | Path, up: str | None = None, forward: str | None = None
+) -> None:
     """Write a motion in the format its suffix names, atomically.
 
     Args:
         motion: The motion.
         path: A ``.bvh``, ``.glb`` or ``.gltf`` path.
+        up: The file's up axis (``None``: ``"y"``); the motion is turned from the
+            canonical frame into it.
+        forward: The file's forward axis (``None``: the usual one for ``up``).
 
     Raises:
         SkelagnosticError: An unknown suffix, or the writer's ``BVHError`` /
             ``GLTFError`` (a glTF file without the ``gltf`` extra installed, a
-            directory that cannot be written, ...).
+            directory that cannot be written, ...), or ``AxesError`` for a bad
+            ``up``/``forward``.
     """
     if motion_format(path) == "bvh":
         from skelagnostic.io.bvh import write_bvh
 
-        write_bvh(motion, path)
+        write_bvh(motion, path, up=up, forward=forward)
     else:
         from skelagnostic.io.gltf import write_gltf
 
-        write_gltf(motion, path)
+        write_gltf(motion, path, up=up, forward=forward)

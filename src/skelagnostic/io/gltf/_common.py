@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 
@@ -47,3 +48,36 @@ def _unique(name: str, taken: set[str]) -> str:
         candidate = f"{name}{k}"
     taken.add(candidate)
     return candidate
+
+
+def _metadata(node: Any) -> dict[str, Any]:
+    extras = node.extras if isinstance(node.extras, dict) else {}
+    meta = extras.get(_EXTRA)
+    return meta if isinstance(meta, dict) else {}
+
+
+def _declared_axes(
+    meta: dict[str, Any], up: str | None, forward: str | None
+) -> tuple[str | None, str | None]:
+    """``up`` and ``forward``, or (``up`` is ``None``) the file axes ``write_gltf`` recorded."""
+    axes = meta.get("axes")
+    if up is not None or not isinstance(axes, dict):
+        return up, forward
+    return axes.get("up"), forward if forward is not None else axes.get("forward")
+
+
+def _end_sites(
+    reader: Any,
+    sites: list[int],
+    parent: list[int],
+    index: dict[int, int],
+    cumulative: np.ndarray,
+) -> dict[int, list[list[float]]]:
+    """The End Site offsets of each joint, scaled by the joint's cumulative scale."""
+    end_sites: dict[int, list[list[float]]] = {}
+    for node in sites:
+        if parent[node] in index:
+            j = index[parent[node]]
+            t = reader.local(node)[0]
+            end_sites.setdefault(j, []).append([float(v) for v in cumulative[j] * t])
+    return end_sites

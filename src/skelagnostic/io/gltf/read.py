@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from skelagnostic.core import quaternion as Q
+from skelagnostic.core.axes import to_canonical
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import GLTFError, SkeletonError
@@ -29,6 +30,9 @@ from skelagnostic.io.gltf._common import (
     _PATH_WIDTH,
     _SCALE_TOLERANCE,
     _WIDTH,
+    _declared_axes,
+    _end_sites,
+    _metadata,
     _pygltflib,
     _unique,
 )
@@ -407,14 +411,12 @@ def _skeleton_nodes(
     return root, order, sorted(sites)
 
 
-def _metadata(node: Any) -> dict[str, Any]:
-    extras = node.extras if isinstance(node.extras, dict) else {}
-    meta = extras.get(_EXTRA)
-    return meta if isinstance(meta, dict) else {}
-
-
 def read_gltf(
-    path: str | Path, dtype: torch.dtype = torch.float64, animation: int | str = 0
+    path: str | Path,
+    dtype: torch.dtype = torch.float64,
+    animation: int | str = 0,
+    up: str | None = None,
+    forward: str | None = None,
 ) -> Motion:
     """Read skeletal animation from a glTF 2.0 file (``.glb`` or ``.gltf``).
 
@@ -434,7 +436,7 @@ def read_gltf(
     and shortest-arc slerp; ``STEP``; ``CUBICSPLINE``: Hermite) on an even grid
     from the first to the last key at the rate of the channel with the most keys,
     each channel held at its end values outside its own keys. A file written by
-    :func:`write_gltf` gives back its frame rate, up axis, units, BVH channel
+    :func:`write_gltf` gives back its frame rate, axes, units, BVH channel
     layout and body root.
 
     Args:
@@ -442,6 +444,10 @@ def read_gltf(
             files next to it).
         dtype: Float dtype of the tensors.
         animation: Index or name of the animation to read.
+        up: The file's up axis (``x, y, z, -x, -y, -z``, or ``"auto"``); the motion is
+            turned into the canonical frame (:mod:`skelagnostic.core.axes`). ``None``:
+            the axes :func:`write_gltf` recorded, else ``"y"`` (glTF's own).
+        forward: The file's forward axis, or ``"auto"``; ``None``: as for ``up``.
 
     Returns:
         The :class:`~skelagnostic.Motion`, named after the file stem.
@@ -519,7 +525,7 @@ def read_gltf(
     end_sites = _end_sites(reader, sites, parent, index, cumulative)
     skeleton, units = _skeleton(reader, nodes, root, joints, joint_parents, offsets, end_sites)
     quats = to_wxyz(rotations)
-    return Motion(
+    motion = Motion(
         skeleton,
         Q.continuity(quats, dim=0),
         torch.from_numpy(np.ascontiguousarray(root_positions)),
@@ -529,6 +535,8 @@ def read_gltf(
         units=units,
         dtype=dtype,
     )
+    up, forward = _declared_axes(_metadata(nodes[root]), up, forward)
+    return to_canonical(motion, up, forward, where=path)[0]
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -632,23 +640,6 @@ def _joint_scale(reader: _Reader, node: int, rest: np.ndarray, track: Track | No
             "a non-uniform or non-positive scale is not supported", f"nodes[{node}].scale"
         )
     return uniform
-
-
-def _end_sites(
-    reader: _Reader,
-    sites: list[int],
-    parent: list[int],
-    index: dict[int, int],
-    cumulative: np.ndarray,
-) -> dict[int, list[list[float]]]:
-    """The End Site offsets of each joint, scaled by the joint's cumulative scale."""
-    end_sites: dict[int, list[list[float]]] = {}
-    for node in sites:
-        if parent[node] in index:
-            j = index[parent[node]]
-            t = reader.local(node)[0]
-            end_sites.setdefault(j, []).append([float(v) for v in cumulative[j] * t])
-    return end_sites
 
 
 def _skeleton(

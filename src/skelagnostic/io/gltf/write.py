@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from skelagnostic.core.axes import CANONICAL_UP, default_forward, from_canonical, parse_axis
 from skelagnostic.core.motion import Motion
 from skelagnostic.errors import GLTFError
 from skelagnostic.io.atomic import atomic_write
@@ -119,7 +120,13 @@ def _bone_mesh(segments: list[tuple[np.ndarray, np.ndarray, int]]) -> tuple[np.n
     )
 
 
-def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
+def write_gltf(
+    motion: Motion,
+    path: str | Path,
+    bones: bool = True,
+    up: str | None = None,
+    forward: str | None = None,
+) -> None:
     """Write a motion as glTF 2.0: ``.glb`` (binary) or ``.gltf`` (JSON, embedded buffer).
 
     One node per joint, in joint order (nodes ``0 .. J-1``), its ``translation`` the
@@ -127,12 +134,13 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
     ``extras``); one animation with a rotation channel (quaternions x, y, z, w) per
     joint and a translation channel on the root and on every joint with animated
     translations, keyed at ``k / fps`` seconds with ``LINEAR`` interpolation.
-    Lengths are the motion's own units and the axes its own. With ``bones`` a skin
+    Lengths are the motion's own units; the axes are glTF's (+Y up, facing +Z),
+    the canonical frame, unless ``up``/``forward`` say otherwise. With ``bones`` a skin
     (bind pose: the rest offsets, no rotation) and a mesh of one octahedron per
     bone, skinned rigidly to the bone's parent joint, are added, so that Blender
     imports an armature and viewers show a figure.
 
-    The skeleton's up axis, units, BVH channel layout and body root go into the
+    The file's axes, units, BVH channel layout and body root go into the
     root node's ``extras`` and the frame rate into the animation's, so that
     :func:`read_gltf` gives them back. The file is written atomically
     (:func:`~skelagnostic.io.atomic.atomic_write`).
@@ -141,10 +149,16 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
         motion: The motion.
         path: Target ``.glb`` or ``.gltf`` file.
         bones: Add the skin and the bone mesh.
+        up: The file's up axis (``x, y, z, -x, -y, -z``; ``None``: ``"y"``): the motion
+            is turned from the canonical frame into it
+            (:func:`~skelagnostic.core.axes.from_canonical`). glTF viewers expect
+            Y up; other axes serve tools that read the file's nodes as they are.
+        forward: The file's forward axis (``None``: the usual one for ``up``).
 
     Raises:
         GLTFError: If the suffix is neither ``.glb`` nor ``.gltf``, pygltflib (the
             ``gltf`` extra) is missing, or the file cannot be written.
+        AxesError: A bad ``up``/``forward`` (nothing is written).
 
     Examples:
         >>> import skelagnostic as sa, tempfile, os
@@ -158,12 +172,16 @@ def write_gltf(motion: Motion, path: str | Path, bones: bool = True) -> None:
     suffix = path.suffix.lower()
     if suffix not in GLTF_SUFFIXES:
         raise GLTFError(f"a glTF file name ends in .glb or .gltf, not {path.suffix!r}", path)
+    file_up = parse_axis(up, "up") if up is not None else CANONICAL_UP
+    file_forward = parse_axis(forward, "forward") if forward is not None else None
+    file_forward = file_forward or default_forward(file_up)
+    m = from_canonical(motion.to(dtype=torch.float64, device="cpu"), file_up, file_forward)
     pg = _pygltflib(path)
-    m = motion.to(dtype=torch.float64, device="cpu")
     sk = m.skeleton
     offsets = sk.offsets.detach().double().cpu().numpy()
     blob = _Blob(pg)
     nodes, taken, sites = _nodes(pg, m, offsets)
+    nodes[0].extras[_EXTRA]["axes"] = {"up": file_up, "forward": file_forward}
     animation = _animation(pg, blob, m, offsets)
     scene_nodes = [0]
     skins, meshes, materials = [], [], []
