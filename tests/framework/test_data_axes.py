@@ -107,15 +107,15 @@ def test_configs_route_up_and_forward_to_the_source(exports: tuple[Path, Path]) 
 def test_log_line_counts_clips_read_with_different_axes() -> None:
     from types import SimpleNamespace
 
-    from skelagnostic.data.datamodule import _describe_axes
+    from skelagnostic.data.describe import describe_axes
 
     def member(axes: dict | None) -> tuple[None, SimpleNamespace]:
         return None, SimpleNamespace(meta={} if axes is None else {"axes": axes})
 
     z = {"up": "z", "forward": "-y", "detected": ["up"]}
     y = {"up": "y", "forward": "z", "detected": []}
-    assert _describe_axes([member(z), member(z)]) == ", file axes up z, forward -y (up detected)"
-    assert _describe_axes([member(None)]) == ""  # an entry cached before axes were recorded
-    assert _describe_axes([member(z), member(y), member(z)]) == (
+    assert describe_axes([member(z), member(z)]) == ", file axes up z, forward -y (up detected)"
+    assert describe_axes([member(None)]) == ""  # an entry cached before axes were recorded
+    assert describe_axes([member(z), member(y), member(z)]) == (
         ", file axes up z, forward -y (up detected): 2 clip(s); up y, forward z: 1 clip(s)"
     )
