@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import torch
-from skelagnostic_pcmrl.interp.data import CachedClip, Clip, PcmrlInterpDataModule
+from skelagnostic_pcmrl.interp.clips import CachedClip, Clip
+from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
 
 
 def test_cached_clips_give_the_windows_of_in_memory_clips(tmp_path: Path) -> None:

@@ -11,12 +11,8 @@ import lightning as L
 import pytest
 import torch
 from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
-from skelagnostic_pcmrl.interp.data import (
-    PcmrlInterpDataModule,
-    gap_keys,
-    random_keys,
-    regular_keys,
-)
+from skelagnostic_pcmrl.interp.clips import gap_keys, random_keys, regular_keys
+from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
 from skelagnostic_pcmrl.interp.keyframes import key_brackets, lerp_keys, slerp_keys
 from skelagnostic_pcmrl.interp.rpa import bone_tails
 

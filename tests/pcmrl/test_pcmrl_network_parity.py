@@ -13,7 +13,8 @@ import pytest
 import torch
 from skelagnostic_pcmrl.authors import load_stage1, load_stage2, read_state
 from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
-from skelagnostic_pcmrl.interp.data import Clip, PcmrlInterpDataModule, TrainWindows
+from skelagnostic_pcmrl.interp.clips import Clip, TrainWindows
+from skelagnostic_pcmrl.interp.data import PcmrlInterpDataModule
 from skelagnostic_pcmrl.interp.keyframes import window_features
 from skelagnostic_pcmrl.interp.rpa import (
     authors_rest_pose_rotations,

@@ -51,7 +51,7 @@ from skelagnostic.core.motion import Motion
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import feature_npss, l2p, l2q, npss
-from skelagnostic_pcmrl.interp.data import gap_keys
+from skelagnostic_pcmrl.interp.clips import gap_keys
 from skelagnostic_pcmrl.points import effective_joints
 
 __all__ = [
