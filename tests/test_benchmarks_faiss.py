@@ -42,17 +42,28 @@ def test_faiss_rows_give_eq9_costs(database: tuple) -> None:
 def test_faiss_flat_picks_our_windows_and_hnsw_is_scored_against_them(database: tuple) -> None:
     _, index, qs = database
     torch.set_num_threads(1)
-    ours = matching_faiss.our_search(index, qs, repeats=1)
-    flat = faiss.IndexFlatL2(matching_faiss._query_rows(qs).shape[1])
+    rows = matching_faiss._query_rows(qs)
+    flat = faiss.IndexFlatL2(rows.shape[1])
     matching_faiss._fill(flat, index)
     assert flat.ntotal == index.num_windows
     assert matching_faiss._index_bytes(flat) == index.num_windows * 631 * 4
-    labels, seconds = matching_faiss._timed_search(flat, matching_faiss._query_rows(qs), 1)
-    assert seconds > 0
+    count = rows.shape[0]
+    searches = [matching_faiss.our_query(index, qs), matching_faiss.faiss_query(flat, rows)]
+    (ours, labels), seconds = matching_faiss.paired(searches, count, repeats=2)
+    assert len(ours) == len(labels) == count and all(s > 0 for s in seconds)
     costs = [matching_faiss._exact_cost(index, qs, i, w) for i, w in enumerate(labels)]
-    share, ties = matching_faiss.same_or_tied(ours, {"windows": labels, "costs": costs})
+    assert costs == pytest.approx([c for _, c in ours], rel=1e-12)
+    mine = {"windows": [w for w, _ in ours], "costs": [c for _, c in ours]}
+    share, ties = matching_faiss.same_or_tied(mine, {"windows": labels, "costs": costs})
     assert share == 1.0 and ties == 0
-    assert labels == ours["windows"]
+    assert labels == mine["windows"]
+    hnsw = faiss.IndexHNSWFlat(rows.shape[1], 8)
+    matching_faiss._fill(hnsw, index)
+    assert matching_faiss._index_bytes(hnsw) > matching_faiss._index_bytes(flat)
+    search = matching_faiss.faiss_query(hnsw, rows)
+    hnsw.hnsw.efSearch = 2048
+    ef, recall = matching_faiss.pick_ef(mine["windows"], {2048: [search(i) for i in range(count)]})
+    assert ef == 2048 and recall >= 0.9
 
 
 def test_same_or_tied_counts_exact_ties_only() -> None:
@@ -62,12 +73,13 @@ def test_same_or_tied_counts_exact_ties_only() -> None:
 
 
 def test_pick_ef_takes_the_smallest_reaching_the_goal_else_the_best() -> None:
-    ours = {"windows": list(range(100))}
-    miss = lambda k: {"windows": [-1] * k + list(range(k, 100)), "query_s": 0.1}  # noqa: E731
-    sweep = {"16": miss(5), "32": miss(1), "64": miss(0)}
-    assert matching_faiss.pick_ef(ours, {"sweep": sweep}) == (32, 0.99)
-    low = {"16": miss(9), "32": miss(3), "64": miss(4)}
-    assert matching_faiss.pick_ef(ours, {"sweep": low}) == (32, 0.97)
+    ours = list(range(100))
+
+    def miss(k: int) -> list[int]:
+        return [-1] * k + list(range(k, 100))
+
+    assert matching_faiss.pick_ef(ours, {64: miss(0), 16: miss(5), 32: miss(1)}) == (32, 0.99)
+    assert matching_faiss.pick_ef(ours, {16: miss(9), 32: miss(3), 64: miss(4)}) == (32, 0.97)
 
 
 @pytest.mark.slow

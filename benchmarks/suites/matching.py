@@ -89,15 +89,8 @@ def _current_rss_mib() -> float | None:
     return None
 
 
-def child_fast(
-    frames: int, query_frames: int, repeats: int, faiss_queries: int = 0
-) -> dict[str, Any]:
-    """Build + frequency-scaled matching with the exact bounded search.
-
-    With ``faiss_queries > 0`` it also times the search alone on the faiss
-    baselines' independent queries (``"search"``, see :mod:`.matching_faiss`).
-    """
-    from benchmarks.suites.matching_faiss import our_search, query_set
+def child_fast(frames: int, query_frames: int, repeats: int) -> dict[str, Any]:
+    """Build + frequency-scaled matching with the exact bounded search."""
     from skelagnostic.matching import frequency_scaled_motion_matching
 
     start_rss = _current_rss_mib()  # python, torch and skelagnostic loaded, no data yet
@@ -112,12 +105,7 @@ def child_fast(
         out["windows"] = result.windows.tolist()
 
     seconds = timeit_median(once, repeats=repeats, warmup=1)
-    search = None
-    if faiss_queries > 0:
-        queries = query_set(db, index, query_frames, faiss_queries)
-        search = our_search(index, queries, repeats)
     return {
-        "search": search,
         "build_s": build,
         "database_bytes": db.nbytes + index.nbytes,
         "num_windows": index.num_windows,
@@ -295,7 +283,6 @@ def run(size: str) -> list[Result]:
             frames=frames,
             query_frames=settings["query_frames"],
             repeats=settings["repeats"],
-            faiss_queries=0 if no_faiss else settings["faiss_queries"],
         )
         naive, naive_rss = run_child(
             "benchmarks.suites.matching:child_naive",
@@ -327,8 +314,8 @@ def run(size: str) -> list[Result]:
                     (fast_rss - fast["start_rss_mib"]) / database_mib,
                 )
             )
-        if fast["search"] is not None:
-            ours = {**fast["search"], "build_s": fast["build_s"], "peak_rss_mib": fast_rss}
+        if no_faiss is None:
+            ours = {"build_s": fast["build_s"], "peak_rss_mib": fast_rss}
             results += faiss_results(label, ours, database_mib, frames, settings)
         if repo is not None:
             theirs, theirs_rss = run_child(
