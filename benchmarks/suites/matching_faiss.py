@@ -12,8 +12,11 @@ faiss). Queries are independent: the window starting at evenly spaced frames
 of the suite's query sequence, with that frame's own pose descriptor as start
 pose, so every method answers the same questions one query at a time.
 
-Each side runs in its own subprocess (:func:`benchmarks.harness.run_child`); faiss
-runs with as many OpenMP threads as torch has (``--threads 1``: one thread).
+Each faiss index is built in its own subprocess
+(:func:`benchmarks.harness.run_child`), which also builds our index and times
+our search interleaved with faiss's, query by query (:func:`paired`), so a busy
+spell of the shared machine slows both alike. faiss runs with as many OpenMP
+threads as torch has (``--threads 1``: one thread).
 """
 
 from __future__ import annotations
