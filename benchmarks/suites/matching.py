@@ -15,6 +15,10 @@ pose descriptor + frequency, see :mod:`benchmarks.suites.synthetic`):
   against the precomputed window features the dense scan needs.
 * ``peak_rss_mib_<size>``: peak resident memory of a fresh process generating
   the data, building and querying, against the same for the dense baseline.
+* ``*_faiss_flat_<size>``, ``*_faiss_hnsw_<size>``: our search alone against
+  faiss's exact ``IndexFlatL2`` and its HNSW index on the same windows and
+  queries (see :mod:`benchmarks.suites.matching_faiss`; skipped, with a printed
+  reason, when faiss is not installed).
 
 Each side runs in its own subprocess so the peak memory belongs to it alone.
 """
@@ -29,6 +33,8 @@ import torch
 
 from benchmarks.authors import authors_repo
 from benchmarks.harness import Result, run_child, timeit_median
+from benchmarks.suites.matching_faiss import faiss_missing
+from benchmarks.suites.matching_faiss import results as faiss_results
 
 SIZES: dict[str, list[int]] = {
     "smoke": [10_000],
@@ -36,14 +42,16 @@ SIZES: dict[str, list[int]] = {
     "large": [1_000_000],
 }
 SETTINGS: dict[str, dict[str, int]] = {
-    "smoke": {"query_frames": 240, "repeats": 2, "naive_queries": 3},
-    "default": {"query_frames": 600, "repeats": 3, "naive_queries": 3},
-    "large": {"query_frames": 600, "repeats": 5, "naive_queries": 5},
+    "smoke": {"query_frames": 240, "repeats": 2, "naive_queries": 3, "faiss_queries": 20},
+    "default": {"query_frames": 600, "repeats": 3, "naive_queries": 3, "faiss_queries": 100},
+    "large": {"query_frames": 600, "repeats": 5, "naive_queries": 5, "faiss_queries": 200},
 }
 FPS = 60.0
 FRAMES_PER_CLIP = 1000
 LAMBDA1, LAMBDA2 = 0.5, 1.0
 BASELINE = "authors' dense scan"
+#: Distributions whose versions the JSON records (the faiss baselines).
+BASELINE_PACKAGES = ("faiss-cpu",)
 AUTHORS_CODE = "authors' find_nn_separate (official code)"
 
 
@@ -258,9 +266,15 @@ def run(size: str) -> list[Result]:
     With ``--authors-repo walkthedog=DIR`` it also times the authors' own kernel
     (:func:`child_authors`) and adds ``query_ms_<N>_authors_code``,
     ``identical_matches_authors_code_<N>`` and ``peak_rss_mib_<N>_authors_code``.
+    With faiss installed it adds the faiss baselines of :mod:`.matching_faiss`
+    (``*_faiss_flat``, ``*_faiss_hnsw``); without it they are skipped with a
+    printed reason.
     """
     settings = SETTINGS[size]
     repo = authors_repo("walkthedog")
+    no_faiss = faiss_missing()
+    if no_faiss is not None:
+        print(f"matching: faiss baselines skipped: {no_faiss}", flush=True)
     results: list[Result] = []
     for frames in SIZES[size]:
         label = _label(frames)
@@ -300,6 +314,9 @@ def run(size: str) -> list[Result]:
                     (fast_rss - fast["start_rss_mib"]) / database_mib,
                 )
             )
+        if no_faiss is None:
+            ours = {"build_s": fast["build_s"], "peak_rss_mib": fast_rss}
+            results += faiss_results(label, ours, database_mib, frames, settings)
         if repo is not None:
             theirs, theirs_rss = run_child(
                 "benchmarks.suites.matching:child_authors",
