@@ -58,7 +58,11 @@ def test_end_effector_error_is_summed_over_effectors_in_cm(lafan) -> None:
     assert scores["end"] == pytest.approx(5 * 10.0, rel=1e-6)  # 5 effectors, 0.1 m, x100
     # the authors' code: mean |difference| over the 4 limb ends and x, y, z: (10 + 0 + 0) / 3
     assert scores["end_authors"] == pytest.approx(10.0 / 3, rel=1e-6)
-    assert set(scores) == {"knn@0", "knn@0.1", "end", "end_authors"}
+    skate = {"foot_skate_cm_s", "foot_skate_ratio"}
+    assert set(scores) == {"knn@0", "knn@0.1", "end", "end_authors", *skate}
+    # a constant shift does not move a planted foot: the source's own skate
+    own = evaluate_pair(lafan, lafan, sigmas=(0.0,), num_points=256)
+    assert {k: scores[k] for k in skate} == pytest.approx({k: own[k] for k in skate}, rel=1e-9)
 
 
 def test_limb_ends_are_the_authors_end_joints(lafan, shared_data) -> None:
