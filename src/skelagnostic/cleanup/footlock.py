@@ -316,7 +316,12 @@ def foot_lock(
         if not bool(moved.any()):
             continue
         chain = leg_chain(motion, foot)
-        frames_moved = moved.nonzero().flatten()
+        # every frame from the first to the last moved one, also those whose offset is
+        # exactly zero (a one-frame contact pins the foot where it is): IK is not exactly
+        # the identity there (soft reach, averaged knee plane), and a frame left out
+        # between solved ones would jump (a knee-acceleration spike)
+        span = moved.nonzero().flatten()
+        frames_moved = torch.arange(int(span[0]), int(span[-1]) + 1)
         target = positions[frames_moved, chain[2]] + offset[frames_moved]
         rotations = _solve_leg(motion, rotations, chain, target, frames_moved)
     return motion._replace(rotations=rotations)
