@@ -9,6 +9,7 @@ it does to a motion (skate before and after, the change, the largest acceleratio
 from skelagnostic.cleanup.footlock import HALFLIFE, contact_runs, foot_lock, leg_chain
 from skelagnostic.cleanup.measure import (
     FOOT_LOCK_METRICS,
+    SPIKE_TOLERANCE,
     foot_lock_figures,
     largest_acceleration,
 )
@@ -16,6 +17,7 @@ from skelagnostic.cleanup.measure import (
 __all__ = [
     "FOOT_LOCK_METRICS",
     "HALFLIFE",
+    "SPIKE_TOLERANCE",
     "contact_runs",
     "foot_lock",
     "foot_lock_figures",
