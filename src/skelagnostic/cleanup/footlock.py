@@ -350,9 +350,9 @@ def foot_lock(
             continue
         chain = leg_chain(motion, foot)
         # every frame from the first to the last moved one, also those whose offset is
-        # exactly zero (a one-frame contact pins the foot where it is): IK is not exactly
-        # the identity there (soft reach, averaged knee plane), and a frame left out
-        # between solved ones would jump (a knee-acceleration spike)
+        # exactly zero (a one-frame contact pins the foot where it is), so that any
+        # rounding of the solver is the same on all of them: a frame left out between
+        # solved ones made the knee jump when the IK was not the identity there
         span = moved.nonzero().flatten()
         frames_moved = torch.arange(int(span[0]), int(span[-1]) + 1)
         target = positions[frames_moved, chain[2]] + offset[frames_moved]
