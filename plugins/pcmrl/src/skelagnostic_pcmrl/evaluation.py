@@ -263,7 +263,8 @@ def evaluate_clips(
             ``seed``, ``stride``).
 
     Returns:
-        ``{"rows": {row: {metric: mean}}, "per_clip": [...], "options": ...}``.
+        ``{"rows": {row: {metric: mean}}, "per_clip": [...], "options": ...}``; a mean
+        is over the clips that have the figure (the foot skate needs a planted foot).
     """
     per_clip = []
     for motion in track(clips, "held-out clips"):
@@ -278,11 +279,13 @@ def evaluate_clips(
             rows["pcmrl"] = evaluate_pair(aligner.retarget(motion, target), motion, **options)
         per_clip.append({"frames": motion.num_frames, "rows": rows})
     names = list(per_clip[0]["rows"]) if per_clip else []
-    metrics = list(per_clip[0]["rows"][names[0]]) if names else []
-    mean = {
-        r: {m: sum(c["rows"][r][m] for c in per_clip) / len(per_clip) for m in metrics}
-        for r in names
-    }
+    mean = {}
+    for r in names:  # over the clips that have the figure (a clip may plant no foot)
+        have: dict[str, list[float]] = {}
+        for clip in per_clip:
+            for metric, value in clip["rows"][r].items():
+                have.setdefault(metric, []).append(value)
+        mean[r] = {m: sum(v) / len(v) for m, v in have.items()}
     return {
         "rows": mean,
         "per_clip": per_clip,
@@ -305,7 +308,7 @@ def format_table(result: dict[str, Any]) -> str:
     )
     lines = [head, "|" + "---|" * (len(metrics) + 1)]
     for name, values in rows.items():
-        cells = " | ".join(f"{values[m]:.4f}" for m in metrics)
+        cells = " | ".join(f"{values.get(m, float('nan')):.4f}" for m in metrics)
         lines.append(f"| {markdown_cell(name)} | {cells} |")
     return "\n".join(lines)
 
