@@ -318,7 +318,7 @@ def foot_lock(
         ...     toe = m.global_positions()[5:15, feet[0]][:, [0, 2]]
         ...     return float((toe[1:] - toe[:-1]).norm(dim=-1).sum())
         >>> round(slide(motion), 1), round(slide(locked), 1)
-        (21.2, 0.8)
+        (21.2, 0.7)
     """
     if contacts is None:
         contacts, feet = foot_contacts(motion, joints=None if feet is None else list(feet))
