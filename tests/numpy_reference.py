@@ -141,3 +141,31 @@ def npss(pred: np.ndarray, target: np.ndarray, power: str = "abs") -> float:
     norm_t = np.divide(ps_t, tot_t, out=np.zeros_like(ps_t), where=tot_t > 0)
     emd = np.abs(np.cumsum(norm_p, axis=1) - np.cumsum(norm_t, axis=1)).sum(axis=1)
     return float((emd * weight).sum() / weight.sum())
+
+
+def foot_skate(
+    positions: np.ndarray,
+    contacts: np.ndarray,
+    feet: list[int],
+    fps: float,
+    up: int,
+    threshold: float,
+) -> tuple[float, float]:
+    """Mean planted-foot horizontal speed and the share above ``threshold``, numpy loops.
+
+    ``positions`` ``[..., T, J, 3]`` and ``contacts`` ``[..., T, F]`` (leading axes: one
+    sequence each); a step counts where foot ``f`` is in contact at ``t`` and ``t + 1``.
+    Returns ``(nan, nan)`` without such a step.
+    """
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, *np.shape(positions)[-3:])
+    con = np.asarray(contacts, dtype=bool).reshape(-1, *np.shape(contacts)[-2:])
+    speeds = [
+        float(np.linalg.norm(np.delete(seq[t + 1, j] - seq[t, j], up))) * fps
+        for seq, c in zip(pos, con, strict=True)
+        for f, j in enumerate(feet)
+        for t in range(len(seq) - 1)
+        if c[t, f] and c[t + 1, f]
+    ]
+    if not speeds:
+        return float("nan"), float("nan")
+    return float(np.mean(speeds)), float(np.mean([s > threshold for s in speeds]))

@@ -87,13 +87,19 @@ def test_evaluate_writes_the_report_on_the_test_split_or_every_held_out_clip(
     assert report["data"]["split"] == "test" and report["data"]["source"] == "procedural"
     assert report["data"]["clips"] == sorted(k for k, v in split.items() if v == "test")
     assert report["data"]["config"]["window"] == 16  # the run's data config
-    assert report["methods"] == ["model", "mean_pose", "mean_pose_on_trajectory"]
-    assert set(report["metrics"]) == {"mpjpe_cm", "mpjpe_over_height"}
+    methods = ["model", "mean_pose", "mean_pose_on_trajectory"]
+    assert report["methods"] == [*methods, "ground_truth"]  # its own skate: a reference
+    skate = {"foot_skate_cm_s", "foot_skate_ratio"}
+    assert set(report["metrics"]) == {"mpjpe_cm", "mpjpe_over_height", *skate}
     assert [r["clip"] for r in report["per_clip"]] == report["data"]["clips"]
     for method in report["methods"]:
         for metric in report["metrics"]:
-            values = [r["values"][method][metric] for r in report["per_clip"]]
-            assert report["mean"][method][metric] == pytest.approx(sum(values) / len(values))
+            values = [r["values"][method].get(metric) for r in report["per_clip"]]
+            values = [v for v in values if v is not None]  # a clip may have no planted step
+            if method == "ground_truth" and metric not in skate:
+                assert not values
+            elif values:
+                assert report["mean"][method][metric] == pytest.approx(sum(values) / len(values))
     # the root-trajectory baseline is exact on the root, so it beats the static mean pose
     assert (
         report["mean"]["mean_pose_on_trajectory"]["mpjpe_cm"]
@@ -105,8 +111,21 @@ def test_evaluate_writes_the_report_on_the_test_split_or_every_held_out_clip(
     assert "| mpjpe_cm (" in markdown
     assert "example.reconstruction on the test split" in out and "mean_pose" in out
     assert (run / "config.yaml").is_file()
-    # split=heldout: the same run's validation and test clips together
+    # cleanup=footlock: the foot lock measured on the model's output of every clip
     shutil.rmtree(run)
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "cleanup=footlock"]) == 0, (
+        capsys.readouterr().err
+    )
+    capsys.readouterr()
+    locked = json.loads((_evaluation_dir(tmp_path) / "evaluation.json").read_text())
+    assert {"footlock_mpjpe_cm", "footlock_accel_max_locked"} <= set(locked["mean"]["model"])
+    assert locked["mean"]["mean_pose"] == report["mean"]["mean_pose"]  # the rest unchanged
+    assert any("cleanup=footlock" in note for note in locked["notes"])
+    shutil.rmtree(_evaluation_dir(tmp_path))
+    assert cli.main(["evaluate", f"ckpt_path={fitted}", "cleanup=fix"]) != 0
+    assert "cleanup='fix': must be one of none, footlock" in capsys.readouterr().err
+    # split=heldout: the same run's validation and test clips together
+    shutil.rmtree(tmp_path / "runs" / "example" / "evaluate", ignore_errors=True)
     assert cli.main(["evaluate", f"ckpt_path={fitted}", "split=heldout"]) == 0, (
         capsys.readouterr().err
     )

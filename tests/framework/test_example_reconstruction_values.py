@@ -4,9 +4,12 @@ Two LaFAN1 clips and the untrained (seeded) example aligner. The model's
 encode-decode output is the method under test; the test recomputes, with numpy
 forward kinematics in metres, the MPJPE of the model and of both baselines (the
 clip's temporal mean pose; its mean root-relative pose along the true root path)
-over the frames both motions have, and MPJPE / height. Taken from the library:
-the skeleton's height (:meth:`Skeleton.height`, the extent of its canonical
-template, a rig-reading construction not re-derived here).
+over the frames both motions have, and MPJPE / height; and the foot skate (cm/s)
+and skate ratio of each, and of the clip itself (``ground_truth``), on the clip's
+contacts. Taken from the library: the skeleton's height (:meth:`Skeleton.height`,
+the extent of its canonical template, a rig-reading construction not re-derived
+here) and the contact detector (``foot_contacts``, tested against an independent
+rule in ``tests/analysis/test_foot_contacts.py``).
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ import pytest
 import torch
 
 import skelagnostic as sa
-from numpy_reference import global_pose, metres, mpjpe
+from numpy_reference import foot_skate, global_pose, metres, mpjpe
 from skelagnostic import plugins
+from skelagnostic.analysis import foot_contacts
 from skelagnostic.evaluation import HeldOut, mean_rows
 
 
@@ -33,6 +37,13 @@ def _expected(aligner: object, clip: sa.Motion) -> dict[str, dict[str, float]]:
     truth, guess = truth[:frames], guess[:frames]
     height = clip.skeleton.height() * metres(clip)
     root = truth[:, :1]
+    contacts, feet = foot_contacts(clip[:frames])
+    up = clip.skeleton.up_index
+
+    def skate(positions: np.ndarray) -> dict[str, float]:
+        mean, ratio = foot_skate(100 * positions, contacts.numpy(), feet, clip.fps, up, 5 * height)
+        return {"foot_skate_cm_s": mean, "foot_skate_ratio": ratio}
+
     out = {}
     for method, positions in (
         ("model", guess),
@@ -41,6 +52,8 @@ def _expected(aligner: object, clip: sa.Motion) -> dict[str, dict[str, float]]:
     ):
         err = mpjpe(positions, truth)
         out[method] = {"mpjpe_cm": 100.0 * err, "mpjpe_over_height": err / height}
+        out[method] |= skate(positions)
+    out["ground_truth"] = skate(truth)
     return out
 
 
@@ -71,6 +84,9 @@ def test_rows_and_means_equal_an_independent_computation(
         for metric, value in figures.items():
             average = (value + expected["b"][method][metric]) / 2
             assert mean[method][metric] == pytest.approx(average, rel=1e-6)
-    # sanity of the reference: following the true root path beats a static mean pose
+    # sanity of the reference: following the true root path beats a static mean pose; the
+    # clips have planted feet, a static pose never skates, the untrained model does
     for want in expected.values():
         assert want["mean_pose_on_trajectory"]["mpjpe_cm"] < want["mean_pose"]["mpjpe_cm"]
+        assert want["mean_pose"]["foot_skate_cm_s"] == 0.0
+        assert want["model"]["foot_skate_cm_s"] > want["ground_truth"]["foot_skate_cm_s"]

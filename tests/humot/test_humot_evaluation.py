@@ -106,6 +106,7 @@ def test_reconstruction_protocol_rows_curves_and_plots(tmp_path, humot_small):
         "mean_pose",
         "template",
         "mean_pose_on_trajectory",
+        "ground_truth",  # its own foot skate: a reference
     }
     assert any("dog" in n for n in out.notes)
     assert set(out.extra["curves"]) == {"biped31", "biped17"}
@@ -124,8 +125,9 @@ def test_retarget_protocol_cycles_through_another_topology(tmp_path, humot_small
         out = retarget_protocol(model, _held(clip), tmp_path)
     (row,) = out.rows
     assert row["via"] == "biped31"  # the first human kind of another topology
-    assert set(row["values"]) == {"model", "name_copy", "primal_copy", "direction_copy"}
-    assert all(v["cycle_over_height"] >= 0 for v in row["values"].values())
+    methods = {"model", "name_copy", "primal_copy", "direction_copy", "ground_truth"}
+    assert set(row["values"]) == methods
+    assert all(v["cycle_over_height"] >= 0 for m, v in row["values"].items() if m != "ground_truth")
     mean = out.extra["procedural_paired_retargeting"]["mean"]
     by_method = out.extra["procedural_paired_mean"]
     assert set(by_method) == {"model", "name_copy", "primal_copy", "direction_copy"}

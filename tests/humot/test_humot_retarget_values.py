@@ -23,7 +23,7 @@ from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.evaluation.retarget import retarget_protocol
 
 import skelagnostic as sa
-from numpy_reference import global_pose
+from numpy_reference import foot_skate, global_pose
 from skelagnostic.analysis import foot_contacts
 from skelagnostic.baselines import direction_copy, name_copy, primal_copy
 from skelagnostic.evaluation import HeldOut, mean_rows
@@ -49,18 +49,21 @@ def _errors(pred: sa.Motion, truth: sa.Motion) -> dict[str, float]:
     }
 
 
-def _skate_cm_s(pred: sa.Motion, truth: sa.Motion) -> float:
-    """Mean horizontal speed (cm/s) of the truth's planted feet, numpy loops."""
+def _skate_cm_s(pred: sa.Motion, truth: sa.Motion) -> tuple[float, float]:
+    """Mean horizontal speed (cm/s) of the truth's planted feet and the share above
+    0.05 heights/s, numpy loops."""
     contacts, feet = foot_contacts(truth)  # the library's detector: shared by every method
     positions = global_pose(pred, 1.0)[1]
-    up = truth.skeleton.up_index
-    speeds = [
-        float(np.linalg.norm(np.delete(positions[t + 1, j] - positions[t, j], up))) * truth.fps
-        for f, j in enumerate(feet)
-        for t in range(min(len(positions), truth.num_frames) - 1)
-        if contacts[t, f] and contacts[t + 1, f]
-    ]
-    return float(np.mean(speeds)) if speeds else float("nan")
+    frames = min(len(positions), truth.num_frames)
+    threshold = 0.05 * truth.skeleton.height()  # procedural rigs are in cm
+    return foot_skate(
+        positions[:frames],
+        contacts.numpy()[:frames],
+        feet,
+        truth.fps,
+        truth.skeleton.up_index,
+        threshold,
+    )
 
 
 def _methods(model: HumotAligner) -> dict[str, object]:
@@ -98,7 +101,10 @@ def test_rows_means_and_paired_table_equal_an_independent_computation(
                 there = f(clip, via, "cm", "cm")
                 back = f(there, clip.skeleton, "cm", "cm")
                 expected[clip.name][name] = _errors(back, clip)
-                expected[clip.name][name]["skate"] = _skate_cm_s(back, clip)
+                skate, ratio = _skate_cm_s(back, clip)
+                expected[clip.name][name] |= {"skate": skate, "ratio": ratio}
+            skate, ratio = _skate_cm_s(clip, clip)
+            expected[clip.name]["source"] = {"skate": skate, "ratio": ratio}
         paired = {}
         data = {
             k: sa.procedural.dataset(
@@ -137,6 +143,16 @@ def test_rows_means_and_paired_table_equal_an_independent_computation(
             assert got["cycle_foot_skate_cm_s"] == pytest.approx(
                 want[prefix]["skate"], rel=1e-6, nan_ok=True
             ), (row["clip"], method)
+            assert got["cycle_foot_skate_ratio"] == pytest.approx(
+                want[prefix]["ratio"], rel=1e-6, nan_ok=True
+            ), (row["clip"], method)
+        # the source's own skate: a reference row beside the methods
+        assert row["values"]["ground_truth"] == {
+            "cycle_foot_skate_cm_s": pytest.approx(want["source"]["skate"], rel=1e-6, nan_ok=True),
+            "cycle_foot_skate_ratio": pytest.approx(want["source"]["ratio"], rel=1e-6, nan_ok=True),
+        }
+    # clip a plants a foot for 6 frames (b runs without a contact: NaN, no value)
+    assert np.isfinite(expected["a"]["source"]["skate"])
     mean = mean_rows(out.rows)
     assert mean["model"]["cycle_over_height"] == pytest.approx(
         (expected["a"]["humot"]["mpjpe_over_height"] + expected["b"]["humot"]["mpjpe_over_height"])

@@ -58,7 +58,11 @@ def test_end_effector_error_is_summed_over_effectors_in_cm(lafan) -> None:
     assert scores["end"] == pytest.approx(5 * 10.0, rel=1e-6)  # 5 effectors, 0.1 m, x100
     # the authors' code: mean |difference| over the 4 limb ends and x, y, z: (10 + 0 + 0) / 3
     assert scores["end_authors"] == pytest.approx(10.0 / 3, rel=1e-6)
-    assert set(scores) == {"knn@0", "knn@0.1", "end", "end_authors"}
+    skate = {"foot_skate_cm_s", "foot_skate_ratio"}
+    assert set(scores) == {"knn@0", "knn@0.1", "end", "end_authors", *skate}
+    # a constant shift does not move a planted foot: the source's own skate
+    own = evaluate_pair(lafan, lafan, sigmas=(0.0,), num_points=256)
+    assert {k: scores[k] for k in skate} == pytest.approx({k: own[k] for k in skate}, rel=1e-9)
 
 
 def test_limb_ends_are_the_authors_end_joints(lafan, shared_data) -> None:
@@ -214,3 +218,20 @@ def test_reconstruction_protocol_rows_are_per_clip_figures(lafan, shared_data, t
         assert out.extra["options"] == {"stride": 2, "max_frames": 8}
         with pytest.raises(EvaluationError, match="stride"):
             reconstruction_protocol(model, held, tmp_path, stride=0)
+
+
+def test_clip_means_skip_clips_without_a_planted_foot() -> None:
+    """The foot skate needs a planted foot: a clip without one has no skate figure, and
+    the mean is over the clips that have it (the other figures over every clip)."""
+    walk = sa.procedural.generate("biped22", "walk", seconds=1.0, fps=30, seed=3)[0]
+    run = sa.procedural.generate("biped22", "run", seconds=1.0, fps=30, seed=5)[0]
+    target = sa.procedural.skeleton("biped31")
+    result = evaluate_clips([walk, run], target, sigmas=(0.0,), num_points=256)
+    walk_rows, run_rows = (clip["rows"] for clip in result["per_clip"])
+    assert "foot_skate_cm_s" in walk_rows["name_copy"]
+    assert "foot_skate_cm_s" not in run_rows["name_copy"]
+    for method, mean in result["rows"].items():
+        assert mean["foot_skate_cm_s"] == walk_rows[method]["foot_skate_cm_s"]
+        both = (walk_rows[method]["knn@0"] + run_rows[method]["knn@0"]) / 2
+        assert mean["knn@0"] == pytest.approx(both)
+    assert "nan" not in format_table(result)

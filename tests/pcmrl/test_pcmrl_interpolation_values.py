@@ -13,9 +13,14 @@ windows and numpy forward kinematics and recomputes:
 * the LaFAN1 benchmark's definitions (``lafan1_*``, ``design/METHODS.md``): L2P
   z-scored per channel with statistics of the evaluated windows (no training clips
   here), L2Q on sign-continuous global quaternions, both over the non-key frames;
-  NPSS on global quaternions over the whole window.
+  NPSS on global quaternions over the whole window;
+* the foot skate (cm/s) and the share of planted steps above 0.05 heights/s of
+  every method and of the ground truth (``ground_truth``, a reference row), over
+  the planted steps of all windows, with numpy loops.
 
-Taken from the library: the two methods' outputs (the interpolated motions).
+Taken from the library: the two methods' outputs (the interpolated motions) and
+the contact detector (``foot_contacts`` on each ground-truth window, tested
+against an independent rule in ``tests/analysis/test_foot_contacts.py``).
 """
 
 from __future__ import annotations
@@ -29,8 +34,9 @@ import torch
 from skelagnostic_pcmrl.evaluation import interpolation_protocol
 from skelagnostic_pcmrl.interp.aligner import PcmrlInterpAligner
 
-from numpy_reference import global_pose, hemisphere_continuous, npss
+from numpy_reference import foot_skate, global_pose, hemisphere_continuous, npss
 from skelagnostic import Motion, procedural
+from skelagnostic.analysis import foot_contacts
 from skelagnostic.baselines import lerp_slerp
 from skelagnostic.evaluation import HeldOut, mean_rows
 
@@ -116,6 +122,19 @@ def _lafan1(
     }
 
 
+def _skate(motions: list[Motion], wins: list[Motion]) -> dict[str, float]:
+    """Foot skate (cm/s) of ``motions`` on the contacts of the windows ``wins`` (metres)."""
+    detected = [foot_contacts(w) for w in wins]
+    feet = detected[0].joints
+    contacts = np.stack([c.contacts.numpy() for c in detected])
+    positions = 100 * np.stack([global_pose(m, 1.0)[1] for m in motions])
+    sk = wins[0].skeleton
+    mean, ratio = foot_skate(positions, contacts, feet, wins[0].fps, sk.up_index, 5 * sk.height())
+    if not np.isfinite(mean):  # no planted step: no value
+        return {}
+    return {"foot_skate_cm_s": mean, "foot_skate_ratio": ratio}
+
+
 def test_rows_and_means_equal_an_independent_computation(tmp_path: Path) -> None:
     torch.manual_seed(0)
     model = PcmrlInterpAligner(
@@ -143,6 +162,8 @@ def test_rows_and_means_equal_an_independent_computation(tmp_path: Path) -> None
     for clip in clips:
         wins = [clip[s : s + WINDOW] for s in range(0, clip.num_frames - WINDOW + 1, STRIDE)]
         expected[clip.name] = {"windows": len(wins)}
+        truth = {f"{k}@{gap}": v for k, v in _skate(wins, wins).items() for gap in GAPS}
+        expected[clip.name]["ground_truth"] = truth
         for method, interpolate in methods.items():
             values = {}
             for gap in GAPS:
@@ -150,23 +171,31 @@ def test_rows_and_means_equal_an_independent_computation(tmp_path: Path) -> None
                 with torch.no_grad():
                     preds = [interpolate(w, keys) for w in wins]
                 figures = _authors(preds, wins, keys) | _lafan1(preds, wins, keys, stats)
+                figures |= _skate(preds, wins)
                 values |= {f"{k}@{gap}": v for k, v in figures.items()}
             expected[clip.name][method] = values
     assert [r["clip"] for r in out.rows] == ["walk", "run"]
     for row in out.rows:
         want = expected[row["clip"]]
         assert row["windows"] == want["windows"] == 3
-        assert set(row["values"]) == set(methods)
-        for method in methods:
+        assert set(row["values"]) == {*methods, "ground_truth"}
+        for method in (*methods, "ground_truth"):
             assert set(row["values"][method]) == set(want[method])
             for metric, value in want[method].items():
                 got = row["values"][method][metric]
-                assert got == pytest.approx(value, rel=1e-6, abs=1e-10), (row["clip"], metric)
+                assert got == pytest.approx(value, rel=1e-6, abs=1e-10), (
+                    row["clip"],
+                    method,
+                    metric,
+                )
     mean = mean_rows(out.rows)
-    for method in methods:
-        for metric in expected["walk"][method]:
-            average = (expected["walk"][method][metric] + expected["run"][method][metric]) / 2
+    for method in (*methods, "ground_truth"):
+        for metric in expected["walk"][method]:  # over the clips that have the value
+            have = [c[method][metric] for c in expected.values() if metric in c[method]]
+            average = sum(have) / len(have)
             assert mean[method][metric] == pytest.approx(average, rel=1e-6, abs=1e-10)
     # sanity of the reference: LERP is worse with sparser keys
+    # the walk plants its feet (the run's windows have no planted step: no skate value)
+    assert expected["walk"]["ground_truth"] and not expected["run"]["ground_truth"]
     lerp = expected["walk"]["lerp_slerp"]
     assert lerp["l2p@5"] < lerp["l2p@15"] and lerp["lafan1_l2p@5"] < lerp["lafan1_l2p@15"]

@@ -8,8 +8,12 @@ under the authors' code, x100 in metres) and their means in ``evaluation.json``
 are recomputed here with numpy forward kinematics, a brute-force KNN over every
 pair of point trajectories (PC-MRL Eq. 5) and hand-picked end-effector pairs
 (Eq. 6: hands, feet, head; the authors' ``train_pointcloud.py``: wrists and
-toes). Only the seeded draw of the points on the bones (``PointCloud.sample``)
-and the methods' own outputs (the retargeted motions) come from the library.
+toes), and the foot skate (cm/s, and the share of planted steps above 0.05
+heights/s) of the target's toes on the source toes' contacts, on the frames the
+metrics read, with numpy loops. Only the seeded draw of the points on the bones
+(``PointCloud.sample``), the contact detector (``contacts_of_positions``, tested
+against an independent rule in ``tests/analysis/test_foot_contacts.py``) and the
+methods' own outputs (the retargeted motions) come from the library.
 """
 
 from __future__ import annotations
@@ -25,7 +29,8 @@ from skelagnostic_pcmrl.evaluation import BASELINES, evaluate_pair, reconstructi
 from skelagnostic_pcmrl.recon.aligner import PcmrlReconAligner
 
 import skelagnostic as sa
-from numpy_reference import global_pose, metres, qrot
+from numpy_reference import foot_skate, global_pose, metres, qrot
+from skelagnostic.analysis import contacts_of_positions
 from skelagnostic.baselines import direction_copy, name_copy, primal_copy
 from skelagnostic.core.motion import UNITS
 from skelagnostic.evaluation import HeldOut, write_evaluation
@@ -99,8 +104,25 @@ def _end_authors(result: sa.Motion, source: sa.Motion) -> float:
     return 100.0 * float(np.mean(np.abs(pb[:, b] - pa[:, a])))
 
 
+def _skate(result: sa.Motion, source: sa.Motion) -> dict[str, float]:
+    """Skate of the result's toes on the source toes' contacts, every STRIDE-th frame (cm)."""
+    feet = [source.skeleton.index(j) for j in ("LeftToe", "RightToe")]
+    toes = ("LeftToe", "RightToe") if result is source else ("LeftToeBase", "RightToeBase")
+    res_feet = [result.skeleton.index(j) for j in toes]
+    fps = source.fps / STRIDE
+    src = global_pose(source)[1][::STRIDE]
+    height = source.skeleton.height() * metres(source)
+    contacts = contacts_of_positions(
+        torch.from_numpy(src[:, feet]), fps, source.skeleton.up_index, height
+    ).numpy()
+    res = 100 * global_pose(result)[1][::STRIDE]
+    threshold = 5 * result.skeleton.height() * metres(result)
+    mean, ratio = foot_skate(res, contacts, res_feet, fps, result.skeleton.up_index, threshold)
+    return {"foot_skate_cm_s": mean, "foot_skate_ratio": ratio} if np.isfinite(mean) else {}
+
+
 def _figures(result: sa.Motion, source: sa.Motion, seed: int) -> dict[str, float]:
-    out = {f"knn@{s:g}": _knn(result, source, s, seed) for s in SIGMAS}
+    out = {f"knn@{s:g}": _knn(result, source, s, seed) for s in SIGMAS} | _skate(result, source)
     # the source against itself: every effector on itself, no error by definition
     if result is source:
         return out | {"end": 0.0, "end_authors": 0.0}
@@ -136,6 +158,8 @@ def test_rows_and_means_equal_an_independent_computation(lafan_clip: Path, tmp_p
             }
     assert [r["clip"] for r in out.rows] == ["a", "b"]
     assert [r["frames"] for r in out.rows] == [MAX_FRAMES, MAX_FRAMES]
+    # the source plants a foot in at least one clip: the skate columns are exercised
+    assert any("foot_skate_cm_s" in want["model"] for want in expected.values())
     for row in out.rows:
         want = expected[row["clip"]]
         assert set(row["values"]) == set(want)

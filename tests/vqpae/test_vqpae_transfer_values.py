@@ -7,7 +7,10 @@ the three outputs of every clip (the model's, ``unscaled_matching``'s and
 numpy forward kinematics, ``accel_height_per_s2`` and
 ``accel_max_height_per_s2`` (second difference of the joint positions times
 fps^2, its norm averaged over the joints, over the skeleton height; mean and
-maximum over the frames). From the row's measured frequencies it recomputes
+maximum over the frames) and the foot skate (cm/s, and the share of planted steps
+above 0.05 heights/s) of every output and of the source (``source``, a reference
+row) on their own contacts (the library's detector, tested in
+``tests/analysis/test_foot_contacts.py``). From the row's measured frequencies it recomputes
 ``frequency_error_pct``, ``gait_ratio``, ``contact_rhythm_error_pct`` and
 ``contact_rhythm_within_10pct``. Not recomputed: the measured frequencies
 themselves (``output_hz``, ``source_hz``, ``contact_hz``) and ``contact_lock``,
@@ -27,7 +30,8 @@ import pytest
 import torch
 from skelagnostic_vqpae.protocols import transfer as evaluation
 
-from numpy_reference import global_pose
+from numpy_reference import foot_skate, global_pose, metres
+from skelagnostic.analysis import foot_contacts
 from skelagnostic.evaluation import mean_rows
 
 
@@ -36,6 +40,16 @@ def _acceleration(motion: Any) -> tuple[float, float]:
     per_frame = np.linalg.norm(pos[2:] - 2 * pos[1:-1] + pos[:-2], axis=-1).mean(-1)
     per_frame = per_frame * motion.fps**2 / motion.skeleton.height()
     return float(per_frame.mean()), float(per_frame.max())
+
+
+def _skate(motion: Any) -> dict[str, float]:
+    """Foot skate (cm/s) of a motion on its own contacts; empty without a planted step."""
+    contacts, feet = foot_contacts(motion)
+    pos = 100 * global_pose(motion)[1]
+    threshold = 5 * motion.skeleton.height() * metres(motion)
+    up = motion.skeleton.up_index
+    mean, ratio = foot_skate(pos, contacts.numpy(), feet, motion.fps, up, threshold)
+    return {"foot_skate_cm_s": mean, "foot_skate_ratio": ratio} if np.isfinite(mean) else {}
 
 
 def test_acceleration_and_derived_figures_equal_an_independent_computation(
@@ -54,7 +68,8 @@ def test_acceleration_and_derived_figures_equal_an_independent_computation(
     with torch.no_grad():
         out = evaluation.transfer_protocol(model, held, tmp_path)
     methods = [evaluation.MODEL, evaluation.UNSCALED, evaluation.OWN_RATE]
-    assert out.methods == methods and out.rows
+    assert out.methods == [*methods, evaluation.SOURCE] and out.rows
+    skated = 0
     for row in out.rows:
         source, *made = captured[row["clip"]]
         assert row["frames"] == source.num_frames
@@ -63,6 +78,11 @@ def test_acceleration_and_derived_figures_equal_an_independent_computation(
             mean_acc, max_acc = _acceleration(output)
             assert values["accel_height_per_s2"] == pytest.approx(mean_acc, rel=1e-6)
             assert values["accel_max_height_per_s2"] == pytest.approx(max_acc, rel=1e-6)
+            skate = _skate(output)
+            skated += bool(skate)
+            assert {k: values[k] for k in values if k.startswith("foot_skate")} == pytest.approx(
+                skate, rel=1e-6
+            )
             hz, src = values["output_hz"], row["source_hz"]
             assert values["gait_ratio"] == pytest.approx(hz / src, nan_ok=True)
             assert values["frequency_error_pct"] == pytest.approx(
@@ -72,6 +92,10 @@ def test_acceleration_and_derived_figures_equal_an_independent_computation(
             assert values["contact_rhythm_error_pct"] == pytest.approx(error, nan_ok=True)
             within = math.nan if math.isnan(error) else float(error <= 10)
             assert values["contact_rhythm_within_10pct"] == pytest.approx(within, nan_ok=True)
+        assert row["values"][evaluation.SOURCE] == pytest.approx(_skate(source), rel=1e-6)
+    assert skated  # some output plants a foot: the skate columns are exercised
+    # the model's output motions, handed over for evaluate cleanup=footlock
+    assert {c: out.outputs[c]() for c in out.outputs} == {c: m[1] for c, m in captured.items()}
     # means over the clips (NaN values skipped): the acceleration of each method
     mean = mean_rows(out.rows)
     for method in methods:

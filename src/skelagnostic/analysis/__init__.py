@@ -24,6 +24,7 @@ from skelagnostic.analysis.contacts import (
     CONTACT_SPEED,
     FootContacts,
     contact_joints,
+    contacts_of_positions,
     foot_contacts,
 )
 from skelagnostic.analysis.gait import (
@@ -73,6 +74,7 @@ __all__ = [
     "contact_joints",
     "contact_lock",
     "contact_onsets",
+    "contacts_of_positions",
     "foot_contacts",
     "foot_heights",
     "foot_joints",

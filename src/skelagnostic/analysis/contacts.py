@@ -26,6 +26,7 @@ __all__ = [
     "CONTACT_SPEED",
     "FootContacts",
     "contact_joints",
+    "contacts_of_positions",
     "foot_contacts",
 ]
 
@@ -138,19 +139,56 @@ def foot_contacts(
         >>> tuple(contacts.shape), [walk.skeleton.joint_names[j] for j in feet]
         ((61, 2), ['LeftToe', 'RightToe'])
     """
+    skeleton = motion.skeleton
+    feet = list(joints) if joints is not None else contact_joints(skeleton)
+    pos = motion.global_positions()[:, feet]
+    contacts = contacts_of_positions(
+        pos, motion.fps, skeleton.up_index, skeleton.height(), height, speed
+    )
+    return FootContacts(contacts, feet)
+
+
+def contacts_of_positions(
+    positions: torch.Tensor,
+    fps: float,
+    up_index: int,
+    scale: float,
+    height: float = CONTACT_HEIGHT,
+    speed: float = CONTACT_SPEED,
+) -> torch.Tensor:
+    """The rule of :func:`foot_contacts` on feet positions already computed.
+
+    For callers that hold the global positions (an evaluation protocol that ran
+    forward kinematics once): no skeleton, no second forward kinematics.
+
+    Args:
+        positions: ``[..., F, N, 3]`` global positions of the ``N`` feet over ``F`` frames.
+        fps: Frame rate.
+        up_index: Index of the up axis (0, 1 or 2).
+        scale: The skeleton's height, in the positions' units.
+        height: Contact height, in skeleton heights.
+        speed: Contact speed, in skeleton heights per second.
+
+    Returns:
+        ``[..., F, N]`` bool contacts.
+
+    Raises:
+        SkelagnosticError: A threshold is not positive.
+    """
     if not (height > 0 and speed > 0):
         raise SkelagnosticError(
             f"foot contacts: height and speed must be positive, got {height} and {speed}"
         )
-    skeleton = motion.skeleton
-    feet = list(joints) if joints is not None else contact_joints(skeleton)
-    scale = max(skeleton.height(), 1e-9)
-    pos = motion.global_positions()[:, feet].double()
-    level = pos[..., skeleton.up_index]
-    floor = torch.quantile(level, CONTACT_FLOOR_QUANTILE, dim=0)
+    scale = max(float(scale), 1e-9)
+    pos = positions.double()
+    level = pos[..., up_index]
+    floor = torch.quantile(level, CONTACT_FLOOR_QUANTILE, dim=-2, keepdim=True)
     low = level - floor <= height * scale
-    if pos.shape[0] < 2:
-        return FootContacts(low, feet)
-    step = torch.cat([pos[1:2] - pos[:1], (pos[2:] - pos[:-2]) / 2, pos[-1:] - pos[-2:-1]])
-    still = step.norm(dim=-1) * motion.fps <= speed * scale
-    return FootContacts(low & still, feet)
+    if pos.shape[-3] < 2:
+        return low
+    frames = pos.movedim(-3, 0)  # central differences over the frames, one-sided at the ends
+    step = torch.cat(
+        [frames[1:2] - frames[:1], (frames[2:] - frames[:-2]) / 2, frames[-1:] - frames[-2:-1]]
+    ).movedim(0, -3)
+    still = step.norm(dim=-1) * fps <= speed * scale
+    return low & still

@@ -36,6 +36,9 @@ __all__ = ["contact_runs", "foot_lock", "leg_chain"]
 HALFLIFE = 0.1
 #: Share of a leg's length over which IK approaches full extension softly.
 SOFT_REACH = 0.05
+#: Distance of the knee from the hip-ankle line, in thigh lengths, from which IK keeps
+#: the frame's own bend plane (below it fades into the averaged hinge's).
+BENT = 0.02
 
 
 def contact_runs(contacts: torch.Tensor) -> list[tuple[int, int]]:
@@ -161,20 +164,29 @@ def _blended_offsets(
     return out
 
 
-def _soft_reach(dist: torch.Tensor, upper: torch.Tensor, lower: torch.Tensor) -> torch.Tensor:
+def _soft_reach(
+    dist: torch.Tensor, now: torch.Tensor, upper: torch.Tensor, lower: torch.Tensor
+) -> torch.Tensor:
     """The hip-ankle distance IK aims for: ``dist``, softly kept inside the leg's reach.
 
     Near full extension a hard clamp kinks the knee's path (a visible snap); the
     soft limit of Nicholas' "soft IK" approaches the reach exponentially instead, over
-    the last :data:`SOFT_REACH` of the leg's length.
+    the last :data:`SOFT_REACH` of the leg's length. Only the change from the
+    animation's own distance ``now`` is softened (``now`` plus the soft limit's change
+    from ``now`` to ``dist``), so a target that does not move the ankle keeps the pose
+    exactly, however extended the leg.
     """
     reach = upper + lower
     soft = SOFT_REACH * reach
     start = reach - soft
-    over = (dist - start).clamp_min(0.0)
-    softened = torch.where(dist > start, start + soft * (1 - torch.exp(-over / soft)), dist)
+
+    def limited(x: torch.Tensor) -> torch.Tensor:
+        over = (x - start).clamp_min(0.0)
+        return torch.where(x > start, start + soft * (1 - torch.exp(-over / soft)), x)
+
     shortest = (upper - lower).abs() + 1e-4 * reach
-    return softened.clamp_min(shortest)
+    softened = now + limited(dist) - limited(now)
+    return torch.minimum(softened, reach).clamp_min(shortest)
 
 
 def _bend_direction(
@@ -182,11 +194,32 @@ def _bend_direction(
 ) -> torch.Tensor:
     """``[n, 3]`` unit direction, perpendicular to ``aim``, in which the knee bends.
 
-    A knee is a hinge: its axis, ``(knee - hip) x (ankle - knee)``, is fixed in the
-    thigh's frame. Averaged in that frame over the frames (weighted by how bent the
-    leg is), it stays defined on frames where the leg is straight, where the bend
-    plane of a single frame would flip and the knee would snap.
+    Where the leg is bent (the knee at least :data:`BENT` of the thigh's length off
+    the hip-ankle line), the frame's own bend plane, turned with the hip-ankle line
+    onto ``aim``: a target that does not move the ankle keeps the knee exactly where
+    it is. Where the leg is nearly straight, that plane is ill-defined and flips
+    from frame to frame; there the direction fades (smoothstep) into the hinge's:
+    a knee's axis, ``(knee - hip) x (ankle - knee)``, is fixed in the thigh's frame,
+    and averaged in that frame over the frames (weighted by how bent the leg is) it
+    stays defined on straight frames, so the knee does not snap.
     """
+    hinge = _hinge_direction(hip_world, h, k, a, aim)
+    line = a - h
+    line = line / line.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+    own = (k - h) - ((k - h) * line).sum(-1, keepdim=True) * line
+    own = quat.rotate(quat.rotation_between(line, aim), own)  # onto the new hip-ankle line
+    own = own - (own * aim).sum(-1, keepdim=True) * aim
+    size = own.norm(dim=-1, keepdim=True)
+    x = (size / (BENT * (k - h).norm(dim=-1, keepdim=True)).clamp_min(1e-30)).clamp(0.0, 1.0)
+    weight = x * x * (3 - 2 * x)
+    bend = weight * own / size.clamp_min(1e-30) + (1 - weight) * hinge
+    return bend / bend.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+
+
+def _hinge_direction(
+    hip_world: torch.Tensor, h: torch.Tensor, k: torch.Tensor, a: torch.Tensor, aim: torch.Tensor
+) -> torch.Tensor:
+    """The bend direction of the knee's hinge axis averaged in the thigh's frame (unit)."""
     cross = torch.linalg.cross(k - h, a - k, dim=-1)
     local = quat.rotate(quat.inv(hip_world), cross).sum(dim=0)
     if float(local.norm()) <= 1e-12 * float((k - h).norm(dim=-1).amax() ** 2):
@@ -221,7 +254,7 @@ def _solve_leg(
     upper = (k - h).norm(dim=-1)
     lower = (a - k).norm(dim=-1)
     reach = ankle_target - h
-    dist = _soft_reach(reach.norm(dim=-1), upper, lower)
+    dist = _soft_reach(reach.norm(dim=-1), (a - h).norm(dim=-1), upper, lower)
     aim = reach / reach.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     bend = _bend_direction(glob[:, hip], h, k, a, aim)
     cos_hip = ((upper**2 + dist**2 - lower**2) / (2 * upper * dist)).clamp(-1.0, 1.0)
@@ -285,7 +318,7 @@ def foot_lock(
         ...     toe = m.global_positions()[5:15, feet[0]][:, [0, 2]]
         ...     return float((toe[1:] - toe[:-1]).norm(dim=-1).sum())
         >>> round(slide(motion), 1), round(slide(locked), 1)
-        (21.2, 0.8)
+        (21.2, 0.7)
     """
     if contacts is None:
         contacts, feet = foot_contacts(motion, joints=None if feet is None else list(feet))
@@ -316,7 +349,12 @@ def foot_lock(
         if not bool(moved.any()):
             continue
         chain = leg_chain(motion, foot)
-        frames_moved = moved.nonzero().flatten()
+        # every frame from the first to the last moved one, also those whose offset is
+        # exactly zero (a one-frame contact pins the foot where it is), so that any
+        # rounding of the solver is the same on all of them: a frame left out between
+        # solved ones made the knee jump when the IK was not the identity there
+        span = moved.nonzero().flatten()
+        frames_moved = torch.arange(int(span[0]), int(span[-1]) + 1)
         target = positions[frames_moved, chain[2]] + offset[frames_moved]
         rotations = _solve_leg(motion, rotations, chain, target, frames_moved)
     return motion._replace(rotations=rotations)

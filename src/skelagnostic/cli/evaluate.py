@@ -1,19 +1,21 @@
 """``skelagnostic evaluate``: a registered protocol on the held-out clips of a run.
 
 ``skelagnostic evaluate ckpt_path=RUN_OR_CKPT [protocol=NAME] [+protocol_options.KEY=VALUE]
-[split=test|val|heldout|train] [overrides]`` takes the model and data of the checkpoint's run
-(as ``validate`` and ``test`` do), loads the weights, collects the run's test clips (else its
-validation clips; ``split=`` chooses, :func:`~skelagnostic.evaluation.held_out`; ``train``:
-the training clips, labelled as not held out), runs the
-protocol (default: the model's default protocol; ``protocol_options``
-become its keyword arguments) and writes
-``evaluation.json``, ``evaluation.md`` and plots into its own run directory
-(``runs/<model>/evaluate/<time>``); see :mod:`skelagnostic.evaluation`.
+[split=test|val|heldout|train] [cleanup=footlock] [overrides]`` takes the model and data of
+the checkpoint's run (as ``validate`` and ``test`` do), loads the weights, collects the run's
+test clips (else its validation clips; ``split=`` chooses,
+:func:`~skelagnostic.evaluation.held_out`; ``train``: the training clips, labelled as not
+held out), runs the protocol (default: the model's default protocol; ``protocol_options``
+become its keyword arguments) and writes ``evaluation.json``, ``evaluation.md`` and plots
+into its own run directory (``runs/<model>/evaluate/<time>``); see :mod:`skelagnostic.evaluation`.
+``cleanup=footlock`` also measures :func:`skelagnostic.cleanup.foot_lock` on the
+model's output of every clip (:func:`measure_cleanup`).
 """
 
 from __future__ import annotations
 
 import inspect
+import math
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -23,10 +25,26 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from skelagnostic.aligners.checkpoints import load_checkpoint
-from skelagnostic.evaluation import MODEL, EvaluationError, held_out, write_evaluation
+from skelagnostic.evaluation import (
+    MODEL,
+    Evaluation,
+    EvaluationError,
+    held_out,
+    track,
+    write_evaluation,
+)
 from skelagnostic.plugins import PluginManager
 
-__all__ = ["evaluate_checkpoint", "print_evaluation", "protocols_text"]
+__all__ = [
+    "CLEANUPS",
+    "evaluate_checkpoint",
+    "measure_cleanup",
+    "print_evaluation",
+    "protocols_text",
+]
+
+#: The values of ``evaluate cleanup=``.
+CLEANUPS = ("none", "footlock")
 
 
 def evaluate_checkpoint(
@@ -46,7 +64,8 @@ def evaluate_checkpoint(
     Args:
         cfg: The composed config (``model``, ``data``, ``protocol``, ``run_dir``, optional
             ``protocol_options``: keyword arguments of the protocol function, optional
-            ``split``: which held-out clips, :func:`~skelagnostic.evaluation.held_out`).
+            ``split``: which held-out clips, :func:`~skelagnostic.evaluation.held_out`;
+            optional ``cleanup``: ``footlock`` adds :func:`measure_cleanup`).
         pm: Where the protocol is looked up.
         module: The aligner class of ``cfg.model.name``.
         datamodule: The data module built from ``cfg.data``.
@@ -61,11 +80,15 @@ def evaluate_checkpoint(
     Raises:
         PluginError: Unknown protocol, or one of another model (the message lists the
             model's protocols).
-        EvaluationError: No held-out split, the protocol found nothing to evaluate, or
-            ``protocol_options`` names an argument the protocol does not take.
+        EvaluationError: No held-out split, the protocol found nothing to evaluate,
+            ``protocol_options`` names an argument the protocol does not take, or
+            ``cleanup`` is unknown or the protocol has no output motions to clean.
     """
     protocol = pm.evaluation(cfg.get("protocol"), cfg.model.name)
     options = _protocol_options(cfg, protocol.name, protocol.function)
+    cleanup = str(cfg.get("cleanup") or "none")
+    if cleanup not in CLEANUPS:
+        raise EvaluationError(f"cleanup={cleanup!r}: must be one of {', '.join(CLEANUPS)}")
     if aligner is None:
         aligner = load_checkpoint(
             module, ckpt, option="ckpt_path", aligners=pm.aligner_classes()
@@ -75,6 +98,8 @@ def evaluate_checkpoint(
     run_dir.mkdir(parents=True, exist_ok=True)
     with torch.no_grad():
         result = protocol.function(aligner, held, run_dir, **options)
+        if cleanup == "footlock":
+            measure_cleanup(result, protocol.name)
     data = OmegaConf.to_container(cfg.data, resolve=True)
     report = write_evaluation(
         result,
@@ -88,6 +113,57 @@ def evaluate_checkpoint(
     )
     print_evaluation(report, run_dir)
     return {f"{MODEL}/{k}": v for k, v in report["mean"][MODEL].items()}
+
+
+def measure_cleanup(result: Evaluation, protocol: str) -> Evaluation:
+    """Add :func:`~skelagnostic.cleanup.foot_lock_figures` of every model output to ``result``.
+
+    For each clip of ``result.outputs`` the model's output motion is made, cleaned
+    with :func:`~skelagnostic.cleanup.foot_lock` (contacts detected on the output, as
+    ``cleanup=footlock`` on the verbs) and measured; the figures
+    (:data:`~skelagnostic.cleanup.FOOT_LOCK_METRICS`) join the :data:`MODEL` values of
+    the clip's row (a new row for a clip without one). Undefined figures (no skate
+    to reduce) are left out.
+
+    Args:
+        result: What the protocol returned; changed in place.
+        protocol: Its name, for messages.
+
+    Returns:
+        ``result``.
+
+    Raises:
+        EvaluationError: The protocol hands over no output motion, or an output cannot
+            be cleaned (a rig without legs); the message names the clip.
+    """
+    from skelagnostic.cleanup import FOOT_LOCK_METRICS, foot_lock_figures
+    from skelagnostic.errors import SkelagnosticError
+
+    if not result.outputs:
+        raise EvaluationError(
+            f"cleanup=footlock: protocol {protocol!r} hands over no output motion of the model "
+            "(Evaluation.outputs is empty); choose a protocol with motion outputs, e.g. the "
+            "models' default protocols"
+        )
+    rows = {str(row["clip"]): row for row in result.rows}
+    for clip, make in track(list(result.outputs.items()), "cleanup=footlock: model outputs"):
+        try:
+            figures = foot_lock_figures(make())
+        except SkelagnosticError as error:
+            raise EvaluationError(f"cleanup=footlock: clip {clip!r}: {error}") from error
+        if clip not in rows:
+            rows[clip] = {"clip": clip, "values": {}}
+            result.rows.append(rows[clip])
+        values = rows[clip]["values"].setdefault(MODEL, {})
+        values.update({k: v for k, v in figures.items() if math.isfinite(v)})
+    result.metrics.update(FOOT_LOCK_METRICS)
+    result.notes.append(
+        "cleanup=footlock: the model's output of each clip "
+        f"({len(result.outputs)} outputs) before and after skelagnostic.cleanup.foot_lock, "
+        "contacts detected on the output (as cleanup=footlock on the verbs); footlock_* "
+        "figures are in the model's column"
+    )
+    return result
 
 
 def _protocol_options(cfg: DictConfig, name: str, function: Any) -> dict[str, Any]:

@@ -16,15 +16,25 @@ run's aligner and data, loads the checkpoint, collects the held-out clips
 A protocol is a plain function ``protocol(aligner, held_out, out_dir) -> Evaluation``,
 so tests and benchmarks call it without the command line.
 
-The framework lives in three modules: :mod:`~skelagnostic.evaluation.protocol`
+The framework lives in four modules: :mod:`~skelagnostic.evaluation.protocol`
 (what a protocol receives and returns), :mod:`~skelagnostic.evaluation.reconstruction`
-(the reconstruction rows a simple protocol reuses) and
+(the reconstruction rows a simple protocol reuses), :mod:`~skelagnostic.evaluation.feet`
+(every method's foot skate on the ground truth's contacts) and
 :mod:`~skelagnostic.evaluation.report` (the files above); this package re-exports
 their public names, the import path plugins use::
 
     from skelagnostic.evaluation import MODEL, Evaluation, HeldOut, mean_rows
 """
 
+from skelagnostic.evaluation.feet import (
+    FOOT_SKATE_METRICS,
+    GROUND_TRUTH,
+    SKATE_THRESHOLD,
+    foot_skate_figures,
+    foot_skate_rows,
+    own_foot_skate,
+    skate_feet,
+)
 from skelagnostic.evaluation.protocol import (
     MODEL,
     SPLITS,
@@ -40,18 +50,25 @@ from skelagnostic.evaluation.reconstruction import RECONSTRUCTION_METRICS, recon
 from skelagnostic.evaluation.report import markdown, portable_names, write_evaluation
 
 __all__ = [
+    "FOOT_SKATE_METRICS",
+    "GROUND_TRUTH",
     "MODEL",
     "RECONSTRUCTION_METRICS",
+    "SKATE_THRESHOLD",
     "SPLITS",
     "Evaluation",
     "EvaluationError",
     "HeldOut",
     "clips_of_split",
+    "foot_skate_figures",
+    "foot_skate_rows",
     "held_out",
     "markdown",
     "mean_rows",
+    "own_foot_skate",
     "portable_names",
     "reconstruction_rows",
+    "skate_feet",
     "track",
     "write_evaluation",
 ]

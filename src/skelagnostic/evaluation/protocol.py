@@ -9,7 +9,7 @@ and its baselines in an :class:`Evaluation`; :func:`mean_rows` averages them and
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -193,6 +193,11 @@ class Evaluation:
         extra: More JSON-able results (curves, per-setting tables).
         plots: File names of the plots the protocol wrote into its ``out_dir``.
         notes: Sentences for the report (what the baselines are, caveats).
+        outputs: ``clip id -> function making the model's output motion`` of a row's
+            clip (what a user of the model gets, e.g. its retarget or interpolation),
+            called only when asked (``evaluate cleanup=footlock`` measures a cleanup
+            on them); not written to the report. A protocol without a motion output
+            leaves it empty.
     """
 
     metrics: dict[str, str]
@@ -200,6 +205,7 @@ class Evaluation:
     extra: dict[str, Any] = field(default_factory=dict)
     plots: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    outputs: dict[str, Callable[[], Motion]] = field(default_factory=dict)
 
     @property
     def methods(self) -> list[str]:

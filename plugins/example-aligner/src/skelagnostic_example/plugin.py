@@ -5,6 +5,7 @@ Hook implementations of the example plugin (the ``skelagnostic`` entry point).
 
 from __future__ import annotations
 
+from functools import partial
 from importlib.resources import files
 from typing import Any
 
@@ -45,10 +46,12 @@ def reconstruction(aligner: Any, held_out: Any, out_dir: Any) -> Any:
     """Encode-decode pose error on held-out clips, beside the mean-pose baselines."""
     from skelagnostic.evaluation import RECONSTRUCTION_METRICS, Evaluation, reconstruction_rows
 
-    rows = reconstruction_rows(
-        held_out.clips, lambda m: aligner.decode(aligner.encode(m), m.skeleton)
-    )
-    return Evaluation(dict(RECONSTRUCTION_METRICS), rows)
+    def reconstruct(motion: Any) -> Any:
+        return aligner.decode(aligner.encode(motion), motion.skeleton)
+
+    rows = reconstruction_rows(held_out.clips, reconstruct)
+    outputs = {str(c.name): partial(reconstruct, c) for c in held_out.clips}
+    return Evaluation(dict(RECONSTRUCTION_METRICS), rows, outputs=outputs)
 
 
 @hookimpl

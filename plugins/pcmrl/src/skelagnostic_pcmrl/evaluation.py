@@ -60,16 +60,21 @@ from typing import Any
 
 import torch
 
+from skelagnostic.analysis import contacts_of_positions
 from skelagnostic.baselines import direction_copy, lerp_slerp, name_copy, primal_copy
 from skelagnostic.core.motion import UNITS, Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.evaluation import (
+    FOOT_SKATE_METRICS,
+    GROUND_TRUTH,
     MODEL,
     Evaluation,
     EvaluationError,
     HeldOut,
     clips_of_split,
+    foot_skate_figures,
+    skate_feet,
     track,
 )
 from skelagnostic.io.markdown import markdown_cell
@@ -177,7 +182,9 @@ def evaluate_pair(
         stride: Use every ``stride``-th frame for the metrics (1: all).
 
     Returns:
-        ``{"knn@<sigma>": ..., "end": ..., "end_authors": ...}`` (see the module).
+        ``{"knn@<sigma>": ..., "end": ..., "end_authors": ...}`` (see the module), and
+        ``foot_skate_cm_s``, ``foot_skate_ratio`` of the result on the contacts of the
+        source, on the frames the metrics read (every ``stride``-th).
 
     Raises:
         SkelagnosticError: The frame counts differ.
@@ -213,7 +220,28 @@ def evaluate_pair(
         distance="mean_abs",
     )
     out["end_authors"] = 100.0 * float(end_authors)
-    return out
+    return out | _skate(res_pos, src_pos, res.skeleton, src.skeleton, src.fps / stride)
+
+
+def _skate(
+    res_pos: torch.Tensor,
+    src_pos: torch.Tensor,
+    target: Skeleton,
+    source: Skeleton,
+    fps: float,
+) -> dict[str, float]:
+    """Foot skate (:data:`~skelagnostic.evaluation.FOOT_SKATE_METRICS`) of the result.
+
+    The contacts are detected on the source's feet and read on the target's feet of
+    the same legs (:func:`~skelagnostic.evaluation.skate_feet`, one foot per leg in
+    body-group order); nothing when either rig has no legs or their counts differ.
+    Positions in metres, at ``fps`` (the frames the metrics read).
+    """
+    src_feet, res_feet = skate_feet(source), skate_feet(target)
+    if src_feet is None or res_feet is None or len(src_feet) != len(res_feet):
+        return {}
+    contacts = contacts_of_positions(src_pos[:, src_feet], fps, source.up_index, source.height())
+    return foot_skate_figures(res_pos, contacts, res_feet, fps, target.up_index, target.height())
 
 
 def evaluate_clips(
@@ -235,7 +263,8 @@ def evaluate_clips(
             ``seed``, ``stride``).
 
     Returns:
-        ``{"rows": {row: {metric: mean}}, "per_clip": [...], "options": ...}``.
+        ``{"rows": {row: {metric: mean}}, "per_clip": [...], "options": ...}``; a mean
+        is over the clips that have the figure (the foot skate needs a planted foot).
     """
     per_clip = []
     for motion in track(clips, "held-out clips"):
@@ -250,11 +279,13 @@ def evaluate_clips(
             rows["pcmrl"] = evaluate_pair(aligner.retarget(motion, target), motion, **options)
         per_clip.append({"frames": motion.num_frames, "rows": rows})
     names = list(per_clip[0]["rows"]) if per_clip else []
-    metrics = list(per_clip[0]["rows"][names[0]]) if names else []
-    mean = {
-        r: {m: sum(c["rows"][r][m] for c in per_clip) / len(per_clip) for m in metrics}
-        for r in names
-    }
+    mean = {}
+    for r in names:  # over the clips that have the figure (a clip may plant no foot)
+        have: dict[str, list[float]] = {}
+        for clip in per_clip:
+            for metric, value in clip["rows"][r].items():
+                have.setdefault(metric, []).append(value)
+        mean[r] = {m: sum(v) / len(v) for m, v in have.items()}
     return {
         "rows": mean,
         "per_clip": per_clip,
@@ -277,7 +308,7 @@ def format_table(result: dict[str, Any]) -> str:
     )
     lines = [head, "|" + "---|" * (len(metrics) + 1)]
     for name, values in rows.items():
-        cells = " | ".join(f"{values[m]:.4f}" for m in metrics)
+        cells = " | ".join(f"{values.get(m, float('nan')):.4f}" for m in metrics)
         lines.append(f"| {markdown_cell(name)} | {cells} |")
     return "\n".join(lines)
 
@@ -297,6 +328,9 @@ TABLE2_METRICS = {
     "it: absolute coordinate difference averaged over frames, wrists and toes (no head) and "
     "x, y, z; the definition compared with Table 2's L_end (PC-MRL 5.6258, primal skeleton "
     "9.6990), lower is better",
+    "foot_skate_cm_s": "mean horizontal speed of the target's feet (cm/s) where the source's "
+    "feet are planted (on the frames the metrics read), lower is better",
+    "foot_skate_ratio": FOOT_SKATE_METRICS["foot_skate_ratio"],
 }
 
 
@@ -341,10 +375,12 @@ def reconstruction_protocol(
     return Evaluation(
         dict(TABLE2_METRICS),
         rows,
+        outputs={str(c.name): partial(aligner.retarget, c, target) for c in clips},
         extra={"options": result["options"] | {"max_frames": max_frames}},
         notes=[
             f"target skeleton: {target.name or f'{target.num_joints} joints'}; 'original' is an "
-            "independent cloud on the source motion (the best reachable KNN value)",
+            "independent cloud on the source motion (the best reachable KNN value); its foot "
+            "skate is the source's own (a reference, not a baseline)",
             (
                 "each clip whole"
                 if max_frames is None
@@ -429,7 +465,10 @@ def interpolation_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evalua
         "lafan1_*: the LaFAN1 benchmark's metric definitions (L2P z-scored per channel with "
         f"statistics of {stats_from}; L2P/L2Q over non-key frames, NPSS on quaternions over "
         "the window) on this protocol's windows and keys, not the benchmark's 65-frame "
-        "windows with 10 context frames"
+        "windows with 10 context frames",
+        "foot_skate_*: the feet's horizontal speed on the frames where the target window's "
+        "feet are planted (contacts detected on the ground truth, skelagnostic.analysis); "
+        f"`{GROUND_TRUTH}` is the data's own skate, a reference, not a baseline",
     ]
     short = [str(c.name) for c in held.clips if c.num_frames < window]
     if short:
@@ -459,4 +498,28 @@ def interpolation_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evalua
         )
         for g in GAPS
     }
-    return Evaluation(metrics, rows, notes=notes)
+    metrics |= {
+        f"{k}@{g}": f"{text} with a key every {g} frames"
+        for k, text in FOOT_SKATE_METRICS.items()
+        for g in GAPS
+    }
+    outputs = {str(c.name): partial(aligner.interpolate, c, output_keys(c)) for c in clips}
+    return Evaluation(metrics, rows, notes=notes, outputs=outputs)
+
+
+#: Keyframe gap of the outputs :func:`interpolation_protocol` hands to a cleanup
+#: (``evaluate cleanup=footlock``): the middle gap of Table 1.
+OUTPUT_GAP = 15
+
+
+def output_keys(clip: Motion, gap: int = OUTPUT_GAP) -> list[int]:
+    """Keys every ``gap`` frames of a whole clip and on its last frame.
+
+    Examples:
+        >>> from skelagnostic import procedural
+        >>> walk, _ = procedural.generate("biped22", "walk", seconds=1.0, fps=30, seed=0)
+        >>> output_keys(walk)
+        [0, 15, 30]
+    """
+    last = clip.num_frames - 1
+    return sorted({*range(0, last + 1, gap), last})

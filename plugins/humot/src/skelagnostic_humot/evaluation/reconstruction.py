@@ -24,16 +24,28 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import torch
 
+from skelagnostic.analysis import contacts_of_positions
 from skelagnostic.baselines import mean_pose, mean_pose_on_trajectory
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
-from skelagnostic.evaluation import MODEL, Evaluation, EvaluationError, HeldOut
+from skelagnostic.core.units import UNITS, infer_units
+from skelagnostic.evaluation import (
+    FOOT_SKATE_METRICS,
+    GROUND_TRUTH,
+    MODEL,
+    Evaluation,
+    EvaluationError,
+    HeldOut,
+    foot_skate_rows,
+    skate_feet,
+)
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.data import Topology, gather_subset, prepare_chunks
 from skelagnostic_humot.evaluation.held_out import (
@@ -45,6 +57,7 @@ from skelagnostic_humot.evaluation.held_out import (
 
 __all__ = [
     "DENOISING_FROM_CM",
+    "chunk_contacts",
     "chunks_of",
     "denoising_curve",
     "denoising_figures",
@@ -56,6 +69,15 @@ __all__ = [
     "upsampling_curve",
 ]
 
+#: Index of the up axis of the model frame (:func:`~skelagnostic_humot.template.to_model_frame`).
+MODEL_UP = 2
+#: The note on the foot-skate columns of ``humot.reconstruction``.
+SKATE_NOTE = (
+    f"foot skate: the feet's horizontal speed inside each 1 s chunk on the frames where the "
+    f"clip's own feet are planted (contacts detected on the ground truth, "
+    f"skelagnostic.analysis); `{GROUND_TRUTH}` is the clip's own skate, a reference, not a "
+    "baseline"
+)
 #: Noise level (sigma, cm) from which a denoised output must stay below its noisy input.
 DENOISING_FROM_CM = 4.0
 
@@ -68,6 +90,30 @@ def chunks_of(motion: Motion, chunk: int = 30, units: str | None = None) -> torc
     pos = motion.global_positions().float()
     count = pos.shape[0] // chunk
     return pos[: count * chunk].reshape(count, chunk, *pos.shape[1:])
+
+
+def chunk_contacts(
+    chunks: torch.Tensor, skeleton: Skeleton, feet: Sequence[int] | None, units: str | None = None
+) -> torch.Tensor | None:
+    """``[C, F, len(feet)]`` foot contacts of :func:`chunks_of`'s chunks, on the clip as a whole.
+
+    The rule of :func:`~skelagnostic.analysis.foot_contacts` on the chunks' frames taken
+    as one sequence (the clip at 30 fps, its floor over all of them), then cut again:
+    no second forward kinematics.
+
+    Args:
+        chunks: ``[C, F, J, 3]`` world positions (metres) of one clip (or of clips of one
+            skeleton, one after the other).
+        skeleton: Their skeleton (its height and up axis).
+        feet: The foot joints; ``None``: no contacts.
+        units: The skeleton's length unit (default: guessed, as :func:`chunks_of`).
+    """
+    if feet is None or not len(chunks):
+        return None
+    metres = skeleton.height() * UNITS[infer_units(skeleton, units)]
+    flat = chunks.reshape(-1, *chunks.shape[2:])[:, list(feet)]
+    contacts = contacts_of_positions(flat, 30.0, skeleton.up_index, metres)
+    return contacts.reshape(*chunks.shape[:2], len(feet))
 
 
 def _mpjpe(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -106,16 +152,33 @@ def run_network(
 
 
 def reconstruction(
-    model: HumotAligner, chunks: torch.Tensor, topology: Topology, up_axis: str = "y"
-) -> dict[str, float]:
+    model: HumotAligner,
+    chunks: torch.Tensor,
+    topology: Topology,
+    up_axis: str = "y",
+    feet: Sequence[int] | None = None,
+    contacts: torch.Tensor | None = None,
+) -> dict[str, Any]:
     """Encode-decode MPJPE on the chunks' own templates, with static baselines.
+
+    Args:
+        model: The model.
+        chunks: ``[C, F, J, 3]`` world positions (metres), :func:`chunks_of`.
+        topology: The chunks' topology.
+        up_axis: Up axis of ``chunks``.
+        feet: Foot joints for the foot skate (:func:`~skelagnostic.evaluation.skate_feet`).
+        contacts: ``[C, F, len(feet)]`` contacts of the chunks' feet
+            (:func:`chunk_contacts`); without them or ``feet``, no ``foot_skate`` figures.
 
     Returns:
         ``mpjpe_cm``, ``mpjpe_std_cm`` (over chunks), ``mpjpe_over_height``, the
         baselines ``mean_pose_cm`` (the chunk's temporal mean pose), ``template_cm``
         (the template at the chunk centre) and ``mean_pose_on_trajectory_cm`` (the
         temporal mean of the root-relative pose plus the true root position of each
-        frame), ``chunks``.
+        frame), ``chunks``; and ``foot_skate``: ``method -> {foot_skate_cm_s,
+        foot_skate_ratio}`` for ``model``, ``mean_pose``, ``template``,
+        ``mean_pose_on_trajectory`` and ``ground_truth``, on ``contacts``
+        (:func:`~skelagnostic.evaluation.foot_skate_rows`; inside each chunk, at 30 fps).
     """
     pos, tmpl = prepare_chunks(chunks, topology, up_axis)
     rec = run_network(model, pos, tmpl, tmpl)
@@ -129,6 +192,15 @@ def reconstruction(
     tmpl_pose = (tmpl - tmpl[:, topology.major].mean(dim=1, keepdim=True))[:, None] + centre
     on_trajectory = mean_pose_on_trajectory(pos)
     height = float((tmpl[..., 2].amax(-1) - tmpl[..., 2].amin(-1)).mean())
+    guesses = {
+        MODEL: rec,
+        "mean_pose": static,
+        "template": tmpl_pose.expand_as(pos),
+        "mean_pose_on_trajectory": on_trajectory,
+    }
+    skates = {}
+    if feet is not None and contacts is not None:
+        skates = foot_skate_rows(guesses, pos, feet, 30.0, MODEL_UP, height, contacts=contacts)
     return {
         "mpjpe_cm": 100 * float(err.mean()),
         "mpjpe_std_cm": 100 * float(err.std()) if len(err) > 1 else 0.0,
@@ -137,6 +209,7 @@ def reconstruction(
         "template_cm": 100 * float(_mpjpe(tmpl_pose.expand_as(pos), pos).mean()),
         "mean_pose_on_trajectory_cm": 100 * float(_mpjpe(on_trajectory, pos).mean()),
         "chunks": len(pos),
+        "foot_skate": skates,
     }
 
 
@@ -323,9 +396,11 @@ def reconstruction_protocol(
         "the chunk's mean root-relative pose along the true root path; the identity "
         "baseline of denoising is the curves' input_mpjpe_cm",
         SEEN_NOTE,
+        SKATE_NOTE,
     ]
     humans, trained = protocol_clips(held, notes, extra, extra_units)
     rows: list[dict[str, Any]] = []
+    outputs: dict[str, Callable[[], Motion]] = {}
     groups: dict[tuple[Any, ...], tuple[str, list[torch.Tensor], Skeleton]] = {}
     for clip in humans:
         chunks = chunks_of(clip, aligner.hparams.chunk)
@@ -337,23 +412,21 @@ def reconstruction_protocol(
             continue
         sk = clip.skeleton
         status = topology_status(sk, trained)
-        rec = reconstruction(aligner, chunks, aligner.topology(sk), sk.up_axis)
+        feet = skate_feet(sk)
+        contacts = chunk_contacts(chunks, sk, feet, clip.units)
+        rec = reconstruction(aligner, chunks, aligner.topology(sk), sk.up_axis, feet, contacts)
+        values = {
+            MODEL: {"mpjpe_cm": rec["mpjpe_cm"], "mpjpe_over_height": rec["mpjpe_over_height"]},
+            "mean_pose": {"mpjpe_cm": rec["mean_pose_cm"]},
+            "template": {"mpjpe_cm": rec["template_cm"]},
+            "mean_pose_on_trajectory": {"mpjpe_cm": rec["mean_pose_on_trajectory_cm"]},
+        }
+        for method, skate in rec["foot_skate"].items():
+            values[method] = values.get(method, {}) | skate
         rows.append(
-            {
-                "clip": str(clip.name),
-                "chunks": rec["chunks"],
-                "topology": status,
-                "values": {
-                    MODEL: {
-                        "mpjpe_cm": rec["mpjpe_cm"],
-                        "mpjpe_over_height": rec["mpjpe_over_height"],
-                    },
-                    "mean_pose": {"mpjpe_cm": rec["mean_pose_cm"]},
-                    "template": {"mpjpe_cm": rec["template_cm"]},
-                    "mean_pose_on_trajectory": {"mpjpe_cm": rec["mean_pose_on_trajectory_cm"]},
-                },
-            }
+            {"clip": str(clip.name), "chunks": rec["chunks"], "topology": status, "values": values}
         )
+        outputs[str(clip.name)] = partial(aligner.denoise, clip)  # the whole clip, through IK
         name = sk.name or f"{sk.num_joints} joints"
         name = name if status == "unknown" else f"{name} ({status})"
         groups.setdefault((sk.topology_key(), status), (name, [], sk))[1].append(chunks)
@@ -383,9 +456,11 @@ def reconstruction_protocol(
         {
             "mpjpe_cm": "MPJPE of 1 s chunks decoded on their own template, cm, lower is better",
             "mpjpe_over_height": "MPJPE / skeleton height, lower is better",
+            **FOOT_SKATE_METRICS,
         },
         rows,
         extra=extra,
         plots=plots,
         notes=notes,
+        outputs=outputs,
     )

@@ -24,19 +24,28 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from skelagnostic import procedural
-from skelagnostic.analysis import foot_contacts
 from skelagnostic.baselines import direction_copy, name_copy, primal_copy
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import SkelagnosticError
-from skelagnostic.evaluation import MODEL, Evaluation, HeldOut
-from skelagnostic.metrics.functional import foot_skate
+from skelagnostic.evaluation import (
+    GROUND_TRUTH,
+    MODEL,
+    SKATE_THRESHOLD,
+    Evaluation,
+    HeldOut,
+    foot_skate_rows,
+    skate_feet,
+)
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.evaluation.held_out import (
     HELD_OUT_SEED,
@@ -70,14 +79,25 @@ def _at_30fps(motion: Motion) -> Motion:
 
 def _motion_error(pred: Motion, truth: Motion) -> dict[str, float]:
     """MPJPE (truth's units) and MPJPE / height, globally and with the roots aligned."""
+    _check_joints(pred, truth)
+    return _position_error(
+        pred.global_positions().double(),
+        truth.global_positions().double(),
+        truth.skeleton.height(),
+    )
+
+
+def _check_joints(pred: Motion, truth: Motion) -> None:
     if pred.skeleton.joint_names != truth.skeleton.joint_names:
         raise SkelagnosticError(
             "retargeting error: prediction and ground truth have different joints"
         )
-    frames = min(pred.num_frames, truth.num_frames)
-    a = pred.global_positions()[:frames].double()
-    b = truth.global_positions()[:frames].double()
-    height = truth.skeleton.height()
+
+
+def _position_error(a: torch.Tensor, b: torch.Tensor, height: float) -> dict[str, float]:
+    """:func:`_motion_error` of global positions ``[T, J, 3]`` (the common frames)."""
+    frames = min(a.shape[0], b.shape[0])
+    a, b = a[:frames], b[:frames]
     err = float((a - b).norm(dim=-1).mean())
     local = float(((a - a[:, :1]) - (b - b[:, :1])).norm(dim=-1).mean())
     return {
@@ -155,7 +175,10 @@ def cycle_error(
     Returns:
         ``humot_*`` and ``<baseline>_*`` errors (one per :data:`BASELINES`; see
         :func:`retargeting_procedural`;
-        ``mpjpe`` in the source's units).
+        ``mpjpe`` in the source's units), and each one's ``*_foot_skate`` (cm/s) and
+        ``*_foot_skate_ratio`` on the contacts of the source
+        (:func:`~skelagnostic.evaluation.foot_skate_rows`), with the source's own as
+        ``source_foot_skate`` and ``source_foot_skate_ratio`` (NaN without contacts).
     """
     unit = infer_units(motion.skeleton, units or motion.units)
     truth = motion.resample(30.0) if motion.fps != 30.0 else motion
@@ -167,31 +190,22 @@ def cycle_error(
     for name, f in BASELINES.items():
         there = f(_at_30fps(motion), via, unit, via_units)
         preds[name] = f(there, motion.skeleton, there.units, unit)
-    for method, pred in preds.items():
-        for key, value in _motion_error(pred, truth).items():
+    truth_pos, height = truth.global_positions().double(), truth.skeleton.height()
+    positions = {}
+    for method, pred in preds.items():  # forward kinematics once per output
+        _check_joints(pred, truth)
+        positions[method] = pred.global_positions().double()
+        for key, value in _position_error(positions[method], truth_pos, height).items():
             results[f"{method}_{key}"] = value
-    results |= _foot_skates(preds, truth, unit)
+    sk = truth.skeleton
+    skates = foot_skate_rows(
+        positions, truth_pos, skate_feet(sk), truth.fps, sk.up_index, height, 100.0 * UNITS[unit]
+    )
+    for method, figures in skates.items():
+        name = "source" if method == GROUND_TRUTH else method
+        results[f"{name}_foot_skate"] = figures.get("foot_skate_cm_s", math.nan)
+        results[f"{name}_foot_skate_ratio"] = figures.get("foot_skate_ratio", math.nan)
     return results
-
-
-def _foot_skates(preds: Mapping[str, Motion], truth: Motion, unit: str) -> dict[str, float]:
-    """``<method>_foot_skate`` (cm/s) of each prediction, on the contacts of ``truth``.
-
-    The contacts are detected once on the ground truth (:func:`foot_contacts`), so
-    every method is scored on the same planted frames; the truth's own skate is
-    ``source_foot_skate``, the floor a faithful method reaches.
-    """
-    contacts, feet = foot_contacts(truth)
-    frames = min(truth.num_frames, *(p.num_frames for p in preds.values()))
-    to_cm = 100.0 * UNITS[unit]
-    skates = {}
-    for method, motion in {"source": truth, **preds}.items():
-        positions = motion.global_positions()[:frames].double() * to_cm
-        value = foot_skate(
-            positions, contacts[:frames], truth.fps, up_axis=truth.skeleton.up_axis, feet=feet
-        )
-        skates[f"{method}_foot_skate"] = float(value)
-    return skates
 
 
 def paired_by_method(mean: Mapping[str, float]) -> dict[str, dict[str, float]]:
@@ -240,7 +254,8 @@ def retarget_protocol(
         "with the source at 30 fps; baselines: name_copy, primal_copy and direction_copy "
         "(skelagnostic.baselines)",
         "foot skate: on the contacts detected on the source (skelagnostic.analysis); the "
-        "source's own skate is in extra.source_foot_skate_cm_s",
+        f"source's own skate is the `{GROUND_TRUTH}` row (a reference, not a baseline) and "
+        "extra.source_foot_skate_cm_s",
         SEEN_NOTE,
     ]
     humans, trained = protocol_clips(held, notes, extra, extra_units)
@@ -260,7 +275,12 @@ def retarget_protocol(
                 "cycle_over_height": cyc[f"{prefix}_mpjpe_over_height"],
                 "cycle_root_aligned_over_height": cyc[f"{prefix}_root_aligned_over_height"],
                 "cycle_foot_skate_cm_s": cyc[f"{prefix}_foot_skate"],
+                "cycle_foot_skate_ratio": cyc[f"{prefix}_foot_skate_ratio"],
             }
+        values[GROUND_TRUTH] = {
+            "cycle_foot_skate_cm_s": cyc["source_foot_skate"],
+            "cycle_foot_skate_ratio": cyc["source_foot_skate_ratio"],
+        }
         rows.append(
             {
                 "clip": str(clip.name),
@@ -277,6 +297,8 @@ def retarget_protocol(
             "cycle_root_aligned_over_height": "the same with the roots aligned, lower is better",
             "cycle_foot_skate_cm_s": "horizontal speed of the feet (cm/s) on the frames where "
             "the source's feet are planted, lower is better",
+            "cycle_foot_skate_ratio": "share of those planted steps faster than "
+            f"{SKATE_THRESHOLD:g} source heights/s, lower is better",
         },
         rows,
         extra={

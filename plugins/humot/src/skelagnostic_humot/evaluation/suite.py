@@ -16,9 +16,11 @@ from skelagnostic import procedural
 from skelagnostic.core.motion import Motion
 from skelagnostic.core.skeleton import Skeleton
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.evaluation import skate_feet
 from skelagnostic_humot.aligner import HumotAligner
 from skelagnostic_humot.evaluation.held_out import HELD_OUT_SEED, HUMAN_KINDS
 from skelagnostic_humot.evaluation.reconstruction import (
+    chunk_contacts,
     chunks_of,
     denoising_curve,
     reconstruction,
@@ -60,11 +62,18 @@ def evaluate_clips(
                 )
         unit = (units or {}).get(name)
         chunks = torch.cat([chunks_of(m, model.hparams.chunk, unit) for m in motions])
-        topo = model.topology(sk)
+        topo, feet = model.topology(sk), skate_feet(sk)
         results[name] = {
             "joints": sk.num_joints,
             "clips": [m.name for m in motions],
-            "reconstruction": reconstruction(model, chunks, topo, sk.up_axis),
+            "reconstruction": reconstruction(
+                model,
+                chunks,
+                topo,
+                sk.up_axis,
+                feet,
+                chunk_contacts(chunks, sk, feet, unit or motions[0].units),
+            ),
             "denoising": denoising_curve(model, chunks, topo, up_axis=sk.up_axis),
             "upsampling": upsampling_curve(model, chunks, topo, up_axis=sk.up_axis),
         }

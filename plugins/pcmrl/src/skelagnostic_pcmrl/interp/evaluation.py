@@ -46,9 +46,12 @@ from typing import Any
 
 import torch
 
+from skelagnostic.analysis import contacts_of_positions
 from skelagnostic.core import quaternion as Q
 from skelagnostic.core.motion import Motion
+from skelagnostic.core.units import UNITS, infer_units
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.evaluation import GROUND_TRUTH, foot_skate_figures, skate_feet
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import feature_npss, l2p, l2q, npss
 from skelagnostic_pcmrl.interp.clips import gap_keys
@@ -242,7 +245,10 @@ def evaluate(
             ``lafan1_l2p``, ``lafan1_l2q``, ``lafan1_npss``.
 
     Returns:
-        ``{"protocol": {...}, "results": {method: {gap: {metric: value}}}}``.
+        ``{"protocol": {...}, "results": {method: {gap: {metric: value}}}}``; every
+        method also has ``foot_skate_cm_s`` and ``foot_skate_ratio`` on the contacts of
+        the target windows (:func:`~skelagnostic.evaluation.foot_skate_figures`), and
+        the target's own skate is the method ``ground_truth`` (when the skeleton has legs).
 
     Raises:
         SkelagnosticError: No clip is long enough for one window, or an unknown metric set.
@@ -264,6 +270,7 @@ def evaluate(
     authors_target = [_authors_inputs(w, joints) for w in wins]
     a_pos = torch.stack([p for p, _ in authors_target])
     a_rot = torch.stack([r for _, r in authors_target])
+    skate = _skate_setup(wins, target_pos)
     results: dict[str, dict[str, dict[str, float]]] = {}
     for name, method in methods.items():
         results[name] = {}
@@ -272,6 +279,11 @@ def evaluate(
             keys = key_mask.nonzero().squeeze(1).tolist()
             preds = [method(w, keys).double() for w in wins]
             row: dict[str, float] = {}
+            pred_pos = torch.stack(
+                [_centred_positions_like(p, w) for p, w in zip(preds, wins, strict=True)]
+            )
+            if skate is not None:
+                row |= foot_skate_figures(pred_pos, *skate)
             if "authors" in metrics:
                 pairs = [_authors_inputs(p, joints, r) for p, r in zip(preds, a_rot, strict=True)]
                 row |= authors_table1(
@@ -284,9 +296,6 @@ def evaluate(
                 )
             if "lafan1" in metrics:
                 mean, std = stats
-                pred_pos = torch.stack(
-                    [_centred_positions_like(p, w) for p, w in zip(preds, wins, strict=True)]
-                )
                 pred_rot = torch.stack([p.global_rotations() for p in preds])
                 mask = (~key_mask).expand(len(wins), -1)
                 row |= {
@@ -295,6 +304,8 @@ def evaluate(
                     "lafan1_npss": float(npss(pred_rot, target_rot, "abs")),
                 }
             results[name][str(gap)] = row
+    if skate is not None:  # the ground truth's own skate: a reference row, last
+        results[GROUND_TRUTH] = {str(g): foot_skate_figures(target_pos, *skate) for g in gaps}
     return {
         "protocol": {
             "window": window,
@@ -313,6 +324,22 @@ def evaluate(
         },
         "results": results,
     }
+
+
+def _skate_setup(wins: Sequence[Motion], target_pos: torch.Tensor) -> tuple[Any, ...] | None:
+    """The arguments of :func:`~skelagnostic.evaluation.foot_skate_figures` after positions.
+
+    Contacts are detected once on the target windows (``[W, T, J, 3]``); ``None`` for a
+    skeleton without legs.
+    """
+    sk, fps = wins[0].skeleton, wins[0].fps
+    feet = skate_feet(sk)
+    if feet is None:
+        return None
+    height = sk.height()
+    contacts = contacts_of_positions(target_pos[..., feet, :], fps, sk.up_index, height)
+    to_cm = 100.0 * UNITS[infer_units(sk, wins[0].units)]
+    return contacts, feet, fps, sk.up_index, height, to_cm
 
 
 def _centred_positions_like(pred: Motion, target: Motion) -> torch.Tensor:

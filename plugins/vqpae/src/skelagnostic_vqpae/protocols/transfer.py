@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +28,13 @@ from skelagnostic.analysis import (
 from skelagnostic.core.motion import Motion
 from skelagnostic.evaluation import (
     MODEL,
+    SKATE_THRESHOLD,
     Evaluation,
     EvaluationError,
     HeldOut,
     clips_of_split,
     mean_rows,
+    own_foot_skate,
     track,
 )
 from skelagnostic_vqpae.embed import ClipEmbedding, embed_clip
@@ -47,6 +50,7 @@ from skelagnostic_vqpae.transfer import (
 
 __all__ = [
     "OWN_RATE",
+    "SOURCE",
     "TRANSFER_METRICS",
     "UNSCALED",
     "touchdown_bound",
@@ -79,7 +83,16 @@ TRANSFER_METRICS = {
     "1/s^2 (frame-to-frame smoothness), lower is smoother",
     "accel_max_height_per_s2": "largest per-frame joint acceleration over the skeleton height, "
     "1/s^2 (the worst jump, e.g. at a cut between replayed windows), lower is smoother",
+    "foot_skate_cm_s": "mean horizontal speed of the output's feet on the frames where they "
+    "are planted (contacts detected on the output itself: the target character has no ground "
+    "truth), cm/s, lower is better",
+    "foot_skate_ratio": f"share of those planted steps faster than {SKATE_THRESHOLD:g} skeleton "
+    "heights/s, lower is better",
 }
+
+#: The reference row of :func:`transfer_rows`: the source clip's own foot skate (on its
+#: own contacts), what the data itself has; not a method.
+SOURCE = "source"
 
 
 #: Baseline of :func:`transfer_rows`: classical motion matching (1 s replays, no time warping).
@@ -197,7 +210,8 @@ def transfer_rows(
         values = {}
         for method, out in made.items():
             hz = gait_frequency(out)
-            mean_acc, max_acc = acceleration(out)
+            positions = out.global_positions()  # once for the smoothness and the skate
+            mean_acc, max_acc = acceleration(out, positions)
             values[method] = {
                 "frequency_error_pct": 100 * abs(hz - source_hz) / source_hz,
                 "output_hz": hz,
@@ -205,7 +219,9 @@ def transfer_rows(
                 **rhythm_figures(clip, out),
                 "accel_height_per_s2": mean_acc,
                 "accel_max_height_per_s2": max_acc,
+                **own_foot_skate(out, positions),
             }
+        values[SOURCE] = own_foot_skate(clip)
         rows.append(
             {
                 "clip": str(clip.name),
@@ -338,6 +354,9 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
         "feet's touch-downs wherever a foot steps, what exact frequency estimates would give "
         f"(locomotion rhythm error {bounded('locomotion_rhythm_error_pct'):.1f} %, whole "
         f"clips {bounded('contact_rhythm_error_pct'):.1f} %)",
+        "foot skate: on the contacts detected on each output itself (the target character has "
+        f"no ground truth); `{SOURCE}` is the source clip's own skate on its own contacts, a "
+        "reference, not a method",
     ]
     return Evaluation(
         TRANSFER_METRICS,
@@ -345,4 +364,10 @@ def transfer_protocol(aligner: Any, held: HeldOut, out_dir: Path) -> Evaluation:
         extra={"touchdown_periods": bound},
         plots=["transfer.gif", "transfer_sheet.png"],
         notes=notes,
+        outputs={clip: partial(_made, made[1]) for clip, made in outputs.items()},
     )
+
+
+def _made(motion: Motion) -> Motion:
+    """The motion already made (an :attr:`Evaluation.outputs` entry of a finished transfer)."""
+    return motion
