@@ -163,6 +163,54 @@ def test_unknown_hook_is_rejected() -> None:
         PluginManager(load_entrypoints=False).register(Typo(), "typo")
 
 
+def test_a_distribution_without_a_summary_loads(add_plugin, monkeypatch) -> None:
+    """importlib_metadata's metadata raises KeyError for a missing key (the stdlib's gives None).
+
+    wandb and mlflow install that backport; a plugin distribution without a
+    ``Summary`` line then broke every plugin listing.
+    """
+    from importlib import metadata
+
+    add_plugin("nosummary", REGISTERING_PLUGIN)
+    real = metadata.entry_points
+
+    class StrictMetadata:
+        def __init__(self, inner):
+            self.inner = inner
+
+        def __getitem__(self, key):
+            value = self.inner[key]
+            if value is None:
+                raise KeyError(key)
+            return value
+
+        def get(self, key, default=None):
+            return self.inner.get(key, default)
+
+    class StrictDist:
+        def __init__(self, dist):
+            self._dist = dist
+            self.metadata = StrictMetadata(dist.metadata)
+
+        def __getattr__(self, name):
+            return getattr(self._dist, name)
+
+    class StrictEntryPoint:
+        def __init__(self, ep):
+            self._ep, self.dist = ep, StrictDist(ep.dist)
+
+        def __getattr__(self, name):
+            return getattr(self._ep, name)
+
+    monkeypatch.setattr(
+        metadata,
+        "entry_points",
+        lambda **kw: [StrictEntryPoint(ep) for ep in real(**kw)],
+    )
+    infos = {i.name: i for i in PluginManager().plugins()}
+    assert infos["nosummary"].status == "loaded"
+
+
 def test_plugin_failing_at_import_is_skipped_with_warning(add_plugin) -> None:
     add_plugin("broken", "raise RuntimeError('boom at import')\n")
     add_plugin("good", REGISTERING_PLUGIN)

@@ -212,7 +212,7 @@ class PluginManager:
             dist = ep.dist
             version = dist.version if dist is not None else ""
             source = dist.name if dist is not None else ep.value
-            summary = (dist.metadata["Summary"] or "") if dist is not None else ""
+            summary = (dist.metadata.get("Summary") or "") if dist is not None else ""
             if only is not None and ep.name not in only:
                 self._infos.setdefault(
                     ep.name, PluginInfo(ep.name, version, source, "disabled", description=summary)
