@@ -280,7 +280,8 @@ def test_cli_data_dirs(
         ),
         (
             ["+model.hiden=8"],
-            "model.hiden is not an option of model=example; accepted: hidden, latent, lr",
+            "model.hiden is not an option of model=example; accepted: hidden, latent, optimizer, "
+            "scheduler",
         ),
         (
             ["model.hidden=big"],

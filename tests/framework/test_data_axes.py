@@ -89,16 +89,20 @@ def test_path_entries_and_presets_take_axes(exports: tuple[Path, Path]) -> None:
     assert BVHSource([z_up]).loading() != BVHSource([z_up], up="z").loading()
 
 
-def test_configs_route_up_and_forward_to_the_source(exports: tuple[Path, Path]) -> None:
-    pm = sa.plugins.get_plugin_manager()
+def test_configs_route_up_and_forward_to_the_source(
+    exports: tuple[Path, Path], example_plugin: Path
+) -> None:
+    pm = sa.plugins.PluginManager()  # the example plugin, installed by the fixture
     for data in (
         ["data=bvh", f"data.paths=[{exports[1]}]"],
         ["data=cmu", f"data.root={exports[1]}"],
     ):
-        cfg = app.compose(["model=example", "run_dir=/tmp/x", *data, "data.up=z", "data.forward=y"])
+        overrides = ["model=example", "run_dir=/tmp/x", *data, "data.up=z", "data.forward=y"]
+        cfg = app.compose(overrides, plugin_manager=pm)
         (source,) = app.build_datamodule(cfg, pm).sources
         assert (source.up, source.forward) == ("z", "y")
-    cfg = app.compose(["model=example", "run_dir=/tmp/x", "data=bvh", f"data.paths=[{exports[1]}]"])
+    overrides = ["model=example", "run_dir=/tmp/x", "data=bvh", f"data.paths=[{exports[1]}]"]
+    cfg = app.compose(overrides, plugin_manager=pm)
     cfg.data.up = "w"
     with pytest.raises(AxesError, match=r"data\.up='w'"):
         app.build_datamodule(cfg, pm)

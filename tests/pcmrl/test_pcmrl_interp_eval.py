@@ -20,6 +20,9 @@ from skelagnostic.baselines import lerp_slerp
 from skelagnostic.core import quaternion as Q
 from skelagnostic.evaluation import EvaluationError, HeldOut, held_out
 
+#: The foot-skate figures every motion protocol reports beside its own (issue 50, item 4).
+SKATE = {"foot_skate_cm_s", "foot_skate_ratio"}
+
 
 def _clips() -> list[Motion]:
     out = []
@@ -36,9 +39,11 @@ def test_oracle_scores_zero_and_lerp_matches_a_direct_computation() -> None:
     )
     assert report["protocol"]["windows"] == len(windows(clips, 32, 16)) == 6
     for gap in ("5", "15"):
-        oracle = report["results"]["oracle"][gap]
+        oracle = dict(report["results"]["oracle"][gap])
+        skate = {k: oracle.pop(k) for k in SKATE}  # the truth's own skate: the oracle is it
         assert set(oracle) == {f"{p}{m}" for p in ("", "lafan1_") for m in ("l2p", "l2q", "npss")}
         assert all(v == pytest.approx(0.0, abs=1e-12) for v in oracle.values())
+        assert skate["foot_skate_cm_s"] >= 0 and 0 <= skate["foot_skate_ratio"] <= 1
         assert report["results"]["LERP"][gap]["l2p"] > 0
         assert report["results"]["LERP"][gap]["lafan1_l2p"] > 0
     # L2P of LERP at gap 15 by hand: centred positions, z-scored with the windows' stats,
@@ -103,10 +108,10 @@ def test_interpolation_protocol_rows_beside_lerp(tmp_path: Path) -> None:
         out = interpolation_protocol(model, held, tmp_path)
     assert [r["clip"] for r in out.rows] == ["walk", "run"]
     assert any("short" in n for n in out.notes)
-    assert out.methods == ["model", "lerp_slerp"]
+    assert out.methods == ["model", "lerp_slerp", "ground_truth"]
     assert set(out.metrics) == {
         f"{p}{k}@{g}" for p in ("", "lafan1_") for k in ("l2p", "l2q", "npss") for g in (5, 15, 30)
-    }
+    } | {f"{k}@{g}" for k in SKATE for g in (5, 15, 30)}
     # the same figures as the Table 1 function on the clip, with the shared statistics
     stats = position_stats(windows(clips, 32, 16))
     direct = evaluate({"LERP": lerp_slerp}, clips[:1], 32, 16, stats=stats)
@@ -133,7 +138,7 @@ def test_authors_metrics_of_lerp_by_hand() -> None:
     report = evaluate(
         {"LERP": lerp_slerp}, clips, window=32, stride=16, gaps=(15,), metrics=("authors",)
     )
-    assert set(report["results"]["LERP"]["15"]) == {"l2p", "l2q", "npss"}
+    assert set(report["results"]["LERP"]["15"]) - SKATE == {"l2p", "l2q", "npss"}
     wins = windows(clips, 32, 16)
     keys = [0, 15, 30, 31]
     err = []
@@ -279,7 +284,7 @@ def test_cli_evaluates_a_cmu_hierarchy_model_on_every_cmu_clip(
     assert report["protocol"] == "pcmrl.interpolation" and report["data"]["source"] == "bvh"
     assert report["data"]["split"] == "test"
     assert sorted(Path(c).stem for c in report["data"]["clips"]) == ["131_01", "131_03"]
-    assert report["methods"] == ["model", "lerp_slerp"]
+    assert report["methods"] == ["model", "lerp_slerp", "ground_truth"]
     assert len(report["per_clip"]) == 2
     for metric in ("l2p@15", "lafan1_l2p@30"):
         values = [r["values"]["lerp_slerp"][metric] for r in report["per_clip"]]

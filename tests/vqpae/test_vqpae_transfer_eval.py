@@ -113,10 +113,13 @@ def test_transfer_protocol_runs_on_a_tiny_model(tiny_run, tmp_path) -> None:
     with torch.no_grad():
         out = transfer_protocol(model, held, tmp_path)
     assert [r["clip"] for r in out.rows] == [str(c.name) for c in humans]
-    assert out.methods == [MODEL, UNSCALED, OWN_RATE]
+    # the source human's own foot skate is a reference row, not a method (issue 50, item 4)
+    assert out.methods == [MODEL, UNSCALED, OWN_RATE, "source"]
     for row, clip in zip(out.rows, humans, strict=True):
         assert row["source_hz"] == pytest.approx(gait_frequency(clip))
-        for values in row["values"].values():
+        assert set(row["values"]["source"]) == {"foot_skate_cm_s", "foot_skate_ratio"}
+        for method in (MODEL, UNSCALED, OWN_RATE):
+            values = row["values"][method]
             assert set(values) == set(out.metrics)
             assert values["accel_height_per_s2"] > 0
             if math.isfinite(values["output_hz"]):
@@ -159,7 +162,7 @@ def test_main_experiment_writes_the_transfer_summary(tmp_path, vqpae_cli, capsys
     split = json.loads((run / "split.json").read_text())["clips"]
     assert all(split[row["clip"]] == "val" for row in transfer["per_clip"])
     assert all(split[clip] == "train" for clip in transfer["database_clips"])
-    assert set(transfer["mean"]) == {MODEL, UNSCALED, OWN_RATE}
+    assert set(transfer["mean"]) == {MODEL, UNSCALED, OWN_RATE, "source"}
     for suffix in (".gif", ".png"):
         assert (run / f"vqpae_transfer{suffix}").stat().st_size > 0
 
