@@ -237,6 +237,21 @@ class Aligner(L.LightningModule, ABC):
         """
         return {}
 
+    def stage_datamodule(self) -> Any | None:
+        """The trainer's data module, set up for the stage running; ``None`` without one.
+
+        For ``configure_model`` of an aligner whose layers depend on the data:
+        Lightning calls that hook before every stage (after the data module's
+        ``setup``), and callbacks that copy the model (``callbacks=ema``) call it
+        before their copy, earlier than the module's ``setup``, so it sets the
+        data module up itself.
+        """
+        dm = getattr(self._trainer, "datamodule", None)
+        if dm is not None:
+            fn = self.trainer.state.fn
+            dm.setup(fn.value if fn is not None else "fit")
+        return dm
+
     def supports(self, capability: str) -> bool:
         """Whether the aligner declares ``capability``."""
         return capability in self.capabilities

@@ -249,17 +249,13 @@ class VqpaeModel(Aligner):
     def configure_model(self) -> None:
         """Build the networks from the data module's datasets and copy its statistics.
 
-        Lightning calls this hook before every stage (after the data module's
-        ``setup``), and callbacks that copy the model (``callbacks=ema``) call it
-        before their copy, which is earlier than the module's ``setup``.
+        The data module is set up for the running stage first (:meth:`stage_datamodule`).
         """
         if self.codebook is not None:  # built already, or from a checkpoint's hyperparameters
             return
-        dm = getattr(self._trainer, "datamodule", None)
+        dm = self.stage_datamodule()
         if dm is None:
             self._require_built()  # no data module to build from: say what to pass
-        fn = self.trainer.state.fn
-        dm.setup(fn.value if fn is not None else "fit")
         specs = {
             name: {
                 "channels": dm.channels(name),

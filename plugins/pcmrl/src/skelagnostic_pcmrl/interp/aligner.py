@@ -202,19 +202,12 @@ class PcmrlInterpAligner(Aligner):
         )
 
     def configure_model(self) -> None:
-        """Build the network from the data module's target skeleton.
-
-        Lightning calls this hook before every stage (after the data module's
-        ``setup``), and callbacks that copy the model (``callbacks=ema``) call it
-        before their copy, which is earlier than the module's ``setup``.
-        """
+        """Build the network from the data module's target skeleton (:meth:`stage_datamodule`)."""
         if self.net is not None:  # built already, or from a checkpoint's hyperparameters
             return
-        dm = getattr(self._trainer, "datamodule", None)
+        dm = self.stage_datamodule()
         if dm is None:
             self._require_net()  # no data module to build from: say what to pass
-        fn = self.trainer.state.fn
-        dm.setup(fn.value if fn is not None else "fit")
         skeleton = dm.skeleton
         self.hparams["skeleton"] = skeleton.to_dict()
         self.hparams["fps"] = float(dm.fps)
