@@ -44,6 +44,7 @@ from skelagnostic_humot.model import (
     reconstruction_loss,
 )
 from skelagnostic_humot.template import from_model_frame, major_joints, to_model_frame
+from skelagnostic_humot.xcit import XCA_SCOPES
 
 if TYPE_CHECKING:
     import lightning as L
@@ -117,6 +118,11 @@ class HumotAligner(Aligner):
         fast_path: Compute the network on the valid joints of each chunk only (packed
             tokens); ``False`` runs the padded computation, same values and gradients to
             float rounding, kept as the benchmarks' same-run baseline.
+        xca: The tokens each XCA channel map spans: ``"frame"`` (one frame's joints and
+            latent token, our reading of the paper's Sec. 3.3; every joint reaches the
+            latent of its frame) or ``"sequence"`` (all joints and frames of a chunk:
+            the reading before 0.x, kept for its checkpoints and comparisons; see
+            :mod:`skelagnostic_humot.xcit`).
 
     Raises:
         SkelagnosticError: A hyper-parameter is out of range (the message names it).
@@ -143,6 +149,7 @@ class HumotAligner(Aligner):
         scheduler: OptimizerSpec | None = PAPER_SCHEDULER,
         chunk: int = 30,
         fast_path: bool = True,
+        xca: str = "frame",
     ) -> None:
         super().__init__()
         checks = (
@@ -152,6 +159,7 @@ class HumotAligner(Aligner):
             ("p_other", 0 <= p_other < 1, "in [0, 1)"),
             ("chunk", chunk > 0, "> 0"),
             ("kernel_size", kernel_size % 2 == 1, "odd"),
+            ("xca", xca in XCA_SCOPES, f"one of {', '.join(XCA_SCOPES)}"),
         )
         for name, ok, what in checks:
             if not ok:
@@ -159,7 +167,9 @@ class HumotAligner(Aligner):
         optimizer, scheduler = check_specs(optimizer, scheduler)
         self.save_hyperparameters()
         self.net = HuMoT(
-            HuMoTConfig(dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path)
+            HuMoTConfig(
+                dim, latent, blocks, heads, kernel_size, mlp_ratio, layer_scale, fast_path, xca
+            )
         )
         self._topologies: dict[tuple[Any, ...], Topology] = {}
 

@@ -100,6 +100,8 @@ class HuMoTConfig:
         layer_scale: Initial XCiT layer scale.
         fast_path: Compute on the valid (unpadded) tokens only; ``False`` keeps the padded
             computation (same values, slower on batches of mixed joint counts).
+        xca: The tokens each XCA map spans, ``"frame"`` or ``"sequence"``
+            (:data:`~skelagnostic_humot.xcit.XCA_SCOPES`).
     """
 
     dim: int
@@ -110,12 +112,15 @@ class HuMoTConfig:
     mlp_ratio: float
     layer_scale: float
     fast_path: bool
+    xca: str
 
 
 def _xcit_blocks(config: HuMoTConfig) -> list[XCiTBlock]:
     """The ``config.blocks`` XCiT blocks of an encoder or a decoder."""
     return [
-        XCiTBlock(config.dim, config.heads, config.mlp_ratio, config.layer_scale)
+        XCiTBlock(
+            config.dim, config.heads, config.mlp_ratio, config.layer_scale, xca_scope=config.xca
+        )
         for _ in range(config.blocks)
     ]
 

@@ -5,9 +5,23 @@ laid out on a 2D grid ``[B, G, F, C]``: ``G`` skeleton tokens (joints, plus the
 latent token in the encoder) by ``F`` frames, ``C`` channels. A block is, with
 pre-normalisation and learnable per-channel layer scales ``gamma``::
 
-    x = x + gamma1 * XCA(LN(x))          # attention between channels, over all G*F tokens
+    x = x + gamma1 * XCA(LN(x))          # attention between channels, per frame (see below)
     x = x + gamma3 * LPI(LN(x))          # depthwise 3x3 convs over the G x F grid
     x = x + gamma2 * MLP(LN(x))
+
+**The span of XCA's map** (``scope``). XCA computes one ``d x d`` channel map
+from the covariance of a set of tokens. With ``scope="frame"`` (the default)
+the set is one frame's ``G`` tokens: the map of frame ``f`` is built from that
+frame's joints, so what the latent token reads at frame ``f`` depends on every
+joint at frame ``f``. This is how we read the paper (Sec. 3.3: the transformer
+keeps "the sequence-to-sequence paradigm ... along the temporal dimension" and
+acts as a "sequence-to-item" function over the joints; the token sequence is
+the ``J + 1`` joints, frames are carried along). ``scope="sequence"`` computes
+one map over all ``G x F`` tokens of a sample (XCiT's image reading applied to
+the grid): the map then averages over the frames, and only the LPI convolutions
+carry a joint's frame-local features towards the latent token, one or two rows
+per block, so most joints cannot reach the latent of their frame
+(``docs/reports/humot.md``, "Receptive field").
 
 Variable joint counts in one batch are handled with a token mask ``[B, G]``
 (valid tokens first, padding last): padded tokens are zeroed before every
@@ -38,7 +52,17 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-__all__ = ["XCA", "LocalPatchInteraction", "MaskedBatchNorm", "TokenLayout", "XCiTBlock"]
+__all__ = [
+    "XCA",
+    "XCA_SCOPES",
+    "LocalPatchInteraction",
+    "MaskedBatchNorm",
+    "TokenLayout",
+    "XCiTBlock",
+]
+
+#: The token sets XCA's channel map may span on the joint x time grid (see the module text).
+XCA_SCOPES = ("frame", "sequence")
 
 
 def _scaled_linear(x: torch.Tensor, linear: nn.Linear, scale: torch.Tensor | None) -> torch.Tensor:
@@ -155,16 +179,26 @@ class XCA(nn.Module):
     learnable temperature per head, and the output is ``attention @ v``. The
     cost is linear in the number of tokens.
 
+    :meth:`forward` attends over each set ``[N, C]`` it is given; on the joint x
+    time grid (:meth:`forward_grid`, :meth:`forward_packed`) ``scope`` says which
+    tokens form a set: one frame's (``"frame"``) or a whole sample's (``"sequence"``).
+
     Args:
         dim: Channels.
         heads: Attention heads (must divide ``dim``).
         qkv_bias: Bias of the q/k/v projection.
+        scope: ``"frame"`` or ``"sequence"`` (:data:`XCA_SCOPES`).
     """
 
-    def __init__(self, dim: int, heads: int, qkv_bias: bool = True) -> None:
+    def __init__(
+        self, dim: int, heads: int, qkv_bias: bool = True, scope: str = "frame"
+    ) -> None:
         super().__init__()
         if dim % heads:
             raise ValueError(f"heads ({heads}) must divide dim ({dim})")
+        if scope not in XCA_SCOPES:
+            raise ValueError(f"scope must be one of {XCA_SCOPES}, got {scope!r}")
+        self.scope = scope
         self.heads = heads
         self.temperature = nn.Parameter(torch.ones(heads, 1, 1))
         self.qkv = nn.Linear(dim, 3 * dim, bias=qkv_bias)
@@ -194,14 +228,32 @@ class XCA(nn.Module):
             out = out * mask[..., None].to(out.dtype)
         return out
 
+    def forward_grid(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """:meth:`forward` on the joint x time grid, one map per ``scope`` set.
+
+        Args:
+            x: ``[B, G, F, C]`` tokens.
+            mask: ``[B, G]`` valid rows (``None``: all).
+
+        Returns:
+            ``[B, G, F, C]``, zero on padded rows.
+        """
+        b, g, f, c = x.shape
+        if self.scope == "sequence":
+            flat = None if mask is None else mask[:, :, None].expand(b, g, f).reshape(b, g * f)
+            return self(x.reshape(b, g * f, c), flat).reshape(b, g, f, c)
+        frames = x.transpose(1, 2).reshape(b * f, g, c)
+        per_frame = None if mask is None else mask[:, None].expand(b, f, g).reshape(b * f, g)
+        return self(frames, per_frame).reshape(b, f, g, c).transpose(1, 2)
+
     def forward_packed(
         self, x: torch.Tensor, layout: TokenLayout, scale: torch.Tensor | None = None
     ) -> torch.Tensor:
-        """:meth:`forward` on the valid tokens ``x`` ``[N, C]`` of ``layout``: ``[N, C]``.
+        """:meth:`forward_grid` on the valid tokens ``x`` ``[N, C]`` of ``layout``: ``[N, C]``.
 
         The q/k/v and output projections see the ``N`` valid tokens only; the
         channel attention runs on the grid rebuilt with zeros on padded cells,
-        exactly as :meth:`forward` with the layout's mask.
+        exactly as :meth:`forward_grid` with the layout's mask.
 
         Args:
             x: ``[N, C]`` valid tokens.
@@ -211,8 +263,12 @@ class XCA(nn.Module):
         """
         qkv = layout.unpack(self.qkv(x))
         b, g, f, c3 = qkv.shape
-        out = self._attend(qkv.reshape(b, g * f, c3))
-        return _scaled_linear(layout.pack(out.reshape(b, g, f, c3 // 3)), self.proj, scale)
+        if self.scope == "sequence":
+            out = self._attend(qkv.reshape(b, g * f, c3)).reshape(b, g, f, c3 // 3)
+        else:
+            out = self._attend(qkv.transpose(1, 2).reshape(b * f, g, c3))
+            out = out.reshape(b, f, g, c3 // 3).transpose(1, 2)
+        return _scaled_linear(layout.pack(out), self.proj, scale)
 
     def _attend(self, qkv: torch.Tensor) -> torch.Tensor:
         """``[B, N, 3C]`` queries, keys, values (zero on padded tokens) -> ``[B, N, C]``."""
@@ -348,6 +404,8 @@ class XCiTBlock(nn.Module):
         mlp_ratio: Hidden width of the MLP relative to ``dim``.
         layer_scale: Initial value of the per-channel residual scales (XCiT's ``eta``).
         lpi_kernel: Kernel size of the local patch interaction.
+        xca_scope: The tokens each XCA map spans: ``"frame"`` or ``"sequence"``
+            (:data:`XCA_SCOPES`, the module text).
     """
 
     def __init__(
@@ -357,11 +415,12 @@ class XCiTBlock(nn.Module):
         mlp_ratio: float,
         layer_scale: float,
         lpi_kernel: int = 3,
+        xca_scope: str = "frame",
     ) -> None:
         super().__init__()
         hidden = int(dim * mlp_ratio)
         self.norm1 = nn.LayerNorm(dim)
-        self.attn = XCA(dim, heads)
+        self.attn = XCA(dim, heads, scope=xca_scope)
         self.norm3 = nn.LayerNorm(dim)
         self.local_mp = LocalPatchInteraction(dim, lpi_kernel)
         self.norm2 = nn.LayerNorm(dim)
@@ -380,12 +439,8 @@ class XCiTBlock(nn.Module):
         Returns:
             ``[B, G, F, C]``; padded tokens are zero.
         """
-        b, g, f, c = x.shape
         cells = None if mask is None else mask[:, :, None, None].to(x.dtype)
-        flat_mask = None if mask is None else mask[:, :, None].expand(b, g, f).reshape(b, g * f)
-        x = x + self.gamma1 * self.attn(self.norm1(x).reshape(b, g * f, c), flat_mask).reshape(
-            b, g, f, c
-        )
+        x = x + self.gamma1 * self.attn.forward_grid(self.norm1(x), mask)
         x = x + self.gamma3 * self.local_mp(self.norm3(x), mask)
         x = x + self.gamma2 * self.mlp(self.norm2(x))
         if cells is not None:
