@@ -5,6 +5,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import lightning as L
@@ -105,9 +106,14 @@ class Aligner(L.LightningModule, ABC):
 
     Attributes:
         capabilities: What the aligner can do; see :data:`KNOWN_CAPABILITIES`.
+        legacy_hparams: Hyper-parameters added after checkpoints were written with
+            another behaviour: a checkpoint whose saved hyper-parameters lack a key
+            is loaded with the value given here (the behaviour it was trained with),
+            not with the constructor's current default.
     """
 
     capabilities: ClassVar[frozenset[str]] = frozenset()
+    legacy_hparams: ClassVar[Mapping[str, Any]] = MappingProxyType({})
 
     @abstractmethod
     def encode(self, motion: Motion) -> Latent:

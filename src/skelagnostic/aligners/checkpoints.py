@@ -169,7 +169,9 @@ def load_checkpoint(
         option: How the user named the file, for the messages.
         aligners: The registered aligners, to name the one that wrote the
             checkpoint (see :func:`read_checkpoint`).
-        **overrides: Hyperparameters replacing the saved ones.
+        **overrides: Hyperparameters replacing the saved ones. Keys of the module's
+            ``legacy_hparams`` that the checkpoint lacks get their legacy value (the
+            behaviour the checkpoint was trained with) unless overridden here.
 
     Returns:
         The module with the checkpoint's weights.
@@ -180,6 +182,8 @@ def load_checkpoint(
     """
     checkpoint = read_checkpoint(path, module, option=option, aligners=aligners)
     saved = dict(checkpoint.get("hyper_parameters") or {})
+    legacy = getattr(module, "legacy_hparams", {})
+    overrides = {**{k: v for k, v in legacy.items() if k not in saved}, **overrides}
     source: Path | io.BytesIO = Path(path)
     named: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
     if is_weights(path):  # Lightning reads torch files: hand it the checkpoint in memory

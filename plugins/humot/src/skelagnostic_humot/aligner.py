@@ -23,6 +23,7 @@ no twist about the bone axis, since positions do not determine it).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -131,6 +132,8 @@ class HumotAligner(Aligner):
     capabilities: ClassVar[frozenset[str]] = frozenset(
         {"encode", "decode", "retarget", "unseen_topology", "denoise"}
     )
+    # checkpoints from before model.xca were trained with one XCA map per chunk
+    legacy_hparams: ClassVar[Mapping[str, Any]] = MappingProxyType({"xca": "sequence"})
 
     def __init__(
         self,

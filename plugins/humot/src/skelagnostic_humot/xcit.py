@@ -190,9 +190,7 @@ class XCA(nn.Module):
         scope: ``"frame"`` or ``"sequence"`` (:data:`XCA_SCOPES`).
     """
 
-    def __init__(
-        self, dim: int, heads: int, qkv_bias: bool = True, scope: str = "frame"
-    ) -> None:
+    def __init__(self, dim: int, heads: int, qkv_bias: bool = True, scope: str = "frame") -> None:
         super().__init__()
         if dim % heads:
             raise ValueError(f"heads ({heads}) must divide dim ({dim})")
