@@ -41,9 +41,12 @@ def test_small_humot_overfits_two_windows(tmp_path: Path) -> None:
         def on_train_batch_end(self, trainer: L.Trainer, *args: object) -> None:
             history.append(float(trainer.callback_metrics["train/mpjpe_cm"]))
 
+    # 1,000 steps: with one XCA map per frame (model.xca=frame, the default) the network
+    # reaches 1.7 cm at step 800 and 0.8 cm by 1,500; one map per chunk (xca=sequence)
+    # got under 2 cm by step 500 (docs/reports/humot.md, section 14)
     trainer = L.Trainer(
         overfit_batches=1,
-        max_epochs=500,
+        max_epochs=1000,
         accelerator="cpu",
         logger=False,
         enable_checkpointing=False,
@@ -54,5 +57,5 @@ def test_small_humot_overfits_two_windows(tmp_path: Path) -> None:
     )
     trainer.fit(model, datamodule=dm)
     assert history[0] > 40.0  # an untrained network: tens of centimetres
-    print("mpjpe every 50 steps:", [round(v, 1) for v in history[::50]], "last", history[-1])
+    print("mpjpe every 100 steps:", [round(v, 1) for v in history[::100]], "last", history[-1])
     assert min(history[-50:]) < 2.0
