@@ -88,6 +88,7 @@ SUITES: dict[str, str] = {
 PARTS: dict[str, str] = {
     "training_humot": "benchmarks.suites.training_humot",
     "training_pcmrl": "benchmarks.suites.training_pcmrl",
+    "training_options": "benchmarks.suites.training_options",
 }
 
 

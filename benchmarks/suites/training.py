@@ -9,7 +9,10 @@ themselves) and concatenates their results:
 * ``benchmarks.suites.training_humot``: HuMoT steps/s, windows/s and the
   data-loading share of the paper-size network;
 * ``benchmarks.suites.training_pcmrl``: PC-MRL steps/s, windows/s and the
-  data-loading share of both stages at the paper's sizes.
+  data-loading share of both stages at the paper's sizes;
+* ``benchmarks.suites.training_options``: each method's 2-CPU-hour preset under
+  bf16 autocast, ``torch.compile``, twice the batch and two threads, against the
+  preset as it runs.
 
 Each part documents its settings, sizes and baselines in its own docstring.
 """
@@ -25,6 +28,7 @@ PARTS: dict[str, str] = {
     "vqpae": "benchmarks.suites.training_vqpae",
     "humot": "benchmarks.suites.training_humot",
     "pcmrl": "benchmarks.suites.training_pcmrl",
+    "options": "benchmarks.suites.training_options",
 }
 
 
