@@ -136,3 +136,24 @@ def test_data_module_mirrors_training_clips_and_keys_its_cache(tmp_path: Path) -
     torch.testing.assert_close(frames, expected, rtol=1e-4, atol=1e-4)
     with pytest.raises(SkelagnosticError, match=r"data\.features must be one of raw, authors"):
         VqpaeDataModule(src, features="exporter", **kw)
+
+
+def test_a_model_trained_on_authors_features_encodes_motions_with_them(
+    tmp_path: Path, helpers: dict
+) -> None:
+    from skelagnostic_vqpae.aligner import VqpaeAligner
+
+    from skelagnostic import procedural
+
+    src = ProceduralSource(kinds=["biped22"], gaits=["walk"], clips_per_gait=2, seconds=2.0)
+    dm = VqpaeDataModule(src, fps=20, batch_size=4, cache_dir=tmp_path, features="authors")
+    model = VqpaeAligner(num_codes=4, kernel_size=7, pose_mlp="none")
+    helpers["trainer"](tmp_path, 2, validate=False).fit(model, datamodule=dm)
+    spec = model.hparams["datasets"][dm.dataset_names[0]]
+    assert spec["features"] == "authors"
+    motion, _ = procedural.generate("biped22", "walk", seconds=2.0, fps=20, seed=5)
+    windows, _ = model._windows(0, motion)
+    char = model.characters[0]
+    vel = authors_features(motion.to_metres())[0].flatten(1).float()
+    expected = (vel - char.input_mean) / char.input_std
+    torch.testing.assert_close(windows[:, :, windows.shape[-1] // 2], expected)
