@@ -98,6 +98,20 @@ def test_features_do_not_depend_on_joint_names(lafan_clip: Path) -> None:
             torch.testing.assert_close(a, b, rtol=0, atol=1e-9)
 
 
+def test_a_quadruped_neck_without_its_name_is_found_where_the_front_legs_branch(
+    shared_data: Path,
+) -> None:
+    motion = read_bvh(shared_data / "dog/mann/D1_010_KAN01_003.bvh")[:120]
+    sk = motion.skeleton
+    names = ["Withers" if "neck" in n.lower() else n for n in sk.joint_names]
+    other = Skeleton(names, sk.parents, sk.offsets, name="no_neck_name")
+    assert other.morphology == "quadruped" and "Neck" not in names
+    assert facing_joints(other)["neck"] == facing_joints(sk)["neck"] == sk.index("Neck")
+    renamed = Motion(other, motion.rotations, motion.root_positions, motion.fps)
+    for a, b in zip(authors_features(motion), authors_features(renamed), strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=1e-9)
+
+
 def test_a_rig_without_the_facing_joints_is_named_in_one_line() -> None:
     legs = Skeleton(
         ["Hips", "LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg", "Spine"],

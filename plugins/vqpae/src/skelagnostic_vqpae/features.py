@@ -12,7 +12,9 @@ keeps: the network's input and the average-pose target) the same way:
 * facing: for a biped, the horizontal normal of the sum of the unit horizontal
   right-to-left hip and shoulder vectors (the first joint of each leg and arm body
   group); for a quadruped (:attr:`Skeleton.morphology
-  <skelagnostic.Skeleton.morphology>`), the horizontal hips-to-neck direction. The
+  <skelagnostic.Skeleton.morphology>`), the horizontal hips-to-neck direction (the
+  neck: a spine joint named ``*neck*``, else the spine joint after the one both
+  front legs branch from). The
   facing is smoothed with a Gaussian over ``2 s`` (standard deviation a quarter of
   the window, edges repeating the end frames), as ``wtd_data.py`` approximates the
   exporter's adaptive smoothing;
@@ -79,7 +81,11 @@ def _limb_starts(skeleton: Skeleton) -> dict[str, int]:
 
 
 def _neck(skeleton: Skeleton, starts: dict[str, int]) -> int | None:
-    """A spine joint named ``*neck*``, else the spine joint both arms branch from."""
+    """A spine joint named ``*neck*``, else the one after the spine joint both arms branch from.
+
+    The fallback is the branching joint's one spine child (the start of the neck), or
+    the branching joint itself if it has none or several.
+    """
     groups, names, parents = skeleton.body_groups, skeleton.joint_names, skeleton.parents
     for j in range(1, skeleton.num_joints):
         if groups[j] == "spine" and any("neck" in w for w in name_words(names[j])):
@@ -98,7 +104,8 @@ def _neck(skeleton: Skeleton, starts: dict[str, int]) -> int | None:
     common = next((a for a in ancestors(starts["left_arm"]) if a in right), None)
     if common is None or common == skeleton.body_root or groups[common] != "spine":
         return None
-    return common
+    spine = [c for c in skeleton.children(common) if groups[c] == "spine"]
+    return spine[0] if len(spine) == 1 else common
 
 
 def facing_joints(skeleton: Skeleton) -> dict[str, int]:
