@@ -171,3 +171,5 @@ def test_a_model_trained_on_authors_features_encodes_motions_with_them(
     vel = authors_features(motion.to_metres())[0].flatten(1).float()
     expected = (vel - char.input_mean) / char.input_std
     torch.testing.assert_close(windows[:, :, windows.shape[-1] // 2], expected)
+    encoder = next(g for g in model.export_graphs() if g.name.startswith("encoder_"))
+    assert encoder.metadata["representation"].startswith("the WalkTheDog exporter's velocities")
