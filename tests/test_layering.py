@@ -99,6 +99,7 @@ PLUGIN_FLOORS: dict[str, dict[str, int]] = {
         "skelagnostic_vqpae.codebook": 0,
         "skelagnostic_vqpae.schedule": 0,
         "skelagnostic_vqpae.data": 0,
+        "skelagnostic_vqpae.features": 0,
         "skelagnostic_vqpae.training": 0,
         "skelagnostic_vqpae.graphs": 0,
         "skelagnostic_vqpae.options": 0,

@@ -19,6 +19,12 @@ are summed over chunks of a fixed size.
 Every clip also keeps its root-local joint positions (normalised the same way)
 for the average-pose MLP (Sec. 5.2).
 
+With ``features="authors"`` (``data.features=authors``) the velocities and
+positions are those of the WalkTheDog authors' exporter
+(:mod:`skelagnostic_vqpae.features`: root frame with a smoothed facing, 3.25 Hz
+low-pass) and every clip's cache entry also holds its mirror image, which the
+training split uses as one more clip.
+
 Several characters: one dataset per source and skeleton topology; training
 steps draw one batch from every dataset. :class:`~skelagnostic.data.MultiSource` bundles several
 sources (a human and a dog directory, several style sets) into the one
@@ -52,6 +58,7 @@ from skelagnostic.data.loaders import SkeletonCollate
 from skelagnostic.data.window_dataset import STATS_CHUNK_VALUES, check_statistics
 from skelagnostic.errors import SkelagnosticError
 from skelagnostic.representations import GlobalPositions, MotionRepresentation, RootLocalVelocities
+from skelagnostic_vqpae.features import FEATURES, authors_features
 
 __all__ = [
     "CachedFrameWindows",
@@ -217,8 +224,10 @@ class FrameWindows(Dataset):
 class CachedFrameWindows(FrameWindows):
     """:class:`FrameWindows` whose frames stay in the cache and are read per batch.
 
-    Every clip is one cache entry of ``[1, F, J, C_in + C_pose]`` raw values
-    (velocities, then root-local positions). :meth:`gather` reads the ``T``
+    Every clip is one cache entry of ``[copies, F, J, C_in + C_pose]`` raw values
+    (velocities, then root-local positions; a second copy is the clip's mirror image
+    with ``data.features=authors``), each copy a clip of the dataset if
+    ``copies``, else the first only. :meth:`gather` reads the ``T``
     frames of each asked window from its entry with a positioned read (no
     memory map) and normalises them with the dataset's statistics, so the
     values are those of :class:`FrameWindows` over the normalised frames, and
@@ -232,6 +241,7 @@ class CachedFrameWindows(FrameWindows):
         window: ``T`` (odd).
         stride: Frames between pivots.
         pair_shift: Frames between a window and its partner (0: no partner).
+        copies: Use every copy of an entry as a clip (the training split), else the first.
     """
 
     def __init__(
@@ -242,14 +252,26 @@ class CachedFrameWindows(FrameWindows):
         window: int,
         stride: int,
         pair_shift: int = 0,
+        copies: bool = False,
     ) -> None:
         self.entries = list(entries)
+        #: ``(entry index, copy)`` of every clip of the dataset.
+        self.segments = [
+            (e, c)
+            for e, entry in enumerate(self.entries)
+            if entry.num_windows
+            for c in range(entry.num_windows if copies else 1)
+        ]
+        #: Clip ids of the segments (``<id>/mirrored`` for an entry's second copy).
+        self.clip_names = [
+            self.entries[e].meta["clip"] + ("/mirrored" if c else "") for e, c in self.segments
+        ]
         self._n_in = len(representation.channels)
         self._stats = [
             (r.mean.clone(), r.std.clone())  # type: ignore[union-attr]
             for r in (representation, poses)
         ]
-        lengths = np.cumsum([0] + [e.layout[1][1] if e.num_windows else 0 for e in self.entries])
+        lengths = np.cumsum([0] + [self.entries[e].layout[1][1] for e, _ in self.segments])
         self._firsts = torch.as_tensor(lengths[:-1], dtype=torch.long)
         self._index(
             list(zip(lengths[:-1].tolist(), lengths[1:].tolist(), strict=True)),
@@ -260,11 +282,12 @@ class CachedFrameWindows(FrameWindows):
 
     def _read(self, clip: int, first: int, count: int) -> np.ndarray:
         """Raw frames ``first:first + count`` of clip ``clip``, ``[count, J, C_in + C_pose]``."""
-        entry = self.entries[clip]
+        e, copy = self.segments[clip]
+        entry = self.entries[e]
         offset, shape = entry.layout
         out = np.empty((count, *shape[2:]), np.float32)
         with entry.array.open("rb", buffering=0) as fh:
-            fh.seek(offset + first * 4 * math.prod(shape[2:]))
+            fh.seek(offset + (copy * shape[1] + first) * 4 * math.prod(shape[2:]))
             read_exactly(fh, out, entry.array)
         return out
 
@@ -293,12 +316,11 @@ class CachedFrameWindows(FrameWindows):
 
     def frames(self) -> Iterator[tuple[Tensor, Tensor]]:
         """Every clip's normalised ``([F, C] features, [F, P] poses)``, one clip at a time."""
-        for clip, entry in enumerate(self.entries):
-            if entry.num_windows:
-                feats, poses = self._normalize(
-                    torch.from_numpy(self._read(clip, 0, entry.layout[1][1]))
-                )
-                yield feats, poses  # type: ignore[misc]
+        for clip, (e, _) in enumerate(self.segments):
+            feats, poses = self._normalize(
+                torch.from_numpy(self._read(clip, 0, self.entries[e].layout[1][1]))
+            )
+            yield feats, poses  # type: ignore[misc]
 
     @property
     def features(self) -> Tensor:  # type: ignore[override]
@@ -314,7 +336,7 @@ class CachedFrameWindows(FrameWindows):
 def _frame_chunks(
     entries: Sequence[CacheEntry], channels: slice, chunk_values: int = STATS_CHUNK_VALUES
 ) -> Iterator[Tensor]:
-    """The ``channels`` of every frame of ``entries`` in ``[frames, J, C]`` chunks.
+    """The ``channels`` of every frame (of every copy) of ``entries`` in ``[frames, J, C]`` chunks.
 
     Chunks hold a fixed number of frames (``chunk_values`` values with all
     channels; the last chunk of a clip may be shorter), read from the files, so
@@ -328,8 +350,9 @@ def _frame_chunks(
         rows = max(1, chunk_values // max(1, math.prod(shape[2:])))
         with entry.array.open("rb", buffering=0) as fh:
             fh.seek(offset)
-            for first in range(0, shape[1], rows):
-                buf = np.empty((min(rows, shape[1] - first), *shape[2:]), np.float32)
+            total = shape[0] * shape[1]  # every copy of the clip (the mirror image too)
+            for first in range(0, total, rows):
+                buf = np.empty((min(rows, total - first), *shape[2:]), np.float32)
                 read_exactly(fh, buf, entry.array)
                 yield torch.from_numpy(buf[..., channels])
 
@@ -352,6 +375,10 @@ class VqpaeDataModule(MotionDataModule):
             authors), which the aligner's phase-rate loss needs
             (``model.lambda_phase_rate``; ``experiment=vqpae_plus`` sets 0.1 s, which
             keeps the phase advance between the two windows unambiguous up to 5 Hz).
+        features: ``raw`` (default: :class:`RootLocalVelocities` and root-local positions
+            of every frame) or ``authors`` (the WalkTheDog exporter's velocities and
+            positions, :func:`~skelagnostic_vqpae.features.authors_features`, and a
+            mirrored copy of every training clip).
         **kwargs: The other options of :class:`~skelagnostic.data.MotionDataModule`
             (``representation``: default :class:`RootLocalVelocities`; ``batch_size``:
             windows per batch and dataset, 32; ``cache_dir``: cache of the per-clip
@@ -377,12 +404,17 @@ class VqpaeDataModule(MotionDataModule):
         window_seconds: float | None = 1.0,
         std_floor: float = 0.01,
         pair_seconds: float = 0.0,
+        features: str = "raw",
         **kwargs: Any,
     ) -> None:
         if "per_element_stats" in kwargs:
             raise SkelagnosticError(
                 "data.per_element_stats is not an option of VqpaeDataModule: its statistics "
                 "are always per element"
+            )
+        if features not in FEATURES:
+            raise SkelagnosticError(
+                f"data.features must be one of {', '.join(FEATURES)}, got {features!r}"
             )
         if not pair_seconds >= 0:
             raise SkelagnosticError(f"data.pair_seconds must be >= 0, got {pair_seconds}")
@@ -402,6 +434,12 @@ class VqpaeDataModule(MotionDataModule):
         self.window_seconds = window_seconds
         self.std_floor = float(std_floor)
         self.pair_seconds = float(pair_seconds)
+        self.features = features
+        if features == "authors" and type(self.representation) is not RootLocalVelocities:
+            raise SkelagnosticError(
+                "data.features=authors computes its own velocities: leave data.representation "
+                f"at its default, got {type(self.representation).__name__}"
+            )
         #: Frames between a training window and its partner (0: no partner).
         self.pair_shift = max(1, round(float(fps) * pair_seconds)) if pair_seconds > 0 else 0
         self._poses = GlobalPositions(frame="root")
@@ -422,22 +460,34 @@ class VqpaeDataModule(MotionDataModule):
             "options": self.representation.config(),
             "fps": self.fps,
             "layout": _LAYOUT,
+            **({"features": self.features} if self.features != "raw" else {}),
         }
 
     def _encode(self, source: ClipSource, clip: ClipRef) -> tuple[np.ndarray, dict[str, Any]]:
-        """The clip's frames as one ``[1, F, J, C_in + C_pose]`` cache entry and its metadata."""
+        """The clip's frames as one ``[copies, F, J, C_in + C_pose]`` cache entry and its metadata.
+
+        One copy; with ``features="authors"`` two if the skeleton has left/right pairs
+        (the second is the mirror image).
+        """
         motion = source.load(clip)
         if motion.fps != self.fps:
             motion = motion.resample(self.fps)
-        feats = torch.cat([self.representation.encode(motion), self._poses.encode(motion)], -1)
+        if self.features == "authors":
+            copies = [torch.cat(authors_features(motion), -1)]
+            if motion.skeleton.mirror_map() != list(range(motion.num_joints)):
+                copies.append(torch.cat(authors_features(motion, mirrored=True), -1))
+            feats = torch.stack(copies)
+        else:
+            rep, poses = self.representation, self._poses
+            feats = torch.cat([rep.encode(motion), poses.encode(motion)], -1)[None]
         long_enough = motion.num_frames >= self.window
         array = (
-            feats.float().numpy()[None] if long_enough else np.zeros((0, *feats.shape), np.float32)
+            feats.float().numpy() if long_enough else np.zeros((0, *feats.shape[1:]), np.float32)
         )
         meta = {
             "clip": clip.id,
             "skeleton": motion.skeleton.to_dict(),
-            "starts": [0] if long_enough else [],
+            "starts": [0] * len(feats) if long_enough else [],
             "fps": self.fps,
             "units": motion.units,
         }
@@ -470,10 +520,11 @@ class VqpaeDataModule(MotionDataModule):
                 self.window,
                 self.stride,
                 self.pair_shift if part == "train" else 0,
+                copies=part == "train",
             )
             if len(ds):
                 self.datasets[part][name] = ds  # type: ignore[assignment]
-                self.clip_ids[part][name] = [c.id for c in clips]
+                self.clip_ids[part][name] = ds.clip_names
 
     def channels(self, name: str) -> int:
         """Input channels ``C = J * 3`` of dataset ``name``."""

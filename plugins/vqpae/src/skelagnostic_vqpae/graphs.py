@@ -66,6 +66,7 @@ def export_graphs(aligner: VqpaeModel) -> list[ExportGraph]:
         spec = aligner.hparams["datasets"][name]
         channels, window = int(spec["channels"]), int(spec["window"])
         stem = "".join(c if c.isalnum() or c in "_.-" else "_" for c in name)
+        authors = spec.get("features", "raw") == "authors"
         meta = {
             "dataset": name,
             "skeleton": spec.get("skeleton"),  # None for an authors' run (.authors)
@@ -97,8 +98,13 @@ def export_graphs(aligner: VqpaeModel) -> list[ExportGraph]:
                 fixed_axes=fixed,
                 metadata={
                     **meta,
-                    "representation": "RootLocalVelocities of the motion in metres, "
-                    "[T, J, 3] flattened to [T, J*3] and transposed to [J*3, T]",
+                    "representation": (
+                        "the WalkTheDog exporter's velocities (skelagnostic_vqpae.features."
+                        "authors_features) of the whole clip in metres"
+                        if authors
+                        else "RootLocalVelocities of the motion in metres"
+                    )
+                    + ", [T, J, 3] flattened to [T, J*3] and transposed to [J*3, T]",
                     "normalisation": {
                         "input_mean": char.input_mean,
                         "input_std": char.input_std,
@@ -125,8 +131,12 @@ def export_graphs(aligner: VqpaeModel) -> list[ExportGraph]:
                     ),
                     metadata={
                         **meta,
-                        "representation": "GlobalPositions(frame='root'), [J, 3] "
-                        "flattened to [J*3]",
+                        "representation": (
+                            "the WalkTheDog exporter's root-local positions"
+                            if authors
+                            else "GlobalPositions(frame='root')"
+                        )
+                        + ", [J, 3] flattened to [J*3]",
                         "normalisation": {
                             "pose_mean": char.pose_mean,
                             "pose_std": char.pose_std,

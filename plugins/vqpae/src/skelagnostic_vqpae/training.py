@@ -51,6 +51,7 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.metrics import ManifoldOverlap
 from skelagnostic.representations import RootLocalVelocities, inverse_kinematics
 from skelagnostic_vqpae.codebook import SharedCodebook
+from skelagnostic_vqpae.features import authors_features
 from skelagnostic_vqpae.graphs import export_graphs
 from skelagnostic_vqpae.losses import phase_rate_loss, pivot_mpjpe
 from skelagnostic_vqpae.model import (
@@ -262,6 +263,7 @@ class VqpaeModel(Aligner):
                 "window": dm.window,
                 "fps": dm.fps,
                 "skeleton": dm.skeletons[name].to_dict(),
+                **({"features": dm.features} if getattr(dm, "features", "raw") != "raw" else {}),
             }
             for name in dm.dataset_names
         }
@@ -577,7 +579,9 @@ class VqpaeModel(Aligner):
 
         The features are those of the motion in metres (:meth:`Motion.to_metres`:
         its ``units``, else the guess from its skeleton's height), as the data
-        sources give them in training.
+        sources give them in training, computed as in training (the dataset's
+        ``features``: :class:`RootLocalVelocities`, or the authors' exporter's
+        velocities of the whole clip, :func:`~skelagnostic_vqpae.features.authors_features`).
         """
         spec = self.hparams["datasets"][self.dataset_names[k]]
         fps, window = float(spec["fps"]), int(spec["window"])
@@ -585,7 +589,11 @@ class VqpaeModel(Aligner):
         if motion.fps != fps:
             motion = motion.resample(fps)
         char = self.characters[k]
-        feats = RootLocalVelocities().encode(motion).float().flatten(1).to(char.input_mean)
+        if spec.get("features", "raw") == "authors":
+            vel = authors_features(motion)[0]
+        else:
+            vel = RootLocalVelocities().encode(motion)
+        feats = vel.float().flatten(1).to(char.input_mean)
         feats = (feats - char.input_mean) / char.input_std
         half = window // 2
         padded = torch.cat([feats[:1].expand(half, -1), feats, feats[-1:].expand(half, -1)])
