@@ -14,10 +14,10 @@ is re-entrant from ``sys.argv`` alone, which Lightning's DDP launcher relies on:
 the same command line (plus ``hydra.run.dir=...``) for every extra rank.
 
 Lightning and the run machinery (:mod:`~skelagnostic.cli.build`,
-:mod:`~skelagnostic.cli.tasks`) are imported when a job runs, not with this module, so
-``--help``, ``--cfg`` and a bad override answer without them; ``run``, ``RunMetrics``,
-``TASKS``, ``MAX_SEED`` and ``build_datamodule`` are still importable from here (on
-first use).
+:mod:`~skelagnostic.cli.tasks`) are imported for a command that runs a job, not with
+this module, so ``--help``, ``--cfg`` and ``--info`` answer without them; ``run``,
+``RunMetrics``, ``TASKS``, ``MAX_SEED`` and ``build_datamodule`` are still importable
+from here (on first use).
 """
 
 from __future__ import annotations
@@ -473,6 +473,20 @@ def _hydra_args(
     return [*flags, *ours, *overrides]
 
 
+def _import_lightning_before_logging() -> None:
+    """Import Lightning before Hydra configures logging, as a job will run.
+
+    Lightning sets its loggers up when it is imported: while the root logger has no
+    handler (before Hydra's job logging), ``lightning.pytorch`` and ``lightning.fabric``
+    print through their own handler and do not propagate (what :func:`_job_log`
+    expects). Imported later, inside the job, they would propagate to Hydra's handlers
+    and print each line again on stdout and, prefixed ``INFO:``, on stderr.
+    ``--help`` and the other informational flags do not call this: they need no
+    Lightning.
+    """
+    import lightning  # noqa: F401
+
+
 def _launch(task: str, args: Sequence[str], jobs: list[_Job]) -> int | None:
     """Compose and run the command with Hydra; the exit code when Hydra ends it by itself.
 
@@ -496,6 +510,7 @@ def _launch(task: str, args: Sequence[str], jobs: list[_Job]) -> int | None:
         from skelagnostic.cli.locations import check_run_locations
 
         check_run_locations(overrides)
+        _import_lightning_before_logging()
     job.saved, job.overrides = run_of_overrides(overrides), overrides
     hydra_args = _hydra_args(task, flags, overrides, pm, job.saved)
     check_config_package()
