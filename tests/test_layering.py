@@ -30,6 +30,7 @@ FRAMEWORK = REPO / "src" / "skelagnostic"
 LAYERS: dict[str, int] = {
     "skelagnostic._shadow": 0,
     "skelagnostic.errors": 0,
+    "skelagnostic.filenames": 0,
     "skelagnostic.lazy": 0,
     "skelagnostic.version": 0,
     "skelagnostic.core": 1,

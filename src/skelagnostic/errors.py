@@ -87,6 +87,15 @@ class BVHError(SkelagnosticError, ValueError):
         super().__init__(f"{where}: {reason}")
 
 
+class ConfigError(SkelagnosticError):
+    """A run configuration that cannot work (bad task, unknown options, missing packages).
+
+    Raised by the builders of :mod:`skelagnostic.cli.build` and the task functions of
+    :mod:`skelagnostic.cli.tasks`; defined here so that modules that only report it
+    (the Hydra application's error handling) need not import the training stack.
+    """
+
+
 class NotInvertibleError(SkelagnosticError):
     """A motion representation cannot be decoded back to a :class:`~skelagnostic.Motion`."""
 

@@ -262,6 +262,28 @@ def test_cli_errors_are_one_line(
     assert not any("Traceback" in line or "Error executing job" in line for line in err)
 
 
+def test_a_lightning_misconfiguration_is_one_line(
+    example_plugin: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Lightning's own configuration error, caught although ``cli.app`` does not import it."""
+    from lightning.fabric.utilities.exceptions import MisconfigurationException
+
+    from skelagnostic.cli import tasks
+
+    def refuse(cfg: object, pm: object) -> None:
+        raise MisconfigurationException("the strategy refuses this")
+
+    monkeypatch.setattr(tasks, "run", refuse)
+    code = cli.main(["fit", "model=example", f"runs_dir={tmp_path}"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert err[-1] == "skelagnostic fit: error: the strategy refuses this", err
+    assert list((tmp_path / "example" / "fit").iterdir()) == []  # only bookkeeping: discarded
+
+
 def test_cli_debug_flag_raises(example_plugin: Path, tmp_path: Path) -> None:
     with pytest.raises(Exception, match="You must specify 'model'"):
         cli.main(["fit", "--debug", f"runs_dir={tmp_path}"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -118,24 +119,57 @@ def test_malformed_or_mismatched_references_are_refused_at_registration() -> Non
         resolve_ref("a.b:", "aligner 'x'", "p")
 
 
-def test_listing_the_plugins_imports_no_lightning_and_no_model() -> None:
-    """``skelagnostic plugins`` (issue 48, item 10): the built-in plugins register by reference."""
+#: Commands that answer without the training stack (issue 48, item 10), with a line each prints.
+LIGHT_COMMANDS = {
+    "plugins": "aligners (model=): humot",
+    "fit --help": "== Configuration groups ==",
+    "validate --help": "== Configuration groups ==",
+    "test --help": "== Configuration groups ==",
+    "predict --help": "== Configuration groups ==",
+    "evaluate --help": "Evaluation protocols (protocol=NAME",
+    "retarget --help": "usage: skelagnostic retarget",
+    "interpolate --help": "usage: skelagnostic interpolate",
+    "transfer --help": "usage: skelagnostic transfer",
+    "export --help": "usage: skelagnostic export",
+    "render --help": "usage: skelagnostic render",
+}
+
+
+def test_light_commands_import_no_lightning_and_no_model() -> None:
+    """``plugins`` and every verb's ``--help`` (issue 48, item 10) load no Lightning, no aligner.
+
+    The built-in plugins register by reference, and the Hydra verbs import the run
+    machinery only when a job runs. The commands run one after another in one fresh
+    interpreter; after each, the Lightning packages and aligner modules loaded so far
+    are printed, so the first command that loads one is the one named.
+    """
     paths = [str(REPO / "src"), *sorted(str(p) for p in (REPO / "plugins").glob("*/src"))]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
     code = (
-        "import sys\n"
+        "import json, sys\n"
         "from skelagnostic.cli import main\n"
-        "sys.argv = ['skelagnostic', 'plugins']\n"
-        "try:\n"
-        "    main()\n"
-        "except SystemExit:\n"
-        "    pass\n"
-        "heavy = [m for m in sys.modules if m == 'lightning' or m.endswith('.aligner')]\n"
-        "print('HEAVY', sorted(heavy))\n"
+        "for command in json.loads(sys.argv[1]):\n"
+        "    sys.argv = ['skelagnostic', *command.split()]\n"
+        "    try:\n"
+        "        code = main()\n"
+        "    except SystemExit as exc:\n"
+        "        code = exc.code\n"
+        "    top = {m.split('.')[0] for m in sys.modules}\n"
+        "    heavy = sorted(top & {'lightning', 'pytorch_lightning', 'lightning_fabric'})\n"
+        "    heavy += sorted(m for m in sys.modules if m.endswith('.aligner'))\n"
+        "    print('HEAVY', json.dumps([command, code, heavy]), flush=True)\n"
     )
     proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+        [sys.executable, "-c", code, json.dumps(list(LIGHT_COMMANDS))],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert proc.returncode == 0, proc.stderr
-    assert "aligners (model=): humot" in proc.stdout
-    assert proc.stdout.strip().splitlines()[-1] == "HEAVY []"
+    reports = [json.loads(line[6:]) for line in proc.stdout.splitlines() if line[:6] == "HEAVY "]
+    assert [command for command, _, _ in reports] == list(LIGHT_COMMANDS), proc.stderr
+    for command, code, heavy in reports:
+        assert (code, heavy) == (0, []), f"skelagnostic {command} (exit {code}) loaded {heavy}"
+    for command, line in LIGHT_COMMANDS.items():
+        assert line in proc.stdout, f"skelagnostic {command} did not print {line!r}"

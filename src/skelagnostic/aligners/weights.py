@@ -32,6 +32,7 @@ import torch
 
 from skelagnostic.aligners.checkpoint_errors import CheckpointError, CheckpointNotFoundError
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.filenames import WEIGHTS_FILE
 
 if TYPE_CHECKING:
     import lightning as L
@@ -47,8 +48,6 @@ __all__ = [
     "weights_model",
 ]
 
-#: Name of the weights file in a directory (``ckpt=<dir>`` looks for it).
-WEIGHTS_FILE = "model.safetensors"
 #: Value of the ``format`` metadata field.
 FORMAT = "skelagnostic.weights"
 #: Version of the metadata layout (bumped when a field changes meaning).

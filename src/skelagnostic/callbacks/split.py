@@ -12,10 +12,9 @@ from pathlib import Path
 
 import lightning as L
 
-__all__ = ["SPLIT_FILE", "RecordSplit"]
+from skelagnostic.filenames import SPLIT_FILE
 
-#: The clip split a fit writes into its run directory.
-SPLIT_FILE = "split.json"
+__all__ = ["SPLIT_FILE", "RecordSplit"]
 
 
 class RecordSplit(L.Callback):

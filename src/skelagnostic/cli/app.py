@@ -12,6 +12,12 @@ Plugin config paths (experiments, data presets) are added to Hydra's search path
 configuration, read once from its plugin's file, in Hydra's ConfigStore. The command
 is re-entrant from ``sys.argv`` alone, which Lightning's DDP launcher relies on: it re-executes
 the same command line (plus ``hydra.run.dir=...``) for every extra rank.
+
+Lightning and the run machinery (:mod:`~skelagnostic.cli.build`,
+:mod:`~skelagnostic.cli.tasks`) are imported for a command that runs a job, not with
+this module, so ``--help``, ``--cfg`` and ``--info`` answer without them; ``run``,
+``RunMetrics``, ``TASKS``, ``MAX_SEED`` and ``build_datamodule`` are still importable
+from here (on first use).
 """
 
 from __future__ import annotations
@@ -24,18 +30,15 @@ import shutil
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import hydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
-from lightning.fabric.utilities.exceptions import MisconfigurationException
-from lightning.pytorch.utilities import rank_zero_only
-from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from skelagnostic.cli.allocator import kernel_time_hint
-from skelagnostic.cli.build import ConfigError, build_datamodule
 from skelagnostic.cli.model_configs import (
     ALIGNER_GROUP,
     explain_shadowed_model,
@@ -43,7 +46,6 @@ from skelagnostic.cli.model_configs import (
 )
 from skelagnostic.cli.runs import (
     LOCK_FILE,
-    SPLIT_FILE,
     RunDirectoryRefused,
     checkpoint_of,
     chosen_keys,
@@ -56,16 +58,10 @@ from skelagnostic.cli.runs import (
     value_of,
 )
 from skelagnostic.cli.signals import SIGTERM_EXIT_CODE, Terminated
-from skelagnostic.cli.tasks import (
-    CKPT_ALIASES,
-    MAX_SEED,
-    TASKS,
-    RunMetrics,
-    _preferred_checkpoint,
-    run,
-)
 from skelagnostic.core.paths import expand_home_in_override
-from skelagnostic.errors import SkelagnosticError, error_line, printable
+from skelagnostic.errors import ConfigError, SkelagnosticError, error_line, printable
+from skelagnostic.filenames import SPLIT_FILE
+from skelagnostic.lazy import lazy_exports
 from skelagnostic.plugins import PluginManager, get_plugin_manager
 
 __all__ = [
@@ -86,6 +82,22 @@ __all__ = [
     "test",
     "validate",
 ]
+# The run machinery (Lightning, the builders, the task functions) is imported when a
+# job runs, not with this module: ``skelagnostic fit --help`` stays as light as Hydra.
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "MAX_SEED": "skelagnostic.cli.tasks",
+        "TASKS": "skelagnostic.cli.tasks",
+        "RunMetrics": "skelagnostic.cli.tasks",
+        "run": "skelagnostic.cli.tasks",
+        "build_datamodule": "skelagnostic.cli.build",
+    },
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from skelagnostic.cli.build import build_datamodule
+    from skelagnostic.cli.tasks import MAX_SEED, TASKS, RunMetrics, run
 
 #: Package holding the primary config ``config.yaml``.
 CONFIG_MODULE = "skelagnostic.conf"
@@ -208,6 +220,8 @@ def _discard_failed_run(run_dir: Path) -> str:
     Returns:
         Text appended to the error line.
     """
+    from lightning.pytorch.utilities import rank_zero_only  # the failed job loaded it
+
     cwd = Path.cwd()
     if rank_zero_only.rank != 0 or not run_dir.is_dir() or run_dir.resolve() in (cwd, *cwd.parents):
         return ""
@@ -389,6 +403,11 @@ class _Job:
 
     def __call__(self, cfg: DictConfig) -> None:
         """Run the task of ``cfg`` (Hydra calls this once per job)."""
+        from lightning.fabric.utilities.exceptions import MisconfigurationException
+        from lightning.pytorch.utilities.exceptions import SIGTERMException
+
+        from skelagnostic.cli.tasks import run
+
         self.run_dirs.append(Path(cfg.run_dir))
         if self.saved is not None:
             reuse_run_config(cfg, self.saved, self.overrides)
@@ -412,6 +431,8 @@ class _Job:
 
     def _evaluated(self, cfg: DictConfig) -> Path | None:
         """The checkpoint file a validate, test or predict evaluated (for the summary)."""
+        from skelagnostic.cli.tasks import CKPT_ALIASES, _preferred_checkpoint
+
         ckpt = cfg.ckpt_path
         if (
             not ckpt
@@ -452,6 +473,20 @@ def _hydra_args(
     return [*flags, *ours, *overrides]
 
 
+def _import_lightning_before_logging() -> None:
+    """Import Lightning before Hydra configures logging, as a job will run.
+
+    Lightning sets its loggers up when it is imported: while the root logger has no
+    handler (before Hydra's job logging), ``lightning.pytorch`` and ``lightning.fabric``
+    print through their own handler and do not propagate (what :func:`_job_log`
+    expects). Imported later, inside the job, they would propagate to Hydra's handlers
+    and print each line again on stdout and, prefixed ``INFO:``, on stderr.
+    ``--help`` and the other informational flags do not call this: they need no
+    Lightning.
+    """
+    import lightning  # noqa: F401
+
+
 def _launch(task: str, args: Sequence[str], jobs: list[_Job]) -> int | None:
     """Compose and run the command with Hydra; the exit code when Hydra ends it by itself.
 
@@ -475,6 +510,7 @@ def _launch(task: str, args: Sequence[str], jobs: list[_Job]) -> int | None:
         from skelagnostic.cli.locations import check_run_locations
 
         check_run_locations(overrides)
+        _import_lightning_before_logging()
     job.saved, job.overrides = run_of_overrides(overrides), overrides
     hydra_args = _hydra_args(task, flags, overrides, pm, job.saved)
     check_config_package()
@@ -544,8 +580,8 @@ def main(task: str, argv: Sequence[str]) -> int:
         SkelagnosticError,
         HydraException,
         OmegaConfBaseException,
-        MisconfigurationException,
         OSError,  # e.g. a full disk while Hydra writes the run folder's .hydra/ files
+        *_lightning_errors(),
     ) as exc:
         kept = "".join(_discard_failed_run(d) for j in jobs for d in j.run_dirs)
         if debug:
@@ -566,13 +602,23 @@ def main(task: str, argv: Sequence[str]) -> int:
         release_run_directories()
 
 
+def _lightning_errors() -> tuple[type[Exception], ...]:
+    """Lightning's ``MisconfigurationException`` if Lightning is loaded, else nothing.
+
+    A command that never loaded Lightning (``--help``, a bad override) cannot have
+    raised it, so the CLI catches it without importing Lightning for that.
+    """
+    module = sys.modules.get("lightning.fabric.utilities.exceptions")
+    return () if module is None else (module.MisconfigurationException,)
+
+
 def evaluate(argv: Sequence[str]) -> int:
     """``skelagnostic evaluate ckpt_path=... [protocol=NAME] [overrides]``.
 
     ``--help`` lists the registered protocols before Hydra's help.
     """
     if any(a in ("--help", "-h") for a in argv):
-        from skelagnostic.cli.evaluate import protocols_text
+        from skelagnostic.cli.plugins import protocols_text
 
         print(protocols_text(get_plugin_manager()))
     return main("evaluate", argv)

@@ -27,7 +27,7 @@ from lightning.fabric.utilities.exceptions import MisconfigurationException
 from omegaconf import DictConfig, OmegaConf
 
 from skelagnostic.data.datamodule import datamodule_options
-from skelagnostic.errors import SkelagnosticError
+from skelagnostic.errors import ConfigError
 from skelagnostic.plugins import AlignerSpec, PluginManager
 
 __all__ = [
@@ -53,10 +53,6 @@ OPTIONAL_EXTRAS = {
 }
 #: Data-config keys that say where the others go: to neither the source nor the data module.
 ROUTING_KEYS = ("source", "source_keys", "representation", "representation_options")
-
-
-class ConfigError(SkelagnosticError):
-    """A run configuration that cannot work (bad task, unknown options, missing packages)."""
 
 
 def source_keys(data: dict[str, Any], spec: AlignerSpec) -> list[str]:

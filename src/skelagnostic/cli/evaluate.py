@@ -40,7 +40,6 @@ __all__ = [
     "evaluate_checkpoint",
     "measure_cleanup",
     "print_evaluation",
-    "protocols_text",
 ]
 
 #: The values of ``evaluate cleanup=``.
@@ -210,19 +209,3 @@ def print_evaluation(report: Mapping[str, Any], run_dir: Path) -> None:
     console = Console(file=sys.stdout, width=max(100, 30 * (len(report["methods"]) + 1)))
     console.print(table)
     console.print(f"report: {run_dir / 'evaluation.md'}")
-
-
-def protocols_text(pm: PluginManager) -> str:
-    """The registered protocols, one line each: name, model, description (``*``: default)."""
-    specs = sorted(pm.evaluations.values(), key=lambda e: (e.model, not e.default, e.name))
-    if not specs:
-        return (
-            "Evaluation protocols: none registered (a plugin registers them with "
-            "register_evaluations)."
-        )
-    width = max(len(e.name) for e in specs) + 2
-    lines = ["Evaluation protocols (protocol=NAME; * = the model's default):"]
-    for e in specs:
-        mark = "*" if e.default else " "
-        lines.append(f"  {mark} {e.name:<{width}} model={e.model}: {e.description}")
-    return "\n".join(lines) + "\n"

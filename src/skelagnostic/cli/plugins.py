@@ -20,7 +20,13 @@ from typing import Any
 from rich.console import Console
 from rich.markup import escape
 
-from skelagnostic.plugins import AlignerSpec, PluginInfo, PluginLoadWarning, get_plugin_manager
+from skelagnostic.plugins import (
+    AlignerSpec,
+    PluginInfo,
+    PluginLoadWarning,
+    PluginManager,
+    get_plugin_manager,
+)
 
 #: ``provides`` kinds in display order, with their labels and the setting they fill.
 _KINDS = (
@@ -203,3 +209,23 @@ def main(argv: Sequence[str]) -> int:
     for item in details:
         _print_aligner(console, item, infos.get(item["plugin"]))
     return 0
+
+
+def protocols_text(pm: PluginManager) -> str:
+    """The registered protocols, one line each: name, model, description (``*``: default).
+
+    ``skelagnostic evaluate --help`` prints it before Hydra's help; the protocols'
+    modules are not imported for it (they register by reference).
+    """
+    specs = sorted(pm.evaluations.values(), key=lambda e: (e.model, not e.default, e.name))
+    if not specs:
+        return (
+            "Evaluation protocols: none registered (a plugin registers them with "
+            "register_evaluations)."
+        )
+    width = max(len(e.name) for e in specs) + 2
+    lines = ["Evaluation protocols (protocol=NAME; * = the model's default):"]
+    for e in specs:
+        mark = "*" if e.default else " "
+        lines.append(f"  {mark} {e.name:<{width}} model={e.model}: {e.description}")
+    return "\n".join(lines) + "\n"

@@ -23,14 +23,12 @@ from pathlib import Path
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
-from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from skelagnostic.aligners.weights import WEIGHTS_FILE
-from skelagnostic.callbacks.split import SPLIT_FILE
 from skelagnostic.cli.lock import LOCK_FILE, RunDirectoryLock, RunDirectoryRefused
 from skelagnostic.core.paths import expand_path
 from skelagnostic.errors import SkelagnosticError
+from skelagnostic.filenames import SPLIT_FILE, WEIGHTS_FILE
 
 __all__ = [
     "LOCK_FILE",
@@ -239,6 +237,8 @@ def summary_table(
         limit: Metrics shown at most.
         stopped: Why a fit ended (``max_steps 20 reached``, ...), shown as a row.
     """
+    from lightning.pytorch.utilities import rank_zero_only  # loaded by the run already
+
     if rank_zero_only.rank != 0:
         return
     from rich.console import Console
@@ -389,6 +389,8 @@ class RunDirectoryGuard(Callback):
 
     def on_run_start(self, config: DictConfig, **kwargs: object) -> None:
         """Check and lock the run directory of this command (rank 0 only)."""
+        from lightning.pytorch.utilities import rank_zero_only  # a job is about to run
+
         if rank_zero_only.rank != 0:
             return
         raw = OmegaConf.select(config, "hydra.run.dir")
