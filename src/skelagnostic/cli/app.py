@@ -576,6 +576,8 @@ def main(task: str, argv: Sequence[str]) -> int:
     try:
         code = _launch(task, args, jobs)
         return code if code is not None else _report(jobs[0], cpu_start)
+    except BrokenPipeError:  # `| head` closed the output: skelagnostic.cli.main ends quietly
+        raise
     except (
         SkelagnosticError,
         HydraException,
