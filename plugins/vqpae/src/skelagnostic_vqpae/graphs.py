@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import torch
 from torch import Tensor, nn
@@ -64,86 +64,103 @@ def export_graphs(aligner: VqpaeModel) -> list[ExportGraph]:
     graphs = []
     for name, char in zip(aligner.dataset_names, aligner.characters, strict=True):
         spec = aligner.hparams["datasets"][name]
-        channels, window = int(spec["channels"]), int(spec["window"])
-        stem = "".join(c if c.isalnum() or c in "_.-" else "_" for c in name)
-        authors = spec.get("features", "raw") == "authors"
+        window = int(spec["window"])
         meta = {
             "dataset": name,
             "skeleton": spec.get("skeleton"),  # None for an authors' run (.authors)
             "fps": float(spec["fps"]),
             "window": window,
             "pivot": window // 2,
-            "channels": channels,
+            "channels": int(spec["channels"]),
         }
-        fixed = {
-            "window": f"{window} frames ({float(spec['fps']):g} fps): the frequency "
-            f"MLP reads the {window // 2 + 1} rfft bins of the window"
-        }
-        graphs.append(
-            ExportGraph(
-                f"encoder_{stem}",
-                _PivotEncoder(char.pae, book),
-                (torch.zeros(2, channels, window).normal_(),),
-                ("windows",),
-                ("phase", "frequency", "code", "amplitude", "manifold"),
-                {
-                    k: {0: "batch"}
-                    for k in ("windows", "phase", "frequency", "code", "amplitude", "manifold")
-                },
-                description=(
-                    f"{name!r}: normalised windows [B, {channels}, {window}] centred on the "
-                    "pivot frame -> pivot phase (cycles), frequency (Hz), codebook index, "
-                    "quantised amplitude [B, 2d] and phase-manifold point [B, d]"
-                ),
-                fixed_axes=fixed,
-                metadata={
-                    **meta,
-                    "representation": (
-                        "the WalkTheDog exporter's velocities (skelagnostic_vqpae.features."
-                        "authors_features) of the whole clip in metres"
-                        if authors
-                        else "RootLocalVelocities of the motion in metres"
-                    )
-                    + ", [T, J, 3] flattened to [T, J*3] and transposed to [J*3, T]",
-                    "normalisation": {
-                        "input_mean": char.input_mean,
-                        "input_std": char.input_std,
-                        "formula": "(features - input_mean) / input_std",
-                    },
-                    "preprocess": "resample to fps; the window of frame i holds frames "
-                    "i - pivot .. i + pivot (repeat the end frames at "
-                    "the clip edges)",
-                },
-            )
-        )
+        graphs.append(_encoder_graph(char, book, spec, meta))
         if bool(char.pose_fitted) and not spec.get("pose_features"):
-            graphs.append(
-                ExportGraph(
-                    f"pose_decoder_{stem}",
-                    Method(char.pose, "forward"),
-                    (torch.zeros(2, aligner.hparams.latent).normal_(),),
-                    ("manifold",),
-                    ("pose",),
-                    {"manifold": {0: "batch"}, "pose": {0: "batch"}},
-                    description=(
-                        f"{name!r}: phase-manifold point [B, d] -> normalised "
-                        f"average root-local pose [B, {channels}] (Sec. 5.2)"
-                    ),
-                    metadata={
-                        **meta,
-                        "representation": (
-                            "the WalkTheDog exporter's root-local positions"
-                            if authors
-                            else "GlobalPositions(frame='root')"
-                        )
-                        + ", [J, 3] flattened to [J*3]",
-                        "normalisation": {
-                            "pose_mean": char.pose_mean,
-                            "pose_std": char.pose_std,
-                            "formula": "pose * pose_std + pose_mean",
-                        },
-                        "postprocess": "inverse kinematics gives rotations",
-                    },
-                )
-            )
+            graphs.append(_pose_graph(char, int(aligner.hparams.latent), spec, meta))
     return graphs
+
+
+def _stem(name: str) -> str:
+    """A dataset name as a file-name part."""
+    return "".join(c if c.isalnum() or c in "_.-" else "_" for c in name)
+
+
+def _authors(spec: dict[str, Any]) -> bool:
+    """Whether the dataset was trained on the authors' features (``data.features=authors``)."""
+    return spec.get("features", "raw") == "authors"
+
+
+def _encoder_graph(
+    char: Any, book: torch.Tensor, spec: dict[str, Any], meta: dict[str, Any]
+) -> ExportGraph:
+    """The encoder graph of one character (see :func:`export_graphs`)."""
+    name, channels, window = meta["dataset"], meta["channels"], meta["window"]
+    fixed = {
+        "window": f"{window} frames ({meta['fps']:g} fps): the frequency "
+        f"MLP reads the {window // 2 + 1} rfft bins of the window"
+    }
+    outputs = ("phase", "frequency", "code", "amplitude", "manifold")
+    representation = (
+        "the WalkTheDog exporter's velocities (skelagnostic_vqpae.features."
+        "authors_features) of the whole clip in metres"
+        if _authors(spec)
+        else "RootLocalVelocities of the motion in metres"
+    )
+    return ExportGraph(
+        f"encoder_{_stem(name)}",
+        _PivotEncoder(char.pae, book),
+        (torch.zeros(2, channels, window).normal_(),),
+        ("windows",),
+        outputs,
+        {k: {0: "batch"} for k in ("windows", *outputs)},
+        description=(
+            f"{name!r}: normalised windows [B, {channels}, {window}] centred on the "
+            "pivot frame -> pivot phase (cycles), frequency (Hz), codebook index, "
+            "quantised amplitude [B, 2d] and phase-manifold point [B, d]"
+        ),
+        fixed_axes=fixed,
+        metadata={
+            **meta,
+            "representation": representation
+            + ", [T, J, 3] flattened to [T, J*3] and transposed to [J*3, T]",
+            "normalisation": {
+                "input_mean": char.input_mean,
+                "input_std": char.input_std,
+                "formula": "(features - input_mean) / input_std",
+            },
+            "preprocess": "resample to fps; the window of frame i holds frames "
+            "i - pivot .. i + pivot (repeat the end frames at "
+            "the clip edges)",
+        },
+    )
+
+
+def _pose_graph(char: Any, latent: int, spec: dict[str, Any], meta: dict[str, Any]) -> ExportGraph:
+    """The average-pose decoder graph of one character (see :func:`export_graphs`)."""
+    name, channels = meta["dataset"], meta["channels"]
+    representation = (
+        "the WalkTheDog exporter's root-local positions"
+        if _authors(spec)
+        else "GlobalPositions(frame='root')"
+    )
+    return ExportGraph(
+        f"pose_decoder_{_stem(name)}",
+        Method(char.pose, "forward"),
+        (torch.zeros(2, latent).normal_(),),
+        ("manifold",),
+        ("pose",),
+        {"manifold": {0: "batch"}, "pose": {0: "batch"}},
+        description=(
+            f"{name!r}: phase-manifold point [B, d] -> normalised "
+            f"average root-local pose [B, {channels}] (Sec. 5.2)"
+        ),
+        metadata={
+            **meta,
+            "representation": representation + ", [J, 3] flattened to [J*3]",
+            "normalisation": {
+                "pose_mean": char.pose_mean,
+                "pose_std": char.pose_std,
+                "formula": "pose * pose_std + pose_mean",
+            },
+            "postprocess": "inverse kinematics gives rotations",
+        },
+    )
