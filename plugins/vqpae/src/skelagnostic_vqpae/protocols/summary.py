@@ -57,6 +57,7 @@ __all__ = [
     "fit_summary",
     "overlap_figures",
     "shared_codes_sentence",
+    "shared_manifold_headline",
     "table2_summary",
     "transfer_labels",
     "transfer_picture",
@@ -191,6 +192,7 @@ def fit_summary(aligner: VqpaeModel, trainer: L.Trainer, mode: str = "full") -> 
         table, note = table2_summary(aligner, held, embeddings["train"])
         metrics["table2"] = table
         content["notes"].append(note)
+        content["headline"] = [shared_manifold_headline(table, list(aligner.dataset_names))]
     stages(f"transfer: {plan.describe()}")
     transferred = transfer_summary(
         aligner,
@@ -331,6 +333,45 @@ def shared_codes_sentence(source: str, target: str, codes: Mapping[str, list[int
             "on other codes."
         )
     return f"{head}: they share {listed(both)}."
+
+
+def shared_manifold_headline(table: Mapping[str, Any], names: list[str]) -> str:
+    """One paragraph for the top of ``summary.md``: does this run show a shared manifold?
+
+    Args:
+        table: :func:`table2_summary`'s figures.
+        names: The dataset names; the first two are the transfer's source and target.
+
+    Returns:
+        The codes both characters use on their training clips with the share of each
+        character's training (and held-out) frames on them, and whether the held-out
+        clips of the first two characters sit on a common code.
+
+    Example:
+        >>> table = {"num_codes": 16, "codes_shared_training": 0,
+        ...          "frame_share_training": {"human": 0.0, "dog": 0.0},
+        ...          "codes_heldout": {"human": [4], "dog": [10]}}
+        >>> text = shared_manifold_headline(table, ["human", "dog"])
+        >>> "0 of 16 codes are used by both" in text, "they share no code" in text
+        (True, True)
+    """
+
+    def shares(figures: Mapping[str, Any]) -> str:
+        def pct(v: float | None) -> str:
+            return "n/a" if v is None or math.isnan(v) else f"{100 * v:.0f} %"
+
+        return ", ".join(f"{n.rsplit('/', 1)[-1]} {pct(figures[n])}" for n in names if n in figures)
+
+    held = table.get("frame_share_heldout_on_training_shared") or {}
+    short = [n.rsplit("/", 1)[-1] for n in names[:2]]
+    return (
+        f"**Shared manifold (WalkTheDog's Table 2)**: {table.get('codes_shared_training')} of "
+        f"{table.get('num_codes')} codes are used by both characters' training clips, with "
+        f"{shares(table.get('frame_share_training', {}))} of the training frames"
+        + (f" and {shares(held)} of the held-out frames on them" if held else " on them")
+        + ". "
+        + shared_codes_sentence(short[0], short[1], _short(table.get("codes_heldout", {})))
+    )
 
 
 def transfer_summary(
