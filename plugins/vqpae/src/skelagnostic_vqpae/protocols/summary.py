@@ -33,7 +33,7 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import manifold_overlap
-from skelagnostic_vqpae.embed import embed_datasets, plot_clip_timing, plot_manifold
+from skelagnostic_vqpae.embed import embed_clip, embed_datasets, plot_clip_timing, plot_manifold
 from skelagnostic_vqpae.picture import plot_transfer
 from skelagnostic_vqpae.protocols.procedural import procedural_kind
 from skelagnostic_vqpae.protocols.tables import table2
@@ -637,6 +637,8 @@ def transfer_picture(
         )
     # the generator's feet touch down more than once per stride: mark their strides instead
     generated = any(procedural_kind(m.skeleton) is not None for m in motions)
+    # every motion's codes, from its own character's VQ-PAE: shared codes show at a glance
+    embedded = [embed_clip(aligner, m) for m in motions]
     return plot_transfer(
         source,
         outputs,
@@ -646,6 +648,7 @@ def transfer_picture(
         source_label=short[0],
         target_label=short[1],
         events="swing" if generated else "touchdown",
+        codes=[(e.code.numpy(), e.fps) for e in embedded],
     )
 
 
