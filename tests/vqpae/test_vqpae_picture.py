@@ -106,7 +106,7 @@ def test_code_strip_shows_each_motion_codes_in_one_colour_per_code(clips) -> Non
     rows, columns = 2, 1 + len(dogs)
     strip = fig.axes[rows * columns]
     assert "same colour" in strip.get_title(loc="left")
-    assert [t.get_text() for t in strip.get_yticklabels()][0].startswith("source")
+    assert strip.get_yticklabels()[0].get_text().startswith("source")
     bars = strip.collections  # one bar per run of equal codes: 2 + 2 + 1 + 2
     assert len(bars) == 7
     colours = [tuple(np.round(b.get_facecolor()[0], 3)) for b in bars]

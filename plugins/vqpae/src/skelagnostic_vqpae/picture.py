@@ -278,7 +278,7 @@ def _draw_codes(
     """One row per motion: its codebook index per frame, one colour per code, numbered."""
     from matplotlib import colormaps
 
-    palette = colormaps["tab20"]
+    palette = colormaps["tab10"]  # ten clearly different colours (tab20 pairs close shades)
     rows = len(codes)
     for r, (code, fps) in enumerate(codes):
         y = rows - 1 - r
@@ -287,17 +287,21 @@ def _draw_codes(
         ends = np.r_[starts[1:], len(code)]
         for a, b in zip(starts, ends, strict=True):
             t0, t1 = a / fps, min(b / fps, duration)
-            ax.broken_barh([(t0, t1 - t0)], (y - 0.4, 0.8), color=palette(int(code[a]) % 20))
+            ax.broken_barh([(t0, t1 - t0)], (y - 0.4, 0.8), color=palette(int(code[a]) % 10))
             if t1 - t0 > 0.25:
                 ax.text((t0 + t1) / 2, y, str(int(code[a])), ha="center", va="center", fontsize=9)
-    ax.set_yticks(range(rows)[::-1], [label.replace("\n", " ") for label in labels])
+    # the outputs' first line without the target's name ("VQ-PAE"), in their colours
+    short = [labels[0]] + [label.split("\n")[0].split(": ", 1)[-1] for label in labels[1:]]
+    ax.set_yticks(range(rows)[::-1], short)
     ax.tick_params(axis="y", labelsize=9)
+    for k, tick in enumerate(ax.get_yticklabels()[1:]):
+        tick.set_color(METHOD_COLORS[k % len(METHOD_COLORS)])
     ax.set_xlim(0, duration)
     ax.set_ylim(-0.5, rows - 0.5)
     ax.set_xticklabels([])
     ax.set_title(
-        "codebook index per frame (same colour and number = same code: where the rows agree, "
-        "both characters sit on a shared part of the phase manifold)",
+        "codebook index per frame: the source's, and of the target frames each method "
+        "replays (same colour and number = same code, a shared part of the phase manifold)",
         loc="left",
         fontsize=11,
         fontweight="bold",

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -33,7 +33,7 @@ from skelagnostic.errors import SkelagnosticError
 from skelagnostic.evaluation import MODEL, clips_of_split, mean_rows
 from skelagnostic.io.markdown import markdown_cell
 from skelagnostic.metrics.functional import manifold_overlap
-from skelagnostic_vqpae.embed import embed_clip, embed_datasets, plot_clip_timing, plot_manifold
+from skelagnostic_vqpae.embed import embed_datasets, plot_clip_timing, plot_manifold
 from skelagnostic_vqpae.picture import plot_transfer
 from skelagnostic_vqpae.protocols.procedural import procedural_kind
 from skelagnostic_vqpae.protocols.tables import table2
@@ -421,7 +421,8 @@ def transfer_summary(
     seconds = plan.transfer_seconds
     excerpts = [c[: int(seconds * c.fps) + 1] for c in sources[:clips]]
     try:
-        rows, outputs = transfer_rows(aligner, excerpts, database)
+        codes: dict[str, Any] = {}
+        rows, outputs = transfer_rows(aligner, excerpts, database, codes=codes)
     except SkelagnosticError as error:  # e.g. frequencies whose periods no clip holds
         return {
             "metrics": {"skipped": str(error)},
@@ -432,7 +433,9 @@ def transfer_summary(
     source, target = aligner.dataset_names[0], aligner.dataset_names[1]
     first = next(iter(outputs))
     stage(f"picture of {first}")
-    picture = transfer_picture(aligner, outputs[first], split=split, table=table, steps=steps)
+    picture = transfer_picture(
+        aligner, outputs[first], split=split, table=table, steps=steps, codes=codes.get(first)
+    )
     notes = [
         _transfer_table(rows, means, split, source, target, seconds, len(database)),
         f"Picture `vqpae_transfer.png`: {first} (held-out, first {seconds:g} s) and the "
@@ -600,6 +603,7 @@ def transfer_picture(
     split: str = "val",
     table: Mapping[str, Any] | None = None,
     steps: int | None = None,
+    codes: Sequence[tuple[torch.Tensor, float]] | None = None,
 ) -> Any:
     """:func:`~skelagnostic_vqpae.picture.plot_transfer` of one transferred clip, titled.
 
@@ -610,6 +614,9 @@ def transfer_picture(
         split: The source clip's split (held out from training).
         table: :func:`table2_summary`'s figures: the header states the shared codes.
         steps: Optimiser steps of the run, for the header (optional).
+        codes: Per motion, its per-frame codes and their frame rate: the source's, then
+            those of the target frames each output replays (``transfer_rows(codes=...)``);
+            drawn as the picture's code strip (optional).
 
     Returns:
         The matplotlib figure.
@@ -637,8 +644,6 @@ def transfer_picture(
         )
     # the generator's feet touch down more than once per stride: mark their strides instead
     generated = any(procedural_kind(m.skeleton) is not None for m in motions)
-    # every motion's codes, from its own character's VQ-PAE: shared codes show at a glance
-    embedded = [embed_clip(aligner, m) for m in motions]
     return plot_transfer(
         source,
         outputs,
@@ -648,7 +653,7 @@ def transfer_picture(
         source_label=short[0],
         target_label=short[1],
         events="swing" if generated else "touchdown",
-        codes=[(e.code.numpy(), e.fps) for e in embedded],
+        codes=[(c.numpy(), fps) for c, fps in codes] if codes else None,
     )
 
 
