@@ -202,7 +202,8 @@ def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
         ["model=vqpae", "experiment=vqpae_main", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm
     )
     assert (
-        cfg.model.num_codes == 16
+        cfg.model.num_codes == 4  # so the characters share codes in the budget (report, 34)
+        and cfg.model.reinit_decay == 0.9
         and cfg.model.optimizer.lr == 1e-3
         and cfg.model.pose_mlp == "none"
     )
