@@ -79,6 +79,7 @@ def test_fit_summary_writes_metrics_renders_figures_and_markdown(tmp_path: Path)
         "renders": {"pose": [stick]},
         "figures": {"curve": figure},
         "notes": ["A note from the aligner."],
+        "headline": ["**The finding** of the run."],
     }
     module = _Tiny(content)
     callback = FitSummary(name="tiny", size=(40, 40), sheet_frames=2)
@@ -95,6 +96,9 @@ def test_fit_summary_writes_metrics_renders_figures_and_markdown(tmp_path: Path)
     assert "| `train/loss` |" in summary and "| `usage` | 0.25 |" in summary
     assert "![pose](tiny_pose.gif)" in summary and "![curve](tiny_curve.png)" in summary
     assert "A note from the aligner." in summary
+    # the headline sits under the step count, before every table
+    paragraphs = summary.split("\n\n")
+    assert "optimiser step(s)" in paragraphs[1] and paragraphs[2] == "**The finding** of the run."
     assert {p.name for p in callback.written} == {
         "tiny_metrics.json",
         "tiny_pose.gif",

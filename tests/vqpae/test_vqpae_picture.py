@@ -96,6 +96,27 @@ def test_swing_timeline_marks_one_event_per_stride(clips) -> None:
     assert rate == pytest.approx(gait_frequency(human))
 
 
+def test_code_strip_shows_each_motion_codes_in_one_colour_per_code(clips) -> None:
+    human, dogs = clips
+    frames = human.num_frames
+    same = np.r_[np.zeros(frames // 2, int), np.full(frames - frames // 2, 3)]
+    codes = [(same, human.fps), (same, human.fps), (np.full(frames, 5), human.fps)]
+    codes.append((same, human.fps))
+    fig = plot_transfer(human, dogs, codes=codes)
+    rows, columns = 2, 1 + len(dogs)
+    strip = fig.axes[rows * columns]
+    assert "same colour" in strip.get_title(loc="left")
+    assert strip.get_yticklabels()[0].get_text().startswith("source")
+    bars = strip.collections  # one bar per run of equal codes: 2 + 2 + 1 + 2
+    assert len(bars) == 7
+    colours = [tuple(np.round(b.get_facecolor()[0], 3)) for b in bars]
+    assert colours[0] == colours[2] and colours[1] == colours[3]  # same code, same colour
+    assert colours[4] not in (colours[0], colours[1])
+    assert len(fig.axes) == rows * columns + 1 + len(dogs)  # the strip, then the timelines
+    with pytest.raises(RenderError, match="codes"):
+        plot_transfer(human, dogs, codes=codes[:2])
+
+
 def test_side_view_stands_on_the_ground_facing_the_travel() -> None:
     dog, _ = procedural.generate("quadruped", "walk", seconds=3.0, fps=30, seed=1, turn_rate=40)
     figure = StickFigure.from_motion(dog.to_metres())

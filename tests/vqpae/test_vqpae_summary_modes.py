@@ -45,6 +45,11 @@ def test_a_tiny_run_gets_the_quick_summary(tiny_fit: dict[str, Any]) -> None:
     table = metrics["table2"]
     assert set(table["frame_share_training"]) == set(tiny_fit["model"].dataset_names)
     assert table["codes_shared_training"] == len(table["shared_codes_training"])
+    # the top of summary.md says whether the run shows a shared manifold, with its figures
+    headline = text.split("\n\n")[2]
+    assert headline.startswith("**Shared manifold")
+    assert f"{table['codes_shared_training']} of {table['num_codes']} codes are used" in headline
+    assert "share no code" in headline or "they share code" in headline
 
 
 def test_full_summary_transfers_more_and_animates(
@@ -112,7 +117,7 @@ def test_table2_summary_on_known_codes() -> None:
     from types import SimpleNamespace
 
     import torch
-    from skelagnostic_vqpae.protocols.summary import table2_summary
+    from skelagnostic_vqpae.protocols.summary import shared_manifold_headline, table2_summary
 
     def clips(*codes: list[int]) -> list[Any]:
         return [SimpleNamespace(code=torch.tensor(c)) for c in codes]
@@ -129,5 +134,13 @@ def test_table2_summary_on_known_codes() -> None:
     assert figures["heldout_source_target_shared"] == []
     assert "| `human` | 50.0 % | 25.0 % | 3 | 2, 4, 7, 9 |" in text
     assert "they share no code" in text
+    headline = shared_manifold_headline(figures, aligner.dataset_names)
+    assert "2 of 16 codes are used by both characters' training clips" in headline
+    assert "human 50 %, dog 75 % of the training frames" in headline
+    assert "human 25 %, dog 0 % of the held-out frames on them" in headline
+    assert headline.endswith("on other codes.")  # the held-out clips share no code: said
+    held["dog"] = clips([7, 10])
+    shared, _ = table2_summary(aligner, held, train)
+    assert shared_manifold_headline(shared, aligner.dataset_names).endswith("share code 7.")
     _, without = table2_summary(aligner, {}, train)  # no validation split
     assert "| `dog` | 75.0 % | n/a | 3 | none |" in without

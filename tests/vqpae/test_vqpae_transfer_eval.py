@@ -168,7 +168,7 @@ def test_main_experiment_writes_the_transfer_summary(tmp_path, vqpae_cli, capsys
 
 
 def test_unscaled_transfer_replays_fixed_windows(tiny_run) -> None:
-    from skelagnostic_vqpae.transfer import build_database, transfer
+    from skelagnostic_vqpae.transfer import build_database, replayed_codes, transfer
 
     from skelagnostic.errors import SkelagnosticError
     from skelagnostic.evaluation import clips_of_split
@@ -185,6 +185,12 @@ def test_unscaled_transfer_replays_fixed_windows(tiny_run) -> None:
     assert all(s.length == replay for s in result.match.segments)
     assert all(s.out_length == replay for s in result.match.segments[:-1])
     assert result.motion.num_frames == len(result.source)
+    # the picture's code strip: per output frame, the code of the dog frame replayed there
+    codes = replayed_codes(result, target)
+    assert len(codes) == sum(s.out_length for s in result.match.segments)
+    for s in result.match.segments:  # same replay speed here: frame for frame
+        replayed = target.embeddings[s.clip].code[s.frame : s.frame + s.out_length]
+        assert torch.equal(codes[s.start : s.start + s.out_length], replayed)
     with pytest.raises(SkelagnosticError, match="replay_seconds"):
         transfer(model, human, target, scaled=False, replay_seconds=0.0)
 
@@ -196,7 +202,8 @@ def test_main_experiment_composes_a_cpu_budget(vqpae_pm) -> None:
         ["model=vqpae", "experiment=vqpae_main", "run_dir=/tmp/unused"], plugin_manager=vqpae_pm
     )
     assert (
-        cfg.model.num_codes == 16
+        cfg.model.num_codes == 4  # so the characters share codes in the budget (report, 34)
+        and cfg.model.reinit_decay == 0.9
         and cfg.model.optimizer.lr == 1e-3
         and cfg.model.pose_mlp == "none"
     )

@@ -88,6 +88,8 @@ class SummaryContent(TypedDict, total=False):
             the callback's ``size`` and ``sheet_frames``.
         figures: ``{key: matplotlib Figure}``, saved as ``<name>_<key>.png`` (and closed).
         notes: Markdown paragraphs appended to ``summary.md``.
+        headline: Markdown paragraphs placed at the top of ``summary.md``, under the
+            run's step count (the one finding a reader must not miss).
     """
 
     metrics: dict[str, Any]
@@ -95,6 +97,7 @@ class SummaryContent(TypedDict, total=False):
     render_options: dict[str, dict[str, Any]]
     figures: dict[str, Any]
     notes: list[str]
+    headline: list[str]
 
 
 def _plain(value: Any) -> Any:
@@ -260,6 +263,8 @@ class FitSummary(pl.Callback):
             + f". Every figure is in `{metrics_file.name}`.",
             "",
         ]
+        for paragraph in content.get("headline", []):
+            lines += [paragraph, ""]
         chosen = content.get("metrics", {}).get("summary")
         if isinstance(chosen, Mapping):
             what = {

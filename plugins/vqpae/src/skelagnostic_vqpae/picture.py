@@ -45,6 +45,8 @@ TIMELINE_INCHES = 1.9
 METHOD_COLORS = ("#2e7d32", "#ef6c00", "#6a1b9a", "#1565c0", "#c62828")
 #: Seconds over which :func:`side_view` reads the direction of travel (centred on the instant).
 HEADING_SPAN = 1.0
+#: Height of one row of the code strip (one motion's codebook index per frame), inches.
+CODE_ROW_INCHES = 0.42
 
 
 def _figure(width: float, height: float) -> Figure:
@@ -270,6 +272,42 @@ class _Lanes:
         )
 
 
+def _draw_codes(
+    ax: Any, codes: Sequence[tuple[np.ndarray, float]], labels: Sequence[str], duration: float
+) -> None:
+    """One row per motion: its codebook index per frame, one colour per code, numbered."""
+    from matplotlib import colormaps
+
+    palette = colormaps["tab10"]  # ten clearly different colours (tab20 pairs close shades)
+    rows = len(codes)
+    for r, (code, fps) in enumerate(codes):
+        y = rows - 1 - r
+        code = np.asarray(code).reshape(-1)
+        starts = np.flatnonzero(np.r_[True, code[1:] != code[:-1]])
+        ends = np.r_[starts[1:], len(code)]
+        for a, b in zip(starts, ends, strict=True):
+            t0, t1 = a / fps, min(b / fps, duration)
+            ax.broken_barh([(t0, t1 - t0)], (y - 0.4, 0.8), color=palette(int(code[a]) % 10))
+            if t1 - t0 > 0.25:
+                ax.text((t0 + t1) / 2, y, str(int(code[a])), ha="center", va="center", fontsize=9)
+    # the outputs' first line without the target's name ("VQ-PAE"), in their colours
+    short = [labels[0]] + [label.split("\n")[0].split(": ", 1)[-1] for label in labels[1:]]
+    ax.set_yticks(range(rows)[::-1], short)
+    ax.tick_params(axis="y", labelsize=9)
+    for k, tick in enumerate(ax.get_yticklabels()[1:]):
+        tick.set_color(METHOD_COLORS[k % len(METHOD_COLORS)])
+    ax.set_xlim(0, duration)
+    ax.set_ylim(-0.5, rows - 0.5)
+    ax.set_xticklabels([])
+    ax.set_title(
+        "codebook index per frame: the source's, and of the target frames each method "
+        "replays (same colour and number = same code, a shared part of the phase manifold)",
+        loc="left",
+        fontsize=11,
+        fontweight="bold",
+    )
+
+
 def plot_transfer(
     source: Motion,
     outputs: Mapping[str, Motion],
@@ -280,6 +318,7 @@ def plot_transfer(
     source_label: str = "source",
     target_label: str = "target",
     events: str = "touchdown",
+    codes: Sequence[tuple[np.ndarray, float]] | None = None,
     out: str | Path | None = None,
 ) -> Figure:
     """The source clip and its transfers: poses at one scale and the feet's rhythm.
@@ -301,14 +340,18 @@ def plot_transfer(
             (:func:`~skelagnostic.analysis.forward_swings`, the events of the
             gait frequency; for characters whose feet touch down more than once per
             stride, such as the procedural generator's).
+        codes: Optional, per motion (the source first, then the outputs): its codebook
+            index per frame and their frame rate, drawn as a strip of coloured rows
+            above the timelines, so shared codes show at a glance.
         out: Optional image path (``.png``).
 
     Returns:
         The figure (Agg canvas). Its axes: the pose grid row by row (the source's
-        column first), then one timeline per output.
+        column first), the code strip (with ``codes``), then one timeline per output.
 
     Raises:
-        RenderError: No output, an instant outside the source clip, or unknown events.
+        RenderError: No output, an instant outside the source clip, unknown events, or
+            ``codes`` not one per motion.
 
     Example:
         >>> from skelagnostic import procedural
@@ -326,6 +369,9 @@ def plot_transfer(
         raise RenderError(f"events: one of {', '.join(EVENTS)}, got {events!r}")
     instants = _instants(source, instants)
     motions = [source, *outputs.values()]
+    if codes is not None and len(codes) != len(motions):
+        raise RenderError(f"codes: one per motion ({len(motions)}), got {len(codes)}")
+    strip = CODE_ROW_INCHES * len(motions) + 0.5 if codes is not None else 0.0
     labels = [
         f"{source_label}: {source.name}" if getattr(source, "name", None) else source_label,
         *outputs,
@@ -336,7 +382,7 @@ def plot_transfer(
     width = PANEL_INCHES * columns
     wrapped = [line for note in notes for line in textwrap.wrap(note, int(width * 11))]
     header = 0.75 + 0.25 * len(wrapped) + (0.25 if any("\n" in x for x in labels) else 0)
-    height = header + PANEL_INCHES * rows + TIMELINE_INCHES * len(outputs) + 0.7
+    height = header + PANEL_INCHES * rows + strip + TIMELINE_INCHES * len(outputs) + 0.7
     fig = _figure(width, height)
     top = 1 - header / height
     poses_bottom = top - PANEL_INCHES * rows / height
@@ -352,17 +398,22 @@ def plot_transfer(
     )
     _draw_poses(fig, grid, figures, views, instants, labels)
     timeline = fig.add_gridspec(
-        len(outputs),
+        len(outputs) + (codes is not None),
         1,
         left=0.1,
         right=0.84,
         top=poses_bottom - 0.6 / height,
         bottom=0.5 / height,
         hspace=0.55,
+        height_ratios=([strip - 0.5] if codes is not None else [])
+        + [TIMELINE_INCHES] * len(outputs),
     )
+    if codes is not None:
+        duration = (source.num_frames - 1) / source.fps
+        _draw_codes(fig.add_subplot(timeline[0, 0]), codes, labels, duration)
     lanes = _Lanes(source, events, source_label, target_label)
     for i, (label, motion) in enumerate(outputs.items()):
-        ax = fig.add_subplot(timeline[i, 0])
+        ax = fig.add_subplot(timeline[i + (codes is not None), 0])
         lanes.draw(ax, label, motion, METHOD_COLORS[i % len(METHOD_COLORS)], instants)
         if i == len(outputs) - 1:
             ax.set_xlabel(

@@ -50,6 +50,7 @@ __all__ = [
     "build_database",
     "matching_frequency",
     "phase_rate",
+    "replayed_codes",
     "transfer",
     "with_known_frequencies",
 ]
@@ -381,6 +382,29 @@ def transfer(
         )
     motion = assemble_motion(target.motions, match, target.database, halflife=halflife)
     return TransferResult(motion, match, emb)
+
+
+def replayed_codes(result: TransferResult, target: TransferDatabase) -> Tensor:
+    """Per frame of a transfer's match, the code of the target frame it replays.
+
+    Each matched segment's database frames are stretched (nearest frame) over its
+    output frames, so the result has the match's frame rate (the source embedding's).
+
+    Args:
+        result: A :func:`transfer` result.
+        target: The database it was matched against.
+
+    Returns:
+        ``[F]`` codebook indices, ``F`` the match's output frames.
+    """
+    segments = result.match.segments
+    frames = max((s.start + s.out_length for s in segments), default=0)
+    codes = torch.zeros(frames, dtype=torch.long)
+    for s in segments:
+        clip = target.embeddings[s.clip].code
+        step = torch.arange(s.out_length) * s.length // max(s.out_length, 1)
+        codes[s.start : s.start + s.out_length] = clip[(s.frame + step).clamp(max=len(clip) - 1)]
+    return codes
 
 
 def transfer_clips(

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -57,6 +57,7 @@ __all__ = [
     "fit_summary",
     "overlap_figures",
     "shared_codes_sentence",
+    "shared_manifold_headline",
     "table2_summary",
     "transfer_labels",
     "transfer_picture",
@@ -191,6 +192,7 @@ def fit_summary(aligner: VqpaeModel, trainer: L.Trainer, mode: str = "full") -> 
         table, note = table2_summary(aligner, held, embeddings["train"])
         metrics["table2"] = table
         content["notes"].append(note)
+        content["headline"] = [shared_manifold_headline(table, list(aligner.dataset_names))]
     stages(f"transfer: {plan.describe()}")
     transferred = transfer_summary(
         aligner,
@@ -333,6 +335,45 @@ def shared_codes_sentence(source: str, target: str, codes: Mapping[str, list[int
     return f"{head}: they share {listed(both)}."
 
 
+def shared_manifold_headline(table: Mapping[str, Any], names: list[str]) -> str:
+    """One paragraph for the top of ``summary.md``: does this run show a shared manifold?
+
+    Args:
+        table: :func:`table2_summary`'s figures.
+        names: The dataset names; the first two are the transfer's source and target.
+
+    Returns:
+        The codes both characters use on their training clips with the share of each
+        character's training (and held-out) frames on them, and whether the held-out
+        clips of the first two characters sit on a common code.
+
+    Example:
+        >>> table = {"num_codes": 16, "codes_shared_training": 0,
+        ...          "frame_share_training": {"human": 0.0, "dog": 0.0},
+        ...          "codes_heldout": {"human": [4], "dog": [10]}}
+        >>> text = shared_manifold_headline(table, ["human", "dog"])
+        >>> "0 of 16 codes are used by both" in text, "they share no code" in text
+        (True, True)
+    """
+
+    def shares(figures: Mapping[str, Any]) -> str:
+        def pct(v: float | None) -> str:
+            return "n/a" if v is None or math.isnan(v) else f"{100 * v:.0f} %"
+
+        return ", ".join(f"{n.rsplit('/', 1)[-1]} {pct(figures[n])}" for n in names if n in figures)
+
+    held = table.get("frame_share_heldout_on_training_shared") or {}
+    short = [n.rsplit("/", 1)[-1] for n in names[:2]]
+    return (
+        f"**Shared manifold (WalkTheDog's Table 2)**: {table.get('codes_shared_training')} of "
+        f"{table.get('num_codes')} codes are used by both characters' training clips, with "
+        f"{shares(table.get('frame_share_training', {}))} of the training frames"
+        + (f" and {shares(held)} of the held-out frames on them" if held else " on them")
+        + ". "
+        + shared_codes_sentence(short[0], short[1], _short(table.get("codes_heldout", {})))
+    )
+
+
 def transfer_summary(
     aligner: VqpaeModel,
     datamodule: Any,
@@ -380,7 +421,8 @@ def transfer_summary(
     seconds = plan.transfer_seconds
     excerpts = [c[: int(seconds * c.fps) + 1] for c in sources[:clips]]
     try:
-        rows, outputs = transfer_rows(aligner, excerpts, database)
+        codes: dict[str, Any] = {}
+        rows, outputs = transfer_rows(aligner, excerpts, database, codes=codes)
     except SkelagnosticError as error:  # e.g. frequencies whose periods no clip holds
         return {
             "metrics": {"skipped": str(error)},
@@ -391,7 +433,9 @@ def transfer_summary(
     source, target = aligner.dataset_names[0], aligner.dataset_names[1]
     first = next(iter(outputs))
     stage(f"picture of {first}")
-    picture = transfer_picture(aligner, outputs[first], split=split, table=table, steps=steps)
+    picture = transfer_picture(
+        aligner, outputs[first], split=split, table=table, steps=steps, codes=codes.get(first)
+    )
     notes = [
         _transfer_table(rows, means, split, source, target, seconds, len(database)),
         f"Picture `vqpae_transfer.png`: {first} (held-out, first {seconds:g} s) and the "
@@ -559,6 +603,7 @@ def transfer_picture(
     split: str = "val",
     table: Mapping[str, Any] | None = None,
     steps: int | None = None,
+    codes: Sequence[tuple[torch.Tensor, float]] | None = None,
 ) -> Any:
     """:func:`~skelagnostic_vqpae.picture.plot_transfer` of one transferred clip, titled.
 
@@ -569,6 +614,9 @@ def transfer_picture(
         split: The source clip's split (held out from training).
         table: :func:`table2_summary`'s figures: the header states the shared codes.
         steps: Optimiser steps of the run, for the header (optional).
+        codes: Per motion, its per-frame codes and their frame rate: the source's, then
+            those of the target frames each output replays (``transfer_rows(codes=...)``);
+            drawn as the picture's code strip (optional).
 
     Returns:
         The matplotlib figure.
@@ -605,6 +653,7 @@ def transfer_picture(
         source_label=short[0],
         target_label=short[1],
         events="swing" if generated else "touchdown",
+        codes=[(c.numpy(), fps) for c, fps in codes] if codes else None,
     )
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from torch import Tensor
 
 from skelagnostic.analysis import (
     acceleration,
@@ -44,6 +45,7 @@ from skelagnostic_vqpae.transfer import (
     HALFLIFE,
     TransferDatabase,
     build_database,
+    replayed_codes,
     transfer,
     with_known_frequencies,
 )
@@ -141,6 +143,7 @@ def transfer_rows(
     halflife: float | None = HALFLIFE,
     frequency_tolerance: float | None = FREQUENCY_TOLERANCE,
     embeddings: Sequence[ClipEmbedding] | None = None,
+    codes: dict[str, list[tuple[Tensor, float]]] | None = None,
 ) -> tuple[list[dict[str, Any]], dict[str, list[Motion]]]:
     """Transfer every source clip onto the database's character, model and baseline.
 
@@ -167,6 +170,9 @@ def transfer_rows(
             frequency head's estimates.
         embeddings: The sources' embeddings (:func:`~skelagnostic_vqpae.embed.embed_clip`),
             one per source, if already computed; else each source is embedded here.
+        codes: Optional, filled with ``clip id -> [(codes, fps)]`` in the order of the
+            outputs: the source's per-frame codes, then per output those of the target
+            frames it replays (:func:`~skelagnostic_vqpae.transfer.replayed_codes`).
 
     Returns:
         ``(rows, outputs)``: rows for :class:`Evaluation` with :data:`TRANSFER_METRICS`
@@ -193,11 +199,11 @@ def transfer_rows(
             "frequency_tolerance": frequency_tolerance,
             "embedding": embeddings[i],  # once for the three transfers
         }
-        made = {
-            MODEL: transfer(aligner, clip, target, **options).motion,
+        results = {
+            MODEL: transfer(aligner, clip, target, **options),
             UNSCALED: transfer(
                 aligner, clip, target, scaled=False, replay_seconds=replay_seconds, **options
-            ).motion,
+            ),
             OWN_RATE: transfer(
                 aligner,
                 clip,
@@ -205,8 +211,14 @@ def transfer_rows(
                 scaled=False,
                 replay_seconds=min(clip.duration, shortest),
                 **options,
-            ).motion,
+            ),
         }
+        made = {method: result.motion for method, result in results.items()}
+        if codes is not None:
+            fps = embeddings[i].fps
+            codes[str(clip.name)] = [(embeddings[i].code, fps)] + [
+                (replayed_codes(result, target), fps) for result in results.values()
+            ]
         values = {}
         for method, out in made.items():
             hz = gait_frequency(out)
