@@ -23,6 +23,8 @@ row is the method's ``eager`` row of the same run.
 training loss after the timed steps from the 32-bit run's (same seed, data and
 steps), the change of numerics an option would bring.
 
+The window caches go to ``<tmp>/skelagnostic-bench-cache`` (shared by the options
+of a method and by later runs), so only the first option of a method builds them.
 The corpora come from ``$SKELAGNOSTIC_BENCH_DATA``, ``$SKELAGNOSTIC_DATA`` or
 ``../shared/datasets`` (LaFAN1, MANN dog); a method whose corpus is missing has no
 rows (it says so). ``smoke`` (the tests) runs the ``humot_quick``-sized HuMoT on
@@ -32,6 +34,7 @@ procedural data only, 2 timed steps, eager and ``bf16``.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Any
 
 from benchmarks.harness import Result, run_child
@@ -71,7 +74,8 @@ def measure(overrides: list[str], option: str, steps: int) -> dict[str, Any]:
 
     torch.set_num_threads(2 if option == "threads2" else 1)
     pm = get_plugin_manager()
-    extra = [f"run_dir={tempfile.mkdtemp(prefix='bench-options-')}"]
+    cache = Path(tempfile.gettempdir()) / "skelagnostic-bench-cache"  # shared by the options
+    extra = [f"run_dir={tempfile.mkdtemp(prefix='bench-options-')}", f"data.cache_dir={cache}"]
     if option == "batch2x":
         base = compose([*overrides, *extra], plugin_manager=pm)
         extra.append(f"data.batch_size={2 * int(base.data.batch_size)}")

@@ -311,6 +311,10 @@ def test_cli_data_dirs(
         (["ckpt_path={tmp}/none.ckpt"], "ckpt_path: no checkpoint file '{tmp}/none.ckpt'"),
         (["data.window=0"], "data.window must be > 0, got 0"),
         (
+            ["data.num_workers=-1"],
+            "data.num_workers must be >= 0 (0: load in the main process), got -1",
+        ),
+        (
             ["summary=sometimes"],
             "summary='sometimes': must be one of auto, full, quick, none",
         ),

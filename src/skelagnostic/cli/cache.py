@@ -103,7 +103,9 @@ def main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     cache = WindowCache(args.cache_dir if args.cache_dir is not None else default_cache_dir())
     if cache.root.exists() and not cache.root.is_dir():
-        print(error_line("skelagnostic cache", f"{cache.root} is not a directory"), file=sys.stderr)
+        where = "--cache-dir " if args.cache_dir is not None else "the default cache directory "
+        message = f"{where}{cache.root} is not a directory"
+        print(error_line("skelagnostic cache", message), file=sys.stderr)
         return 1
     try:
         return info(cache, args.verbose) if args.action == "info" else clear(cache)

@@ -186,15 +186,15 @@ class MotionDataModule(L.LightningDataModule):
                 f"data.augment: {type(self).__name__} does not augment its windows: "
                 f"{self.no_augmentation}; remove the data.augment.* settings"
             )
-        for arg, value, low in (
-            ("fps", fps, 0),
-            ("window", window, 0),
-            ("stride", stride, 0),
-            ("batch_size", batch_size, 0),
-            ("num_workers", num_workers, -1),
+        for arg, value, ok, what in (
+            ("fps", fps, fps > 0, "> 0"),
+            ("window", window, window > 0, "> 0"),
+            ("stride", stride, stride > 0, "> 0"),
+            ("batch_size", batch_size, batch_size > 0, "> 0"),
+            ("num_workers", num_workers, num_workers >= 0, ">= 0 (0: load in the main process)"),
         ):
-            if value <= low:
-                raise SkelagnosticError(f"data.{arg} must be > {low}, got {value}")
+            if not ok:
+                raise SkelagnosticError(f"data.{arg} must be {what}, got {value}")
         if not math.isfinite(fps) or fps > MAX_FPS:  # resampling would allocate without bound
             raise SkelagnosticError(
                 f"data.fps={fps:g}: must be a number of frames per second of at most "
