@@ -63,6 +63,16 @@ def test_rotate_broadcasts_over_batch_dims():
     torch.testing.assert_close(out, ref)
 
 
+def test_rotate_mixes_precisions_in_the_wider_one():
+    """Float32 rotations of bfloat16 vectors (autocast output), e.g. PC-MRL's root under bf16."""
+    q = Q.normalize(torch.randn(5, 4, generator=torch.Generator().manual_seed(0)))
+    v = torch.randn(5, 3, generator=torch.Generator().manual_seed(1)).to(torch.bfloat16)
+    out = Q.rotate(q, v)
+    assert out.dtype == torch.float32
+    torch.testing.assert_close(out, Q.rotate(q, v.float()))
+    assert Q.rotate(q.to(torch.bfloat16), v).dtype == torch.bfloat16
+
+
 def test_slerp_endpoints_midpoint_and_short_arc():
     a = Q.euler_to_quat(torch.tensor([[0.0, 0.0, 0.0]], dtype=torch.float64), "ZYX")
     b = Q.euler_to_quat(torch.tensor([[90.0, 0.0, 0.0]], dtype=torch.float64), "ZYX")

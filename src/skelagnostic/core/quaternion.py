@@ -77,7 +77,11 @@ def rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     """Rotate 3-vectors ``v`` by unit (w, x, y, z) quaternions ``q`` (broadcasting).
 
     Uses ``v' = v + 2 w (u x v) + 2 u x (u x v)`` with ``u`` the vector part.
+    Mixed precisions (e.g. float32 rotations of bfloat16 vectors under autocast) are
+    computed in the wider of the two.
     """
+    dtype = torch.promote_types(q.dtype, v.dtype)
+    q, v = q.to(dtype), v.to(dtype)
     shape = torch.broadcast_shapes(q.shape[:-1], v.shape[:-1])
     w = q[..., :1]
     u = q[..., 1:].expand(*shape, 3)
