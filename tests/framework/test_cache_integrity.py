@@ -166,6 +166,7 @@ def test_cache_verb_info_and_clear(tmp_path: Path, capsys: pytest.CaptureFixture
     assert cli.main(["cache", "info", "--cache-dir", str(tmp_path / "file")]) == 1
     err = capsys.readouterr().err.strip()
     assert err == f"skelagnostic cache: error: --cache-dir {tmp_path / 'file'} is not a directory"
-    assert "skelagnostic cache: error: --cache-dir <tmp>/file is not a directory" in TROUBLESHOOTING.read_text(
-        encoding="utf-8"
+    assert (
+        "skelagnostic cache: error: --cache-dir <tmp>/file is not a directory"
+        in TROUBLESHOOTING.read_text(encoding="utf-8")
     )

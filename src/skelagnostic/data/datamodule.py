@@ -187,7 +187,7 @@ class MotionDataModule(L.LightningDataModule):
                 f"{self.no_augmentation}; remove the data.augment.* settings"
             )
         for arg, value, ok, what in (
-            ("fps", fps, fps > 0, "> 0"),
+            ("fps", fps, not fps <= 0, "> 0"),  # NaN: refused below, with the limit
             ("window", window, window > 0, "> 0"),
             ("stride", stride, stride > 0, "> 0"),
             ("batch_size", batch_size, batch_size > 0, "> 0"),
