@@ -10,6 +10,7 @@ exclusion: both sides run ``scipy.signal.filtfilt`` with its default padding.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -173,3 +174,12 @@ def test_a_model_trained_on_authors_features_encodes_motions_with_them(
     torch.testing.assert_close(windows[:, :, windows.shape[-1] // 2], expected)
     encoder = next(g for g in model.export_graphs() if g.name.startswith("encoder_"))
     assert encoder.metadata["representation"].startswith("the WalkTheDog exporter's velocities")
+
+
+def test_without_scipy_the_option_says_what_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
+    """scipy is not a dependency of the package: only data.features=authors needs it."""
+    from skelagnostic_vqpae.features import lowpass
+
+    monkeypatch.setitem(sys.modules, "scipy.signal", None)  # as if it were not installed
+    with pytest.raises(SkelagnosticError, match=r"data\.features=authors needs scipy.*pip install"):
+        lowpass(np.zeros((100, 3)), 60.0)

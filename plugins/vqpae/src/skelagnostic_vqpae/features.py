@@ -41,7 +41,6 @@ from __future__ import annotations
 import numpy as np
 import torch
 import torch.nn.functional as F
-from scipy.signal import butter, filtfilt
 from torch import Tensor
 
 from skelagnostic.core import quaternion as Q
@@ -216,7 +215,8 @@ def lowpass(x: np.ndarray, fps: float, cutoff: float = CUTOFF_HZ) -> np.ndarray:
     """2nd-order zero-phase Butterworth low-pass along axis 0 (unchanged if too short).
 
     Raises:
-        SkelagnosticError: ``cutoff`` is not below the Nyquist frequency ``fps / 2``.
+        SkelagnosticError: ``cutoff`` is not below the Nyquist frequency ``fps / 2``, or
+            scipy is not installed.
     """
     if cutoff <= 0 or len(x) <= _MIN_FILTER_FRAMES:
         return x
@@ -225,6 +225,13 @@ def lowpass(x: np.ndarray, fps: float, cutoff: float = CUTOFF_HZ) -> np.ndarray:
             f"data.features=authors: the {cutoff} Hz low-pass needs data.fps > {2 * cutoff}, "
             f"got {fps}"
         )
+    try:  # only this option needs scipy: the package's dependencies do not include it
+        from scipy.signal import butter, filtfilt
+    except ImportError as exc:
+        raise SkelagnosticError(
+            "data.features=authors needs scipy for its Butterworth low-pass: "
+            "pip install -c constraints.txt scipy"
+        ) from exc
     b, a = butter(2, cutoff, btype="low", fs=fps)
     return filtfilt(b, a, x, axis=0)
 
