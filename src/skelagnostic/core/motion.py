@@ -285,12 +285,7 @@ class Motion:
         sk = self.skeleton
         up = sk.up_index
         fwd_axis = 2 if up != 2 else 1
-        groups = sk.body_groups
-        starts: dict[str, int] = {}
-        lengths = sk.bone_lengths()
-        for j, g in enumerate(groups):
-            if g not in starts and g.startswith(("left_", "right_")) and lengths[j] > 0:
-                starts[g] = j
+        starts = sk.limb_starts()
         pos = self.global_positions()
         across = torch.zeros(self.num_frames, 3, dtype=self.dtype, device=self.device)
         for limb in ("arm", "leg"):

@@ -288,6 +288,22 @@ class Skeleton:
         off[[*self.carrier_joints()[1:], self._body_root]] = 0.0
         return off
 
+    def limb_starts(self) -> dict[str, int]:
+        """The first joint with a bone of every left/right body group (``left_leg`` -> hip).
+
+        Example:
+            >>> from skelagnostic import procedural
+            >>> sk = procedural.skeleton("biped22")
+            >>> sk.joint_names[sk.limb_starts()["left_leg"]]
+            'LeftUpLeg'
+        """
+        lengths = self.bone_lengths()
+        starts: dict[str, int] = {}
+        for j, group in enumerate(self.body_groups):
+            if group not in starts and group.startswith(("left_", "right_")) and lengths[j] > 0:
+                starts[group] = j
+        return starts
+
     def bone_lengths(self) -> torch.Tensor:
         """``[J]`` length of the bone ending at each joint in the rest geometry.
 

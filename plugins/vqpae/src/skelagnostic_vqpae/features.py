@@ -69,16 +69,6 @@ FACING_SECONDS = 2.0
 _MIN_FILTER_FRAMES = 9
 
 
-def _limb_starts(skeleton: Skeleton) -> dict[str, int]:
-    """The first joint of every left/right body group with a bone (``left_leg`` -> hip)."""
-    lengths = skeleton.bone_lengths()
-    starts: dict[str, int] = {}
-    for j, group in enumerate(skeleton.body_groups):
-        if group not in starts and group.startswith(("left_", "right_")) and lengths[j] > 0:
-            starts[group] = j
-    return starts
-
-
 def _neck(skeleton: Skeleton, starts: dict[str, int]) -> int | None:
     """A spine joint named ``*neck*``, else the one after the spine joint both arms branch from.
 
@@ -122,7 +112,7 @@ def facing_joints(skeleton: Skeleton) -> dict[str, int]:
         SkelagnosticError: A joint the facing needs is missing (one line naming the
             skeleton and the missing joints).
     """
-    starts = _limb_starts(skeleton)
+    starts = skeleton.limb_starts()
     label = f"data.features=authors: skeleton {skeleton.name or repr(skeleton)}"
     if skeleton.morphology == "quadruped":
         neck = _neck(skeleton, starts)
